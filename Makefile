@@ -1,0 +1,186 @@
+# splatd — build, test, bench, run, install.
+#
+#   make            build bin/splatd, bin/splat, libsplatclient.{a,so}
+#   make test       unit, rendering, protocol and end-to-end tests, then the same under ASan+UBSan
+#   make asan       only the AddressSanitizer + UBSan test run
+#   make bench      measured numbers (see README.md)
+#   make run        start the daemon on a bundled scan and render an orbit into ./out/
+#   make install    PREFIX=/usr/local DESTDIR=
+#
+# Every dependency comes through pkg-config; when a check fails, deploy/deps.sh installs the
+# Debian packages (so a fresh machine needs only make, gcc and git).
+
+CC      ?= cc
+PREFIX  ?= /usr/local
+BUILD   ?= build
+PKGS    := egl opengl osmesa libturbojpeg libpng liblz4 libcrypto cmocka
+
+ifeq ($(filter clean,$(MAKECMDGOALS)),)
+DEPS_OK := $(shell pkg-config --exists $(PKGS) 2>/dev/null && test -f /usr/include/flann/flann.h \
+             && test -f /usr/include/OpenEXR/openexr.h && echo yes)
+ifneq ($(DEPS_OK),yes)
+$(info splatd: a dependency is missing; running deploy/deps.sh)
+DEPS_RC := $(shell sh deploy/deps.sh 1>&2; echo $$?)
+ifneq ($(DEPS_RC),0)
+$(error deploy/deps.sh failed (exit $(DEPS_RC)); install the packages it lists and retry)
+endif
+endif
+endif
+
+# FLANN's and OpenEXR's .pc files drag in C++ libraries, HDF5 and MPI; the C APIs need only these.
+FLANN_LIBS := -lflann
+EXR_CFLAGS := -I/usr/include/OpenEXR
+EXR_LIBS   := -lOpenEXRCore
+
+PKG_CFLAGS := $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
+PKG_LIBS   := $(shell pkg-config --libs egl opengl osmesa libturbojpeg libpng liblz4 libcrypto 2>/dev/null)
+TEST_LIBS  := $(shell pkg-config --libs cmocka 2>/dev/null)
+
+WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes -Wno-unused-parameter
+CFLAGS  ?= -O2 -g
+ALL_CFLAGS = -std=c11 -D_GNU_SOURCE -fPIC $(WARN) $(CFLAGS) -Iprotocol -Iserver -Iclient -I$(BUILD)/gen \
+             $(PKG_CFLAGS) $(EXR_CFLAGS) -MMD -MP
+LIBS    := $(PKG_LIBS) $(FLANN_LIBS) $(EXR_LIBS) -lpthread -lm
+
+PROTO_SRC  := $(wildcard protocol/*.c)
+SERVER_SRC := $(filter-out server/main.c,$(wildcard server/*.c))
+CLIENT_LIB_SRC := $(filter-out client/splat_main.c,$(wildcard client/*.c))
+SHADERS    := $(sort $(wildcard shaders/*.glsl))
+TEST_SRC   := $(wildcard tests/test_*.c)
+TEST_COMMON_SRC := $(wildcard tests/common/*.c)
+TOOL_SRC   := $(wildcard tests/tools/*.c)
+BENCH_SRC  := $(wildcard tests/bench/*.c)
+
+obj = $(patsubst %.c,$(1)/obj/%.o,$(2))
+
+# Full builds (no goal, or all/test/asan/bench/run/install) are strict: any error stops them.
+# A single-target build (make build/tests/test_x) builds the libraries tolerantly through
+# tools/dev_archive.sh, so one half-edited file does not block work on the others.
+ifeq ($(strip $(MAKECMDGOALS)),)
+STRICT ?= 1
+else ifneq ($(filter all test asan bench run install,$(MAKECMDGOALS)),)
+STRICT ?= 1
+else
+STRICT ?= 0
+endif
+.PHONY: FORCE
+FORCE:
+
+# ---- one build directory per flavour: normal ($(BUILD)) and ASan+UBSan ($(BUILD)/asan) ----
+define FLAVOUR
+$(1)/obj/%.o: %.c $(BUILD)/gen/shaders_gen.h
+	@mkdir -p $$(dir $$@)
+	$$(CC) $$(ALL_CFLAGS) $(2) -c $$< -o $$@
+
+$(1)/obj/gen/shaders_gen.o: $(BUILD)/gen/shaders_gen.c
+	@mkdir -p $$(dir $$@)
+	$$(CC) $$(ALL_CFLAGS) $(2) -c $$< -o $$@
+
+ifeq ($(STRICT),1)
+$(1)/libsplatd.a: $(call obj,$(1),$(SERVER_SRC)) $(1)/obj/gen/shaders_gen.o
+	@rm -f $$@; ar rcs $$@ $$^
+
+$(1)/libsplatproto.a: $(call obj,$(1),$(PROTO_SRC))
+	@rm -f $$@; ar rcs $$@ $$^
+
+$(1)/libsplatclient.a: $(call obj,$(1),$(CLIENT_LIB_SRC) $(PROTO_SRC))
+	@rm -f $$@; ar rcs $$@ $$^
+
+$(1)/libtestcommon.a: $(call obj,$(1),$(TEST_COMMON_SRC))
+	@rm -f $$@; ar rcs $$@ $$^
+else
+$(1)/libsplatd.a: FORCE $(BUILD)/gen/shaders_gen.c
+	@sh tools/dev_archive.sh "$$(CC) $$(ALL_CFLAGS) $(2)" $(1) $$@ $(SERVER_SRC) $(BUILD)/gen/shaders_gen.c
+
+$(1)/libsplatproto.a: FORCE
+	@sh tools/dev_archive.sh "$$(CC) $$(ALL_CFLAGS) $(2)" $(1) $$@ $(PROTO_SRC)
+
+$(1)/libsplatclient.a: FORCE
+	@sh tools/dev_archive.sh "$$(CC) $$(ALL_CFLAGS) $(2)" $(1) $$@ $(CLIENT_LIB_SRC) $(PROTO_SRC)
+
+$(1)/libtestcommon.a: FORCE
+	@sh tools/dev_archive.sh "$$(CC) $$(ALL_CFLAGS) $(2)" $(1) $$@ $(TEST_COMMON_SRC)
+endif
+
+$(1)/bin/splatd: $(1)/obj/server/main.o $(1)/libsplatd.a $(1)/libsplatproto.a
+	@mkdir -p $$(dir $$@)
+	$$(CC) $(2) -o $$@ $$^ $$(LIBS)
+
+$(1)/bin/splat: $(1)/obj/client/splat_main.o $(1)/libsplatclient.a
+	@mkdir -p $$(dir $$@)
+	$$(CC) $(2) -o $$@ $$^ $$(LIBS)
+
+$(1)/tests/%: $(1)/obj/tests/%.o $(1)/libtestcommon.a $(1)/libsplatd.a $(1)/libsplatclient.a
+	@mkdir -p $$(dir $$@)
+	$$(CC) $(2) -o $$@ $$^ $$(LIBS) $$(TEST_LIBS)
+
+$(1)/tools/%: $(1)/obj/tests/tools/%.o $(1)/libsplatd.a $(1)/libsplatproto.a
+	@mkdir -p $$(dir $$@)
+	$$(CC) $(2) -o $$@ $$^ $$(LIBS)
+
+$(1)/bench/%: $(1)/obj/tests/bench/%.o $(1)/libtestcommon.a $(1)/libsplatd.a $(1)/libsplatclient.a
+	@mkdir -p $$(dir $$@)
+	$$(CC) $(2) -o $$@ $$^ $$(LIBS)
+endef
+
+ASAN_FLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+$(eval $(call FLAVOUR,$(BUILD),))
+$(eval $(call FLAVOUR,$(BUILD)/asan,$(ASAN_FLAGS)))
+
+TESTS       := $(patsubst tests/%.c,$(BUILD)/tests/%,$(TEST_SRC))
+ASAN_TESTS  := $(patsubst tests/%.c,$(BUILD)/asan/tests/%,$(TEST_SRC))
+TOOLS       := $(patsubst tests/tools/%.c,$(BUILD)/tools/%,$(TOOL_SRC))
+ASAN_TOOLS  := $(patsubst tests/tools/%.c,$(BUILD)/asan/tools/%,$(TOOL_SRC))
+BENCHES     := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(BENCH_SRC))
+
+# Shaders are compiled into the daemon from a generated C file.
+$(BUILD)/embed_shaders: tools/embed_shaders.c
+	@mkdir -p $(dir $@)
+	$(CC) -std=c11 -O1 -Wall -Werror -o $@ $<
+
+$(BUILD)/gen/shaders_gen.c $(BUILD)/gen/shaders_gen.h &: $(BUILD)/embed_shaders $(SHADERS)
+	@mkdir -p $(BUILD)/gen
+	$(BUILD)/embed_shaders $(BUILD)/gen/shaders_gen $(SHADERS)
+
+.PHONY: all test asan check-tests bench run install clean
+all: $(BUILD)/bin/splatd $(BUILD)/bin/splat $(BUILD)/libsplatclient.a $(BUILD)/libsplatclient.so $(TOOLS)
+
+$(BUILD)/libsplatclient.so: $(call obj,$(BUILD),$(CLIENT_LIB_SRC) $(PROTO_SRC))
+	$(CC) -shared -Wl,-soname,libsplatclient.so.0 -o $@ $^ $(shell pkg-config --libs libcrypto liblz4 libturbojpeg)
+
+# The tests find the binaries and data through these variables.
+TEST_ENV = SPLATD_BIN=$(abspath $(1)/bin/splatd) SPLAT_BIN=$(abspath $(1)/bin/splat) \
+           SPLATD_TOOLS=$(abspath $(1)/tools) SPLATD_TESTDATA=$(abspath tests/data) \
+           SPLATD_SHADERS=$(abspath shaders)
+
+test: all $(TESTS) $(ASAN_TESTS) $(BUILD)/asan/bin/splatd $(BUILD)/asan/bin/splat $(ASAN_TOOLS)
+	@$(call TEST_ENV,$(BUILD)) sh tests/run.sh "plain" $(TESTS)
+	@$(call TEST_ENV,$(BUILD)/asan) ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 \
+	  UBSAN_OPTIONS=print_stacktrace=1 LSAN_OPTIONS=suppressions=$(abspath tests/lsan.supp) \
+	  sh tests/run.sh "asan" $(ASAN_TESTS)
+
+asan: $(ASAN_TESTS) $(BUILD)/asan/bin/splatd $(BUILD)/asan/bin/splat $(ASAN_TOOLS)
+	@$(call TEST_ENV,$(BUILD)/asan) ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 \
+	  UBSAN_OPTIONS=print_stacktrace=1 LSAN_OPTIONS=suppressions=$(abspath tests/lsan.supp) \
+	  sh tests/run.sh "asan" $(ASAN_TESTS)
+
+bench: all $(BENCHES)
+	@$(call TEST_ENV,$(BUILD)) SPLATD_BENCH=$(abspath $(BUILD)/bench) sh tests/bench/bench.sh
+
+run: all
+	@sh deploy/run-demo.sh $(BUILD)/bin/splatd $(BUILD)/bin/splat
+
+install: all
+	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/lib/pkgconfig $(DESTDIR)$(PREFIX)/include
+	install -m 755 $(BUILD)/bin/splatd $(BUILD)/bin/splat $(DESTDIR)$(PREFIX)/bin/
+	install -m 644 $(BUILD)/libsplatclient.a $(DESTDIR)$(PREFIX)/lib/
+	install -m 755 $(BUILD)/libsplatclient.so $(DESTDIR)$(PREFIX)/lib/libsplatclient.so.0
+	ln -sf libsplatclient.so.0 $(DESTDIR)$(PREFIX)/lib/libsplatclient.so
+	install -m 644 client/splat_client.h $(DESTDIR)$(PREFIX)/include/
+	sed 's|@PREFIX@|$(PREFIX)|g' client/splatclient.pc.in > $(DESTDIR)$(PREFIX)/lib/pkgconfig/splatclient.pc
+
+clean:
+	rm -rf $(BUILD) out
+
+.SECONDARY:
+-include $(shell find $(BUILD) -name '*.d' 2>/dev/null)

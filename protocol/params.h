@@ -1,0 +1,81 @@
+/* params.h — every render/frame parameter a client can set: name, type, range, default.
+ *
+ * One X-macro list is the single source for the struct, the defaults, validation, the
+ * `--set key=value` text syntax of both commands and the PARAMS records on the wire.
+ * Enum values are given as a '|'-separated list; the stored value is the index. */
+#pragma once
+#include <stddef.h>
+#include <stdint.h>
+
+typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_type;
+
+/*      id            name            type        field         min   max       default   enum values */
+#define SP_PARAM_LIST(X)                                                                             \
+    X(PIPELINE,     "pipeline",     SP_T_ENUM,  pipeline,     0,    0,        "splat",  "points|splat") \
+    X(SPLAT_SCALE,  "splat_scale",  SP_T_FLOAT, splat_scale,  0.01, 100,      "1",      NULL)     \
+    X(LOWPASS,      "lowpass",      SP_T_FLOAT, lowpass,      0,    16,       "1",      NULL)     \
+    X(POINT_SIZE,   "point_size",   SP_T_FLOAT, point_size,   1,    64,       "1",      NULL)     \
+    X(POINT_BUDGET, "point_budget", SP_T_INT,   point_budget, 0,    4e9,      "0",      NULL)     \
+    X(COLOR,        "color",        SP_T_ENUM,  color,        0,    0,        "rgb",    "rgb|field|normal|depth|intensity") \
+    X(LIGHT,        "light",        SP_T_VEC3,  light,        -1,   1,        "0.3,0.4,1", NULL)  \
+    X(BACKGROUND,   "background",   SP_T_VEC3,  background,   0,    1,        "0,0,0",  NULL)     \
+    X(FORMAT,       "format",       SP_T_ENUM,  format,       0,    0,        "jpeg",   "jpeg|png|lz4|raw|exr") \
+    X(QUALITY,      "quality",      SP_T_INT,   quality,      1,    100,      "85",     NULL)     \
+    X(SUBSAMPLING,  "subsampling",  SP_T_ENUM,  subsampling,  0,    0,        "420",    "444|422|420|gray")
+
+enum {
+#define SP_ID_(id, name, type, field, lo, hi, def, vals) SP_##id,
+    SP_PARAM_LIST(SP_ID_)
+#undef SP_ID_
+    SP_PARAM_COUNT
+};
+
+/* Enum values by index, matching the lists above. */
+enum { SP_PIPE_POINTS = 0, SP_PIPE_SPLAT = 1 };
+enum { SP_COLOR_RGB = 0, SP_COLOR_FIELD, SP_COLOR_NORMAL, SP_COLOR_DEPTH, SP_COLOR_INTENSITY };
+enum { SP_FMT_JPEG = 0, SP_FMT_PNG, SP_FMT_LZ4, SP_FMT_RAW, SP_FMT_EXR };
+enum { SP_SUB_444 = 0, SP_SUB_422, SP_SUB_420, SP_SUB_GRAY };
+
+typedef struct sp_params {
+    int32_t pipeline;
+    float splat_scale;
+    float lowpass;
+    float point_size;
+    int64_t point_budget;   /* 0: every point */
+    int32_t color;
+    float light[3];         /* direction towards the light, camera space (x right, y up, z back) */
+    float background[3];    /* linear RGB in [0,1] */
+    int32_t format;
+    int64_t quality;
+    int32_t subsampling;
+} sp_params;
+
+typedef struct sp_param_info {
+    const char *name;
+    sp_type type;
+    double min, max;
+    const char *def;        /* default, in the text syntax */
+    const char *values;     /* enum values "a|b|c", NULL for numbers */
+} sp_param_info;
+
+extern const sp_param_info sp_param_table[SP_PARAM_COUNT];
+
+/* sp_params_defaults: fills p with every default. */
+void sp_params_defaults(sp_params *p);
+
+/* sp_param_find: the id of a parameter name, or -1. */
+int sp_param_find(const char *name);
+
+/* sp_param_set_text: sets one parameter from text ("splat_scale", "1.5"; "light", "0,1,1";
+ * "pipeline", "points"). Returns 0, or -1 with err naming the parameter and its range or
+ * values (unknown name, unparsable value, out of range). */
+int sp_param_set_text(sp_params *p, const char *name, const char *value, char *err, size_t errlen);
+
+/* sp_param_set_kv: the same for "name=value". */
+int sp_param_set_kv(sp_params *p, const char *kv, char *err, size_t errlen);
+
+/* sp_param_get_text: writes parameter id's current value of p in the text syntax. */
+void sp_param_get_text(const sp_params *p, int id, char *buf, size_t len);
+
+/* sp_enum_name: the name of value v of enum parameter id, or NULL when out of range. */
+const char *sp_enum_name(int id, int v, char *buf, size_t len);

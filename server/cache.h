@@ -1,0 +1,42 @@
+/* cache.h — the prepared-cloud cache: one versioned binary file per source file.
+ *
+ * The cache file is a fixed header (magic, version, the source's size, mtime and content hash,
+ * k, counts, summary) followed by the prepared array block of prepared.h, verbatim. It is
+ * written to a temporary name, fsynced and renamed, and loaded with mmap: a cached load copies
+ * nothing and redoes no kNN. A cache whose source, version or k changed is rebuilt; a truncated
+ * or corrupt one gives a warning (through the warn callback) and is rebuilt, never loaded. */
+#pragma once
+#include <stdint.h>
+
+#include "prepared.h"
+#include "sd_err.h"
+
+typedef struct cache_desc {
+    const char *dir;   /* default NULL: $SPLATD_CACHE, else $XDG_CACHE_HOME/splatd, else
+                          ~/.cache/splatd, else a .splatd-cache directory beside the source */
+    int k;             /* default 24: neighbours for prep (part of the cache key) */
+    int threads;       /* default 0: every core */
+    int force;         /* rebuild even when a valid cache exists */
+    void (*progress)(void *user, const char *phase, double fraction); /* default: none */
+    void (*warn)(void *user, const char *msg);                        /* default: none */
+    void *user;
+} cache_desc;
+
+typedef struct cache_result {
+    int hit;               /* 1: loaded from the cache, 0: prepared now */
+    char path[4096];       /* the cache file */
+    char why[256];         /* why it was (re)built: "no cache", "source changed", ... */
+    double t_read;         /* seconds: file parse (miss) or mmap + checks (hit) */
+    double t_prep;         /* seconds: preprocessing (miss) */
+    double t_write;        /* seconds: cache write (miss) */
+    uint64_t file_size;
+} cache_result;
+
+/* cache_open_cloud: returns in out the prepared cloud of the file src: from a valid cache
+ * (mmapped) or by loading, preparing and caching it. Returns 0 or a negative SD_E* code. A cache
+ * that cannot be written (read-only directory) is reported through warn, not as an error. */
+int cache_open_cloud(const char *src, const cache_desc *d, pc_prepared *out, cache_result *res,
+                     sd_err *err);
+
+/* cache_path_for: the cache file path for src under directory dir (NULL: the default). */
+int cache_path_for(const char *src, const char *dir, int k, char *buf, size_t len, sd_err *err);

@@ -1,0 +1,197 @@
+/* cloud.c — raw cloud growth, finalisation (NaN removal, re-centring) and reader dispatch. */
+#include "cloud.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+
+void pc_attr_names(uint32_t attrs, char *buf, size_t len)
+{
+    static const struct { uint32_t bit; const char *name; } names[] = {
+        {PC_ATTR_RGB, "rgb"}, {PC_ATTR_NORMAL, "normal"}, {PC_ATTR_INTENSITY, "intensity"},
+        {PC_ATTR_CLASS, "classification"}, {PC_ATTR_RADIUS, "radius"},
+        {PC_ATTR_SCALAR, "scalar"}, {PC_ATTR_F, "F"},
+    };
+    size_t used = 0;
+    if (len == 0) return;
+    buf[0] = 0;
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        if (!(attrs & names[i].bit)) continue;
+        int w = snprintf(buf + used, len - used, "%s%s", used ? " " : "", names[i].name);
+        if (w < 0 || (size_t)w >= len - used) break;
+        used += (size_t)w;
+    }
+    if (used == 0) snprintf(buf, len, "none");
+}
+
+static int grow(void **p, size_t cap, size_t elem)
+{
+    if (cap > SIZE_MAX / elem) return -1;
+    void *q = realloc(*p, cap * elem);
+    if (!q) return -1;
+    *p = q;
+    return 0;
+}
+
+int pc_raw_reserve(pc_raw *raw, size_t cap, sd_err *err)
+{
+    if (cap <= raw->cap) return 0;
+    int bad = grow((void **)&raw->xyz, cap, 3 * sizeof(double));
+    if (raw->attrs & PC_ATTR_RGB) bad |= grow((void **)&raw->rgba, cap, 4);
+    if (raw->attrs & PC_ATTR_NORMAL) bad |= grow((void **)&raw->normal, cap, 3 * sizeof(float));
+    if (raw->attrs & PC_ATTR_INTENSITY) bad |= grow((void **)&raw->intensity, cap, sizeof(float));
+    if (raw->attrs & PC_ATTR_CLASS) bad |= grow((void **)&raw->cls, cap, 1);
+    if (raw->attrs & PC_ATTR_RADIUS) bad |= grow((void **)&raw->radius, cap, sizeof(float));
+    if (raw->attrs & PC_ATTR_SCALAR) bad |= grow((void **)&raw->scalar, cap, sizeof(float));
+    if (bad) return sd_errf(err, SD_ENOMEM, "out of memory for %zu points", cap);
+    raw->cap = cap;
+    return 0;
+}
+
+void pc_raw_free(pc_raw *raw)
+{
+    free(raw->xyz);
+    free(raw->rgba);
+    free(raw->normal);
+    free(raw->intensity);
+    free(raw->cls);
+    free(raw->radius);
+    free(raw->scalar);
+    memset(raw, 0, sizeof *raw);
+}
+
+void pc_cloud_free(pc_cloud *c)
+{
+    free(c->pos);
+    free(c->rgba);
+    free(c->normal);
+    free(c->intensity);
+    free(c->cls);
+    free(c->radius);
+    free(c->scalar);
+    memset(c, 0, sizeof *c);
+}
+
+/* Compacts attribute array a (elem bytes per point) in place, keeping the points in keep. */
+static void compact(void *a, size_t elem, const uint8_t *keep, size_t n)
+{
+    if (!a) return;
+    uint8_t *p = a;
+    size_t j = 0;
+    for (size_t i = 0; i < n; i++) {
+        if (!keep[i]) continue;
+        if (j != i) memmove(p + j * elem, p + i * elem, elem);
+        j++;
+    }
+}
+
+int pc_finalize(pc_raw *raw, pc_cloud *out, const char *path, sd_err *err)
+{
+    memset(out, 0, sizeof *out);
+    size_t n = raw->n;
+    uint8_t *keep = malloc(n ? n : 1);
+    if (!keep) return sd_errf(err, SD_ENOMEM, "%s: out of memory for %zu points", path, n);
+
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    size_t kept = 0;
+    for (size_t i = 0; i < n; i++) {
+        const double *p = raw->xyz + 3 * i;
+        keep[i] = isfinite(p[0]) && isfinite(p[1]) && isfinite(p[2]);
+        if (!keep[i]) continue;
+        kept++;
+        for (int k = 0; k < 3; k++) {
+            if (p[k] < lo[k]) lo[k] = p[k];
+            if (p[k] > hi[k]) hi[k] = p[k];
+        }
+    }
+    if (kept == 0) {
+        free(keep);
+        return sd_errf(err, SD_EEMPTY, "%s: no finite points (%zu read)", path, n);
+    }
+
+    out->pos = malloc(kept * 3 * sizeof(float));
+    if (!out->pos) {
+        free(keep);
+        return sd_errf(err, SD_ENOMEM, "%s: out of memory for %zu points", path, kept);
+    }
+    for (int k = 0; k < 3; k++) {
+        out->bmin[k] = lo[k];
+        out->bmax[k] = hi[k];
+        out->offset[k] = 0.5 * (lo[k] + hi[k]);
+    }
+    size_t j = 0;
+    for (size_t i = 0; i < n; i++) {
+        if (!keep[i]) continue;
+        for (int k = 0; k < 3; k++)
+            out->pos[3 * j + k] = (float)(raw->xyz[3 * i + k] - out->offset[k]);
+        j++;
+    }
+    compact(raw->rgba, 4, keep, n);
+    compact(raw->normal, 3 * sizeof(float), keep, n);
+    compact(raw->intensity, sizeof(float), keep, n);
+    compact(raw->cls, 1, keep, n);
+    compact(raw->radius, sizeof(float), keep, n);
+    compact(raw->scalar, sizeof(float), keep, n);
+    free(keep);
+
+    out->n = kept;
+    out->n_dropped = n - kept;
+    out->attrs = raw->attrs;
+    out->rgba = raw->rgba;
+    out->normal = raw->normal;
+    out->intensity = raw->intensity;
+    out->cls = raw->cls;
+    out->radius = raw->radius;
+    out->scalar = raw->scalar;
+    memcpy(out->scalar_name, raw->scalar_name, sizeof out->scalar_name);
+    memcpy(out->format, raw->format, sizeof out->format);
+    raw->rgba = NULL;
+    raw->normal = NULL;
+    raw->intensity = raw->radius = raw->scalar = NULL;
+    raw->cls = NULL;
+    pc_raw_free(raw);
+    return 0;
+}
+
+static const char *ext_of(const char *name)
+{
+    const char *slash = strrchr(name, '/');
+    const char *dot = strrchr(slash ? slash : name, '.');
+    return dot ? dot + 1 : "";
+}
+
+typedef int (*reader_fn)(const char *, pc_raw *, sd_err *);
+
+static reader_fn reader_for(const char *path)
+{
+    const char *e = ext_of(path);
+    if (!strcasecmp(e, "ply")) return pc_read_ply;
+    if (!strcasecmp(e, "pcd")) return pc_read_pcd;
+    if (!strcasecmp(e, "las")) return pc_read_las;
+    if (!strcasecmp(e, "xyz") || !strcasecmp(e, "pts") || !strcasecmp(e, "txt")) return pc_read_xyz;
+    return NULL;
+}
+
+int pc_supported_ext(const char *name)
+{
+    return reader_for(name) != NULL;
+}
+
+int pc_load(const char *path, pc_cloud *out, sd_err *err)
+{
+    reader_fn rd = reader_for(path);
+    memset(out, 0, sizeof *out);
+    if (!rd)
+        return sd_errf(err, SD_EUNSUP,
+                       "%s: unknown extension '.%s' (supported: ply, pcd, las, xyz, pts, txt)",
+                       path, ext_of(path));
+    pc_raw raw = {0};
+    int rc = rd(path, &raw, err);
+    if (rc < 0) {
+        pc_raw_free(&raw);
+        return rc;
+    }
+    return pc_finalize(&raw, out, path, err);
+}

@@ -1,0 +1,65 @@
+/* prepared.c — the section layout of a prepared cloud (shared by prep.c and cache.c). */
+#include "prepared.h"
+
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
+
+#define ALIGN64(x) (((x) + 63u) & ~(uint64_t)63u)
+
+/* Walks the sections in block order; with block == NULL it only measures. */
+static uint64_t layout(pc_prepared *p, uint64_t n, uint32_t attrs, uint64_t nb, uint8_t *block)
+{
+    uint64_t off = 0;
+#define SECTION(field, type, per, present)                                   \
+    do {                                                                     \
+        if (present) {                                                       \
+            if (p) p->field = (type *)(block + off);                         \
+            off = ALIGN64(off + (uint64_t)(per) * sizeof(type));             \
+        } else if (p) {                                                      \
+            p->field = NULL;                                                 \
+        }                                                                    \
+    } while (0)
+    SECTION(pos, float, 3 * n, 1);
+    SECTION(normal, float, 3 * n, 1);
+    SECTION(radius, float, n, 1);
+    SECTION(F, float, n, 1);
+    SECTION(rgba, uint8_t, 4 * n, attrs & PC_ATTR_RGB);
+    SECTION(intensity, float, n, attrs & PC_ATTR_INTENSITY);
+    SECTION(cls, uint8_t, n, attrs & PC_ATTR_CLASS);
+    SECTION(scalar, float, n, attrs & PC_ATTR_SCALAR);
+    SECTION(batches, pc_batch, nb, 1);
+#undef SECTION
+    return off;
+}
+
+uint64_t pc_prepared_block_len(uint64_t n, uint32_t attrs, uint64_t nbatches)
+{
+    return layout(NULL, n, attrs, nbatches, NULL);
+}
+
+void pc_prepared_bind(pc_prepared *p, void *block)
+{
+    p->block = block;
+    p->block_len = layout(p, p->n, p->attrs, p->nbatches, block);
+}
+
+int pc_prepared_alloc(pc_prepared *p, sd_err *err)
+{
+    uint64_t len = pc_prepared_block_len(p->n, p->attrs, p->nbatches);
+    void *b = NULL;
+    if (len > SIZE_MAX || posix_memalign(&b, 64, len ? (size_t)len : 64) != 0)
+        return sd_errf(err, SD_ENOMEM, "out of memory for a prepared cloud of %llu points",
+                       (unsigned long long)p->n);
+    memset(b, 0, (size_t)len);
+    p->heap = b;
+    pc_prepared_bind(p, b);
+    return 0;
+}
+
+void pc_prepared_free(pc_prepared *p)
+{
+    if (p->heap) free(p->heap);
+    if (p->map) munmap(p->map, p->map_len);
+    memset(p, 0, sizeof *p);
+}

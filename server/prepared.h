@@ -1,0 +1,69 @@
+/* prepared.h — a preprocessed cloud: the layout the renderer uploads and cache.c stores.
+ *
+ * Points are in Morton (Z-order) order and grouped into batches of consecutive points with
+ * bounding boxes (frustum culling now, level of detail later). Every array lives in one block,
+ * each section 64-byte aligned, in the order below; that block is written to the cache file
+ * verbatim and mmapped back, so a cached load copies nothing. Arrays are read-only once built. */
+#pragma once
+#include <stddef.h>
+#include <stdint.h>
+
+#include "cloud.h"
+
+typedef struct pc_batch {
+    uint32_t first, count;   /* points [first, first + count) */
+    float bmin[3], bmax[3];  /* bounds of those points (local, re-centred coordinates) */
+} pc_batch;                  /* 32 bytes, stored verbatim */
+
+enum { PC_BATCH_POINTS = 4096 }; /* target points per batch */
+
+typedef struct pc_prep_stats {
+    double t_knn_build, t_knn_query, t_normals, t_radius, t_field, t_reorder; /* seconds */
+} pc_prep_stats;
+
+typedef struct pc_prepared {
+    uint64_t n;
+    uint32_t attrs;          /* PC_ATTR_*: always NORMAL | RADIUS | F, plus what the file had */
+    uint32_t k;              /* neighbours used */
+    /* sections, in block order (NULL when absent) */
+    float *pos;              /* 3n, local coordinates (file coordinates - offset) */
+    float *normal;           /* 3n, unit */
+    float *radius;           /* n, splat radius, eq. 20 as DESIGN.md interprets it */
+    float *F;                /* n, uncertainty eq. 21 normalised to [0,1] */
+    uint8_t *rgba;           /* 4n */
+    float *intensity;        /* n */
+    uint8_t *cls;            /* n */
+    float *scalar;           /* n */
+    pc_batch *batches;       /* nbatches */
+    uint64_t nbatches;
+    /* summary */
+    double offset[3], bmin[3], bmax[3]; /* file coordinates */
+    float sigma;             /* median nearest-neighbour distance */
+    float F_raw_p99;         /* the 99th percentile of raw F used to normalise */
+    float F_pct[5];          /* normalised F at the 1st, 25th, 50th, 75th, 99th percentiles */
+    float radius_median;
+    uint64_t n_dropped;
+    char format[64];
+    char scalar_name[32];
+    pc_prep_stats stats;
+    /* storage: exactly one of heap or map is set */
+    void *block;             /* the arrays' block (inside heap or map) */
+    uint64_t block_len;
+    void *heap;
+    void *map;
+    size_t map_len;
+} pc_prepared;
+
+/* pc_prepared_block_len: bytes of the array block for n points, attrs and nbatches. */
+uint64_t pc_prepared_block_len(uint64_t n, uint32_t attrs, uint64_t nbatches);
+
+/* pc_prepared_bind: points every section pointer of p into block (p->n, p->attrs and
+ * p->nbatches must be set). */
+void pc_prepared_bind(pc_prepared *p, void *block);
+
+/* pc_prepared_alloc: allocates a zeroed heap block for p->n, p->attrs, p->nbatches and binds it.
+ * Returns 0 or SD_ENOMEM. */
+int pc_prepared_alloc(pc_prepared *p, sd_err *err);
+
+/* pc_prepared_free: releases the heap block or the mapping; safe to call twice. */
+void pc_prepared_free(pc_prepared *p);

@@ -1,0 +1,66 @@
+/* render.h — the renderer: one GL context (EGL or OSMesa), clouds uploaded once, pipelines.
+ *
+ * Threading: a rnd_ctx and everything it owns belong to the thread that created it (the
+ * daemon's render thread); nothing here is thread-safe. Clouds are referred to by ids
+ * (index + generation, 0 invalid) so that stale ids are caught, not dereferenced. */
+#pragma once
+#include <stdint.h>
+
+#include "params.h"
+#include "prepared.h"
+#include "sd_err.h"
+
+typedef enum { RND_BACKEND_AUTO = 0, RND_BACKEND_EGL, RND_BACKEND_OSMESA } rnd_backend_kind;
+
+typedef struct rnd_desc {
+    rnd_backend_kind backend; /* default AUTO: EGL, then OSMesa */
+    const char *shader_dir;   /* default NULL: the shaders compiled into the binary */
+    int max_width;            /* default 8192: largest frame accepted */
+    int max_height;           /* default 8192 */
+} rnd_desc;
+
+/* A camera in the cloud file's coordinates (doubles, so georeferenced eyes keep precision).
+ * fov_deg = vertical field of view. znear/zfar <= 0: derived from the cloud's bounds. */
+typedef struct rnd_camera {
+    double eye[3], target[3], up[3];
+    float fov_deg;
+    float znear, zfar;
+    int width, height;
+} rnd_camera;
+
+/* rnd_camera_frame: a camera that frames the bounding box [bmin, bmax] (file coordinates):
+ * looking at its centre from the +y-ish diagonal, up +z unless the box is flat in z. */
+void rnd_camera_frame(const double bmin[3], const double bmax[3], int width, int height,
+                      rnd_camera *cam);
+
+typedef struct rnd_frame {
+    int width, height;
+    uint8_t *rgba8;           /* width*height*4, rows bottom-up (GL order) */
+    uint16_t *rgba16f;        /* width*height*4 half floats, or NULL (filled when want_float) */
+    float *depth;             /* width*height eye-space distance along -z, or NULL; +inf where empty */
+    uint64_t render_us;       /* GPU work up to glFinish */
+    uint64_t readback_us;
+    uint64_t points_drawn;    /* after frustum culling and the point budget */
+} rnd_frame;
+
+typedef struct rnd_ctx rnd_ctx;
+
+/* rnd_create: opens the GL back end and compiles the shaders. Returns NULL with err filled. */
+rnd_ctx *rnd_create(const rnd_desc *desc, sd_err *err);
+void rnd_destroy(rnd_ctx *r);
+
+/* rnd_renderer_string: "egl: llvmpipe (LLVM 15.0.6, 256 bits)" and so on. */
+const char *rnd_renderer_string(const rnd_ctx *r);
+const char *rnd_backend_name(const rnd_ctx *r);
+
+/* rnd_upload: copies a prepared cloud to GPU buffers; returns a cloud id > 0, or a negative
+ * SD_E* code. The prepared cloud may be freed afterwards: the renderer keeps its bounds. */
+int64_t rnd_upload(rnd_ctx *r, const pc_prepared *pc, sd_err *err);
+void rnd_release(rnd_ctx *r, uint32_t cloud_id);
+
+/* rnd_render: renders cloud_id through params->pipeline into frame (buffers allocated or
+ * resized by the renderer; free with rnd_frame_free). want_float also fills rgba16f and depth.
+ * Returns 0 or a negative SD_E* code. */
+int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_params *params,
+               int want_float, rnd_frame *frame, sd_err *err);
+void rnd_frame_free(rnd_frame *f);

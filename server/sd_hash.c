@@ -1,0 +1,56 @@
+/* sd_hash.c — see sd_hash.h. */
+#include "sd_hash.h"
+
+#include <string.h>
+
+#define P1 0x9E3779B185EBCA87ull
+#define P2 0xC2B2AE3D27D4EB4Full
+#define P3 0x165667B19E3779F9ull
+
+static inline uint64_t rotl(uint64_t x, int r) { return (x << r) | (x >> (64 - r)); }
+
+static inline uint64_t lane(uint64_t acc, uint64_t w)
+{
+    acc += w * P2;
+    acc = rotl(acc, 31);
+    return acc * P1;
+}
+
+static inline uint64_t rd64(const uint8_t *p)
+{
+    uint64_t v;
+    memcpy(&v, p, 8);
+    return v;
+}
+
+uint64_t sd_hash64(const void *data, size_t len, uint64_t seed)
+{
+    const uint8_t *p = data;
+    size_t n = len;
+    uint64_t a = seed + P1 + P2, b = seed + P2, c = seed, d = seed - P1;
+    while (n >= 32) {
+        a = lane(a, rd64(p));
+        b = lane(b, rd64(p + 8));
+        c = lane(c, rd64(p + 16));
+        d = lane(d, rd64(p + 24));
+        p += 32;
+        n -= 32;
+    }
+    uint64_t h = rotl(a, 1) + rotl(b, 7) + rotl(c, 12) + rotl(d, 18) + (uint64_t)len;
+    while (n >= 8) {
+        h ^= lane(0, rd64(p));
+        h = rotl(h, 27) * P1 + P3;
+        p += 8;
+        n -= 8;
+    }
+    while (n--) {
+        h ^= (*p++) * P3;
+        h = rotl(h, 11) * P1;
+    }
+    h ^= h >> 33;
+    h *= P2;
+    h ^= h >> 29;
+    h *= P3;
+    h ^= h >> 32;
+    return h;
+}

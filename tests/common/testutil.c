@@ -1,0 +1,56 @@
+/* testutil.c — see testutil.h. */
+#include "testutil.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+const char *tu_env(const char *name, const char *def)
+{
+    const char *v = getenv(name);
+    return v && *v ? v : def;
+}
+
+const char *tu_data(const char *name, char *buf, size_t len)
+{
+    snprintf(buf, len, "%s/%s", tu_env("SPLATD_TESTDATA", "tests/data"), name);
+    return buf;
+}
+
+uint8_t *tu_read_file(const char *path, size_t *len)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) return NULL;
+    if (fseek(f, 0, SEEK_END) != 0) { fclose(f); return NULL; }
+    long sz = ftell(f);
+    if (sz < 0) { fclose(f); return NULL; }
+    rewind(f);
+    uint8_t *b = malloc((size_t)sz + 1);
+    if (b && fread(b, 1, (size_t)sz, f) != (size_t)sz) { free(b); b = NULL; }
+    fclose(f);
+    if (b) { b[sz] = 0; *len = (size_t)sz; }
+    return b;
+}
+
+int tu_write_file(const char *path, const void *data, size_t len)
+{
+    FILE *f = fopen(path, "wb");
+    if (!f) return -1;
+    size_t w = fwrite(data, 1, len, f);
+    return (fclose(f) == 0 && w == len) ? 0 : -1;
+}
+
+const char *tu_tmpdir(char *buf, size_t len)
+{
+    snprintf(buf, len, "%s/splatd-test-XXXXXX", tu_env("TMPDIR", "/tmp"));
+    return mkdtemp(buf);
+}
+
+void tu_rm_rf(const char *path)
+{
+    if (!path || !*path || strstr(path, "splatd-test-") == NULL) return; /* only our own dirs */
+    char cmd[4200];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", path);
+    if (system(cmd) != 0) fprintf(stderr, "testutil: could not remove %s\n", path);
+}

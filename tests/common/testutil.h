@@ -1,0 +1,23 @@
+/* testutil.h — small helpers shared by the tests (files, temporary directories, data paths). */
+#pragma once
+#include <stddef.h>
+#include <stdint.h>
+
+/* tu_data: path of a file in tests/data (from $SPLATD_TESTDATA, else "tests/data"). Static buffer
+ * per call site is not used: the result is written to buf. */
+const char *tu_data(const char *name, char *buf, size_t len);
+
+/* tu_read_file: whole file into a malloc'd buffer; *len set. NULL on failure. */
+uint8_t *tu_read_file(const char *path, size_t *len);
+
+/* tu_write_file: writes len bytes to path; 0 on success. */
+int tu_write_file(const char *path, const void *data, size_t len);
+
+/* tu_tmpdir: creates a fresh directory under $TMPDIR (or /tmp) and writes its path to buf. */
+const char *tu_tmpdir(char *buf, size_t len);
+
+/* tu_rm_rf: removes a directory tree made by tu_tmpdir. */
+void tu_rm_rf(const char *path);
+
+/* tu_env: getenv with a default. */
+const char *tu_env(const char *name, const char *def);

@@ -1,0 +1,88 @@
+/* test_params.c — the parameter table: defaults, text syntax, validation messages. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+#include <string.h>
+
+#include "params.h"
+
+static void test_defaults_valid_and_round_trip(void **state)
+{
+    (void)state;
+    sp_params p, q;
+    sp_params_defaults(&p);
+    char buf[128], err[256];
+    for (int i = 0; i < SP_PARAM_COUNT; i++) {
+        /* every default must parse (sp_params_defaults ignores errors, so check here) */
+        assert_int_equal(sp_param_set_text(&q, sp_param_table[i].name, sp_param_table[i].def,
+                                           err, sizeof err), 0);
+        sp_param_get_text(&p, i, buf, sizeof buf);
+        sp_params r = p;
+        assert_int_equal(sp_param_set_text(&r, sp_param_table[i].name, buf, err, sizeof err), 0);
+        assert_memory_equal(&r, &p, sizeof p);
+    }
+    assert_int_equal(p.pipeline, SP_PIPE_SPLAT);
+    assert_true(p.splat_scale == 1.0f);
+    assert_int_equal(p.quality, 85);
+    assert_int_equal(p.subsampling, SP_SUB_420);
+    assert_true(p.light[2] == 1.0f && p.light[0] == 0.3f);
+}
+
+static void test_set_and_errors(void **state)
+{
+    (void)state;
+    sp_params p;
+    sp_params_defaults(&p);
+    char err[256];
+    assert_int_equal(sp_param_set_kv(&p, "pipeline=points", err, sizeof err), 0);
+    assert_int_equal(p.pipeline, SP_PIPE_POINTS);
+    assert_int_equal(sp_param_set_kv(&p, "splat_scale=2.5", err, sizeof err), 0);
+    assert_true(p.splat_scale == 2.5f);
+    assert_int_equal(sp_param_set_kv(&p, "background=0.1,0.2,0.3", err, sizeof err), 0);
+    assert_true(p.background[1] == 0.2f);
+
+    assert_int_equal(sp_param_set_kv(&p, "nosuch=1", err, sizeof err), -1);
+    assert_non_null(strstr(err, "unknown parameter 'nosuch'"));
+    assert_int_equal(sp_param_set_kv(&p, "quality=101", err, sizeof err), -1);
+    assert_non_null(strstr(err, "'quality'"));
+    assert_non_null(strstr(err, "[1, 100]"));
+    assert_int_equal(p.quality, 85); /* unchanged on error */
+    assert_int_equal(sp_param_set_kv(&p, "quality=8.5", err, sizeof err), -1);
+    assert_non_null(strstr(err, "integer"));
+    assert_int_equal(sp_param_set_kv(&p, "pipeline=raytrace", err, sizeof err), -1);
+    assert_non_null(strstr(err, "points|splat"));
+    assert_int_equal(sp_param_set_kv(&p, "lowpass=nan", err, sizeof err), -1);
+    assert_int_equal(sp_param_set_kv(&p, "lowpass=", err, sizeof err), -1);
+    assert_int_equal(sp_param_set_kv(&p, "light=1,2", err, sizeof err), -1);
+    assert_non_null(strstr(err, "three numbers"));
+    assert_int_equal(sp_param_set_kv(&p, "light=0,0,1,4", err, sizeof err), -1);
+    assert_int_equal(sp_param_set_kv(&p, "background=0,0,2", err, sizeof err), -1);
+    assert_non_null(strstr(err, "out of range"));
+    assert_int_equal(sp_param_set_kv(&p, "=3", err, sizeof err), -1);
+    assert_int_equal(sp_param_set_kv(&p, "splat_scale", err, sizeof err), -1);
+    assert_non_null(strstr(err, "key=value"));
+}
+
+static void test_enum_names(void **state)
+{
+    (void)state;
+    char buf[32];
+    assert_string_equal(sp_enum_name(SP_FORMAT, SP_FMT_EXR, buf, sizeof buf), "exr");
+    assert_string_equal(sp_enum_name(SP_COLOR, SP_COLOR_INTENSITY, buf, sizeof buf), "intensity");
+    assert_null(sp_enum_name(SP_FORMAT, 99, buf, sizeof buf));
+    assert_null(sp_enum_name(SP_QUALITY, 0, buf, sizeof buf));
+    assert_int_equal(sp_param_find("l_m_nonexistent"), -1);
+    assert_int_equal(sp_param_find("lowpass"), SP_LOWPASS);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_defaults_valid_and_round_trip),
+        cmocka_unit_test(test_set_and_errors),
+        cmocka_unit_test(test_enum_names),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
