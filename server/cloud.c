@@ -193,5 +193,7 @@ int pc_load(const char *path, pc_cloud *out, sd_err *err)
         pc_raw_free(&raw);
         return rc;
     }
-    return pc_finalize(&raw, out, path, err);
+    rc = pc_finalize(&raw, out, path, err);
+    pc_raw_free(&raw); /* pc_finalize empties raw on success but leaves it on failure */
+    return rc;
 }
