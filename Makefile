@@ -38,7 +38,7 @@ TEST_LIBS  := $(shell pkg-config --libs cmocka 2>/dev/null)
 
 WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes -Wno-unused-parameter
 CFLAGS  ?= -O2 -g
-ALL_CFLAGS = -std=c11 -D_GNU_SOURCE -fPIC $(WARN) $(CFLAGS) -Iprotocol -Iserver -Iclient -I$(BUILD)/gen \
+ALL_CFLAGS = -std=c11 -D_GNU_SOURCE -fPIC $(WARN) $(CFLAGS) -Iprotocol -Iserver -Iclient -Itests/common -I$(BUILD)/gen \
              $(PKG_CFLAGS) $(EXR_CFLAGS) -MMD -MP
 LIBS    := $(PKG_LIBS) $(FLANN_LIBS) $(EXR_LIBS) -lpthread -lm
 
@@ -146,7 +146,8 @@ $(BUILD)/gen/shaders_gen.c $(BUILD)/gen/shaders_gen.h &: $(BUILD)/embed_shaders 
 all: $(BUILD)/bin/splatd $(BUILD)/bin/splat $(BUILD)/libsplatclient.a $(BUILD)/libsplatclient.so $(TOOLS)
 
 $(BUILD)/libsplatclient.so: $(call obj,$(BUILD),$(CLIENT_LIB_SRC) $(PROTO_SRC))
-	$(CC) -shared -Wl,-soname,libsplatclient.so.0 -o $@ $^ $(shell pkg-config --libs libcrypto liblz4 libturbojpeg)
+	$(CC) -shared -Wl,-soname,libsplatclient.so.0 -Wl,--version-script=client/libsplatclient.map \
+	  -o $@ $^ $(shell pkg-config --libs libcrypto liblz4 libturbojpeg) -lm
 
 # The tests find the binaries and data through these variables.
 TEST_ENV = SPLATD_BIN=$(abspath $(1)/bin/splatd) SPLAT_BIN=$(abspath $(1)/bin/splat) \

@@ -99,7 +99,11 @@ int sp_param_set_text(sp_params *p, const char *name, const char *value, char *e
                      in->type == SP_T_INT ? "an integer" : "a number");
             return -1;
         }
-        if (v < in->min || v > in->max) {
+        /* floats are compared as stored, so the printed value of a stored float reads back */
+        int out = in->type == SP_T_FLOAT
+                      ? ((float)v < (float)in->min || (float)v > (float)in->max)
+                      : (v < in->min || v > in->max);
+        if (out) {
             snprintf(err, errlen, "parameter '%s': %s is out of range [%g, %g]", name, value,
                      in->min, in->max);
             return -1;

@@ -1,0 +1,379 @@
+/* splat_main.c — the `splat` command: list, info, render and camera-path jobs against a
+ * splatd daemon, through libsplatclient. Exit status: 0 success, 1 a failure (any server
+ * ERROR included, printed with its code), 2 a usage error. */
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "campath.h"
+#include "cli.h"
+#include "params.h"
+#include "splat_client.h"
+
+enum { EXIT_FAIL = 1, EXIT_USAGE = 2 };
+
+static void usage(FILE *f)
+{
+    fprintf(f,
+        "usage: splat [--host H] [--port P] [--token-file F] COMMAND ...\n"
+        "\n"
+        "commands:\n"
+        "  list                       the clouds in the server's data directory\n"
+        "  info NAME                  open a cloud (extension optional) and print its summary\n"
+        "  render NAME -o FILE        render one frame; the format follows FILE's extension:\n"
+        "                             .jpg .png .exr .raw (the server's bytes are written as sent)\n"
+        "  path NAME (--path FILE | --orbit N) -o 'dir/%%05d.jpg'\n"
+        "                             render a camera path; frames already written are skipped\n"
+        "\n"
+        "options (before or after the command):\n"
+        "  --host H          server host (default 127.0.0.1)\n"
+        "  --port P          server port (default 7878)\n"
+        "  --token-file F    shared token, mode 0600 (when the server requires one)\n"
+        "  --timeout S       seconds one request may take (default 60, 0 = none)\n"
+        "  -o FILE|PATTERN   output file (render) or pattern with one %%d/%%05d (path)\n"
+        "  --set key=value   a render parameter (repeatable; list below)\n"
+        "  --eye x,y,z --target x,y,z --up x,y,z --fov DEG --size WxH (default 1280x720)\n"
+        "                    camera (file coordinates); without --eye the view frames the cloud\n"
+        "  --path FILE       one camera per line: eye x y z, target x y z, up x y z, fov;\n"
+        "                    '#' comments; spaces and/or commas between numbers\n"
+        "  --orbit N         N cameras around the bounding-box centre (axis --up, default +z)\n"
+        "  --inflight K      frames in flight in a path job (default 2, 1..64)\n"
+        "  --force           re-render frames that already exist\n"
+        "  -q, --quiet       no progress output\n"
+        "  -h, --help        this text\n"
+        "\n"
+        "parameters (--set; the output file's extension decides 'format'):\n");
+    for (int i = 0; i < SP_PARAM_COUNT; i++) {
+        const sp_param_info *p = &sp_param_table[i];
+        char range[160];
+        if (p->type == SP_T_ENUM) snprintf(range, sizeof range, "%s", p->values);
+        else snprintf(range, sizeof range, "%s in [%g, %g]",
+                      p->type == SP_T_FLOAT ? "number" : p->type == SP_T_INT ? "integer"
+                                                                               : "x,y,z each",
+                      p->min, p->max);
+        fprintf(f, "  %-14s %-40s default %s\n", p->name, range, p->def);
+    }
+}
+
+/* fail: prints the client's last error and returns EXIT_FAIL. */
+static int fail(spc_client *c, const char *what)
+{
+    fprintf(stderr, "splat: %s: %s\n", what, spc_errmsg(c));
+    return EXIT_FAIL;
+}
+
+static void on_progress(void *user, const char *phase, float fraction, const char *text)
+{
+    const cli_args *a = user;
+    if (a->quiet) return;
+    char what[300];
+    if (text && text[0]) snprintf(what, sizeof what, "%s", text);
+    else snprintf(what, sizeof what, "%s %.0f%%", phase, 100.0 * fraction);
+    if (isatty(2)) fprintf(stderr, "\rpreparing %s: %s\033[K", a->name, what);
+    else fprintf(stderr, "preparing %s: %s\n", a->name, what);
+}
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+/* open_cloud: OPEN with progress, then the --set parameters plus format (when not NULL). */
+static int open_cloud(spc_client *c, const cli_args *a, const char *format, spc_info *info)
+{
+    int rc = spc_open(c, a->name, info, on_progress, (void *)a);
+    if (!a->quiet && isatty(2)) fprintf(stderr, "\r\033[K");
+    if (rc < 0) return fail(c, a->name);
+    const char *kv[CLI_MAX_SETS + 1];
+    int n = 0;
+    for (int i = 0; i < a->nsets; i++) kv[n++] = a->sets[i];
+    char fkv[32];
+    if (format) {
+        snprintf(fkv, sizeof fkv, "format=%s", format);
+        kv[n++] = fkv;
+    }
+    if (n && spc_set_params(c, kv, n) < 0) return fail(c, "parameters");
+    return 0;
+}
+
+/* make_camera: the camera of `render` from the options and the cloud's bounds. */
+static void make_camera(const cli_args *a, const spc_info *info, spc_camera *cam)
+{
+    spc_camera_frame(info, a->width, a->height, cam);
+    if (a->have_eye) {
+        memcpy(cam->eye, a->eye, sizeof cam->eye);
+        for (int i = 0; i < 3; i++) cam->target[i] = 0.5 * (info->bmin[i] + info->bmax[i]);
+        cam->up[0] = 0, cam->up[1] = 0, cam->up[2] = 1;
+    }
+    if (a->have_target) memcpy(cam->target, a->target, sizeof cam->target);
+    if (a->have_up) memcpy(cam->up, a->up, sizeof cam->up);
+    if (a->have_fov) cam->fov_deg = a->fov;
+}
+
+static int cmd_list(spc_client *c)
+{
+    spc_cloud *l;
+    int n = spc_list(c, &l);
+    if (n < 0) return fail(c, "list");
+    printf("%-40s %14s %12s  %s\n", "NAME", "BYTES", "POINTS", "STATE");
+    for (int i = 0; i < n; i++)
+        printf("%-40s %14llu %12llu  %s\n", l[i].name, (unsigned long long)l[i].bytes,
+               (unsigned long long)l[i].points,
+               l[i].flags & 2 ? "loaded" : l[i].flags & 1 ? "prepared" : "-");
+    spc_free_list(l);
+    return 0;
+}
+
+static int cmd_info(spc_client *c, const cli_args *a)
+{
+    spc_info in;
+    int rc = open_cloud(c, a, NULL, &in);
+    if (rc) return rc;
+    static const char *attr[7] = {"rgb", "normal", "intensity", "class", "radius", "scalar", "F"};
+    char attrs[128] = "";
+    for (int i = 0; i < 7; i++)
+        if (in.attrs & (1u << i)) {
+            strcat(attrs, attrs[0] ? " " : "");
+            strcat(attrs, attr[i]);
+        }
+    printf("name        %s\n", in.name);
+    printf("format      %s\n", in.format);
+    printf("points      %llu (%llu dropped)\n", (unsigned long long)in.points,
+           (unsigned long long)in.dropped);
+    printf("bounds min  %.17g %.17g %.17g\n", in.bmin[0], in.bmin[1], in.bmin[2]);
+    printf("bounds max  %.17g %.17g %.17g\n", in.bmax[0], in.bmax[1], in.bmax[2]);
+    printf("offset      %.17g %.17g %.17g\n", in.offset[0], in.offset[1], in.offset[2]);
+    printf("attributes  %s\n", attrs);
+    printf("sigma       %.9g\n", (double)in.sigma);
+    printf("k           %u\n", in.k);
+    const spc_server_info *s = spc_server(c);
+    printf("server      %s, %s, %s\n", s->server, s->backend, s->renderer);
+    return 0;
+}
+
+static int cmd_render(spc_client *c, const cli_args *a)
+{
+    const char *fmt = cp_ext_format(a->output);
+    if (!fmt) {
+        fprintf(stderr, "splat: cannot tell the format of %s: use .jpg, .png, .exr or .raw\n",
+                a->output);
+        return EXIT_USAGE;
+    }
+    spc_info in;
+    int rc = open_cloud(c, a, fmt, &in);
+    if (rc) return rc;
+    spc_camera cam;
+    make_camera(a, &in, &cam);
+    if (spc_set_camera(c, &cam, NULL) < 0) return fail(c, "camera");
+    spc_frame f;
+    if (spc_render(c, &f, 0) < 0) return fail(c, "render");
+    char err[600];
+    if (cp_mkdirs(a->output, err, sizeof err) < 0 ||
+        cp_write_file(a->output, f.data, f.data_len, err, sizeof err) < 0) {
+        fprintf(stderr, "splat: %s\n", err);
+        return EXIT_FAIL;
+    }
+    if (!a->quiet)
+        fprintf(stderr, "wrote %s: %ux%u %s %s, %zu bytes; render %.1f ms, readback %.1f ms, "
+                "encode %.1f ms, %llu points\n", a->output, f.width, f.height, f.pipeline,
+                f.format, f.data_len, f.render_us / 1e3, f.readback_us / 1e3, f.encode_us / 1e3,
+                (unsigned long long)f.points_drawn);
+    return 0;
+}
+
+/* progress output of a path job: a bar redrawn in place on a terminal, else a plain line at
+ * most every 2 seconds (and at the end). */
+typedef struct prog {
+    int tty, quiet;
+    double t0, last;
+} prog;
+
+static void prog_show(prog *p, long done, long total, int final)
+{
+    if (p->quiet) return;
+    double t = now_s();
+    char line[200];
+    if (p->tty) {
+        if (!final && t - p->last < 0.1) return;
+        fprintf(stderr, "\r%s\033[K%s", cp_progress_line(line, sizeof line, done, total,
+                                                          t - p->t0, 30), final ? "\n" : "");
+    } else {
+        if (!final && t - p->last < 2.0) return;
+        fprintf(stderr, "%s\n", cp_progress_line(line, sizeof line, done, total, t - p->t0, 0));
+    }
+    p->last = t;
+}
+
+typedef struct inflight {
+    uint32_t seq;
+    long index;
+} inflight;
+
+static int cmd_path(spc_client *c, const cli_args *a)
+{
+    char err[600];
+    const char *fmt = cp_ext_format(a->output);
+    if (cp_pattern_check(a->output, err, sizeof err) < 0) {
+        fprintf(stderr, "splat: %s\n", err);
+        return EXIT_USAGE;
+    }
+    if (!fmt) {
+        fprintf(stderr, "splat: cannot tell the format of %s: use .jpg, .png, .exr or .raw\n",
+                a->output);
+        return EXIT_USAGE;
+    }
+    cp_cam *cams = NULL;
+    size_t ncams = 0;
+    if (a->path_file && cp_load(a->path_file, &cams, &ncams, err, sizeof err) < 0) {
+        fprintf(stderr, "splat: %s\n", err);
+        return EXIT_USAGE;
+    }
+    long n = a->path_file ? (long)ncams : a->orbit;
+    long *todo = malloc((size_t)n * sizeof *todo);
+    long ntodo = todo ? cp_todo(a->output, n, a->force, todo) : -1;
+    int rc = 0;
+    if (ntodo < 0) {
+        fprintf(stderr, "splat: cannot plan %ld frames for %s\n", n, a->output);
+        rc = EXIT_FAIL;
+        goto out;
+    }
+    if (ntodo == 0) {
+        if (!a->quiet)
+            fprintf(stderr, "all %ld frames of %s exist already (--force renders them again)\n",
+                    n, a->output);
+        goto out;
+    }
+    char first[4096];
+    cp_expand(a->output, todo[0], first, sizeof first);
+    if (cp_mkdirs(first, err, sizeof err) < 0) {
+        fprintf(stderr, "splat: %s\n", err);
+        rc = EXIT_FAIL;
+        goto out;
+    }
+    spc_info in;
+    if ((rc = open_cloud(c, a, fmt, &in)) != 0) goto out;
+    if (!a->quiet && ntodo < n)
+        fprintf(stderr, "resuming: %ld of %ld frames exist, %ld to render\n", n - ntodo, n, ntodo);
+
+    inflight fl[64];
+    int nfl = 0;
+    long sent = 0, got = 0;
+    prog pg = {isatty(2), a->quiet, now_s(), 0};
+    uint64_t sum_render = 0, sum_encode = 0, bytes = 0;
+    while (got < ntodo) {
+        while (sent < ntodo && nfl < a->inflight) {
+            long idx = todo[sent];
+            spc_camera cam;
+            if (cams) {
+                memset(&cam, 0, sizeof cam);
+                memcpy(cam.eye, cams[idx].eye, sizeof cam.eye);
+                memcpy(cam.target, cams[idx].target, sizeof cam.target);
+                memcpy(cam.up, cams[idx].up, sizeof cam.up);
+                cam.fov_deg = cams[idx].fov;
+                cam.width = a->width;
+                cam.height = a->height;
+            } else {
+                spc_camera_orbit(&in, a->have_up ? a->up : NULL, (int)idx, (int)n,
+                                 a->have_fov ? a->fov : 45.0f, a->width, a->height, &cam);
+            }
+            uint32_t seq;
+            if (spc_send_render(c, &cam, &seq) < 0) {
+                snprintf(err, sizeof err, "frame %ld", idx);
+                rc = fail(c, err);
+                goto out;
+            }
+            fl[nfl].seq = seq;
+            fl[nfl].index = idx;
+            nfl++;
+            sent++;
+        }
+        spc_frame f;
+        if (spc_recv_frame(c, &f, 0) < 0) {
+            if (!a->quiet && pg.tty) fprintf(stderr, "\n");
+            /* name the frame: the error's request is its CAMERA or its RENDER */
+            uint32_t es = spc_errseq(c);
+            snprintf(err, sizeof err, "path");
+            for (int j = 0; j < nfl; j++)
+                if (es && (fl[j].seq == es || fl[j].seq == es + 1))
+                    snprintf(err, sizeof err, "frame %ld", fl[j].index);
+            rc = fail(c, err);
+            goto out;
+        }
+        int k = 0;
+        while (k < nfl && fl[k].seq != f.seq) k++;
+        if (k == nfl) {
+            if (f.seq == 0) continue; /* a streamed frame: not ours */
+            fprintf(stderr, "splat: the server sent a frame for request %u, which is not in "
+                    "flight\n", f.seq);
+            rc = EXIT_FAIL;
+            goto out;
+        }
+        char name[4096];
+        cp_expand(a->output, fl[k].index, name, sizeof name);
+        if (cp_write_file(name, f.data, f.data_len, err, sizeof err) < 0) {
+            fprintf(stderr, "\nsplat: %s\n", err);
+            rc = EXIT_FAIL;
+            goto out;
+        }
+        memmove(&fl[k], &fl[k + 1], (size_t)(nfl - k - 1) * sizeof fl[0]);
+        nfl--;
+        got++;
+        sum_render += f.render_us;
+        sum_encode += f.encode_us;
+        bytes += f.data_len;
+        prog_show(&pg, got, ntodo, got == ntodo);
+    }
+    if (!a->quiet) {
+        double el = now_s() - pg.t0;
+        fprintf(stderr, "%ld frames in %.2f s (%.2f frames/s, %d in flight); server render %.1f "
+                "ms, encode %.1f ms per frame on average; %.1f KiB per frame\n", got, el,
+                got / (el > 0 ? el : 1), a->inflight, sum_render / 1e3 / got,
+                sum_encode / 1e3 / got, bytes / 1024.0 / got);
+    }
+out:
+    free(todo);
+    free(cams);
+    return rc;
+}
+
+int main(int argc, char **argv)
+{
+    cli_args a;
+    char err[600];
+    if (cli_parse(argc, argv, &a, err, sizeof err) < 0) {
+        fprintf(stderr, "splat: %s\n", err);
+        return EXIT_USAGE;
+    }
+    if (a.help) {
+        usage(stdout);
+        return 0;
+    }
+    /* check --set locally before connecting: a typo fails fast with the range */
+    sp_params chk;
+    sp_params_defaults(&chk);
+    for (int i = 0; i < a.nsets; i++)
+        if (sp_param_set_kv(&chk, a.sets[i], err, sizeof err) < 0) {
+            fprintf(stderr, "splat: --set %s: %s\n", a.sets[i], err);
+            return EXIT_USAGE;
+        }
+    spc_options o = {.host = a.host, .port = a.port, .token_file = a.token_file,
+                     .timeout_ms = a.timeout_s ? a.timeout_s * 1000 : -1,
+                     .client_name = "splat"};
+    spc_client *c;
+    if (spc_connect(&o, &c, err, sizeof err) < 0) {
+        fprintf(stderr, "splat: %s\n", err);
+        return EXIT_FAIL;
+    }
+    int rc;
+    if (!strcmp(a.command, "list")) rc = cmd_list(c);
+    else if (!strcmp(a.command, "info")) rc = cmd_info(c, &a);
+    else if (!strcmp(a.command, "render")) rc = cmd_render(c, &a);
+    else rc = cmd_path(c, &a);
+    spc_close(c);
+    return rc;
+}
