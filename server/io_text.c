@@ -26,6 +26,7 @@ int pc__file_open(const char *path, pc__file *f, sd_err *err)
     }
     if (st.st_size == 0) { /* mmap refuses length 0; an empty file is simply no bytes */
         close(fd);
+        f->data = (const uint8_t *)""; /* not NULL: data + 0 on NULL is undefined in C */
         return 0;
     }
     if ((uint64_t)st.st_size > (uint64_t)SIZE_MAX / 2) {

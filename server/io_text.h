@@ -12,7 +12,7 @@
 
 /* A file mapped (or, for an empty file, not mapped) read-only in memory. */
 typedef struct pc__file {
-    const uint8_t *data; /* size bytes; NULL when size is 0 */
+    const uint8_t *data; /* size bytes; a valid empty string when size is 0 */
     size_t size;
     void *map;           /* what munmap needs, NULL when nothing was mapped */
 } pc__file;

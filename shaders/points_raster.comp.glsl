@@ -1,0 +1,95 @@
+#version 430
+// points_raster.comp — the `points` pipeline as a compute rasteriser (the default form; Schütz
+// et al. 2021, "Rendering Point Clouds with Compute Shaders"). llvmpipe has no 64-bit atomics,
+// so the per-pixel key is 32 bits, in one of two ways:
+//   packed (u_pass 2, one pass): key = quantised log depth << u_index_bits | point index, by
+//             atomicMin into depth[pixel]. Used while at least 12 bits are left for the depth
+//             (clouds up to 2^20 - 1 points): points closer than 1/4096 of log(far/near) to
+//             each other may be ordered by index instead of depth. Ties go to the lower index.
+//   exact (two passes): u_pass 0: atomicMin of the eye depth's float bits (positive floats
+//             order like uints) into depth[pixel]; u_pass 1: points whose depth equals the
+//             winner write atomicMin(index[pixel], point), so ties go to the lowest index, as
+//             with GL_POINTS and GL_LESS (first drawn wins).
+// points_resolve.frag.glsl then turns the key or index into colour and depth. Each point covers
+// the pixels whose centres lie in the square of side u_point_size around its projection (the
+// GL_POINTS rule), clipped to the frame but not dropped when its centre is outside it.
+//
+// Each invocation handles u_per points, u_threads apart (adjacent invocations read adjacent
+// points): llvmpipe pays ~50 ns per invocation whatever it does, so on a CPU u_per is 32.
+
+layout(local_size_x = 64) in;
+
+layout(std430, binding = 0) readonly restrict buffer Pos { float pos[]; };
+layout(std430, binding = 5) restrict buffer Depth { uint depth[]; };
+layout(std430, binding = 6) restrict buffer Index { uint index[]; };
+// Visible ranges after culling: x = first point, y = position of that point in the sequence of
+// visible points (an exclusive prefix sum of the counts).
+layout(std430, binding = 7) readonly restrict buffer Ranges { uvec2 ranges[]; };
+
+uniform mat4 u_viewproj;
+uniform ivec2 u_size;
+uniform float u_point_size;
+uniform float u_znear, u_zfar;
+uniform uint u_total;     // visible points
+uniform uint u_nranges;
+uniform uint u_first;     // the first point of range 0
+uniform uint u_stride;    // invocations per row of work groups (2-D dispatch)
+uniform uint u_threads;   // invocations in the dispatch
+uniform uint u_per;       // points per invocation
+uniform int u_pass;
+uniform uint u_index_bits;  // packed: bits of the point index
+uniform float u_log_near;   // packed: log2(near)
+uniform float u_log_scale;  // packed: (2^(32 - u_index_bits) - 1) / log2(far / near)
+
+// The pass's operation on pixel pi for point i with key.
+void touch(uint pi, uint key, uint i)
+{
+    if (u_pass != 1) {
+        if (key < depth[pi]) atomicMin(depth[pi], key);
+    } else if (depth[pi] == key) {
+        atomicMin(index[pi], i);
+    }
+}
+
+void main()
+{
+    uint gid = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * u_stride;
+    float h = 0.5 * u_point_size;
+    for (uint j = 0u; j < u_per; j++) {
+        uint k = gid + j * u_threads;
+        if (k >= u_total) break;
+        uint i = u_first + k; // one range (everything visible): no table look-up
+        if (u_nranges > 1u) {
+            uint lo = 0u, hi = u_nranges - 1u;
+            while (lo < hi) {
+                uint mid = (lo + hi + 1u) >> 1;
+                if (ranges[mid].y <= k) lo = mid;
+                else hi = mid - 1u;
+            }
+            i = ranges[lo].x + (k - ranges[lo].y);
+        }
+        vec4 c = u_viewproj * vec4(pos[3u * i], pos[3u * i + 1u], pos[3u * i + 2u], 1.0);
+        float d = c.w;
+        if (!(d >= u_znear && d <= u_zfar)) continue;
+        vec2 px = (c.xy / c.w * 0.5 + 0.5) * vec2(u_size);
+        // Pixels x with x + 0.5 in [px - h, px + h).
+        ivec2 p0 = max(ivec2(ceil(px - h - 0.5)), ivec2(0));
+        ivec2 p1 = min(ivec2(ceil(px + h - 0.5)) - 1, u_size - 1);
+        uint key;
+        if (u_pass == 2) {
+            float dmax = float((1u << (32u - u_index_bits)) - 1u);
+            uint dq = uint(clamp((log2(d) - u_log_near) * u_log_scale, 0.0, dmax));
+            key = (dq << u_index_bits) | i;
+        } else {
+            key = floatBitsToUint(d);
+        }
+        if (u_point_size == 1.0) {
+            // One pixel, without the loops (5 % faster on llvmpipe, and the common case).
+            if (p0.x <= p1.x && p0.y <= p1.y)
+                touch(uint(p0.y) * uint(u_size.x) + uint(p0.x), key, i);
+            continue;
+        }
+        for (int y = p0.y; y <= p1.y; y++)
+            for (int x = p0.x; x <= p1.x; x++) touch(uint(y) * uint(u_size.x) + uint(x), key, i);
+    }
+}
