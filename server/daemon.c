@@ -1,0 +1,496 @@
+/* daemon.c — `splatd` (the default sub-command): options, start-up checks and the wiring of
+ * the event loop (sockets, signals, timers) to the workers (render_thread.c) and the request
+ * handlers (dispatch.c).
+ *
+ * Threads: this one runs the event loop for every socket; render_thread.c adds the render,
+ * encoder and prep threads. SIGTERM/SIGINT arrive through a signalfd (blocked in every thread);
+ * SIGPIPE is ignored and sends use MSG_NOSIGNAL. */
+#include <errno.h>
+#include <getopt.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <sys/signalfd.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include "commands.h"
+#include "datadir.h"
+#include "srv.h"
+
+static void usage(FILE *f)
+{
+    fprintf(f,
+            "usage: splatd [--listen HOST:PORT] --data DIR [options]\n"
+            "\n"
+            "Serves the point clouds of DIR to splat clients: renders frames on demand and streams them.\n"
+            "\n"
+            "  --listen HOST:PORT   address to listen on (default 127.0.0.1:7878; port 0 picks a free\n"
+            "                       port, printed on stderr as 'listening on HOST:PORT'). Without\n"
+            "                       --token-file only loopback addresses are accepted.\n"
+            "  --port-file F        write the bound port to F once listening\n"
+            "  --data DIR           the data directory: clients open clouds by file name in it\n"
+            "  --cache DIR          prepared-cloud cache (default $SPLATD_CACHE, $XDG_CACHE_HOME/splatd,\n"
+            "                       ~/.cache/splatd)\n"
+            "  --backend B          auto (default), egl or osmesa\n"
+            "  --shader-dir DIR     load shaders from DIR instead of the built-in copies\n"
+            "  --token-file F       require clients to prove they know the token in F (HMAC-SHA256\n"
+            "                       of a random challenge); F must not be accessible by group or others\n"
+            "  --preload NAME       prepare and upload cloud NAME at start-up (repeatable)\n"
+            "  --max-clients N      connections served at once (default 64)\n"
+            "  --handshake-timeout S  seconds a client has to authenticate (default 10)\n"
+            "  --help               this text\n"
+            "\n"
+            "SIGTERM or SIGINT stops accepting, finishes the frames in flight (at most 5 s) and exits 0.\n");
+}
+
+/* parse_opts: fills o from argv. Returns 0, 1 for --help (exit 0), or -1 after printing the
+ * error (exit 2). */
+static int parse_opts(int argc, char **argv, srv_opts *o)
+{
+    enum { O_LISTEN = 1000, O_DATA, O_CACHE, O_BACKEND, O_TOKEN, O_PRELOAD, O_SHADERS, O_MAXC,
+           O_PORTFILE, O_HS, O_HELP };
+    static const struct option lo[] = {
+        {"listen", required_argument, 0, O_LISTEN},   {"data", required_argument, 0, O_DATA},
+        {"cache", required_argument, 0, O_CACHE},     {"backend", required_argument, 0, O_BACKEND},
+        {"token-file", required_argument, 0, O_TOKEN}, {"preload", required_argument, 0, O_PRELOAD},
+        {"shader-dir", required_argument, 0, O_SHADERS}, {"max-clients", required_argument, 0, O_MAXC},
+        {"port-file", required_argument, 0, O_PORTFILE}, {"handshake-timeout", required_argument, 0, O_HS},
+        {"help", no_argument, 0, O_HELP},             {0, 0, 0, 0},
+    };
+    snprintf(o->host, sizeof o->host, "127.0.0.1");
+    o->port = PROTO_DEFAULT_PORT;
+    o->max_clients = 64;
+    o->handshake_ms = 10000;
+    o->shutdown_ms = 5000;
+    optind = 1;
+    opterr = 0;
+    int c;
+    while ((c = getopt_long(argc, argv, "h", lo, NULL)) != -1) {
+        sd_err err = {0};
+        char *end;
+        long v;
+        switch (c) {
+        case O_LISTEN:
+            if (net_parse_hostport(optarg, o->host, sizeof o->host, &o->port, &err) != 0) {
+                fprintf(stderr, "splatd: --listen: %s\n", err.msg);
+                return -1;
+            }
+            break;
+        case O_DATA: o->data_dir = optarg; break;
+        case O_CACHE: o->cache_dir = optarg; break;
+        case O_TOKEN: o->token_file = optarg; break;
+        case O_SHADERS: o->shader_dir = optarg; break;
+        case O_PORTFILE: o->port_file = optarg; break;
+        case O_BACKEND:
+            if (!strcmp(optarg, "auto")) o->backend = RND_BACKEND_AUTO;
+            else if (!strcmp(optarg, "egl")) o->backend = RND_BACKEND_EGL;
+            else if (!strcmp(optarg, "osmesa")) o->backend = RND_BACKEND_OSMESA;
+            else {
+                fprintf(stderr, "splatd: --backend '%s': expected auto, egl or osmesa\n", optarg);
+                return -1;
+            }
+            break;
+        case O_PRELOAD:
+            if (o->npreload == SRV_MAX_PRELOAD) {
+                fprintf(stderr, "splatd: at most %d --preload options\n", SRV_MAX_PRELOAD);
+                return -1;
+            }
+            o->preload[o->npreload++] = optarg;
+            break;
+        case O_MAXC:
+        case O_HS:
+            errno = 0;
+            v = strtol(optarg, &end, 10);
+            if (*end || errno || v < 1 || v > (c == O_MAXC ? 4096 : 3600)) {
+                fprintf(stderr, "splatd: --%s '%s': expected a number in 1..%d\n",
+                        c == O_MAXC ? "max-clients" : "handshake-timeout", optarg,
+                        c == O_MAXC ? 4096 : 3600);
+                return -1;
+            }
+            if (c == O_MAXC) o->max_clients = (int)v;
+            else o->handshake_ms = (int)v * 1000;
+            break;
+        case 'h':
+        case O_HELP: usage(stdout); return 1;
+        default:
+            fprintf(stderr, "splatd: unknown or incomplete option '%s' (see splatd --help)\n",
+                    argv[optind - 1]);
+            return -1;
+        }
+    }
+    if (optind < argc) {
+        fprintf(stderr, "splatd: unexpected argument '%s' (see splatd --help)\n", argv[optind]);
+        return -1;
+    }
+    if (!o->data_dir) {
+        fprintf(stderr, "splatd: --data DIR is required (the directory of clouds to serve)\n");
+        return -1;
+    }
+    return 0;
+}
+
+/* ---- sessions ---- */
+
+static void on_client(ev_loop *l, int fd, int mask, void *data);
+
+static void update_watch(srv *sv, sess *s, int want_write)
+{
+    int mask = want_write ? EV_WRITE : 0;
+    if (!s->paused && !s->close_after && s->in_off == s->in_len && !sv->stopping) mask |= EV_READ;
+    if (ev_mask(sv->loop, s->fd) == mask) return;
+    if (mask == 0) ev_unwatch(sv->loop, s->fd);
+    else if (ev_watch(sv->loop, s->fd, mask, on_client, s, NULL) != 0) srv_close(sv, s, "event loop error");
+}
+
+void srv_kick(srv *sv, sess *s)
+{
+    if (s->dead) return;
+    int rc = sess_flush(s, srv_release_frame, sv);
+    if (rc < 0) {
+        char r[96];
+        snprintf(r, sizeof r, "write failed: %s", strerror(-rc));
+        srv_close(sv, s, r);
+        return;
+    }
+    if (s->close_after && !sess_has_output(s)) {
+        srv_close(sv, s, s->close_reason[0] ? s->close_reason : "closing");
+        return;
+    }
+    int blocked = s->stream_frame != NULL;
+    if (blocked != s->stream_blocked) {
+        s->stream_blocked = blocked;
+        rt_set_stream_blocked(sv->rt, s->id, blocked);
+    }
+    update_watch(sv, s, rc == 0);
+}
+
+void srv_close(srv *sv, sess *s, const char *reason)
+{
+    if (s->dead) return;
+    s->dead = 1;
+    srv_log(sv, s, "closed: %s (%llu frames sent, %llu dropped, %llu bytes, %.1f s)", reason,
+            (unsigned long long)s->frames_sent, (unsigned long long)s->frames_dropped,
+            (unsigned long long)s->bytes_out, (double)(ev_now_ms() - s->t_connect_ms) / 1000.0);
+    ev_unwatch(sv->loop, s->fd);
+    close(s->fd);
+    s->fd = -1;
+    ev_timer_stop(sv->loop, &s->hs_timer);
+    ev_timer_stop(sv->loop, &s->fps_timer);
+    if (sv->rt) rt_client_close(sv->rt, s->id);
+    s->next_dead = sv->dead;
+    sv->dead = s;
+}
+
+static void free_dead(srv *sv)
+{
+    while (sv->dead) {
+        sess *s = sv->dead;
+        sv->dead = s->next_dead;
+        uint32_t i = s->id & 0xffffu;
+        if (sv->sessions[i] == s) {
+            sv->sessions[i] = NULL;
+            sv->nsess--;
+        }
+        sess_free(s, NULL, NULL); /* rt_client_close already forgot its frames */
+    }
+}
+
+static void on_client(ev_loop *l, int fd, int mask, void *data)
+{
+    (void)l; (void)fd;
+    sess *s = data;
+    srv *sv = s->owner;
+    if (s->dead) return;
+    if ((mask & EV_READ) && s->in_off == s->in_len) {
+        ssize_t r = recv(s->fd, s->in, SESS_IN_CHUNK, 0);
+        if (r == 0) {
+            srv_close(sv, s, s->authed ? "closed by the client" : "closed by the client before the handshake");
+            return;
+        }
+        if (r < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
+            char why[96];
+            snprintf(why, sizeof why, "read failed: %s", strerror(errno));
+            srv_close(sv, s, why);
+            return;
+        }
+        if (r > 0) {
+            s->in_off = 0;
+            s->in_len = (size_t)r;
+            srv_session_input(sv, s);
+            return;
+        }
+    }
+    srv_kick(sv, s);
+}
+
+static void on_handshake_timeout(ev_loop *l, ev_timer *t, void *data)
+{
+    (void)l; (void)t;
+    sess *s = data;
+    srv *sv = s->owner;
+    proto_buf b = {.version = s->version};
+    char msg[128];
+    snprintf(msg, sizeof msg, "no %sHELLO within %d s", sv->token.len ? "authenticated " : "",
+             sv->o.handshake_ms / 1000);
+    if (proto_enc_error(&b, 0, PROTO_E_AUTH_REQUIRED, msg) == 0 && sess_push(s, &b) == 0)
+        sess_flush(s, NULL, NULL);
+    proto_buf_free(&b);
+    srv_close(sv, s, msg);
+}
+
+/* refuse: a best-effort ERROR on a connection the daemon will not serve, then close. */
+static void refuse(int fd, int code, const char *text)
+{
+    proto_buf b = {0};
+    if (proto_enc_error(&b, 0, (uint32_t)code, text) == 0) {
+        ssize_t w = send(fd, b.data, b.len, MSG_NOSIGNAL | MSG_DONTWAIT);
+        (void)w;
+    }
+    proto_buf_free(&b);
+    close(fd);
+}
+
+static void on_accept(ev_loop *l, int fd, int mask, void *data)
+{
+    (void)l; (void)mask;
+    srv *sv = data;
+    for (int n = 0; n < 16 && !sv->stopping; n++) {
+        char addr[NET_ADDR_LEN];
+        int c = net_accept(fd, addr, sizeof addr);
+        if (c == -EAGAIN) return;
+        if (c < 0) {
+            srv_log(sv, NULL, "accept failed: %s", strerror(-c));
+            return;
+        }
+        int idx = -1;
+        for (int i = 0; i < sv->o.max_clients; i++)
+            if (!sv->sessions[i]) { idx = i; break; }
+        if (idx < 0) {
+            srv_log(sv, NULL, "%s refused: %d clients already connected (--max-clients)", addr, sv->nsess);
+            refuse(c, PROTO_E_BUSY, "too many clients; retry later");
+            continue;
+        }
+        if (++sv->gens[idx] == 0) sv->gens[idx] = 1;
+        uint32_t id = ((uint32_t)sv->gens[idx] << 16) | (uint32_t)idx;
+        sess *s = sess_new(id, c, addr);
+        sd_err err = {0};
+        if (!s || auth_challenge(s->challenge, &err) != 0 || rt_client_open(sv->rt, id) != 0) {
+            srv_log(sv, NULL, "%s refused: %s", addr, s ? err.msg : "out of memory");
+            sess_free(s, NULL, NULL);
+            refuse(c, PROTO_E_INTERNAL, "the server cannot take a connection now");
+            continue;
+        }
+        s->owner = sv;
+        s->version = PROTO_VERSION;
+        sv->sessions[idx] = s;
+        sv->nsess++;
+        srv_log(sv, s, "connected");
+        ev_timer_start(sv->loop, &s->hs_timer, (uint64_t)sv->o.handshake_ms, on_handshake_timeout, s);
+        update_watch(sv, s, 0);
+    }
+}
+
+/* ---- shutdown ---- */
+
+static void on_stop_deadline(ev_loop *l, ev_timer *t, void *data)
+{
+    (void)t;
+    srv *sv = data;
+    srv_log(sv, NULL, "shutdown: frames still in flight after %d ms; exiting anyway", sv->o.shutdown_ms);
+    ev_stop(l);
+}
+
+static void begin_shutdown(srv *sv, const char *why)
+{
+    if (sv->stopping) return;
+    sv->stopping = 1;
+    srv_log(sv, NULL, "%s: not accepting new connections; finishing frames in flight", why);
+    if (sv->lfd >= 0) {
+        ev_unwatch(sv->loop, sv->lfd);
+        close(sv->lfd);
+        sv->lfd = -1;
+    }
+    rt_drop_requests(sv->rt);
+    for (int i = 0; i < sv->o.max_clients; i++) {
+        sess *s = sv->sessions[i];
+        if (!s || s->dead) continue;
+        s->stream = 0;
+        ev_timer_stop(sv->loop, &s->fps_timer);
+        s->close_after = 1;
+        snprintf(s->close_reason, sizeof s->close_reason, "server shutting down");
+        srv_kick(sv, s);
+    }
+    ev_timer_start(sv->loop, &sv->stop_timer, (uint64_t)sv->o.shutdown_ms, on_stop_deadline, sv);
+}
+
+static void on_signal(ev_loop *l, int fd, int mask, void *data)
+{
+    (void)l; (void)mask;
+    srv *sv = data;
+    struct signalfd_siginfo si;
+    while (read(fd, &si, sizeof si) == (ssize_t)sizeof si)
+        begin_shutdown(sv, si.ssi_signo == SIGINT ? "SIGINT" : "SIGTERM");
+}
+
+static void before_sleep(ev_loop *l, void *data)
+{
+    srv *sv = data;
+    free_dead(sv);
+    if (sv->stopping && sv->nsess == 0 && !rt_busy(sv->rt)) ev_stop(l);
+}
+
+static void on_wakeup(ev_loop *l, void *data)
+{
+    (void)l;
+    srv_on_worker_events(data);
+}
+
+/* ---- start-up ---- */
+
+static int write_port_file(const char *path, int port)
+{
+    char tmp[4200];
+    snprintf(tmp, sizeof tmp, "%s.tmp%ld", path, (long)getpid());
+    FILE *f = fopen(tmp, "w");
+    if (!f) return -1;
+    fprintf(f, "%d\n", port);
+    if (fclose(f) != 0 || rename(tmp, path) != 0) {
+        unlink(tmp);
+        return -1;
+    }
+    return 0;
+}
+
+/* start: everything before the loop runs. Returns 0, or 1 after printing why. */
+static int start(srv *sv)
+{
+    sd_err err = {0};
+    if (dd_check_dir(sv->o.data_dir, &err) != 0) {
+        fprintf(stderr, "splatd: %s\n", err.msg);
+        return 1;
+    }
+    if (sv->o.token_file && auth_token_load(sv->o.token_file, &sv->token, &err) != 0) {
+        fprintf(stderr, "splatd: %s\n", err.msg);
+        return 1;
+    }
+    if (!sv->o.token_file && !net_host_is_loopback(sv->o.host)) {
+        fprintf(stderr,
+                "splatd: refusing to listen on %s without authentication: anyone who can reach "
+                "it could read your data. Use --token-file F (mode 0600), or listen on "
+                "127.0.0.1.\n", sv->o.host);
+        return 1;
+    }
+    /* Block the stop signals before any thread starts, so only the signalfd sees them. */
+    sigset_t ss;
+    sigemptyset(&ss);
+    sigaddset(&ss, SIGTERM);
+    sigaddset(&ss, SIGINT);
+    pthread_sigmask(SIG_BLOCK, &ss, NULL);
+    signal(SIGPIPE, SIG_IGN);
+    sv->sigfd = signalfd(-1, &ss, SFD_NONBLOCK | SFD_CLOEXEC);
+    if (sv->sigfd < 0) {
+        fprintf(stderr, "splatd: signalfd: %s\n", strerror(errno));
+        return 1;
+    }
+    struct rlimit rl;
+    int max_fds = 4096;
+    if (getrlimit(RLIMIT_NOFILE, &rl) == 0 && rl.rlim_cur != RLIM_INFINITY && rl.rlim_cur < 65536)
+        max_fds = (int)rl.rlim_cur > max_fds ? (int)rl.rlim_cur : max_fds;
+    sv->loop = ev_create(max_fds, &err);
+    sv->sessions = calloc((size_t)sv->o.max_clients, sizeof *sv->sessions);
+    sv->gens = calloc((size_t)sv->o.max_clients, sizeof *sv->gens);
+    if (!sv->loop || !sv->sessions || !sv->gens) {
+        fprintf(stderr, "splatd: %s\n", sv->loop ? "out of memory" : err.msg);
+        return 1;
+    }
+    sv->max_w = sv->max_h = 8192;
+    rt_desc rd = {
+        .rnd = {.backend = sv->o.backend, .shader_dir = sv->o.shader_dir,
+                .max_width = sv->max_w, .max_height = sv->max_h},
+        .max_clients = sv->o.max_clients, .cache_dir = sv->o.cache_dir,
+        .pack = srv_pack_frame, .pack_user = sv,
+    };
+    sv->rt = rt_create(&rd, sv->loop, &err);
+    if (!sv->rt) {
+        fprintf(stderr, "splatd: cannot start the renderer: %s\n", err.msg);
+        return 1;
+    }
+    srv_log(sv, NULL, "renderer: %s (%s)", rt_renderer_string(sv->rt), rt_backend_name(sv->rt));
+    for (int i = 0; i < sv->o.npreload; i++) {
+        if (srv_preload(sv, sv->o.preload[i], &err) != 0) {
+            fprintf(stderr, "splatd: --preload %s: %s\n", sv->o.preload[i], err.msg);
+            return 1;
+        }
+        srv_log(sv, NULL, "preloading %s", sv->o.preload[i]);
+    }
+    if (net_listen(sv->o.host, sv->o.port, 128, &sv->lfd, &sv->bound_port, &err) != 0) {
+        fprintf(stderr, "splatd: %s\n", err.msg);
+        return 1;
+    }
+    if (ev_watch(sv->loop, sv->lfd, EV_READ, on_accept, sv, &err) != 0 ||
+        ev_watch(sv->loop, sv->sigfd, EV_READ, on_signal, sv, &err) != 0) {
+        fprintf(stderr, "splatd: %s\n", err.msg);
+        return 1;
+    }
+    ev_set_before_sleep(sv->loop, before_sleep, sv);
+    ev_set_wakeup(sv->loop, on_wakeup, sv);
+    ev_timer_init(&sv->stop_timer);
+    int v6 = strchr(sv->o.host, ':') != NULL;
+    fprintf(stderr, "listening on %s%s%s:%d\n", v6 ? "[" : "", sv->o.host, v6 ? "]" : "", sv->bound_port);
+    fflush(stderr);
+    if (sv->o.port_file && write_port_file(sv->o.port_file, sv->bound_port) != 0) {
+        fprintf(stderr, "splatd: cannot write the port file %s: %s\n", sv->o.port_file, strerror(errno));
+        return 1;
+    }
+    if (sv->token.len) srv_log(sv, NULL, "clients must authenticate (token from %s)", sv->o.token_file);
+    return 0;
+}
+
+/* teardown: closes every session and frees everything, except when a cloud preparation is
+ * still running (see rt_stop_for_exit): then the workers' context and the loop stay as they
+ * are, and the process exits without waiting for it. */
+static int teardown(srv *sv)
+{
+    for (int i = 0; sv->sessions && i < sv->o.max_clients; i++)
+        if (sv->sessions[i] && !sv->sessions[i]->dead) srv_close(sv, sv->sessions[i], "server stopped");
+    if (sv->sessions) free_dead(sv);
+    if (rt_stop_for_exit(sv->rt)) {
+        srv_log(sv, NULL, "a cloud is still being prepared; exiting without waiting for it");
+        return 1;
+    }
+    if (sv->lfd >= 0) close(sv->lfd);
+    if (sv->sigfd >= 0) close(sv->sigfd);
+    ev_destroy(sv->loop);
+    for (int i = 0; i < sv->nclouds; i++) free(sv->clouds[i].waiters);
+    free(sv->clouds);
+    free(sv->sessions);
+    free(sv->gens);
+    memset(&sv->token, 0, sizeof sv->token);
+    return 0;
+}
+
+int cmd_daemon(int argc, char **argv)
+{
+    srv sv = {.lfd = -1, .sigfd = -1};
+    int rc = parse_opts(argc, argv, &sv.o);
+    if (rc != 0) return rc > 0 ? 0 : 2;
+    rc = start(&sv);
+    int ran = rc == 0;
+    if (ran && ev_run(sv.loop) != 0) {
+        srv_log(&sv, NULL, "event loop failed: %s", strerror(errno));
+        rc = 1;
+    }
+    int abandoned = teardown(&sv);
+    if (ran && rc == 0) srv_log(&sv, NULL, "stopped");
+    if (abandoned) {
+        /* The prep thread is still running: leave at once, without exit()'s library
+         * destructors (FLANN is C++) running under its feet. */
+        fflush(NULL);
+        _exit(rc);
+    }
+    return rc;
+}

@@ -1,0 +1,654 @@
+/* dispatch.c — the daemon's request handling: one function per message type, the cloud
+ * table (each cloud prepared and uploaded once, shared by every client), and the events the
+ * workers post (frames, progress, loaded clouds). Event-loop thread only, except
+ * srv_pack_frame (encoder thread). Answers go out in request order (PROTOCOL.md section 5). */
+#include <errno.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "datadir.h"
+#include "srv.h"
+
+#ifndef SPLATD_VERSION
+#define SPLATD_VERSION "0.1.0"
+#endif
+
+void srv_log(const srv *sv, const sess *s, const char *fmt, ...)
+{
+    (void)sv;
+    char line[1200];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(line, sizeof line, fmt, ap);
+    va_end(ap);
+    time_t t = time(NULL);
+    struct tm tm;
+    gmtime_r(&t, &tm);
+    char ts[32];
+    strftime(ts, sizeof ts, "%Y-%m-%dT%H:%M:%SZ", &tm);
+    if (s) fprintf(stderr, "splatd %s %s %s\n", ts, s->addr, line);
+    else fprintf(stderr, "splatd %s %s\n", ts, line);
+}
+
+sess *srv_lookup(srv *sv, uint32_t id)
+{
+    uint32_t i = id & 0xffffu;
+    if (i >= (uint32_t)sv->o.max_clients) return NULL;
+    sess *s = sv->sessions[i];
+    return (s && s->id == id && !s->dead) ? s : NULL;
+}
+
+void srv_release_frame(void *user, uint32_t id)
+{
+    srv *sv = user;
+    rt_frame_released(sv->rt, id);
+}
+
+/* push: queues an encoded message b on s; an output over the limit closes the client. */
+static void push(srv *sv, sess *s, proto_buf *b)
+{
+    int rc = sess_push(s, b);
+    if (rc == SD_ELIMIT) {
+        s->close_after = 0;
+        srv_close(sv, s, "its output went over the limit (the client does not read)");
+    } else if (rc != 0) {
+        srv_close(sv, s, "out of memory queueing output");
+    }
+}
+
+/* send_error: queues ERROR code for request seq; a fatal code (PROTOCOL.md 6) stops reading and
+ * closes the connection once the output is flushed. Logs one line. */
+static void send_error(srv *sv, sess *s, uint32_t seq, int code, const char *msg)
+{
+    proto_buf b = {.version = s->version};
+    char text[PROTO_MAX_ERRTEXT + 1];
+    snprintf(text, sizeof text, "%s", msg);
+    srv_log(sv, s, "error %s (seq %u): %s", proto_err_name(code), seq, text);
+    if (proto_enc_error(&b, seq, (uint32_t)code, text) == 0) push(sv, s, &b);
+    else proto_buf_free(&b);
+    if (proto_err_fatal(code) && !s->dead) {
+        s->close_after = 1;
+        snprintf(s->close_reason, sizeof s->close_reason, "after error %s", proto_err_name(code));
+    }
+}
+
+int srv_pack_frame(void *user, const rt_frame_meta *m, const uint8_t *data, size_t len,
+                   uint8_t **msg, size_t *msglen)
+{
+    (void)user;
+    if (len > PROTO_MAX_FRAME - PROTO_FRAME_FIXED) return SD_ELIMIT;
+    uint8_t *p = malloc(PROTO_FRAME_HEAD_LEN + len);
+    if (!p) return SD_ENOMEM;
+    proto_frame f = {
+        .camera_seq = m->camera_seq, .pipeline = (uint8_t)m->pipeline, .format = (uint8_t)m->format,
+        .width = (uint32_t)m->width, .height = (uint32_t)m->height, .render_us = m->render_us,
+        .readback_us = m->readback_us, .encode_us = m->encode_us, .points_drawn = m->points_drawn,
+        .data_len = (uint32_t)len,
+    };
+    proto_frame_head(p, PROTO_VERSION, m->stream ? 0 : m->req_seq, &f);
+    memcpy(p + PROTO_FRAME_HEAD_LEN, data, len);
+    *msg = p;
+    *msglen = PROTO_FRAME_HEAD_LEN + len;
+    return 0;
+}
+
+/* ---- cloud table ---- */
+
+static srv_cloud *cloud_by_path(srv *sv, const char *path)
+{
+    for (int i = 0; i < sv->nclouds; i++)
+        if (sv->clouds[i].state != SRV_CLOUD_FREE && !strcmp(sv->clouds[i].path, path))
+            return &sv->clouds[i];
+    return NULL;
+}
+
+static srv_cloud *cloud_by_job(srv *sv, uint32_t job)
+{
+    for (int i = 0; i < sv->nclouds; i++)
+        if (sv->clouds[i].state == SRV_CLOUD_LOADING && sv->clouds[i].job == job) return &sv->clouds[i];
+    return NULL;
+}
+
+/* cloud_start: a new LOADING entry for path with its prep job queued, or NULL when out of
+ * memory. */
+static srv_cloud *cloud_start(srv *sv, const char *path)
+{
+    srv_cloud *c = NULL;
+    for (int i = 0; i < sv->nclouds; i++)
+        if (sv->clouds[i].state == SRV_CLOUD_FREE) { c = &sv->clouds[i]; break; }
+    if (!c) {
+        srv_cloud *nc = realloc(sv->clouds, (size_t)(sv->nclouds + 1) * sizeof *nc);
+        if (!nc) return NULL;
+        sv->clouds = nc;
+        c = &sv->clouds[sv->nclouds++];
+    }
+    memset(c, 0, sizeof *c);
+    snprintf(c->path, sizeof c->path, "%s", path);
+    const char *slash = strrchr(path, '/');
+    snprintf(c->name, sizeof c->name, "%s", slash ? slash + 1 : path);
+    c->job = rt_prepare(sv->rt, path);
+    if (!c->job) return NULL;
+    c->state = SRV_CLOUD_LOADING;
+    c->t_start_ms = ev_now_ms();
+    return c;
+}
+
+static int add_waiter(srv_cloud *c, uint32_t sess_id, uint32_t seq)
+{
+    if (c->nwait == c->capwait) {
+        int cap = c->capwait ? c->capwait * 2 : 4;
+        srv_waiter *w = realloc(c->waiters, (size_t)cap * sizeof *w);
+        if (!w) return SD_ENOMEM;
+        c->waiters = w;
+        c->capwait = cap;
+    }
+    c->waiters[c->nwait++] = (srv_waiter){sess_id, seq};
+    return 0;
+}
+
+int srv_preload(srv *sv, const char *name, sd_err *err)
+{
+    char path[PATH_MAX];
+    int rc = dd_resolve(sv->o.data_dir, name, path, sizeof path, NULL, err);
+    if (rc) return rc;
+    if (!cloud_by_path(sv, path) && !cloud_start(sv, path))
+        return sd_errf(err, SD_ENOMEM, "out of memory preparing %s", name);
+    return 0;
+}
+
+/* send_info: queues INFO about cloud c answering request seq. */
+static void send_info(srv *sv, sess *s, const srv_cloud *c, uint32_t seq)
+{
+    proto_info in = {0};
+    snprintf(in.name, sizeof in.name, "%s", c->name);
+    in.points = c->info.points;
+    in.dropped = c->info.dropped;
+    memcpy(in.bmin, c->info.bmin, sizeof in.bmin);
+    memcpy(in.bmax, c->info.bmax, sizeof in.bmax);
+    memcpy(in.offset, c->info.offset, sizeof in.offset);
+    in.attrs = c->info.attrs;
+    in.sigma = c->info.sigma;
+    in.k = c->info.k;
+    snprintf(in.format, sizeof in.format, "%s", c->info.format);
+    proto_buf b = {.version = s->version};
+    if (proto_enc_info(&b, seq, &in) == 0) push(sv, s, &b);
+    else proto_buf_free(&b);
+}
+
+/* ---- rendering requests ---- */
+
+/* make_request: the current render request of s (its camera, or one framing the cloud). */
+static void make_request(srv *sv, sess *s, rt_request *rq, uint32_t req_seq)
+{
+    memset(rq, 0, sizeof *rq);
+    rq->cloud_id = s->cloud_id;
+    rq->params = s->params;
+    rq->req_seq = req_seq;
+    if (s->have_camera) {
+        rq->cam = s->cam;
+        rq->camera_seq = s->camera_seq;
+    } else {
+        const srv_cloud *c = &sv->clouds[s->cloud];
+        rnd_camera_frame(c->info.bmin, c->info.bmax, 1280, 720, &rq->cam);
+        rq->camera_seq = 0;
+    }
+}
+
+static void on_fps_timer(ev_loop *l, ev_timer *t, void *data);
+
+/* stream_update: in stream mode, submits the session's current view (latest wins), held back
+ * by the fps timer when max_fps would be exceeded. */
+static void stream_update(srv *sv, sess *s, uint32_t seq)
+{
+    if (!s->stream || s->cloud < 0 || sv->stopping) return;
+    s->stream_seq = seq;
+    uint64_t now = ev_now_ms();
+    if (s->max_fps > 0) {
+        uint64_t gap = (uint64_t)(1000.0f / s->max_fps);
+        if (now < s->last_stream_ms + gap) {
+            if (!ev_timer_armed(&s->fps_timer))
+                ev_timer_start(sv->loop, &s->fps_timer, s->last_stream_ms + gap - now, on_fps_timer, s);
+            return;
+        }
+    }
+    ev_timer_stop(sv->loop, &s->fps_timer);
+    s->last_stream_ms = now;
+    rt_request rq;
+    make_request(sv, s, &rq, seq);
+    rt_submit_latest(sv->rt, s->id, &rq);
+}
+
+static void on_fps_timer(ev_loop *l, ev_timer *t, void *data)
+{
+    (void)l; (void)t;
+    sess *s = data;
+    stream_update(s->owner, s, s->stream_seq);
+}
+
+/* ---- one handler per message type; each returns after queueing its answer ---- */
+
+static void send_welcome(srv *sv, sess *s, uint32_t seq)
+{
+    proto_welcome w = {0};
+    w.version = s->version;
+    w.auth_required = sv->token.len > 0;
+    w.authenticated = (uint8_t)s->authed;
+    memcpy(w.challenge, s->challenge, sizeof w.challenge);
+    w.max_request = PROTO_MAX_REQUEST;
+    w.max_width = (uint32_t)sv->max_w;
+    w.max_height = (uint32_t)sv->max_h;
+    snprintf(w.server, sizeof w.server, "splatd %s", SPLATD_VERSION);
+    snprintf(w.backend, sizeof w.backend, "%s", rt_backend_name(sv->rt));
+    snprintf(w.renderer, sizeof w.renderer, "%s", rt_renderer_string(sv->rt));
+    proto_buf b = {.version = s->version};
+    if (proto_enc_welcome(&b, seq, &w) == 0) push(sv, s, &b);
+    else proto_buf_free(&b);
+}
+
+static void on_hello(srv *sv, sess *s, const proto_msg *m)
+{
+    proto_hello h;
+    proto_error pe = {0};
+    int rc = proto_parse_hello(m->payload, m->len, &h, &pe);
+    if (rc < 0) { send_error(sv, s, m->h.seq, -rc, pe.msg); return; }
+    if (s->authed) { send_welcome(sv, s, m->h.seq); return; } /* harmless repeat */
+    int v = proto_pick_version(h.min_version, h.max_version, &pe);
+    if (v < 0) { send_error(sv, s, m->h.seq, -v, pe.msg); return; }
+    snprintf(s->client_name, sizeof s->client_name, "%s", h.client);
+    if (!s->hello_seen) {
+        s->hello_seen = 1;
+        s->version = (uint16_t)v;
+        if (sv->token.len == 0) {
+            s->authed = 1;
+        } else {
+            /* The first HELLO only learns the challenge (PROTOCOL.md 4): answer unauthenticated. */
+            send_welcome(sv, s, m->h.seq);
+            return;
+        }
+    } else if (h.proof_len != PROTO_AUTH_LEN ||
+               !auth_verify(&sv->token, s->challenge, h.proof, h.proof_len)) {
+        send_error(sv, s, m->h.seq, PROTO_E_AUTH_FAILED,
+                   h.proof_len ? "wrong authentication proof" : "no authentication proof; the server needs one");
+        return;
+    } else {
+        s->authed = 1;
+    }
+    s->dec.preauth = 0;
+    s->dec.version = s->version;
+    ev_timer_stop(sv->loop, &s->hs_timer);
+    srv_log(sv, s, "hello from '%s', protocol %u%s", s->client_name, s->version,
+            sv->token.len ? ", authenticated" : "");
+    send_welcome(sv, s, m->h.seq);
+}
+
+/* cache_is_fresh: 1 when a cache file for path exists and is newer than it. A cheap hint for
+ * LIST (no content hash): cache.c still validates the file on OPEN. */
+static int cache_is_fresh(const srv *sv, const char *path)
+{
+    char cp[PATH_MAX + 64];
+    struct stat cs, ss;
+    if (cache_path_for(path, sv->o.cache_dir, 24, cp, sizeof cp, NULL) != 0) return 0;
+    return stat(cp, &cs) == 0 && stat(path, &ss) == 0 && cs.st_mtime >= ss.st_mtime;
+}
+
+static void on_list(srv *sv, sess *s, const proto_msg *m)
+{
+    proto_error pe;
+    int prc = proto_parse_empty(m->h.type, m->len, &pe);
+    if (prc < 0) { send_error(sv, s, m->h.seq, -prc, pe.msg); return; }
+    dd_entry *v = NULL;
+    size_t n = 0;
+    sd_err err = {0};
+    if (dd_list(sv->o.data_dir, &v, &n, &err) != 0) {
+        send_error(sv, s, m->h.seq, PROTO_E_INTERNAL, err.msg);
+        return;
+    }
+    proto_cloud_entry *items = calloc(n ? n : 1, sizeof *items);
+    if (!items) { free(v); send_error(sv, s, m->h.seq, PROTO_E_INTERNAL, "out of memory"); return; }
+    char rdir[PATH_MAX];
+    if (!realpath(sv->o.data_dir, rdir)) snprintf(rdir, sizeof rdir, "%s", sv->o.data_dir);
+    for (size_t i = 0; i < n; i++) {
+        snprintf(items[i].name, sizeof items[i].name, "%s", v[i].name);
+        items[i].bytes = v[i].size;
+        char path[PATH_MAX];
+        if (dd_resolve(sv->o.data_dir, v[i].name, path, sizeof path, NULL, NULL) == 0) {
+            const srv_cloud *c = cloud_by_path(sv, path);
+            if (c && c->state == SRV_CLOUD_READY) {
+                items[i].points = c->info.points;
+                items[i].flags = PROTO_CLOUD_LOADED | PROTO_CLOUD_PREPARED;
+            } else if (cache_is_fresh(sv, path)) {
+                items[i].flags = PROTO_CLOUD_PREPARED;
+            }
+        }
+    }
+    proto_buf b = {.version = s->version};
+    if (proto_enc_clouds(&b, m->h.seq, items, (uint32_t)n) == 0) push(sv, s, &b);
+    else { proto_buf_free(&b); send_error(sv, s, m->h.seq, PROTO_E_INTERNAL, "cloud list too long"); }
+    free(items);
+    free(v);
+}
+
+static void on_open(srv *sv, sess *s, const proto_msg *m)
+{
+    char name[PROTO_MAX_NAME + 1];
+    proto_error pe = {0};
+    int rc = proto_parse_open(m->payload, m->len, name, &pe);
+    if (rc < 0) { send_error(sv, s, m->h.seq, -rc, pe.msg); return; }
+    char path[PATH_MAX];
+    dd_why why;
+    sd_err err = {0};
+    if (dd_resolve(sv->o.data_dir, name, path, sizeof path, &why, &err) != 0) {
+        int code = why == DD_NOT_FOUND ? PROTO_E_NOT_FOUND
+                 : why == DD_NOT_CLOUD ? PROTO_E_NOT_FOUND
+                 : PROTO_E_BAD_NAME; /* bad name, outside the data dir, ambiguous */
+        send_error(sv, s, m->h.seq, code, err.msg);
+        return;
+    }
+    /* OPEN replaces the open cloud and resets the camera (PROTOCOL.md, OPEN). */
+    s->cloud = -1;
+    s->cloud_id = 0;
+    s->have_camera = 0;
+    s->camera_seq = 0;
+    srv_cloud *c = cloud_by_path(sv, path);
+    if (c && c->state == SRV_CLOUD_READY) {
+        s->cloud = (int)(c - sv->clouds);
+        s->cloud_id = c->cloud_id;
+        srv_log(sv, s, "open %s: %s (in memory)", name, c->name);
+        send_info(sv, s, c, m->h.seq);
+        return;
+    }
+    if (!c) c = cloud_start(sv, path);
+    if (!c || add_waiter(c, s->id, m->h.seq) != 0) {
+        send_error(sv, s, m->h.seq, PROTO_E_INTERNAL, "out of memory opening the cloud");
+        return;
+    }
+    srv_log(sv, s, "open %s: %s (preparing)", name, c->name);
+    s->opening = (int)(c - sv->clouds);
+    s->open_seq = m->h.seq;
+    s->paused = 1; /* later requests wait for INFO, so answers stay in order */
+}
+
+static int need_cloud(srv *sv, sess *s, uint32_t seq, const char *what)
+{
+    if (s->cloud >= 0) return 1;
+    char t[128];
+    snprintf(t, sizeof t, "%s before a successful OPEN: open a cloud first", what);
+    send_error(sv, s, seq, PROTO_E_NOT_OPEN, t);
+    return 0;
+}
+
+static void on_camera(srv *sv, sess *s, const proto_msg *m)
+{
+    proto_camera c;
+    proto_error pe = {0};
+    int rc = proto_parse_camera(m->payload, m->len, &c, &pe);
+    if (rc < 0) { send_error(sv, s, m->h.seq, -rc, pe.msg); return; }
+    if (!need_cloud(sv, s, m->h.seq, "CAMERA")) return;
+    if ((int)c.width > sv->max_w || (int)c.height > sv->max_h) {
+        char t[160];
+        snprintf(t, sizeof t, "CAMERA size %ux%u is over this server's maximum of %dx%d",
+                 c.width, c.height, sv->max_w, sv->max_h);
+        send_error(sv, s, m->h.seq, PROTO_E_BAD_CAMERA, t);
+        return;
+    }
+    rnd_camera *k = &s->cam;
+    memcpy(k->eye, c.eye, sizeof k->eye);
+    memcpy(k->target, c.target, sizeof k->target);
+    memcpy(k->up, c.up, sizeof k->up);
+    k->fov_deg = c.fov_deg;
+    k->znear = c.znear;
+    k->zfar = c.zfar;
+    k->width = (int)c.width;
+    k->height = (int)c.height;
+    s->have_camera = 1;
+    s->camera_seq = m->h.seq;
+    stream_update(sv, s, 0);
+}
+
+static void send_ok(srv *sv, sess *s, uint32_t seq)
+{
+    proto_buf b = {.version = s->version};
+    if (proto_enc_empty(&b, PROTO_MSG_OK, seq) == 0) push(sv, s, &b);
+    else proto_buf_free(&b);
+}
+
+static void on_params(srv *sv, sess *s, const proto_msg *m)
+{
+    proto_error pe = {0};
+    int rc = proto_parse_params(m->payload, m->len, &s->params, NULL, &pe);
+    if (rc < 0) { send_error(sv, s, m->h.seq, -rc, pe.msg); return; }
+    send_ok(sv, s, m->h.seq);
+    stream_update(sv, s, 0);
+}
+
+static void on_render(srv *sv, sess *s, const proto_msg *m)
+{
+    proto_error pe;
+    int prc = proto_parse_empty(m->h.type, m->len, &pe);
+    if (prc < 0) { send_error(sv, s, m->h.seq, -prc, pe.msg); return; }
+    if (!need_cloud(sv, s, m->h.seq, "RENDER")) return;
+    if (sv->stopping) {
+        send_error(sv, s, m->h.seq, PROTO_E_SHUTTING_DOWN, "the server is stopping");
+        return;
+    }
+    rt_request rq;
+    make_request(sv, s, &rq, m->h.seq);
+    if (s->frames_queued >= RT_QUEUE_MAX + RT_MAX_OUTSTANDING ||
+        rt_submit_queue(sv->rt, s->id, &rq) != 0) {
+        char t[128];
+        snprintf(t, sizeof t, "too many frames in flight: at most %d RENDER requests may wait",
+                 RT_QUEUE_MAX);
+        send_error(sv, s, m->h.seq, PROTO_E_BUSY, t);
+        return;
+    }
+    if (sess_push_frame_slot(s, m->h.seq) != 0) srv_close(sv, s, "out of memory");
+}
+
+static void on_stream(srv *sv, sess *s, const proto_msg *m)
+{
+    proto_stream st;
+    proto_error pe = {0};
+    int rc = proto_parse_stream(m->payload, m->len, &st, &pe);
+    if (rc < 0) { send_error(sv, s, m->h.seq, -rc, pe.msg); return; }
+    if (st.on && !need_cloud(sv, s, m->h.seq, "STREAM")) return;
+    s->stream = st.on;
+    s->max_fps = st.max_fps;
+    if (!st.on) ev_timer_stop(sv->loop, &s->fps_timer);
+    send_ok(sv, s, m->h.seq);
+    stream_update(sv, s, 0); /* the current view, so a stream starts with a frame */
+}
+
+static void on_ping(srv *sv, sess *s, const proto_msg *m)
+{
+    proto_ping p;
+    proto_error pe = {0};
+    int rc = proto_parse_ping(m->payload, m->len, &p, &pe);
+    if (rc < 0) { send_error(sv, s, m->h.seq, -rc, pe.msg); return; }
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    proto_pong pg = {p.token, (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u};
+    proto_buf b = {.version = s->version};
+    if (proto_enc_pong(&b, m->h.seq, &pg) == 0) push(sv, s, &b);
+    else proto_buf_free(&b);
+}
+
+/* handle: one decoded message. */
+static void handle(srv *sv, sess *s, const proto_msg *m)
+{
+    switch (m->h.type) {
+    case PROTO_MSG_HELLO: on_hello(sv, s, m); break;
+    case PROTO_MSG_LIST: on_list(sv, s, m); break;
+    case PROTO_MSG_OPEN: on_open(sv, s, m); break;
+    case PROTO_MSG_CAMERA: on_camera(sv, s, m); break;
+    case PROTO_MSG_PARAMS: on_params(sv, s, m); break;
+    case PROTO_MSG_RENDER: on_render(sv, s, m); break;
+    case PROTO_MSG_STREAM: on_stream(sv, s, m); break;
+    case PROTO_MSG_PING: on_ping(sv, s, m); break;
+    case PROTO_MSG_BYE:
+        s->close_after = 1;
+        snprintf(s->close_reason, sizeof s->close_reason, "BYE");
+        break;
+    default:
+        send_error(sv, s, m->h.seq, PROTO_E_UNKNOWN_TYPE, "unexpected message type");
+        break;
+    }
+}
+
+void srv_session_input(srv *sv, sess *s)
+{
+    while (!s->dead && !s->close_after && !s->paused && s->in_off < s->in_len) {
+        size_t used = 0;
+        proto_msg m;
+        proto_error pe = {0};
+        int rc = proto_decode(&s->dec, s->in + s->in_off, s->in_len - s->in_off, &used, &m, &pe);
+        s->in_off += used;
+        if (rc < 0) {
+            /* Framing is lost: answer with the code and close (PROTOCOL.md 2). */
+            send_error(sv, s, 0, -rc, pe.msg);
+            break;
+        }
+        if (rc == PROTO_ONE_MSG) handle(sv, s, &m);
+    }
+    if (s->in_off == s->in_len) s->in_off = s->in_len = 0;
+    srv_kick(sv, s);
+}
+
+/* ---- worker events ---- */
+
+static int phase_of(const char *name)
+{
+    static const struct { const char *key; int phase; } map[] = {
+        {"upload", PROTO_PHASE_UPLOAD}, {"knn", PROTO_PHASE_KNN}, {"neigh", PROTO_PHASE_KNN},
+        {"normal", PROTO_PHASE_NORMALS}, {"radi", PROTO_PHASE_RADIUS}, {"field", PROTO_PHASE_FIELD},
+        {"uncert", PROTO_PHASE_FIELD}, {"order", PROTO_PHASE_REORDER}, {"morton", PROTO_PHASE_REORDER},
+        {"batch", PROTO_PHASE_REORDER}, {"cache", PROTO_PHASE_CACHE}, {"writ", PROTO_PHASE_CACHE},
+    };
+    char low[32];
+    size_t i = 0;
+    for (; name[i] && i < sizeof low - 1; i++) low[i] = (char)((name[i] >= 'A' && name[i] <= 'Z') ? name[i] + 32 : name[i]);
+    low[i] = 0;
+    for (size_t k = 0; k < sizeof map / sizeof map[0]; k++)
+        if (strstr(low, map[k].key)) return map[k].phase;
+    return PROTO_PHASE_LOAD;
+}
+
+static void on_progress_ev(srv *sv, const rt_event *ev)
+{
+    srv_cloud *c = cloud_by_job(sv, ev->job);
+    if (!c) return;
+    proto_progress p = {0};
+    p.phase = (uint8_t)phase_of(ev->phase_name);
+    p.fraction = (float)(ev->fraction < 0 ? 0 : ev->fraction > 1 ? 1 : ev->fraction);
+    snprintf(p.text, sizeof p.text, "%s %d%%", ev->phase_name, (int)(p.fraction * 100 + 0.5f));
+    for (int i = 0; i < c->nwait; i++) {
+        sess *s = srv_lookup(sv, c->waiters[i].sess);
+        if (!s || s->opening != (int)(c - sv->clouds)) continue;
+        proto_buf b = {.version = s->version};
+        if (proto_enc_progress(&b, c->waiters[i].seq, &p) == 0) push(sv, s, &b);
+        else proto_buf_free(&b);
+        srv_kick(sv, s);
+    }
+}
+
+static void on_cloud_done(srv *sv, const rt_event *ev)
+{
+    srv_cloud *c = cloud_by_job(sv, ev->job);
+    if (!c) return;
+    int idx = (int)(c - sv->clouds);
+    int ok = ev->kind == RT_EV_CLOUD_READY;
+    if (ok) {
+        c->state = SRV_CLOUD_READY;
+        c->cloud_id = ev->cloud_id;
+        c->info = ev->info;
+        srv_log(sv, NULL, "cloud %s ready: %llu points, %s in %.2f s", c->name,
+                (unsigned long long)c->info.points, c->info.cache_hit ? "from the cache" : "prepared",
+                (double)(ev_now_ms() - c->t_start_ms) / 1000.0);
+    } else {
+        srv_log(sv, NULL, "cloud %s failed: %s", c->name, ev->err.msg);
+    }
+    /* Detach the waiters first: a waiter's buffered requests may OPEN this cloud again. */
+    srv_waiter *w = c->waiters;
+    int nw = c->nwait;
+    c->waiters = NULL;
+    c->nwait = c->capwait = 0;
+    if (!ok) c->state = SRV_CLOUD_FREE; /* a later OPEN retries */
+    for (int i = 0; i < nw; i++) {
+        sess *s = srv_lookup(sv, w[i].sess);
+        if (!s || s->opening != idx) continue;
+        s->opening = -1;
+        s->paused = 0;
+        if (ok) {
+            /* sv->clouds may have moved (an earlier waiter's OPEN of another cloud). */
+            const srv_cloud *cc = &sv->clouds[idx];
+            s->cloud = idx;
+            s->cloud_id = cc->cloud_id;
+            send_info(sv, s, cc, w[i].seq);
+        } else {
+            send_error(sv, s, w[i].seq, PROTO_E_LOAD_FAILED, ev->err.msg);
+        }
+        srv_session_input(sv, s); /* requests that waited behind the OPEN */
+    }
+    free(w);
+}
+
+static void on_frame_ev(srv *sv, rt_event *ev)
+{
+    sess *s = srv_lookup(sv, ev->meta.client);
+    if (!s) return; /* its slot was already cleared by rt_client_close */
+    if (ev->kind == RT_EV_FRAME_FAILED) {
+        if (ev->meta.stream) {
+            srv_log(sv, s, "streamed frame failed: %s", ev->err.msg);
+            return;
+        }
+        /* The placeholder becomes the ERROR answer, in order. */
+        for (sess_item *it = s->head; it; it = it->next) {
+            if (it->is_frame && !it->filled) {
+                proto_buf b = {.version = s->version};
+                if (proto_enc_error(&b, it->seq, PROTO_E_RENDER_FAILED, ev->err.msg) == 0) {
+                    it->data = b.data;
+                    it->len = b.len;
+                    it->filled = 1;
+                    it->is_frame = 0;
+                    s->out_bytes += b.len;
+                    s->frames_queued--;
+                } else {
+                    proto_buf_free(&b);
+                }
+                break;
+            }
+        }
+        srv_log(sv, s, "error RENDER_FAILED (seq %u): %s", ev->meta.req_seq, ev->err.msg);
+        srv_kick(sv, s);
+        return;
+    }
+    if (ev->meta.stream) {
+        if (sess_set_stream_frame(s, ev->msg, ev->msglen)) rt_frame_released(sv->rt, s->id);
+    } else if (sess_fill_frame(s, ev->msg, ev->msglen) != 0) {
+        rt_frame_released(sv->rt, s->id);
+        return; /* no placeholder (cannot happen): ev keeps msg, freed by the caller */
+    }
+    ev->msg = NULL;
+    srv_kick(sv, s);
+}
+
+void srv_on_worker_events(srv *sv)
+{
+    rt_event *ev = rt_take_events(sv->rt);
+    while (ev) {
+        rt_event *next = ev->next;
+        switch (ev->kind) {
+        case RT_EV_FRAME:
+        case RT_EV_FRAME_FAILED: on_frame_ev(sv, ev); break;
+        case RT_EV_PROGRESS: on_progress_ev(sv, ev); break;
+        case RT_EV_CLOUD_READY:
+        case RT_EV_CLOUD_FAILED: on_cloud_done(sv, ev); break;
+        }
+        rt_event_free(ev);
+        ev = next;
+    }
+}

@@ -1,0 +1,632 @@
+/* render_thread.c — the render, encoder and prep workers of the daemon (see render_thread.h).
+ *
+ * One mutex guards all shared state (slots, queues, the frame pool, events); the work itself
+ * (prep, upload, render, encode, pack) runs outside it. Three condition variables wake the
+ * three threads. Frames: a pool of RT_NFRAMES rnd_frames; the render thread fills a free one,
+ * the encoder thread encodes it and returns it, so render of frame k+1 overlaps encode of k. */
+#include "render_thread.h"
+
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "encode.h"
+#include "ev.h"
+
+enum { RT_NFRAMES = 2 };
+
+typedef struct rt_slot {
+    uint32_t id;                /* 0: free */
+    int has_latest;
+    rt_request latest;
+    rt_request q[RT_QUEUE_MAX];
+    int qhead, qn;
+    int outstanding;            /* rendering + encoding + waiting at the loop */
+    int stream_blocked;         /* a streamed frame waits unsent at the loop */
+} rt_slot;
+
+typedef struct rt_encjob {
+    int frame;                  /* index into frames */
+    rt_frame_meta meta;
+    sp_params params;
+} rt_encjob;
+
+typedef struct rt_prepjob {
+    uint32_t job;
+    char *path;
+    pc_prepared *prep;          /* set once prepared, waiting for upload */
+    rt_cloud_info info;
+    struct rt_prepjob *next;
+} rt_prepjob;
+
+struct rt_ctx {
+    rt_desc d;
+    ev_loop *loop;
+    pthread_mutex_t mu;
+    pthread_cond_t cv_render, cv_enc, cv_prep, cv_init;
+    rt_slot *slots;
+    int nslots, rr_next;
+    rnd_frame frames[RT_NFRAMES];
+    int frame_busy[RT_NFRAMES];
+    rt_encjob encq[RT_NFRAMES];
+    int enc_n, encoding, rendering;
+    rt_prepjob *prep_head, *prep_tail;   /* waiting for prep */
+    rt_prepjob *up_head, *up_tail;       /* prepared, waiting for upload */
+    int prepping;
+    uint32_t next_job;
+    rt_event *ev_head, *ev_tail;
+    int stop, render_done;
+    int init_state;                      /* 0 pending, 1 ok, -1 failed */
+    sd_err init_err;
+    char renderer[256], backend[32];
+    pthread_t th_render, th_enc, th_prep;
+    int started_render, started_enc, started_prep;
+};
+
+static uint64_t now_us(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u;
+}
+
+/* post: appends ev to the event list (mu held) and wakes the loop. */
+static void post(rt_ctx *rt, rt_event *ev)
+{
+    ev->next = NULL;
+    if (rt->ev_tail) rt->ev_tail->next = ev;
+    else rt->ev_head = ev;
+    rt->ev_tail = ev;
+    ev_wakeup(rt->loop);
+}
+
+static rt_slot *slot_of(rt_ctx *rt, uint32_t id)
+{
+    uint32_t i = id & 0xffffu;
+    if (id == 0 || i >= (uint32_t)rt->nslots || rt->slots[i].id != id) return NULL;
+    return &rt->slots[i];
+}
+
+/* pick: the next slot (round-robin) with work and room for a frame; fills rq and stream. mu held. */
+static rt_slot *pick(rt_ctx *rt, rt_request *rq, int *stream)
+{
+    for (int k = 0; k < rt->nslots; k++) {
+        int i = (rt->rr_next + k) % rt->nslots;
+        rt_slot *s = &rt->slots[i];
+        if (!s->id || s->outstanding >= RT_MAX_OUTSTANDING) continue;
+        if (s->qn) {
+            *rq = s->q[s->qhead];
+            s->qhead = (s->qhead + 1) % RT_QUEUE_MAX;
+            s->qn--;
+            *stream = 0;
+        } else if (s->has_latest && !s->stream_blocked) {
+            *rq = s->latest;
+            s->has_latest = 0;
+            *stream = 1;
+        } else {
+            continue;
+        }
+        rt->rr_next = (i + 1) % rt->nslots;
+        return s;
+    }
+    return NULL;
+}
+
+static int free_frame(rt_ctx *rt)
+{
+    for (int i = 0; i < RT_NFRAMES; i++)
+        if (!rt->frame_busy[i]) return i;
+    return -1;
+}
+
+static int has_work(rt_ctx *rt)
+{
+    if (rt->up_head) return 1;
+    if (free_frame(rt) < 0) return 0;
+    for (int i = 0; i < rt->nslots; i++) {
+        rt_slot *s = &rt->slots[i];
+        if (s->id && s->outstanding < RT_MAX_OUTSTANDING && (s->qn || (s->has_latest && !s->stream_blocked)))
+            return 1;
+    }
+    return 0;
+}
+
+/* do_upload: uploads one prepared cloud (mu not held) and posts READY or FAILED. */
+static void do_upload(rt_ctx *rt, rnd_ctx *rnd, rt_prepjob *j)
+{
+    rt_event *ev = calloc(1, sizeof *ev);
+    sd_err err = {0};
+    int64_t id = rnd_upload(rnd, j->prep, &err);
+    pc_prepared_free(j->prep);
+    free(j->prep);
+    j->prep = NULL;
+    pthread_mutex_lock(&rt->mu);
+    if (ev) {
+        ev->job = j->job;
+        ev->info = j->info;
+        if (id > 0) {
+            ev->kind = RT_EV_CLOUD_READY;
+            ev->cloud_id = (uint32_t)id;
+        } else {
+            ev->kind = RT_EV_CLOUD_FAILED;
+            ev->err = err;
+        }
+        post(rt, ev);
+    }
+    pthread_mutex_unlock(&rt->mu);
+    free(j->path);
+    free(j);
+}
+
+static void *render_main(void *arg)
+{
+    rt_ctx *rt = arg;
+    sd_err err = {0};
+    rnd_ctx *rnd = rnd_create(&rt->d.rnd, &err);
+    pthread_mutex_lock(&rt->mu);
+    if (!rnd) {
+        rt->init_err = err;
+        rt->init_state = -1;
+        rt->render_done = 1;
+        pthread_cond_broadcast(&rt->cv_init);
+        pthread_cond_broadcast(&rt->cv_enc);
+        pthread_mutex_unlock(&rt->mu);
+        return NULL;
+    }
+    snprintf(rt->renderer, sizeof rt->renderer, "%s", rnd_renderer_string(rnd));
+    snprintf(rt->backend, sizeof rt->backend, "%s", rnd_backend_name(rnd));
+    rt->init_state = 1;
+    pthread_cond_broadcast(&rt->cv_init);
+    for (;;) {
+        while (!rt->stop && !has_work(rt)) pthread_cond_wait(&rt->cv_render, &rt->mu);
+        if (rt->stop) break;
+        if (rt->up_head) {
+            rt_prepjob *j = rt->up_head;
+            rt->up_head = j->next;
+            if (!rt->up_head) rt->up_tail = NULL;
+            rt->rendering = 1;
+            pthread_mutex_unlock(&rt->mu);
+            do_upload(rt, rnd, j);
+            pthread_mutex_lock(&rt->mu);
+            rt->rendering = 0;
+            continue;
+        }
+        rt_request rq;
+        int stream = 0;
+        int fi = free_frame(rt);
+        rt_slot *s = fi >= 0 ? pick(rt, &rq, &stream) : NULL;
+        if (!s) continue;
+        s->outstanding++;
+        rt->frame_busy[fi] = 1;
+        rt->rendering = 1;
+        rt_encjob job = {.frame = fi, .params = rq.params};
+        job.meta.client = s->id;
+        job.meta.req_seq = rq.req_seq;
+        job.meta.camera_seq = rq.camera_seq;
+        job.meta.stream = stream;
+        job.meta.pipeline = rq.params.pipeline;
+        job.meta.format = rq.params.format;
+        pthread_mutex_unlock(&rt->mu);
+
+        rnd_frame *f = &rt->frames[fi];
+        int rc = rnd_render(rnd, rq.cloud_id, &rq.cam, &rq.params, rq.params.format == SP_FMT_EXR,
+                            f, &err);
+        pthread_mutex_lock(&rt->mu);
+        rt->rendering = 0;
+        if (rc != 0) {
+            rt->frame_busy[fi] = 0;
+            rt_slot *s2 = slot_of(rt, job.meta.client);
+            if (s2) s2->outstanding--;
+            rt_event *ev = calloc(1, sizeof *ev);
+            if (ev) {
+                ev->kind = RT_EV_FRAME_FAILED;
+                ev->meta = job.meta;
+                ev->err = err;
+                post(rt, ev);
+            }
+            continue;
+        }
+        job.meta.width = f->width;
+        job.meta.height = f->height;
+        job.meta.render_us = f->render_us;
+        job.meta.readback_us = f->readback_us;
+        job.meta.points_drawn = f->points_drawn;
+        rt->encq[rt->enc_n++] = job;
+        pthread_cond_signal(&rt->cv_enc);
+    }
+    rt->render_done = 1;
+    pthread_cond_broadcast(&rt->cv_enc);
+    /* The encoder may still use frames: wait until it is done before freeing them. */
+    while (rt->enc_n || rt->encoding) pthread_cond_wait(&rt->cv_render, &rt->mu);
+    pthread_mutex_unlock(&rt->mu);
+    for (int i = 0; i < RT_NFRAMES; i++) rnd_frame_free(&rt->frames[i]);
+    rnd_destroy(rnd);
+    return NULL;
+}
+
+static void *enc_main(void *arg)
+{
+    rt_ctx *rt = arg;
+    sd_err err = {0};
+    enc_ctx *enc = enc_create(&err);
+    pthread_mutex_lock(&rt->mu);
+    for (;;) {
+        while (!rt->enc_n && !rt->render_done) pthread_cond_wait(&rt->cv_enc, &rt->mu);
+        if (!rt->enc_n) break; /* render thread gone and nothing left */
+        rt_encjob job = rt->encq[0];
+        memmove(rt->encq, rt->encq + 1, (size_t)(--rt->enc_n) * sizeof rt->encq[0]);
+        rt->encoding = 1;
+        pthread_mutex_unlock(&rt->mu);
+
+        const uint8_t *out = NULL;
+        size_t len = 0;
+        uint8_t *msg = NULL;
+        size_t msglen = 0;
+        uint64_t t0 = now_us();
+        int rc = enc ? enc_encode(enc, &rt->frames[job.frame], &job.params, &out, &len, &err) : SD_ENOMEM;
+        job.meta.encode_us = now_us() - t0;
+        if (rc == 0 && rt->d.pack(rt->d.pack_user, &job.meta, out, len, &msg, &msglen) != 0) {
+            rc = sd_errf(&err, SD_ENOMEM, "out of memory packing a %zu-byte frame", len);
+        }
+        rt_event *ev = calloc(1, sizeof *ev);
+
+        pthread_mutex_lock(&rt->mu);
+        rt->encoding = 0;
+        rt->frame_busy[job.frame] = 0;
+        if (ev) {
+            ev->meta = job.meta;
+            if (rc == 0) {
+                ev->kind = RT_EV_FRAME;
+                ev->msg = msg;
+                ev->msglen = msglen;
+            } else {
+                ev->kind = RT_EV_FRAME_FAILED;
+                ev->err = err;
+                free(msg);
+            }
+            post(rt, ev);
+        } else {
+            free(msg);
+        }
+        if (rc != 0 || !ev) { /* nothing reaches the loop's waiting slot */
+            rt_slot *s = slot_of(rt, job.meta.client);
+            if (s) s->outstanding--;
+        }
+        pthread_cond_broadcast(&rt->cv_render);
+    }
+    pthread_mutex_unlock(&rt->mu);
+    enc_destroy(enc);
+    return NULL;
+}
+
+/* Progress of one prep job, throttled to one event per 100 ms per phase. */
+typedef struct prep_prog {
+    rt_ctx *rt;
+    uint32_t job;
+    char phase[32];
+    uint64_t last_us;
+} prep_prog;
+
+static void on_progress(void *user, const char *phase, double fraction)
+{
+    prep_prog *p = user;
+    uint64_t t = now_us();
+    int same = strncmp(p->phase, phase, sizeof p->phase - 1) == 0;
+    if (same && t - p->last_us < 100000 && fraction < 1.0) return;
+    snprintf(p->phase, sizeof p->phase, "%s", phase);
+    p->last_us = t;
+    rt_event *ev = calloc(1, sizeof *ev);
+    if (!ev) return;
+    ev->kind = RT_EV_PROGRESS;
+    ev->job = p->job;
+    snprintf(ev->phase_name, sizeof ev->phase_name, "%s", phase);
+    ev->fraction = fraction;
+    pthread_mutex_lock(&p->rt->mu);
+    post(p->rt, ev);
+    pthread_mutex_unlock(&p->rt->mu);
+}
+
+static void *prep_main(void *arg)
+{
+    rt_ctx *rt = arg;
+    pthread_mutex_lock(&rt->mu);
+    for (;;) {
+        while (!rt->prep_head && !rt->stop) pthread_cond_wait(&rt->cv_prep, &rt->mu);
+        if (rt->stop) break;
+        rt_prepjob *j = rt->prep_head;
+        rt->prep_head = j->next;
+        if (!rt->prep_head) rt->prep_tail = NULL;
+        j->next = NULL;
+        rt->prepping = 1;
+        pthread_mutex_unlock(&rt->mu);
+
+        prep_prog pp = {.rt = rt, .job = j->job};
+        cache_desc cd = {.dir = rt->d.cache_dir, .threads = rt->d.prep_threads,
+                         .progress = on_progress, .user = &pp};
+        cache_result res;
+        sd_err err = {0};
+        pc_prepared *p = calloc(1, sizeof *p);
+        int rc = p ? cache_open_cloud(j->path, &cd, p, &res, &err)
+                   : sd_errf(&err, SD_ENOMEM, "out of memory");
+        if (rc == 0) {
+            rt_cloud_info *in = &j->info;
+            in->points = p->n;
+            in->dropped = p->n_dropped;
+            memcpy(in->bmin, p->bmin, sizeof in->bmin);
+            memcpy(in->bmax, p->bmax, sizeof in->bmax);
+            memcpy(in->offset, p->offset, sizeof in->offset);
+            in->attrs = p->attrs;
+            in->k = p->k;
+            in->sigma = p->sigma;
+            snprintf(in->format, sizeof in->format, "%s", p->format);
+            in->cache_hit = res.hit;
+            j->prep = p;
+            on_progress(&pp, "upload", 0.0);
+        } else {
+            free(p);
+        }
+        pthread_mutex_lock(&rt->mu);
+        rt->prepping = 0;
+        if (rc == 0) {
+            if (rt->up_tail) rt->up_tail->next = j;
+            else rt->up_head = j;
+            rt->up_tail = j;
+            pthread_cond_signal(&rt->cv_render);
+        } else {
+            rt_event *ev = calloc(1, sizeof *ev);
+            if (ev) {
+                ev->kind = RT_EV_CLOUD_FAILED;
+                ev->job = j->job;
+                ev->err = err;
+                post(rt, ev);
+            }
+            free(j->path);
+            free(j);
+        }
+    }
+    pthread_mutex_unlock(&rt->mu);
+    return NULL;
+}
+
+rt_ctx *rt_create(const rt_desc *d, ev_loop *loop, sd_err *err)
+{
+    rt_ctx *rt = calloc(1, sizeof *rt);
+    if (!rt) { sd_errf(err, SD_ENOMEM, "out of memory"); return NULL; }
+    rt->d = *d;
+    rt->loop = loop;
+    rt->nslots = d->max_clients > 0 ? d->max_clients : 64;
+    if (rt->nslots > 0xffff) rt->nslots = 0xffff;
+    rt->slots = calloc((size_t)rt->nslots, sizeof *rt->slots);
+    pthread_mutex_init(&rt->mu, NULL);
+    pthread_cond_init(&rt->cv_render, NULL);
+    pthread_cond_init(&rt->cv_enc, NULL);
+    pthread_cond_init(&rt->cv_prep, NULL);
+    pthread_cond_init(&rt->cv_init, NULL);
+    if (!rt->slots) { sd_errf(err, SD_ENOMEM, "out of memory"); goto fail; }
+    if (pthread_create(&rt->th_render, NULL, render_main, rt) != 0) {
+        sd_errf(err, SD_ENOMEM, "cannot start the render thread");
+        goto fail;
+    }
+    rt->started_render = 1;
+    pthread_mutex_lock(&rt->mu);
+    while (rt->init_state == 0) pthread_cond_wait(&rt->cv_init, &rt->mu);
+    pthread_mutex_unlock(&rt->mu);
+    if (rt->init_state < 0) {
+        if (err) *err = rt->init_err;
+        goto fail;
+    }
+    if (pthread_create(&rt->th_enc, NULL, enc_main, rt) != 0) {
+        sd_errf(err, SD_ENOMEM, "cannot start the encoder thread");
+        goto fail;
+    }
+    rt->started_enc = 1;
+    if (pthread_create(&rt->th_prep, NULL, prep_main, rt) != 0) {
+        sd_errf(err, SD_ENOMEM, "cannot start the prep thread");
+        goto fail;
+    }
+    rt->started_prep = 1;
+    return rt;
+fail:
+    rt_destroy(rt);
+    return NULL;
+}
+
+static void free_jobs(rt_prepjob *j)
+{
+    while (j) {
+        rt_prepjob *n = j->next;
+        if (j->prep) { pc_prepared_free(j->prep); free(j->prep); }
+        free(j->path);
+        free(j);
+        j = n;
+    }
+}
+
+/* stop_workers: stops and joins the render and encoder threads, and the prep thread unless
+ * wait_prep is 0 and it is preparing a cloud. Returns 1 when the prep thread was left running. */
+static int stop_workers(rt_ctx *rt, int wait_prep)
+{
+    pthread_mutex_lock(&rt->mu);
+    rt->stop = 1;
+    pthread_cond_broadcast(&rt->cv_render);
+    pthread_cond_broadcast(&rt->cv_enc);
+    pthread_cond_broadcast(&rt->cv_prep);
+    pthread_mutex_unlock(&rt->mu);
+    if (rt->started_render) pthread_join(rt->th_render, NULL);
+    if (rt->started_enc) pthread_join(rt->th_enc, NULL);
+    rt->started_render = rt->started_enc = 0;
+    pthread_mutex_lock(&rt->mu);
+    int busy = rt->prepping;
+    pthread_mutex_unlock(&rt->mu);
+    if (busy && !wait_prep) return 1;
+    if (rt->started_prep) pthread_join(rt->th_prep, NULL);
+    rt->started_prep = 0;
+    return 0;
+}
+
+int rt_stop_for_exit(rt_ctx *rt)
+{
+    if (!rt) return 0;
+    if (stop_workers(rt, 0)) return 1;
+    rt_destroy(rt);
+    return 0;
+}
+
+void rt_destroy(rt_ctx *rt)
+{
+    if (!rt) return;
+    stop_workers(rt, 1);
+    free_jobs(rt->prep_head);
+    free_jobs(rt->up_head);
+    rt_event *ev = rt->ev_head;
+    while (ev) {
+        rt_event *n = ev->next;
+        rt_event_free(ev);
+        ev = n;
+    }
+    pthread_cond_destroy(&rt->cv_render);
+    pthread_cond_destroy(&rt->cv_enc);
+    pthread_cond_destroy(&rt->cv_prep);
+    pthread_cond_destroy(&rt->cv_init);
+    pthread_mutex_destroy(&rt->mu);
+    free(rt->slots);
+    free(rt);
+}
+
+const char *rt_renderer_string(const rt_ctx *rt) { return rt->renderer; }
+const char *rt_backend_name(const rt_ctx *rt) { return rt->backend; }
+
+int rt_client_open(rt_ctx *rt, uint32_t id)
+{
+    uint32_t i = id & 0xffffu;
+    if (id == 0 || i >= (uint32_t)rt->nslots) return SD_ELIMIT;
+    pthread_mutex_lock(&rt->mu);
+    memset(&rt->slots[i], 0, sizeof rt->slots[i]);
+    rt->slots[i].id = id;
+    pthread_mutex_unlock(&rt->mu);
+    return 0;
+}
+
+void rt_client_close(rt_ctx *rt, uint32_t id)
+{
+    pthread_mutex_lock(&rt->mu);
+    rt_slot *s = slot_of(rt, id);
+    if (s) memset(s, 0, sizeof *s);
+    pthread_mutex_unlock(&rt->mu);
+}
+
+int rt_submit_latest(rt_ctx *rt, uint32_t id, const rt_request *rq)
+{
+    int replaced = 0;
+    pthread_mutex_lock(&rt->mu);
+    rt_slot *s = slot_of(rt, id);
+    if (s) {
+        replaced = s->has_latest;
+        s->latest = *rq;
+        s->has_latest = 1;
+        pthread_cond_signal(&rt->cv_render);
+    }
+    pthread_mutex_unlock(&rt->mu);
+    return replaced;
+}
+
+int rt_submit_queue(rt_ctx *rt, uint32_t id, const rt_request *rq)
+{
+    int rc = 0;
+    pthread_mutex_lock(&rt->mu);
+    rt_slot *s = slot_of(rt, id);
+    if (!s || s->qn >= RT_QUEUE_MAX) {
+        rc = SD_ELIMIT;
+    } else {
+        s->q[(s->qhead + s->qn) % RT_QUEUE_MAX] = *rq;
+        s->qn++;
+        pthread_cond_signal(&rt->cv_render);
+    }
+    pthread_mutex_unlock(&rt->mu);
+    return rc;
+}
+
+void rt_frame_released(rt_ctx *rt, uint32_t id)
+{
+    pthread_mutex_lock(&rt->mu);
+    rt_slot *s = slot_of(rt, id);
+    if (s && s->outstanding > 0) {
+        s->outstanding--;
+        pthread_cond_signal(&rt->cv_render);
+    }
+    pthread_mutex_unlock(&rt->mu);
+}
+
+void rt_set_stream_blocked(rt_ctx *rt, uint32_t id, int blocked)
+{
+    pthread_mutex_lock(&rt->mu);
+    rt_slot *s = slot_of(rt, id);
+    if (s && s->stream_blocked != blocked) {
+        s->stream_blocked = blocked;
+        if (!blocked) pthread_cond_signal(&rt->cv_render);
+    }
+    pthread_mutex_unlock(&rt->mu);
+}
+
+int rt_pending(rt_ctx *rt, uint32_t id)
+{
+    pthread_mutex_lock(&rt->mu);
+    rt_slot *s = slot_of(rt, id);
+    int n = s ? s->qn + s->has_latest + s->outstanding : 0;
+    pthread_mutex_unlock(&rt->mu);
+    return n;
+}
+
+uint32_t rt_prepare(rt_ctx *rt, const char *path)
+{
+    rt_prepjob *j = calloc(1, sizeof *j);
+    char *p = strdup(path);
+    if (!j || !p) { free(j); free(p); return 0; }
+    j->path = p;
+    pthread_mutex_lock(&rt->mu);
+    j->job = ++rt->next_job;
+    if (rt->prep_tail) rt->prep_tail->next = j;
+    else rt->prep_head = j;
+    rt->prep_tail = j;
+    pthread_cond_signal(&rt->cv_prep);
+    uint32_t id = j->job;
+    pthread_mutex_unlock(&rt->mu);
+    return id;
+}
+
+rt_event *rt_take_events(rt_ctx *rt)
+{
+    pthread_mutex_lock(&rt->mu);
+    rt_event *h = rt->ev_head;
+    rt->ev_head = rt->ev_tail = NULL;
+    pthread_mutex_unlock(&rt->mu);
+    return h;
+}
+
+void rt_event_free(rt_event *ev)
+{
+    if (!ev) return;
+    free(ev->msg);
+    free(ev);
+}
+
+int rt_busy(rt_ctx *rt)
+{
+    pthread_mutex_lock(&rt->mu);
+    int busy = rt->rendering || rt->encoding || rt->enc_n || rt->ev_head;
+    for (int i = 0; !busy && i < rt->nslots; i++)
+        busy = rt->slots[i].id && (rt->slots[i].qn || rt->slots[i].has_latest);
+    pthread_mutex_unlock(&rt->mu);
+    return busy;
+}
+
+void rt_drop_requests(rt_ctx *rt)
+{
+    pthread_mutex_lock(&rt->mu);
+    for (int i = 0; i < rt->nslots; i++) rt->slots[i].has_latest = 0;
+    free_jobs(rt->prep_head);
+    rt->prep_head = rt->prep_tail = NULL;
+    pthread_mutex_unlock(&rt->mu);
+}

@@ -1,0 +1,148 @@
+/* render_thread.h — the daemon's workers: one render thread that owns the GL context
+ * (rnd_ctx), one encoder thread with its enc_ctx, and one prep thread that loads/prepares
+ * clouds through the cache. They talk to the event loop only through this API: the loop
+ * submits requests; the workers post rt_events and call ev_wakeup.
+ *
+ * Per client (a "slot", identified by the session id the loop gives it):
+ *   - a latest-wins request (stream mode): a new one replaces the pending one;
+ *   - a small FIFO of one-shot requests (RENDER), at most RT_QUEUE_MAX;
+ *   - an outstanding count: frames rendering, encoding or waiting at the loop. The render
+ *     thread skips a client with RT_MAX_OUTSTANDING frames outstanding, so a client that stops
+ *     reading never costs render time and never makes frames pile up (the loop calls
+ *     rt_frame_released when a frame leaves its waiting slot: sent to the socket or dropped).
+ * The render thread serves clients with work round-robin, one frame at a time, and uploads
+ * prepared clouds (before any frame) so that each cloud is on the GPU once, shared by all.
+ * Frames are delivered in order per client (one encoder thread). */
+#pragma once
+#include <stddef.h>
+#include <stdint.h>
+
+#include "cache.h"
+#include "render.h"
+#include "sd_err.h"
+
+enum { RT_QUEUE_MAX = 64, RT_MAX_OUTSTANDING = 2 }; /* 64: `splat path --inflight` allows up to 64 */
+
+typedef struct rt_ctx rt_ctx;
+typedef struct ev_loop ev_loop;
+
+/* What one frame answers and how it came out; filled by the workers. */
+typedef struct rt_frame_meta {
+    uint32_t client;        /* session id */
+    uint32_t req_seq;       /* the request's message sequence (RENDER, or CAMERA/PARAMS in stream mode) */
+    uint32_t camera_seq;    /* the CAMERA message it renders, 0 = default camera */
+    int stream;             /* 1: from the latest-wins slot */
+    int width, height, pipeline, format;
+    uint64_t render_us, readback_us, encode_us, points_drawn;
+} rt_frame_meta;
+
+/* A render request as the loop submits it. */
+typedef struct rt_request {
+    uint32_t cloud_id;      /* from an RT_EV_CLOUD_READY event */
+    rnd_camera cam;
+    sp_params params;
+    uint32_t req_seq, camera_seq;
+} rt_request;
+
+/* Packs an encoded frame into the bytes the loop will write (header + payload), on the encoder
+ * thread. Returns 0 with *msg (malloc'd) and *len set, or a negative code. */
+typedef int (*rt_pack_fn)(void *user, const rt_frame_meta *m, const uint8_t *data, size_t len,
+                          uint8_t **msg, size_t *msglen);
+
+typedef struct rt_desc {
+    rnd_desc rnd;           /* renderer options (back end, shader dir) */
+    int max_clients;        /* slots; client ids must be < 2^16 in their low bits (index) */
+    const char *cache_dir;  /* default NULL: cache.h's default */
+    int prep_threads;       /* default 0: every core (passed to cache_desc.threads) */
+    rt_pack_fn pack;        /* required */
+    void *pack_user;
+} rt_desc;
+
+typedef enum {
+    RT_EV_FRAME = 1,        /* meta, msg/msglen: a packed FRAME message */
+    RT_EV_FRAME_FAILED,     /* meta (client, seqs), err */
+    RT_EV_PROGRESS,         /* job, phase, fraction */
+    RT_EV_CLOUD_READY,      /* job, cloud_id, info */
+    RT_EV_CLOUD_FAILED,     /* job, err */
+} rt_event_kind;
+
+/* The summary of a prepared cloud the loop keeps to answer OPEN (INFO). */
+typedef struct rt_cloud_info {
+    uint64_t points, dropped;
+    double bmin[3], bmax[3], offset[3];
+    uint32_t attrs, k;
+    float sigma;
+    char format[64];
+    int cache_hit;
+} rt_cloud_info;
+
+typedef struct rt_event {
+    rt_event_kind kind;
+    rt_frame_meta meta;
+    uint8_t *msg;           /* RT_EV_FRAME: owned by the event until rt_event_free */
+    size_t msglen;
+    uint32_t job;           /* prep events: the job id rt_prepare returned */
+    int phase;              /* RT_EV_PROGRESS: PROTO_PHASE_*-like index (see render_thread.c) */
+    char phase_name[32];
+    double fraction;
+    uint32_t cloud_id;
+    rt_cloud_info info;
+    sd_err err;
+    struct rt_event *next;
+} rt_event;
+
+/* rt_create: starts the workers; the render thread opens the GL back end, and rt_create
+ * waits for it. Returns NULL with err filled when the renderer cannot start. Events are
+ * announced by ev_wakeup(loop). */
+rt_ctx *rt_create(const rt_desc *d, ev_loop *loop, sd_err *err);
+
+/* rt_destroy: stops and joins the workers (frames in flight are finished first, then
+ * dropped), frees every queued request and event. NULL is allowed. */
+void rt_destroy(rt_ctx *rt);
+
+/* rt_stop_for_exit: like rt_destroy, but when the prep thread is in the middle of preparing a
+ * cloud (which cannot be interrupted and may take minutes), stops only the render and encoder
+ * threads and returns 1: rt is then left as it is, still in use by the prep thread, and the
+ * caller must exit the process without touching rt or the loop again. Returns 0 when rt was
+ * destroyed. Used at SIGTERM, so that a stop request never waits for a preparation. */
+int rt_stop_for_exit(rt_ctx *rt);
+
+const char *rt_renderer_string(const rt_ctx *rt);
+const char *rt_backend_name(const rt_ctx *rt);
+
+/* rt_client_open: claims the slot of client id (index = id & 0xffff < max_clients). Returns 0
+ * or SD_ELIMIT. rt_client_close: drops its requests; frames already in flight are still
+ * posted (the loop ignores events of a closed id). */
+int rt_client_open(rt_ctx *rt, uint32_t id);
+void rt_client_close(rt_ctx *rt, uint32_t id);
+
+/* rt_submit_latest: sets the client's latest-wins request, replacing a pending one (which is
+ * returned as 1 so the caller can count drops; 0 when none was pending). */
+int rt_submit_latest(rt_ctx *rt, uint32_t id, const rt_request *rq);
+/* rt_submit_queue: appends a one-shot request. Returns 0, or SD_ELIMIT when RT_QUEUE_MAX are
+ * already queued (the caller answers BUSY). */
+int rt_submit_queue(rt_ctx *rt, uint32_t id, const rt_request *rq);
+/* rt_frame_released: one frame of client id left the loop's waiting slot. */
+void rt_frame_released(rt_ctx *rt, uint32_t id);
+/* rt_set_stream_blocked: while blocked, the client's latest-wins (streamed) requests wait: the
+ * loop sets it when a streamed frame waits unsent (the client is not reading), so a stalled
+ * streaming client costs no render time. */
+void rt_set_stream_blocked(rt_ctx *rt, uint32_t id, int blocked);
+/* rt_pending: requests queued or latest pending for id, plus frames outstanding. */
+int rt_pending(rt_ctx *rt, uint32_t id);
+
+/* rt_prepare: queues the preparation + upload of the cloud file path (resolved, inside the
+ * data dir). Returns the job id (> 0); its progress and result arrive as events. */
+uint32_t rt_prepare(rt_ctx *rt, const char *path);
+
+/* rt_take_events: the posted events, oldest first, as a list the caller now owns. */
+rt_event *rt_take_events(rt_ctx *rt);
+void rt_event_free(rt_event *ev);
+
+/* rt_busy: 1 while any frame is rendering or encoding, any request is queued, or any event
+ * waits to be taken (a prep job in progress does not count: shutdown does not wait for it). */
+int rt_busy(rt_ctx *rt);
+/* rt_drop_requests: drops every pending latest-wins (streamed) request and every prep job not
+ * started (shutdown). Queued RENDER requests stay: each has an answer slot at its client, and
+ * the shutdown deadline bounds how long they may take. */
+void rt_drop_requests(rt_ctx *rt);

@@ -1,0 +1,194 @@
+/* session.c — a client connection's state and ordered output queue (see session.h). */
+#include "session.h"
+
+#include <errno.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/socket.h>
+
+sess *sess_new(uint32_t id, int fd, const char *addr)
+{
+    sess *s = calloc(1, sizeof *s);
+    if (!s) return NULL;
+    s->in = malloc(SESS_IN_CHUNK);
+    if (!s->in) { free(s); return NULL; }
+    s->id = id;
+    s->fd = fd;
+    strncpy(s->addr, addr, sizeof s->addr - 1);
+    proto_decoder_init(&s->dec, PROTO_C2S);
+    s->dec.preauth = 1;
+    s->cloud = -1;
+    s->opening = -1;
+    sp_params_defaults(&s->params);
+    ev_timer_init(&s->hs_timer);
+    ev_timer_init(&s->fps_timer);
+    s->t_connect_ms = ev_now_ms();
+    return s;
+}
+
+void sess_free(sess *s, void (*release)(void *user, uint32_t id), void *user)
+{
+    if (!s) return;
+    sess_item *it = s->head;
+    while (it) {
+        sess_item *n = it->next;
+        if (it->counted && release) release(user, s->id);
+        free(it->data);
+        free(it);
+        it = n;
+    }
+    if (s->stream_frame && release) release(user, s->id);
+    free(s->stream_frame);
+    free(s->cur_own);
+    proto_decoder_free(&s->dec);
+    free(s->in);
+    free(s);
+}
+
+static sess_item *append(sess *s)
+{
+    sess_item *it = calloc(1, sizeof *it);
+    if (!it) return NULL;
+    if (s->tail) s->tail->next = it;
+    else s->head = it;
+    s->tail = it;
+    return it;
+}
+
+int sess_push(sess *s, proto_buf *b)
+{
+    if (s->out_bytes + b->len > SESS_OUT_MAX) {
+        proto_buf_free(b);
+        return SD_ELIMIT;
+    }
+    /* Coalesce with a ready bytes item at the tail that is not being written. */
+    sess_item *t = s->tail;
+    if (t && !t->is_frame && t != s->cur_item) {
+        uint8_t *nd = realloc(t->data, t->len + b->len);
+        if (!nd) { proto_buf_free(b); return SD_ENOMEM; }
+        memcpy(nd + t->len, b->data, b->len);
+        t->data = nd;
+        t->len += b->len;
+        s->out_bytes += b->len;
+        proto_buf_free(b);
+        return 0;
+    }
+    sess_item *it = append(s);
+    if (!it) { proto_buf_free(b); return SD_ENOMEM; }
+    it->filled = 1;
+    it->data = b->data;
+    it->len = b->len;
+    s->out_bytes += b->len;
+    memset(b, 0, sizeof *b);
+    return 0;
+}
+
+int sess_push_frame_slot(sess *s, uint32_t seq)
+{
+    sess_item *it = append(s);
+    if (!it) return SD_ENOMEM;
+    it->is_frame = 1;
+    it->seq = seq;
+    s->frames_queued++;
+    return 0;
+}
+
+int sess_fill_frame(sess *s, uint8_t *msg, size_t len)
+{
+    for (sess_item *it = s->head; it; it = it->next) {
+        if (it->is_frame && !it->filled) {
+            it->data = msg;
+            it->len = len;
+            it->filled = 1;
+            it->counted = 1;
+            s->frames_queued--;
+            return 0;
+        }
+    }
+    return SD_ENOTFOUND;
+}
+
+int sess_set_stream_frame(sess *s, uint8_t *msg, size_t len)
+{
+    int replaced = s->stream_frame != NULL;
+    free(s->stream_frame);
+    s->stream_frame = msg;
+    s->stream_len = len;
+    if (replaced) s->frames_dropped++;
+    return replaced;
+}
+
+int sess_has_output(const sess *s)
+{
+    return s->cur != NULL || s->head != NULL || s->stream_frame != NULL;
+}
+
+/* next_message: makes the next ready message current (head item if filled, else a streamed
+ * frame). Returns 0 when nothing is ready. */
+static int next_message(sess *s, void (*release)(void *, uint32_t), void *user)
+{
+    sess_item *h = s->head;
+    if (h && h->filled) {
+        s->cur_item = h;
+        s->cur = h->data;
+        s->cur_len = h->len;
+        s->cur_off = 0;
+        if (h->counted) {
+            h->counted = 0;
+            if (release) release(user, s->id);
+        }
+        return 1;
+    }
+    if (s->stream_frame) {
+        s->cur_own = s->stream_frame;
+        s->cur = s->stream_frame;
+        s->cur_len = s->stream_len;
+        s->cur_off = 0;
+        s->stream_frame = NULL;
+        if (release) release(user, s->id);
+        return 1;
+    }
+    return 0;
+}
+
+/* done_message: frees the message just written. */
+static void done_message(sess *s)
+{
+    if (s->cur_item) {
+        sess_item *h = s->cur_item;
+        if (h->is_frame) s->frames_sent++;
+        else s->out_bytes -= h->len;
+        s->head = h->next;
+        if (!s->head) s->tail = NULL;
+        free(h->data);
+        free(h);
+        s->cur_item = NULL;
+    } else {
+        free(s->cur_own);
+        s->cur_own = NULL;
+        s->frames_sent++;
+    }
+    s->cur = NULL;
+    s->cur_len = s->cur_off = 0;
+}
+
+int sess_flush(sess *s, void (*release)(void *user, uint32_t id), void *user)
+{
+    /* At most 16 messages per call, so one client cannot hold the loop (STYLE.md 8). */
+    for (int n = 0; n < 16; n++) {
+        if (!s->cur && !next_message(s, release, user)) return 1;
+        while (s->cur_off < s->cur_len) {
+            ssize_t w = send(s->fd, s->cur + s->cur_off, s->cur_len - s->cur_off, MSG_NOSIGNAL);
+            if (w < 0) {
+                if (errno == EINTR) continue;
+                if (errno == EAGAIN || errno == EWOULDBLOCK) return 0;
+                return -errno;
+            }
+            s->cur_off += (size_t)w;
+            s->bytes_out += (uint64_t)w;
+        }
+        done_message(s);
+    }
+    int ready = s->cur || (s->head && s->head->filled) || s->stream_frame;
+    return ready ? 0 : 1;
+}

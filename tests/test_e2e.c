@@ -1,0 +1,1181 @@
+/* test_e2e.c — end-to-end tests of the real daemon binary ($SPLATD_BIN) on an ephemeral port:
+ * malformed input (raw sockets with protocol/proto.h), lossless frames against `splatd render`,
+ * JPEG frames, authentication, isolation of a client that stops reading, 20 concurrent
+ * clients with a memory check, a client killed mid-frame, and SIGTERM.
+ *
+ * The data directory is a temporary directory holding a copy of tests/data/Guanyin.ply and a
+ * symlink that points outside it. Frames are small (160x120, `points` pipeline, ~15 ms each on
+ * llvmpipe) to keep the whole file well under a minute. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <errno.h>
+#include <fcntl.h>
+#include <math.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <arpa/inet.h>
+#include <png.h>
+#include <poll.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "common/testutil.h"
+#include "proto.h"
+#include "splat_client.h"
+
+typedef struct daemon_proc {
+    pid_t pid;
+    int port;
+    char log[700];
+} daemon_proc;
+
+typedef struct e2e {
+    char root[512];
+    char data[600], cache[600], outside[600];
+    daemon_proc d;
+    daemon_proc aux;   /* a second daemon of one test; stopped by the teardown if it failed */
+} e2e;
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+static const char *splatd_bin(void)
+{
+    return tu_env("SPLATD_BIN", "build/bin/splatd");
+}
+
+/* copy_file: copies src to dst; 0 on success. */
+static int copy_file(const char *src, const char *dst)
+{
+    size_t len;
+    uint8_t *b = tu_read_file(src, &len);
+    if (!b) return -1;
+    int rc = tu_write_file(dst, b, len);
+    free(b);
+    return rc;
+}
+
+/* daemon_start: runs splatd with the extra arguments (NULL-terminated) plus --port-file; waits
+ * up to 60 s for the port file. Returns 0, or -1 when the daemon exited (its status in *status
+ * when not NULL). */
+static int daemon_start(const e2e *t, daemon_proc *d, int *status, ...)
+{
+    char portfile[700];
+    static int counter;
+    snprintf(portfile, sizeof portfile, "%s/port%d", t->root, ++counter);
+    snprintf(d->log, sizeof d->log, "%s/splatd%d.log", t->root, counter);
+    const char *argv[40];
+    int n = 0;
+    argv[n++] = splatd_bin();
+    va_list ap;
+    va_start(ap, status);
+    const char *a;
+    while ((a = va_arg(ap, const char *)) && n < 36) argv[n++] = a;
+    va_end(ap);
+    argv[n++] = "--port-file";
+    argv[n++] = portfile;
+    argv[n] = NULL;
+    pid_t pid = fork();
+    assert_true(pid >= 0);
+    if (pid == 0) {
+        int fd = open(d->log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        if (fd >= 0) { dup2(fd, 2); close(fd); }
+        execv(argv[0], (char *const *)argv);
+        _exit(127);
+    }
+    d->pid = pid;
+    for (int i = 0; i < 6000; i++) {
+        int st;
+        if (waitpid(pid, &st, WNOHANG) == pid) {
+            if (status) *status = st;
+            d->pid = 0;
+            return -1;
+        }
+        size_t len;
+        uint8_t *b = tu_read_file(portfile, &len);
+        if (b) {
+            d->port = atoi((char *)b);
+            free(b);
+            if (d->port > 0) return 0;
+        }
+        usleep(10000);
+    }
+    fail_msg("splatd did not start within 60 s (log %s)", d->log);
+    return -1;
+}
+
+/* daemon_stop: SIGTERM, then waits up to 20 s; returns the exit status (or -1 on a signal). */
+static int daemon_stop(daemon_proc *d)
+{
+    if (d->pid <= 0) return -1;
+    kill(d->pid, SIGTERM);
+    int st = 0;
+    for (int i = 0; i < 2000; i++) {
+        if (waitpid(d->pid, &st, WNOHANG) == d->pid) {
+            d->pid = 0;
+            return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+        }
+        usleep(10000);
+    }
+    kill(d->pid, SIGKILL);
+    waitpid(d->pid, &st, 0);
+    d->pid = 0;
+    return -2;
+}
+
+static long vm_rss_kb(pid_t pid)
+{
+    char p[64], line[256];
+    snprintf(p, sizeof p, "/proc/%d/status", (int)pid);
+    FILE *f = fopen(p, "r");
+    if (!f) return -1;
+    long kb = -1;
+    while (fgets(line, sizeof line, f))
+        if (sscanf(line, "VmRSS: %ld", &kb) == 1) break;
+    fclose(f);
+    return kb;
+}
+
+/* ---- a raw protocol client ---- */
+
+typedef struct raw {
+    int fd;
+    uint32_t seq;
+    uint8_t *pl;        /* last payload received */
+    proto_header h;     /* last header received */
+} raw;
+
+static int raw_connect(raw *r, int port)
+{
+    memset(r, 0, sizeof *r);
+    r->fd = socket(AF_INET, SOCK_STREAM, 0);
+    assert_true(r->fd >= 0);
+    struct sockaddr_in a = {.sin_family = AF_INET, .sin_port = htons((uint16_t)port)};
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    int one = 1;
+    setsockopt(r->fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    struct timeval tv = {20, 0};
+    setsockopt(r->fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    return connect(r->fd, (struct sockaddr *)&a, sizeof a);
+}
+
+static void raw_close(raw *r)
+{
+    if (r->fd >= 0) close(r->fd);
+    free(r->pl);
+    r->pl = NULL;
+    r->fd = -1;
+}
+
+static int write_all(int fd, const void *p, size_t n)
+{
+    const uint8_t *b = p;
+    while (n) {
+        ssize_t w = send(fd, b, n, MSG_NOSIGNAL);
+        if (w < 0 && errno == EINTR) continue;
+        if (w <= 0) return -1;
+        b += w;
+        n -= (size_t)w;
+    }
+    return 0;
+}
+
+/* raw_send_hdr: a header with explicit fields and len payload bytes from pl. */
+static uint32_t raw_send_hdr(raw *r, uint32_t magic, uint16_t version, uint16_t type, uint32_t len,
+                             const void *pl, size_t pllen)
+{
+    uint8_t h[PROTO_HEADER_LEN];
+    proto_header hd = {magic, version, type, ++r->seq, len};
+    proto_put_header(h, &hd);
+    assert_int_equal(write_all(r->fd, h, sizeof h), 0);
+    if (pllen) assert_int_equal(write_all(r->fd, pl, pllen), 0);
+    return r->seq;
+}
+
+/* raw_send_buf: sends the message(s) encoded in b. */
+static void raw_send_buf(raw *r, proto_buf *b)
+{
+    assert_int_equal(write_all(r->fd, b->data, b->len), 0);
+    proto_buf_free(b);
+}
+
+static int read_all(int fd, void *p, size_t n)
+{
+    uint8_t *b = p;
+    while (n) {
+        ssize_t g = recv(fd, b, n, 0);
+        if (g < 0 && errno == EINTR) continue;
+        if (g <= 0) return -1;
+        b += g;
+        n -= (size_t)g;
+    }
+    return 0;
+}
+
+/* raw_recv: the next message; returns its type, or -1 on EOF/timeout. */
+static int raw_recv(raw *r)
+{
+    uint8_t h[PROTO_HEADER_LEN];
+    if (read_all(r->fd, h, sizeof h) != 0) return -1;
+    proto_get_header(h, &r->h);
+    assert_int_equal(r->h.magic, PROTO_MAGIC);
+    assert_true(r->h.len <= PROTO_MAX_FRAME);
+    free(r->pl);
+    r->pl = malloc(r->h.len + 1);
+    assert_non_null(r->pl);
+    if (read_all(r->fd, r->pl, r->h.len) != 0) return -1;
+    return r->h.type;
+}
+
+/* raw_recv_skip: the next message that is not PROGRESS. */
+static int raw_recv_skip(raw *r)
+{
+    int t;
+    while ((t = raw_recv(r)) == PROTO_MSG_PROGRESS) {}
+    return t;
+}
+
+static void raw_hello(raw *r)
+{
+    proto_buf b = {0};
+    proto_hello h = {.min_version = 1, .max_version = 1};
+    snprintf(h.client, sizeof h.client, "test_e2e");
+    assert_int_equal(proto_enc_hello(&b, ++r->seq, &h), 0);
+    raw_send_buf(r, &b);
+    assert_int_equal(raw_recv(r), PROTO_MSG_WELCOME);
+    proto_welcome w;
+    assert_int_equal(proto_parse_welcome(r->pl, r->h.len, &w, NULL), 0);
+    assert_int_equal(w.authenticated, 1);
+}
+
+/* raw_expect_error: the next non-PROGRESS message is ERROR code for request seq. */
+static void raw_expect_error(raw *r, int code, uint32_t seq)
+{
+    int t = raw_recv_skip(r);
+    if (t != PROTO_MSG_ERROR) fail_msg("expected ERROR %s, got message type %d", proto_err_name(code), t);
+    proto_errmsg em;
+    assert_int_equal(proto_parse_error(r->pl, r->h.len, &em, NULL), 0);
+    if ((int)em.code != code)
+        fail_msg("expected ERROR %s, got %s: %s", proto_err_name(code), proto_err_name((int)em.code), em.text);
+    assert_int_equal(r->h.seq, seq);
+    assert_true(strlen(em.text) > 10); /* a sentence, not just a code */
+}
+
+/* raw_expect_closed: the server closed the connection (EOF within the receive timeout). */
+static void raw_expect_closed(raw *r)
+{
+    uint8_t b;
+    ssize_t g = recv(r->fd, &b, 1, 0);
+    assert_int_equal(g, 0);
+}
+
+static uint32_t raw_open(raw *r, const char *name)
+{
+    proto_buf b = {0};
+    uint32_t s = ++r->seq;
+    assert_int_equal(proto_enc_open(&b, s, name), 0);
+    raw_send_buf(r, &b);
+    return s;
+}
+
+static uint32_t raw_params(raw *r, const char *const *kv, int n)
+{
+    sp_params p;
+    sp_params_defaults(&p);
+    proto_param_rec recs[16];
+    for (int i = 0; i < n; i++) {
+        char err[256];
+        assert_int_equal(sp_param_set_kv(&p, kv[i], err, sizeof err), 0);
+        char name[64];
+        snprintf(name, sizeof name, "%.*s", (int)(strchr(kv[i], '=') - kv[i]), kv[i]);
+        proto_param_rec_from(&p, sp_param_find(name), &recs[i]);
+    }
+    proto_buf b = {0};
+    uint32_t s = ++r->seq;
+    assert_int_equal(proto_enc_params(&b, s, recs, (unsigned)n), 0);
+    raw_send_buf(r, &b);
+    return s;
+}
+
+static uint32_t raw_camera(raw *r, int w, int h, double angle)
+{
+    proto_camera c = {.eye = {3 * cos(angle), 3 * sin(angle), 0.5}, .up = {0, 0, 1},
+                      .fov_deg = 45, .width = (uint32_t)w, .height = (uint32_t)h};
+    proto_buf b = {0};
+    uint32_t s = ++r->seq;
+    assert_int_equal(proto_enc_camera(&b, s, &c), 0);
+    raw_send_buf(r, &b);
+    return s;
+}
+
+static uint32_t raw_simple(raw *r, unsigned type)
+{
+    proto_buf b = {0};
+    uint32_t s = ++r->seq;
+    assert_int_equal(proto_enc_empty(&b, type, s), 0);
+    raw_send_buf(r, &b);
+    return s;
+}
+
+/* raw_ping: one PING/PONG round trip; asserts the token comes back. */
+static void raw_ping(raw *r)
+{
+    proto_buf b = {0};
+    proto_ping p = {.token = 0x1234567890abcdefull};
+    uint32_t s = ++r->seq;
+    assert_int_equal(proto_enc_ping(&b, s, &p), 0);
+    raw_send_buf(r, &b);
+    assert_int_equal(raw_recv(r), PROTO_MSG_PONG);
+    proto_pong pg;
+    assert_int_equal(proto_parse_pong(r->pl, r->h.len, &pg, NULL), 0);
+    assert_int_equal(pg.token, p.token);
+    assert_int_equal(r->h.seq, s);
+}
+
+/* raw_ready: a connected, authenticated session with Guanyin open and small points frames. */
+static void raw_ready(raw *r, int port, int w, int h, const char *format)
+{
+    assert_int_equal(raw_connect(r, port), 0);
+    raw_hello(r);
+    uint32_t s = raw_open(r, "Guanyin");
+    assert_int_equal(raw_recv_skip(r), PROTO_MSG_INFO);
+    assert_int_equal(r->h.seq, s);
+    char fmt[32];
+    snprintf(fmt, sizeof fmt, "format=%s", format);
+    const char *kv[] = {"pipeline=points", fmt};
+    s = raw_params(r, kv, 2);
+    assert_int_equal(raw_recv(r), PROTO_MSG_OK);
+    assert_int_equal(r->h.seq, s);
+    raw_camera(r, w, h, 0.3);
+}
+
+/* raw_frame: sends RENDER and waits for its FRAME; returns the frame's data length. */
+static uint32_t raw_frame(raw *r, proto_frame *f)
+{
+    uint32_t s = raw_simple(r, PROTO_MSG_RENDER);
+    int t = raw_recv(r);
+    if (t != PROTO_MSG_FRAME) {
+        proto_errmsg em = {0};
+        if (t == PROTO_MSG_ERROR) proto_parse_error(r->pl, r->h.len, &em, NULL);
+        fail_msg("RENDER got type %d instead of FRAME: %s", t, em.text);
+    }
+    assert_int_equal(r->h.seq, s);
+    assert_int_equal(proto_parse_frame(r->pl, r->h.len, f, NULL), 0);
+    return f->data_len;
+}
+
+/* ---- fixture: one daemon for most tests ---- */
+
+static int group_setup(void **state)
+{
+    e2e *t = calloc(1, sizeof *t);
+    if (!tu_tmpdir(t->root, sizeof t->root)) return -1;
+    snprintf(t->data, sizeof t->data, "%s/data", t->root);
+    snprintf(t->cache, sizeof t->cache, "%s/cache", t->root);
+    snprintf(t->outside, sizeof t->outside, "%s/outside", t->root);
+    mkdir(t->data, 0755);
+    mkdir(t->cache, 0755);
+    mkdir(t->outside, 0755);
+    char src[600], dst[700];
+    tu_data("Guanyin.ply", src, sizeof src);
+    snprintf(dst, sizeof dst, "%s/Guanyin.ply", t->data);
+    if (copy_file(src, dst) != 0) return -1;
+    tu_data("bun000.ply", src, sizeof src);
+    snprintf(dst, sizeof dst, "%s/bunny.ply", t->data); /* not preloaded: prepared on OPEN */
+    if (copy_file(src, dst) != 0) return -1;
+    snprintf(dst, sizeof dst, "%s/secret.ply", t->outside);
+    if (copy_file(src, dst) != 0) return -1;
+    char lnk[700];
+    snprintf(lnk, sizeof lnk, "%s/outside.ply", t->data);
+    if (symlink(dst, lnk) != 0) return -1;
+    signal(SIGPIPE, SIG_IGN);
+    /* --preload: the first OPEN finds the cloud prepared (prep runs once, ~3 s). */
+    if (daemon_start(t, &t->d, NULL, "--listen", "127.0.0.1:0", "--data", t->data, "--cache",
+                     t->cache, "--preload", "Guanyin", (char *)NULL) != 0)
+        return -1;
+    *state = t;
+    return 0;
+}
+
+static int group_teardown(void **state)
+{
+    e2e *t = *state;
+    if (t->d.pid > 0) daemon_stop(&t->d);
+    if (t->aux.pid > 0) daemon_stop(&t->aux);
+    tu_rm_rf(t->root);
+    free(t);
+    return 0;
+}
+
+/* ---- malformed input: each gets its specific ERROR; the daemon keeps serving others ---- */
+
+static void test_malformed(void **state)
+{
+    e2e *t = *state;
+    raw w; /* a witness client that must keep being served throughout */
+    assert_int_equal(raw_connect(&w, t->d.port), 0);
+    raw_hello(&w);
+    raw r;
+
+    /* bad magic */
+    assert_int_equal(raw_connect(&r, t->d.port), 0);
+    raw_send_hdr(&r, 0x11223344u, 1, PROTO_MSG_HELLO, 0, NULL, 0);
+    raw_expect_error(&r, PROTO_E_BAD_MAGIC, 0);
+    raw_expect_closed(&r);
+    raw_close(&r);
+
+    /* a request before HELLO */
+    assert_int_equal(raw_connect(&r, t->d.port), 0);
+    raw_send_hdr(&r, PROTO_MAGIC, 1, PROTO_MSG_LIST, 0, NULL, 0);
+    raw_expect_error(&r, PROTO_E_AUTH_REQUIRED, 0);
+    raw_expect_closed(&r);
+    raw_close(&r);
+
+    /* HELLO over the pre-authentication limit */
+    assert_int_equal(raw_connect(&r, t->d.port), 0);
+    raw_send_hdr(&r, PROTO_MAGIC, 1, PROTO_MSG_HELLO, PROTO_MAX_PREAUTH + 1, NULL, 0);
+    raw_expect_error(&r, PROTO_E_TOO_LARGE, 0);
+    raw_expect_closed(&r);
+    raw_close(&r);
+
+    /* unknown type, after the handshake */
+    assert_int_equal(raw_connect(&r, t->d.port), 0);
+    raw_hello(&r);
+    raw_send_hdr(&r, PROTO_MAGIC, 1, 77, 0, NULL, 0);
+    raw_expect_error(&r, PROTO_E_UNKNOWN_TYPE, 0);
+    raw_expect_closed(&r);
+    raw_close(&r);
+
+    /* a server-to-client type sent by the client */
+    assert_int_equal(raw_connect(&r, t->d.port), 0);
+    raw_hello(&r);
+    raw_send_hdr(&r, PROTO_MAGIC, 1, PROTO_MSG_FRAME, 0, NULL, 0);
+    raw_expect_error(&r, PROTO_E_UNKNOWN_TYPE, 0);
+    raw_close(&r);
+
+    /* wrong version after negotiating version 1 */
+    assert_int_equal(raw_connect(&r, t->d.port), 0);
+    raw_hello(&r);
+    raw_send_hdr(&r, PROTO_MAGIC, 2, PROTO_MSG_LIST, 0, NULL, 0);
+    raw_expect_error(&r, PROTO_E_BAD_VERSION, 0);
+    raw_expect_closed(&r);
+    raw_close(&r);
+
+    /* no common version in HELLO */
+    assert_int_equal(raw_connect(&r, t->d.port), 0);
+    {
+        proto_buf b = {0};
+        proto_hello h = {.min_version = 5, .max_version = 9};
+        assert_int_equal(proto_enc_hello(&b, ++r.seq, &h), 0);
+        raw_send_buf(&r, &b);
+        raw_expect_error(&r, PROTO_E_BAD_VERSION, r.seq);
+        raw_expect_closed(&r);
+    }
+    raw_close(&r);
+
+    /* length over the limit after authentication */
+    assert_int_equal(raw_connect(&r, t->d.port), 0);
+    raw_hello(&r);
+    raw_send_hdr(&r, PROTO_MAGIC, 1, PROTO_MSG_PARAMS, PROTO_MAX_REQUEST + 1, NULL, 0);
+    raw_expect_error(&r, PROTO_E_TOO_LARGE, 0);
+    raw_expect_closed(&r);
+    raw_close(&r);
+
+    /* truncated payload: a CAMERA of 50 bytes instead of 92 */
+    assert_int_equal(raw_connect(&r, t->d.port), 0);
+    raw_hello(&r);
+    {
+        uint8_t junk[50] = {0};
+        uint32_t s = raw_send_hdr(&r, PROTO_MAGIC, 1, PROTO_MSG_CAMERA, sizeof junk, junk, sizeof junk);
+        raw_expect_error(&r, PROTO_E_TRUNCATED, s);
+        raw_expect_closed(&r);
+    }
+    raw_close(&r);
+
+    /* non-fatal errors on one connection, which keeps working after each */
+    assert_int_equal(raw_connect(&r, t->d.port), 0);
+    raw_hello(&r);
+    {
+        /* unknown parameter: a hand-made record, since the encoder only knows real names */
+        uint8_t pl[64];
+        size_t n = 0;
+        proto_put_u16(pl, 1);
+        n = 2;
+        const char *nm = "no_such_param";
+        pl[n++] = (uint8_t)strlen(nm);
+        memcpy(pl + n, nm, strlen(nm));
+        n += strlen(nm);
+        pl[n++] = SP_T_FLOAT;
+        proto_put_f32(pl + n, 1.0f);
+        n += 4;
+        uint32_t s = raw_send_hdr(&r, PROTO_MAGIC, 1, PROTO_MSG_PARAMS, (uint32_t)n, pl, n);
+        raw_expect_error(&r, PROTO_E_BAD_PARAM_NAME, s);
+        raw_ping(&r);
+
+        /* out-of-range parameter: splat_scale 500 (range 0.01..100) */
+        proto_param_rec rec = {.type = SP_T_FLOAT};
+        snprintf(rec.name, sizeof rec.name, "splat_scale");
+        rec.u.f = 500.0f;
+        proto_buf b = {0};
+        s = ++r.seq;
+        assert_int_equal(proto_enc_params(&b, s, &rec, 1), 0);
+        raw_send_buf(&r, &b);
+        raw_expect_error(&r, PROTO_E_BAD_PARAM_VALUE, s);
+        raw_ping(&r);
+
+        /* RENDER before OPEN */
+        s = raw_simple(&r, PROTO_MSG_RENDER);
+        raw_expect_error(&r, PROTO_E_NOT_OPEN, s);
+
+        /* OPEN: a path, an absolute path, a symlink out of the data dir, a missing name */
+        s = raw_open(&r, "../x");
+        raw_expect_error(&r, PROTO_E_BAD_NAME, s);
+        s = raw_open(&r, "/etc/passwd");
+        raw_expect_error(&r, PROTO_E_BAD_NAME, s);
+        s = raw_open(&r, "outside.ply");
+        raw_expect_error(&r, PROTO_E_BAD_NAME, s);
+        s = raw_open(&r, "outside");
+        raw_expect_error(&r, PROTO_E_BAD_NAME, s);
+        s = raw_open(&r, "missing");
+        raw_expect_error(&r, PROTO_E_NOT_FOUND, s);
+        s = raw_open(&r, "missing.ply");
+        raw_expect_error(&r, PROTO_E_NOT_FOUND, s);
+        raw_ping(&r);
+    }
+    raw_close(&r);
+
+    /* A half-sent message (the client stalls mid-payload) holds nobody else up. */
+    assert_int_equal(raw_connect(&r, t->d.port), 0);
+    raw_hello(&r);
+    raw_send_hdr(&r, PROTO_MAGIC, 1, PROTO_MSG_CAMERA, 92, "abc", 3);
+    raw_ping(&w);
+    raw_close(&r);
+
+    /* The witness was served all along, and LIST shows only the cloud inside the data dir. */
+    raw_ping(&w);
+    uint32_t s = raw_simple(&w, PROTO_MSG_LIST);
+    assert_int_equal(raw_recv(&w), PROTO_MSG_CLOUDS);
+    assert_int_equal(w.h.seq, s);
+    proto_clouds cl;
+    assert_int_equal(proto_parse_clouds(w.pl, w.h.len, &cl, NULL), 0);
+    assert_int_equal(cl.count, 2);
+    assert_string_equal(cl.items[0].name, "Guanyin.ply");
+    assert_int_equal(cl.items[0].bytes, 3572490);
+    assert_string_equal(cl.items[1].name, "bunny.ply");
+    proto_clouds_free(&cl);
+    raw_close(&w);
+}
+
+/* ---- a first OPEN prepares the cloud with PROGRESS, while other clients are served ---- */
+
+static void test_open_progress(void **state)
+{
+    e2e *t = *state;
+    raw x, y;
+    assert_int_equal(raw_connect(&x, t->d.port), 0);
+    raw_hello(&x);
+    assert_int_equal(raw_connect(&y, t->d.port), 0);
+    raw_hello(&y);
+    uint32_t s = raw_open(&x, "bunny");
+    int progress = 0, pings_meanwhile = 0;
+    double t0 = now_s();
+    for (;;) {
+        int fl = fcntl(x.fd, F_GETFL);
+        fcntl(x.fd, F_SETFL, fl | O_NONBLOCK);
+        uint8_t b;
+        ssize_t g = recv(x.fd, &b, 1, MSG_PEEK);
+        fcntl(x.fd, F_SETFL, fl);
+        if (g > 0) {
+            int ty = raw_recv(&x);
+            if (ty == PROTO_MSG_PROGRESS) {
+                proto_progress p;
+                assert_int_equal(proto_parse_progress(x.pl, x.h.len, &p, NULL), 0);
+                assert_int_equal(x.h.seq, s);
+                assert_true(p.fraction >= 0 && p.fraction <= 1 && p.phase < PROTO_PHASE_COUNT);
+                progress++;
+                continue;
+            }
+            assert_int_equal(ty, PROTO_MSG_INFO);
+            assert_int_equal(x.h.seq, s);
+            break;
+        }
+        raw_ping(&y); /* served while x's cloud is being prepared */
+        pings_meanwhile++;
+        usleep(2000); /* a ping every ~2 ms, not a busy loop that starves the prep */
+        /* The prep thread may first finish Guanyin's --preload (a few seconds). */
+        assert_true(now_s() - t0 < 60);
+    }
+    proto_info in;
+    assert_int_equal(proto_parse_info(x.pl, x.h.len, &in, NULL), 0);
+    assert_string_equal(in.name, "bunny.ply");
+    assert_int_equal(in.points, 40256); /* bun000.ply's vertex count */
+    print_message("open: %d PROGRESS messages, %d PINGs answered meanwhile\n", progress, pings_meanwhile);
+    assert_true(progress >= 1);
+    assert_true(pings_meanwhile >= 1);
+    /* A second OPEN of the same cloud is answered from memory: no PROGRESS at all. */
+    s = raw_open(&y, "bunny.ply");
+    assert_int_equal(raw_recv(&y), PROTO_MSG_INFO);
+    assert_int_equal(y.h.seq, s);
+    /* LIST now reports bunny.ply as loaded, with its point count. */
+    s = raw_simple(&y, PROTO_MSG_LIST);
+    assert_int_equal(raw_recv(&y), PROTO_MSG_CLOUDS);
+    proto_clouds cl;
+    assert_int_equal(proto_parse_clouds(y.pl, y.h.len, &cl, NULL), 0);
+    assert_int_equal(cl.count, 2);
+    assert_string_equal(cl.items[1].name, "bunny.ply");
+    assert_int_equal(cl.items[1].points, 40256);
+    assert_int_equal(cl.items[1].flags, PROTO_CLOUD_LOADED | PROTO_CLOUD_PREPARED);
+    proto_clouds_free(&cl);
+    raw_close(&x);
+    raw_close(&y);
+}
+
+/* ---- end to end: lossless frame equals `splatd render` of the same camera ---- */
+
+/* read_png_rgba: decodes a PNG file to top-down RGBA8 (malloc'd). */
+static uint8_t *read_png_rgba(const char *path, uint32_t *w, uint32_t *h)
+{
+    png_image im;
+    memset(&im, 0, sizeof im);
+    im.version = PNG_IMAGE_VERSION;
+    if (!png_image_begin_read_from_file(&im, path)) return NULL;
+    im.format = PNG_FORMAT_RGBA;
+    uint8_t *buf = malloc(PNG_IMAGE_SIZE(im));
+    if (!buf || !png_image_finish_read(&im, NULL, buf, 0, NULL)) {
+        free(buf);
+        png_image_free(&im);
+        return NULL;
+    }
+    *w = im.width;
+    *h = im.height;
+    return buf;
+}
+
+static void test_lossless_matches_render(void **state)
+{
+    e2e *t = *state;
+    spc_options o = {.host = "127.0.0.1", .port = t->d.port, .client_name = "test_e2e"};
+    spc_client *c;
+    char err[256];
+    assert_int_equal(spc_connect(&o, &c, err, sizeof err), 0);
+    spc_info info;
+    assert_int_equal(spc_open(c, "Guanyin", &info, NULL, NULL), 0);
+    assert_string_equal(info.name, "Guanyin.ply");
+    assert_int_equal(info.points, 238154);
+    const int W = 200, H = 150;
+    spc_camera cam = {.eye = {0.4, -2.5, 0.6}, .target = {0, 0, 0.05}, .up = {0, 0, 1},
+                      .fov_deg = 40, .width = W, .height = H};
+    assert_int_equal(spc_set_camera(c, &cam, NULL), 0);
+    assert_int_equal(spc_set_param(c, "format=lz4"), 0);
+    assert_int_equal(spc_set_param(c, "pipeline=points"), 0);
+    spc_frame f;
+    assert_int_equal(spc_render(c, &f, 1), 0);
+    assert_int_equal(f.width, W);
+    assert_int_equal(f.height, H);
+    assert_string_equal(f.format, "lz4");
+    assert_non_null(f.rgba);
+    uint8_t *mine = malloc((size_t)W * H * 4);
+    memcpy(mine, f.rgba, (size_t)W * H * 4);
+    spc_close(c);
+
+    /* The same camera through `splatd render` (no network), as PNG. */
+    char out[700], cmd[4096];
+    snprintf(out, sizeof out, "%s/ref.png", t->root);
+    snprintf(cmd, sizeof cmd,
+             "'%s' render '%s/Guanyin.ply' -o '%s' --cache '%s' --eye 0.4,-2.5,0.6 --target 0,0,0.05 "
+             "--up 0,0,1 --fov 40 --size %dx%d --set pipeline=points >'%s/render.log' 2>&1",
+             splatd_bin(), t->data, out, t->cache, W, H, t->root);
+    int rc = system(cmd);
+    if (rc != 0) {
+        char lp[700];
+        snprintf(lp, sizeof lp, "%s/render.log", t->root);
+        size_t ll;
+        char *log = (char *)tu_read_file(lp, &ll);
+        fail_msg("splatd render failed (%d): %s", rc, log ? log : "");
+    }
+    uint32_t rw, rh;
+    uint8_t *ref = read_png_rgba(out, &rw, &rh);
+    assert_non_null(ref);
+    assert_int_equal(rw, W);
+    assert_int_equal(rh, H);
+    /* Both are the same renderer on the same machine; PNG and LZ4 are lossless, so the only
+     * allowed difference is one step of 8-bit rounding (1/255). */
+    int maxd = 0;
+    size_t lit = 0;
+    for (size_t i = 0; i < (size_t)W * H * 4; i++) {
+        int d = abs((int)mine[i] - (int)ref[i]);
+        if (d > maxd) maxd = d;
+        if ((i & 3) == 0 && (mine[i] | mine[i + 1] | mine[i + 2])) lit++;
+    }
+    assert_true(maxd <= 1);
+    /* The cloud must actually be in the picture (not two blank frames agreeing). */
+    assert_true(lit > (size_t)W * H / 20);
+    free(ref);
+    free(mine);
+}
+
+/* ---- a JPEG frame decodes to the right size ---- */
+
+static void test_jpeg_frame(void **state)
+{
+    e2e *t = *state;
+    spc_options o = {.host = "127.0.0.1", .port = t->d.port};
+    spc_client *c;
+    char err[256];
+    assert_int_equal(spc_connect(&o, &c, err, sizeof err), 0);
+    spc_info info;
+    assert_int_equal(spc_open(c, "Guanyin.ply", &info, NULL, NULL), 0);
+    spc_camera cam;
+    spc_camera_frame(&info, 321, 123, &cam); /* odd sizes: no multiple-of-8 assumption */
+    uint32_t cseq = 0;
+    assert_int_equal(spc_set_camera(c, &cam, &cseq), 0);
+    assert_int_equal(spc_set_param(c, "pipeline=points"), 0);
+    assert_int_equal(spc_set_param(c, "format=jpeg"), 0);
+    spc_frame f;
+    assert_int_equal(spc_render(c, &f, 1), 0);
+    assert_string_equal(f.format, "jpeg");
+    assert_int_equal(f.width, 321);
+    assert_int_equal(f.height, 123);
+    assert_int_equal(f.camera_seq, cseq);
+    assert_true(f.data_len > 100);
+    assert_int_equal(f.data[0], 0xFF); /* JPEG SOI marker */
+    assert_int_equal(f.data[1], 0xD8);
+    assert_non_null(f.rgba);
+    assert_true(f.render_us > 0);
+    assert_int_equal(f.points_drawn, 238154);
+    spc_close(c);
+}
+
+/* ---- auth ---- */
+
+static void test_auth(void **state)
+{
+    e2e *t = *state;
+    char tok[700], bad[700];
+    snprintf(tok, sizeof tok, "%s/token", t->root);
+    snprintf(bad, sizeof bad, "%s/badtoken", t->root);
+    assert_int_equal(tu_write_file(tok, "correct horse battery staple\n", 29), 0);
+    assert_int_equal(chmod(tok, 0600), 0);
+    assert_int_equal(tu_write_file(bad, "wrong horse\n", 12), 0);
+    assert_int_equal(chmod(bad, 0600), 0);
+
+    daemon_proc *d = &t->aux;
+    assert_int_equal(daemon_start(t, d, NULL, "--listen", "127.0.0.1:0", "--data", t->data,
+                                  "--cache", t->cache, "--token-file", tok,
+                                  "--handshake-timeout", "1", (char *)NULL), 0);
+    spc_client *c = NULL;
+    char err[256];
+    spc_options o = {.host = "127.0.0.1", .port = d->port, .token_file = tok};
+    assert_int_equal(spc_connect(&o, &c, err, sizeof err), 0);
+    assert_true(spc_server(c)->auth_required);
+    spc_cloud *list;
+    assert_int_equal(spc_list(c, &list), 2);
+    spc_free_list(list);
+    spc_close(c);
+
+    o.token_file = bad;
+    assert_int_equal(spc_connect(&o, &c, err, sizeof err), SPC_E_AUTH_FAILED);
+    assert_null(c);
+
+    /* Raw: a wrong 32-byte proof gets AUTH_FAILED and the connection closes; so does a
+     * request before authenticating. */
+    raw r;
+    assert_int_equal(raw_connect(&r, d->port), 0);
+    proto_buf b = {0};
+    proto_hello h = {.min_version = 1, .max_version = 1};
+    assert_int_equal(proto_enc_hello(&b, ++r.seq, &h), 0);
+    raw_send_buf(&r, &b);
+    assert_int_equal(raw_recv(&r), PROTO_MSG_WELCOME);
+    proto_welcome w;
+    assert_int_equal(proto_parse_welcome(r.pl, r.h.len, &w, NULL), 0);
+    assert_int_equal(w.auth_required, 1);
+    assert_int_equal(w.authenticated, 0);
+    h.proof_len = PROTO_AUTH_LEN;
+    memset(h.proof, 0x5a, sizeof h.proof);
+    assert_int_equal(proto_enc_hello(&b, ++r.seq, &h), 0);
+    raw_send_buf(&r, &b);
+    raw_expect_error(&r, PROTO_E_AUTH_FAILED, r.seq);
+    raw_expect_closed(&r);
+    raw_close(&r);
+
+    assert_int_equal(raw_connect(&r, d->port), 0);
+    assert_int_equal(proto_enc_hello(&b, ++r.seq, &(proto_hello){.min_version = 1, .max_version = 1}), 0);
+    raw_send_buf(&r, &b);
+    assert_int_equal(raw_recv(&r), PROTO_MSG_WELCOME);
+    uint32_t s = raw_simple(&r, PROTO_MSG_LIST);
+    (void)s;
+    raw_expect_error(&r, PROTO_E_AUTH_REQUIRED, 0);
+    raw_expect_closed(&r);
+    raw_close(&r);
+
+    /* A client that connects and says nothing is dropped after the handshake timeout (1 s
+     * here): the ERROR arrives after >= 1 s and well before the 20 s receive timeout. */
+    assert_int_equal(raw_connect(&r, d->port), 0);
+    double t0 = now_s();
+    raw_expect_error(&r, PROTO_E_AUTH_REQUIRED, 0);
+    double waited = now_s() - t0;
+    assert_true(waited >= 0.9 && waited < 10);
+    raw_expect_closed(&r);
+    raw_close(&r);
+    assert_int_equal(daemon_stop(d), 0);
+
+    /* Start-up refusals: a token file others can read; a public address without a token. */
+    assert_int_equal(chmod(tok, 0644), 0);
+    int st = 0;
+    assert_int_equal(daemon_start(t, d, &st, "--listen", "127.0.0.1:0", "--data", t->data,
+                                  "--token-file", tok, (char *)NULL), -1);
+    assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 1);
+    size_t ll;
+    char *log = (char *)tu_read_file(d->log, &ll);
+    assert_non_null(log);
+    assert_non_null(strstr(log, "group or others"));
+    free(log);
+
+    assert_int_equal(daemon_start(t, d, &st, "--listen", "0.0.0.0:0", "--data", t->data,
+                                  (char *)NULL), -1);
+    assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 1);
+    log = (char *)tu_read_file(d->log, &ll);
+    assert_non_null(log);
+    assert_non_null(strstr(log, "refusing to listen on 0.0.0.0 without authentication"));
+    free(log);
+}
+
+/* ---- isolation: a client that never reads its stream does not slow another ---- */
+
+/* rate_run: frames/s of n RENDER round trips on r. */
+static double rate_run(raw *r, int n)
+{
+    proto_frame f;
+    double t0 = now_s();
+    for (int i = 0; i < n; i++) raw_frame(r, &f);
+    return n / (now_s() - t0);
+}
+
+static void test_isolation(void **state)
+{
+    e2e *t = *state;
+    raw b;
+    raw_ready(&b, t->d.port, 160, 120, "jpeg");
+    rate_run(&b, 5); /* warm-up */
+    double solo1 = rate_run(&b, 50);
+
+    /* The stalled client: 1280x720 raw frames (3.7 MB, ~100 ms to render, ~7x B's frames),
+     * streaming, never reading, and sending a new camera all the time. Without isolation B
+     * would alternate with A's frames (~1/7 of its rate) or stall behind A's full socket. */
+    raw a;
+    raw_ready(&a, t->d.port, 1280, 720, "raw");
+    int rcv = 4096;
+    setsockopt(a.fd, SOL_SOCKET, SO_RCVBUF, &rcv, sizeof rcv);
+    proto_buf pb = {0};
+    proto_stream st = {.on = 1, .max_fps = 0};
+    assert_int_equal(proto_enc_stream(&pb, ++a.seq, &st), 0);
+    raw_send_buf(&a, &pb);
+    for (int i = 0; i < 40; i++) {
+        raw_camera(&a, 1280, 720, 0.1 * i);
+        usleep(20000);
+    }
+    int flags = fcntl(a.fd, F_GETFL);
+    fcntl(a.fd, F_SETFL, flags | O_NONBLOCK);
+    /* B's 50 frames while A keeps asking for new views (cameras are small: they go through). */
+    proto_frame f;
+    double t0 = now_s();
+    for (int i = 0; i < 50; i++) {
+        proto_camera c = {.eye = {3, 0.1 * i, 0.5}, .up = {0, 0, 1}, .fov_deg = 45, .width = 1280, .height = 720};
+        proto_buf cb = {0};
+        assert_int_equal(proto_enc_camera(&cb, ++a.seq, &c), 0);
+        ssize_t wr = send(a.fd, cb.data, cb.len, MSG_NOSIGNAL); /* may fail once A's buffers fill */
+        (void)wr;
+        proto_buf_free(&cb);
+        raw_frame(&b, &f);
+    }
+    double with_a = 50 / (now_s() - t0);
+    struct sockaddr_in la;
+    socklen_t ll = sizeof la;
+    assert_int_equal(getsockname(a.fd, (struct sockaddr *)&la, &ll), 0);
+    raw_close(&a);
+    /* The daemon's close line for A says how many frames it rendered for A: "127.0.0.1:PORT
+     * closed: ... (S frames sent, D dropped, ...)". Stalled after its first few frames, A must
+     * have cost only a handful of renders, not one per B frame (a count, so no timing noise). */
+    char needle[64];
+    snprintf(needle, sizeof needle, "127.0.0.1:%d closed:", ntohs(la.sin_port));
+    unsigned long sent = 0, dropped = 0;
+    int found = 0;
+    for (int i = 0; i < 300 && !found; i++) {
+        size_t len;
+        char *log = (char *)tu_read_file(t->d.log, &len);
+        char *line = log ? strstr(log, needle) : NULL;
+        if (line) {
+            char *paren = strchr(line, '(');
+            found = paren && sscanf(paren, "(%lu frames sent, %lu dropped", &sent, &dropped) == 2;
+        }
+        free(log);
+        if (!found) usleep(10000);
+    }
+    assert_true(found);
+    print_message("isolation: the stalled client got %lu frames sent, %lu dropped (replaced)\n", sent, dropped);
+    assert_true(sent + dropped <= 10);
+    double solo2 = rate_run(&b, 50);
+    double solo = solo1 < solo2 ? solo1 : solo2;
+    print_message("isolation: solo %.1f and %.1f frames/s, beside a stalled streaming client %.1f frames/s\n",
+                  solo1, solo2, with_a);
+    /* 2x: the machine's 2 cores are shared with whatever else runs, so solo rates are taken
+     * before and after, and the slower one is the reference. */
+    assert_true(with_a >= solo / 2);
+    raw_ping(&b);
+    raw_close(&b);
+}
+
+/* ---- streaming: latest wins, and max_fps caps the rate ---- */
+
+/* readable: 1 when r's socket has data within ms milliseconds. */
+static int readable(raw *r, int ms)
+{
+    struct pollfd p = {.fd = r->fd, .events = POLLIN};
+    return poll(&p, 1, ms) == 1;
+}
+
+/* stream_frames: reads whole messages for secs seconds (waiting with poll, never timing out
+ * inside a message); counts FRAMEs (all with header sequence 0) and puts the camera_seq of the
+ * last one in *last. An OK (a STREAM answer) is counted in *oks when oks is not NULL. */
+static int stream_frames(raw *r, double secs, uint32_t *last, int *oks)
+{
+    int n = 0;
+    double t0 = now_s();
+    for (double left = secs; left > 0; left = secs - (now_s() - t0)) {
+        if (!readable(r, (int)(left * 1000) + 1)) continue;
+        int t = raw_recv(r);
+        if (t == PROTO_MSG_OK && oks) { (*oks)++; continue; }
+        if (t != PROTO_MSG_FRAME) fail_msg("stream: unexpected message type %d", t);
+        proto_frame f;
+        assert_int_equal(proto_parse_frame(r->pl, r->h.len, &f, NULL), 0);
+        assert_int_equal(r->h.seq, 0);
+        *last = f.camera_seq;
+        n++;
+    }
+    return n;
+}
+
+static void test_stream(void **state)
+{
+    e2e *t = *state;
+    raw r;
+    raw_ready(&r, t->d.port, 160, 120, "jpeg");
+    proto_buf b = {0};
+    proto_stream st = {.on = 1, .max_fps = 0};
+    uint32_t s = ++r.seq;
+    assert_int_equal(proto_enc_stream(&b, s, &st), 0);
+    raw_send_buf(&r, &b);
+    assert_int_equal(raw_recv(&r), PROTO_MSG_OK); /* nothing streams before STREAM's answer */
+    assert_int_equal(r.h.seq, s);
+    /* A burst of 30 cameras: each replaces the unrendered one, so fewer than 30 frames come,
+     * and the last frame shows the last camera. */
+    uint32_t lastcam = 0;
+    for (int i = 0; i < 30; i++) lastcam = raw_camera(&r, 160, 120, 0.05 * i);
+    uint32_t got = 0;
+    int n = stream_frames(&r, 1.5, &got, NULL);
+    print_message("stream: 30 cameras in a burst gave %d frames\n", n);
+    assert_true(n >= 1 && n < 30);
+    assert_int_equal(got, lastcam);
+
+    /* max_fps 5: a camera every 20 ms for 2 s gives about 10 frames, never 100. */
+    st.max_fps = 5;
+    s = ++r.seq;
+    assert_int_equal(proto_enc_stream(&b, s, &st), 0);
+    raw_send_buf(&r, &b);
+    int frames = 0, oks = 0;
+    double t0 = now_s();
+    for (int i = 0; now_s() - t0 < 2.0; i++) {
+        lastcam = raw_camera(&r, 160, 120, 0.02 * i);
+        frames += stream_frames(&r, 0.02, &got, &oks);
+    }
+    frames += stream_frames(&r, 0.5, &got, &oks);
+    print_message("stream: max_fps 5 over 2 s gave %d frames\n", frames);
+    assert_int_equal(oks, 1);
+    /* 2.5 s at 5 frames/s is at most ~13; at least a few on a loaded machine. */
+    assert_true(frames >= 3 && frames <= 14);
+    assert_int_equal(got, lastcam); /* the held-back camera is rendered at the end */
+
+    /* Off: once the OK is in, cameras no longer produce frames. */
+    st.on = 0;
+    s = ++r.seq;
+    assert_int_equal(proto_enc_stream(&b, s, &st), 0);
+    raw_send_buf(&r, &b);
+    int ty;
+    while ((ty = raw_recv(&r)) == PROTO_MSG_FRAME) {} /* a frame already under way may come first */
+    assert_int_equal(ty, PROTO_MSG_OK);
+    assert_int_equal(r.h.seq, s);
+    raw_camera(&r, 160, 120, 1.0);
+    assert_int_equal(stream_frames(&r, 0.5, &got, NULL), 0);
+    raw_close(&r);
+}
+
+/* ---- load: 20 clients x 20 frames at once; RSS steady ---- */
+
+typedef struct load_arg {
+    int port, frames, ok;
+} load_arg;
+
+static void *load_client(void *p)
+{
+    load_arg *a = p;
+    spc_options o = {.host = "127.0.0.1", .port = a->port};
+    spc_client *c;
+    char err[256];
+    if (spc_connect(&o, &c, err, sizeof err) != 0) return NULL;
+    spc_info info;
+    if (spc_open(c, "Guanyin", &info, NULL, NULL) == 0 && spc_set_param(c, "pipeline=points") == 0) {
+        spc_camera cam;
+        spc_camera_frame(&info, 160, 120, &cam);
+        int ok = 0;
+        for (int i = 0; i < a->frames; i++) {
+            cam.eye[0] += 0.01;
+            spc_frame f;
+            if (spc_set_camera(c, &cam, NULL) == 0 && spc_render(c, &f, 1) == 0 && f.width == 160 &&
+                f.height == 120 && f.rgba)
+                ok++;
+        }
+        a->ok = ok;
+    }
+    spc_close(c);
+    return NULL;
+}
+
+static int load_round(int port, int clients, int frames)
+{
+    pthread_t th[32];
+    load_arg args[32];
+    for (int i = 0; i < clients; i++) {
+        args[i] = (load_arg){.port = port, .frames = frames};
+        assert_int_equal(pthread_create(&th[i], NULL, load_client, &args[i]), 0);
+    }
+    int ok = 0;
+    for (int i = 0; i < clients; i++) {
+        pthread_join(th[i], NULL);
+        ok += args[i].ok;
+    }
+    return ok;
+}
+
+static void test_load(void **state)
+{
+    e2e *t = *state;
+    /* Warm-up: allocator arenas, frame buffers and encoder buffers reach their working size. */
+    assert_int_equal(load_round(t->d.port, 20, 3), 60);
+    usleep(200000);
+    long before = vm_rss_kb(t->d.pid);
+    double t0 = now_s();
+    assert_int_equal(load_round(t->d.port, 20, 20), 400);
+    double dt = now_s() - t0;
+    usleep(200000);
+    long after = vm_rss_kb(t->d.pid);
+    print_message("load: 400 frames from 20 clients in %.2f s; RSS %ld -> %ld kB\n", dt, before, after);
+    assert_true(before > 0 && after > 0);
+#ifdef __SANITIZE_ADDRESS__
+    /* Under ASan the daemon's RSS includes the allocator's quarantine of freed blocks (up to
+     * 256 MB), so it grows without a leak; LeakSanitizer checks the daemon at exit instead
+     * (test_sigterm asserts exit status 0, which a leak would turn into 23). */
+    return;
+#endif
+    /* 10 %: a leak of even 1 kB per frame (400 kB) on a daemon of ~100+ MB shows as a trend
+     * across runs; per-client state is freed on close, so RSS must stay flat. */
+    assert_true(after <= before + before / 10);
+}
+
+/* ---- a client killed mid-frame leaves the daemon serving ---- */
+
+static void test_kill_mid_frame(void **state)
+{
+    e2e *t = *state;
+    for (int i = 0; i < 3; i++) {
+        raw r;
+        raw_ready(&r, t->d.port, 1280, 720, "raw"); /* a big, slow frame */
+        raw_simple(&r, PROTO_MSG_RENDER);
+        raw_simple(&r, PROTO_MSG_RENDER);
+        usleep(20000 * (useconds_t)i);
+        struct linger lg = {1, 0}; /* close with RST, like a killed process under load */
+        setsockopt(r.fd, SOL_SOCKET, SO_LINGER, &lg, sizeof lg);
+        raw_close(&r);
+    }
+    /* A killed client process (not just a closed socket). */
+    pid_t pid = fork();
+    assert_true(pid >= 0);
+    if (pid == 0) {
+        raw r;
+        raw_ready(&r, t->d.port, 1280, 720, "png");
+        raw_simple(&r, PROTO_MSG_RENDER);
+        pause();
+        _exit(0);
+    }
+    usleep(300000);
+    kill(pid, SIGKILL);
+    waitpid(pid, NULL, 0);
+    assert_int_equal(kill(t->d.pid, 0), 0);
+    raw r;
+    raw_ready(&r, t->d.port, 160, 120, "jpeg");
+    proto_frame f;
+    assert_true(raw_frame(&r, &f) > 0);
+    assert_int_equal(f.width, 160);
+    raw_close(&r);
+}
+
+/* ---- SIGTERM: frames in flight are finished, then exit 0 ---- */
+
+static void test_sigterm(void **state)
+{
+    e2e *t = *state;
+    raw r;
+    raw_ready(&r, t->d.port, 640, 480, "jpeg");
+    uint32_t s = raw_simple(&r, PROTO_MSG_RENDER);
+    usleep(5000);
+    kill(t->d.pid, SIGTERM);
+    /* The RENDER sent before the signal is still answered. */
+    assert_int_equal(raw_recv(&r), PROTO_MSG_FRAME);
+    assert_int_equal(r.h.seq, s);
+    raw_expect_closed(&r);
+    raw_close(&r);
+    int st = 0;
+    double t0 = now_s();
+    while (waitpid(t->d.pid, &st, WNOHANG) != t->d.pid) {
+        assert_true(now_s() - t0 < 20);
+        usleep(10000);
+    }
+    t->d.pid = 0;
+    assert_true(WIFEXITED(st));
+    assert_int_equal(WEXITSTATUS(st), 0);
+    /* Nothing listens any more. */
+    assert_int_not_equal(raw_connect(&r, t->d.port), 0);
+    raw_close(&r);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_malformed),
+        cmocka_unit_test(test_open_progress),
+        cmocka_unit_test(test_lossless_matches_render),
+        cmocka_unit_test(test_jpeg_frame),
+        cmocka_unit_test(test_auth),
+        cmocka_unit_test(test_isolation),
+        cmocka_unit_test(test_stream),
+        cmocka_unit_test(test_load),
+        cmocka_unit_test(test_kill_mid_frame),
+        cmocka_unit_test(test_sigterm),
+    };
+    return cmocka_run_group_tests(tests, group_setup, group_teardown);
+}
