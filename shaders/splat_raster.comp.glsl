@@ -1,0 +1,329 @@
+#version 430
+// splat_raster.comp — EWA surface splatting, passes 1 (visibility) and 2 (attributes), as a
+// compute rasteriser (Schütz et al. 2021) instead of point sprites, which are 10-40x slower on
+// llvmpipe. pipe_splat.c compiles this file four times, inserting after the #version line:
+//   #define PASS 1      visibility: the nearest ray-disc depth per pixel (atomicMax of ~bits)
+//   #define PASS 2      attributes: w*colour, w*normal, w for fragments within eps of it
+//   #define MODE 0      one invocation per visible point: splats that deposit (see below) are
+//                       done here; in pass 1 the others are appended to the raster list. This
+//                       pass holds no pixel loops: llvmpipe runs both sides of a divergent branch
+//                       under a mask, so loop code in it slowed every point down (25 %).
+//   #define MODE 1      one invocation per listed raster splat, looping over the pixels of its
+//                       bounding box; in pass 1 boxes over u_big pixels go to the big list.
+//   #define MODE 2      one 8x8 work group per listed big splat, walking its box in 8x8 tiles
+//                       (so a close-up does not serialise on one lane of a SIMD group).
+//                       Pass 2 replays the lists pass 1 built.
+//   #define FLOAT_ATOMICS 1 (with GL_NV_shader_atomic_float) or 0: fixed-point uint atomics.
+//
+// Footprint (Zwicker et al. 2001, "Surface splatting"; the slides' resampling filter): the splat
+// is a disc (centre c, unit normal n, radius r = radius * splat_scale) carrying a Gaussian with
+// standard deviation sigma = r / 2 (the disc's rim is the 2-sigma contour). J = d(pixel)/d(u,v)
+// is the Jacobian of the projection at c along an orthonormal tangent basis (u, v) of the disc,
+// V_k = sigma^2 J J^T the warped reconstruction kernel. The resampling filter is
+// V = V_k + lowpass * I; pipe_splat.c splits the low-pass into u_pre (added here) and the rest,
+// which splat_resolve.frag applies as a depth-aware 3x3 Gaussian over the accumulated sums
+// (convolution is linear, so filtering the sums equals widening every footprint). Splats whose
+// kernel V_k is small (2 sigma < u_subpx = 2 px along x and y) and lowpass > 0 deposit
+// their whole weight in the pixel holding their centre (area sampling: a box filter of one
+// pixel, so minified splats never vanish and cost one fragment); the others are sampled at pixel
+// centres: w = exp(-x^T Q x / 2) with Q = V^-1 and x^T Q x <= CUT^2 (CUT = 2, so with lowpass 0
+// the footprint is exactly the disc). Depth per fragment is the eye-space depth of the
+// ray-disc-plane intersection, clamped to c's depth +- r (the disc lies inside that slab; the
+// clamp catches rays that miss the plane in the fringe or hit it near edge-on); a deposited
+// splat uses its centre's depth. Footprints and depths are `precise`: pass 2 is a separate
+// compilation and must classify (small, big, deposited) and place every splat exactly as pass 1
+// did, or a splat would be accumulated twice or not at all.
+
+#if MODE == 2
+layout(local_size_x = 8, local_size_y = 8) in;
+#else
+layout(local_size_x = 64) in;
+#endif
+
+#if FLOAT_ATOMICS
+#define ACC float
+#define ACCI float
+#else
+#define ACC uint
+#define ACCI int
+#endif
+
+#define CUT2 4.0
+
+// The cloud's buffers, read as buffer textures: texelFetch gathers all lanes at once on
+// llvmpipe, where storage-buffer reads at varying addresses run lane by lane.
+uniform samplerBuffer u_pos;   // RGB32F
+uniform samplerBuffer u_nrm;   // RGB32F
+uniform samplerBuffer u_rad;   // R32F
+uniform usamplerBuffer u_src;  // R32UI: rgba8 (u_color 0) or float bits of field/intensity
+
+// One pixel of the stripe: accumulated attributes (32 bytes, one cache-line half), and apart
+// from them, in a compact array that pass 1's many reads keep in cache, the visibility key:
+// ~floatBitsToUint(depth). Positive floats order like their bits, so the nearest depth has the
+// largest key and 0 means empty: a zero fill (glClearBufferData, each frame) clears both.
+struct Px { ACC r, g, b, w; ACCI nx, ny, nz; uint pad; };
+layout(std430, binding = 4) restrict buffer Frame { Px px[]; };
+layout(std430, binding = 0) restrict buffer Keys { uint keys[]; };
+
+// The raster and big lists: dispatch arguments for their passes (groups[0] = min(work groups,
+// 65535)), the count and the point indices.
+layout(std430, binding = 5) restrict buffer Big { uint big_groups[3]; uint big_count; uint big_list[]; };
+layout(std430, binding = 7) restrict buffer Ras { uint ras_groups[3]; uint ras_count; uint ras_list[]; };
+
+// Visible ranges after culling: (first point, first visible index) per range.
+layout(std430, binding = 6) readonly restrict buffer Ranges { uvec2 ranges[]; };
+
+uniform mat4 u_view;      // local -> eye
+uniform mat4 u_proj;      // eye -> clip
+uniform vec4 u_rayo;      // eye ray origin at pixel (sx, sy): (x*sx + y, z*sy + w, 0)
+uniform vec4 u_rayd;      // eye ray direction:               (x*sx + y, z*sy + w, -1)
+uniform ivec2 u_size;     // frame width, height in pixels
+uniform ivec2 u_stripe;   // first row and row count of this stripe (the accumulation buffer)
+uniform float u_scale;    // splat_scale
+uniform float u_pre;      // part of the low-pass variance added to each footprint (px^2)
+uniform float u_subpx;    // 2-sigma size (px) below which a splat is deposited; 0: never
+uniform float u_eps;      // depth tolerance of pass 2, in units of the splat's radius
+uniform float u_znear;
+uniform uint u_total;     // visible points
+uniform uint u_nranges;
+uniform uint u_big;       // bounding boxes above this many pixels go to the big list
+uniform int u_color;      // 0 rgb, 1 field, 2 normal, 3 depth, 4 intensity
+
+struct Splat {
+    vec2 ctr;       // centre, pixels
+    vec3 conic;     // Q = [x y; y z]
+    vec2 ext;       // half extent of the cut-off ellipse's bounding box, pixels
+    vec3 num, den;  // depth(sx, sy) = dot(num, (1, sx, sy)) / dot(den, (1, sx, sy))
+    float dc, r;    // centre depth, radius
+    vec3 n;         // eye-space normal, facing the viewer
+    ivec4 box;      // x0, y0, x1, y1 inclusive, clipped to the stripe
+    bool dep;       // deposited: one fragment at box.xy with weight 1 and depth dc
+    vec3 k;         // covariance V_k + u_pre I: xx, xy, yy (px^2)
+    float nc;       // n . c
+};
+
+// The point index of visible index g (binary search over the ranges' first visible index).
+uint point_of(uint g)
+{
+    uint lo = 0u, hi = u_nranges - 1u;
+    while (lo < hi) {
+        uint mid = (lo + hi + 1u) >> 1;
+        if (ranges[mid].y <= g) lo = mid; else hi = mid - 1u;
+    }
+    return ranges[lo].x + (g - ranges[lo].y);
+}
+
+// Splat i's centre, normal, covariance and whether it is deposited (then box.xy is its pixel);
+// false when it is behind the near plane, degenerate, or deposited off the stripe.
+bool setup_core(uint i, out Splat s)
+{
+    vec3 p = texelFetch(u_pos, int(i)).xyz;
+    precise vec3 c = (u_view * vec4(p, 1.0)).xyz;
+    s.dc = -c.z;
+    if (!(s.dc > u_znear)) return false;
+    vec3 n = mat3(u_view) * texelFetch(u_nrm, int(i)).xyz;
+    float nl = dot(n, n);
+    n = nl > 0.0 ? n * inversesqrt(nl) : vec3(0.0, 0.0, 1.0);
+    // The eye ray towards c (perspective: from the origin; orthographic: along -z).
+    vec3 toc = u_proj[3][3] == 0.0 ? c : vec3(0.0, 0.0, -1.0);
+    if (dot(n, toc) > 0.0) n = -n;
+    s.n = n;
+    s.nc = dot(n, c);
+    s.r = texelFetch(u_rad, int(i)).x * u_scale;
+    float sigma = 0.5 * s.r;
+    // Orthonormal tangent basis (Duff et al. 2017); the footprint does not depend on its
+    // rotation because the disc's Gaussian is isotropic.
+    float sg = n.z >= 0.0 ? 1.0 : -1.0;
+    float a = -1.0 / (sg + n.z);
+    float b = n.x * n.y * a;
+    vec3 tu = vec3(1.0 + sg * n.x * n.x * a, sg * b, -sg * n.x);
+    vec3 tv = vec3(b, sg + n.y * n.y * a, -n.y);
+    // Jacobian of pixel coordinates with respect to the eye position at c.
+    vec4 clip = u_proj * vec4(c, 1.0);
+    float iw = 1.0 / clip.w;
+    vec3 rx = vec3(u_proj[0][0], u_proj[1][0], u_proj[2][0]);
+    vec3 ry = vec3(u_proj[0][1], u_proj[1][1], u_proj[2][1]);
+    vec3 rw = vec3(u_proj[0][3], u_proj[1][3], u_proj[2][3]);
+    vec2 half_size = 0.5 * vec2(u_size);
+    vec3 gx = (rx - (clip.x * iw) * rw) * (iw * half_size.x);
+    vec3 gy = (ry - (clip.y * iw) * rw) * (iw * half_size.y);
+    vec2 ju = vec2(dot(gx, tu), dot(gy, tu)) * sigma;
+    vec2 jv = vec2(dot(gx, tv), dot(gy, tv)) * sigma;
+    precise float kxx = ju.x * ju.x + jv.x * jv.x;
+    precise float kxy = ju.x * ju.y + jv.x * jv.y;
+    precise float kyy = ju.y * ju.y + jv.y * jv.y;
+    precise vec2 ctr = (clip.xy * iw * 0.5 + 0.5) * vec2(u_size);
+    s.ctr = ctr;
+    s.dep = 4.0 * max(kxx, kyy) < u_subpx * u_subpx;
+    s.k = vec3(kxx + u_pre, kxy, kyy + u_pre);
+    if (s.dep) {
+        vec2 f = floor(ctr);
+        if (!(f.x >= 0.0 && f.x < float(u_size.x) && f.y >= float(u_stripe.x) &&
+              f.y < float(u_stripe.x + u_stripe.y))) return false;
+        s.box = ivec4(f, f);
+    }
+    return true;
+}
+
+// The rest of a sampled (not deposited) splat's footprint after setup_core: conic, bounding box
+// and depth plane; false when degenerate or off the stripe.
+bool setup_raster(inout Splat s)
+{
+    precise float kxx = s.k.x, kxy = s.k.y, kyy = s.k.z;
+    float det = kxx * kyy - kxy * kxy;
+    if (!(det > 1e-12)) return false;
+    s.conic = vec3(kyy, -kxy, kxx) / det;
+    precise vec2 ext = 2.0 * sqrt(vec2(kxx, kyy)); // CUT * standard deviation along x and y
+    s.ext = ext;
+    // Pixel centres k + 0.5 within [ctr - ext, ctr + ext].
+    precise vec2 lo = ceil(s.ctr - ext - 0.5), hi = floor(s.ctr + ext - 0.5);
+    if (!(lo.x < 1e9 && hi.x > -1e9 && lo.y < 1e9 && hi.y > -1e9)) return false;
+    s.box = ivec4(max(lo.x, 0.0), max(lo.y, float(u_stripe.x)),
+                  min(hi.x, float(u_size.x - 1)), min(hi.y, float(u_stripe.x + u_stripe.y - 1)));
+    if (s.box.x > s.box.z || s.box.y > s.box.w) return false;
+    // Ray-plane depth: t = n.(c - o) / n.d with o, d affine in the pixel position; depth = t.
+    vec3 n = s.n;
+    s.num = vec3(s.nc - n.x * u_rayo.y - n.y * u_rayo.w, -n.x * u_rayo.x, -n.y * u_rayo.z);
+    s.den = vec3(n.x * u_rayd.y + n.y * u_rayd.w - n.z, n.x * u_rayd.x, n.y * u_rayd.z);
+    return true;
+}
+
+// Depth of splat s along the ray through pixel centre (sx, sy).
+float frag_depth(Splat s, float sx, float sy)
+{
+    precise float den = s.den.x + s.den.y * sx + s.den.z * sy;
+    precise float d = abs(den) > 1e-30 ? (s.num.x + s.num.y * sx + s.num.z * sy) / den : s.dc;
+    float lo = max(s.dc - s.r, 0.5 * u_znear), hi = s.dc + s.r;
+    return d >= lo ? (d <= hi ? d : hi) : lo; // NaN -> lo
+}
+
+#if PASS == 2
+// The splat's base colour (RGB in [0,1], the points pipeline's rules): rgba8, the field through
+// viridis, intensity as grey; normal and depth colours are made by the resolve.
+vec3 colormap(float t)
+{
+    t = clamp(t, 0.0, 1.0);
+    const vec3 c0 = vec3(0.2777273272, 0.0054073445, 0.3340998053);
+    const vec3 c1 = vec3(0.1050930431, 1.4046135299, 1.3845901626);
+    const vec3 c2 = vec3(-0.3308618287, 0.2148475595, 0.0950951630);
+    const vec3 c3 = vec3(-4.6342304990, -5.7991009734, -19.3324409563);
+    const vec3 c4 = vec3(6.2282699363, 14.1799333668, 56.6905526007);
+    const vec3 c5 = vec3(4.7763849977, -13.7451453777, -65.3530326334);
+    const vec3 c6 = vec3(-5.4354558559, 4.6458526122, 26.3124352496);
+    return clamp(c0 + t * (c1 + t * (c2 + t * (c3 + t * (c4 + t * (c5 + t * c6))))), 0.0, 1.0);
+}
+
+vec3 base_colour(uint i)
+{
+    if (u_color == 0) return unpackUnorm4x8(texelFetch(u_src, int(i)).x).rgb;
+    if (u_color == 1) return colormap(uintBitsToFloat(texelFetch(u_src, int(i)).x));
+    if (u_color == 4) return vec3(clamp(uintBitsToFloat(texelFetch(u_src, int(i)).x), 0.0, 1.0));
+    return vec3(1.0);
+}
+#endif
+
+// One fragment at pixel (x, y) with depth z, weight w, colour col, normal n: pass 1 keeps the
+// nearest depth, pass 2 accumulates when z lies within eps * r of it.
+void put(int x, int y, float z, float w, vec3 col, vec3 n, float r)
+{
+    uint idx = uint(y - u_stripe.x) * uint(u_size.x) + uint(x);
+#if PASS == 1
+    uint key = ~floatBitsToUint(z);
+    if (key > keys[idx]) atomicMax(keys[idx], key);
+#else
+    float zv = uintBitsToFloat(~keys[idx]);
+    if (z > zv + u_eps * r) return;
+#if FLOAT_ATOMICS
+    atomicAdd(px[idx].r, w * col.r);
+    atomicAdd(px[idx].g, w * col.g);
+    atomicAdd(px[idx].b, w * col.b);
+    atomicAdd(px[idx].w, w);
+    atomicAdd(px[idx].nx, w * n.x);
+    atomicAdd(px[idx].ny, w * n.y);
+    atomicAdd(px[idx].nz, w * n.z);
+#else
+    // Fixed point: w in 1/255 (>= 34 since w >= exp(-2)), colour in 1/255, normal in 1/511;
+    // a pixel overflows only past 66000 (colour) or 16000 (normal) fragments. A constant
+    // colour still normalises exactly: sum(wq * c) / sum(wq) = c.
+    uint wq = uint(w * 255.0 + 0.5);
+    uvec3 cq = uvec3(col * 255.0 + 0.5);
+    ivec3 nq = ivec3(round(n * 511.0));
+    atomicAdd(px[idx].r, wq * cq.r);
+    atomicAdd(px[idx].g, wq * cq.g);
+    atomicAdd(px[idx].b, wq * cq.b);
+    atomicAdd(px[idx].w, wq);
+    atomicAdd(px[idx].nx, int(wq) * nq.x);
+    atomicAdd(px[idx].ny, int(wq) * nq.y);
+    atomicAdd(px[idx].nz, int(wq) * nq.z);
+#endif
+#endif
+}
+
+// A sampled (not deposited) fragment of splat s at pixel (x, y), if inside the cut-off.
+void frag(Splat s, int x, int y, vec3 col)
+{
+    float sx = float(x) + 0.5, sy = float(y) + 0.5;
+    vec2 d = vec2(sx, sy) - s.ctr;
+    precise float q = s.conic.x * d.x * d.x + 2.0 * s.conic.y * d.x * d.y + s.conic.z * d.y * d.y;
+    if (q > CUT2) return;
+    precise float z = frag_depth(s, sx, sy);
+    put(x, y, z, exp(-0.5 * q), col, s.n, s.r);
+}
+
+#if PASS == 2
+#define COLOUR(i) base_colour(i)
+#else
+#define COLOUR(i) vec3(0.0)
+#endif
+
+void main()
+{
+#if MODE == 0
+    uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+    for (uint g = gl_GlobalInvocationID.x; g < u_total; g += stride) {
+        uint i = u_nranges == 1u ? ranges[0].x + g : point_of(g);
+        Splat s;
+        if (!setup_core(i, s)) continue;
+        if (s.dep) {
+            put(s.box.x, s.box.y, s.dc, 1.0, COLOUR(i), s.n, s.r);
+            continue;
+        }
+#if PASS == 1
+        uint k = atomicAdd(ras_count, 1u);
+        ras_list[k] = i;
+        atomicMax(ras_groups[0], min(k / gl_WorkGroupSize.x + 1u, 65535u));
+#endif
+    }
+#elif MODE == 1
+    uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+    for (uint j = gl_GlobalInvocationID.x; j < ras_count; j += stride) {
+        uint i = ras_list[j];
+        Splat s;
+        if (!setup_core(i, s) || !setup_raster(s)) continue;
+        uint area = uint(s.box.z - s.box.x + 1) * uint(s.box.w - s.box.y + 1);
+        if (area > u_big) {
+#if PASS == 1
+            uint k = atomicAdd(big_count, 1u);
+            big_list[k] = i;
+            atomicMax(big_groups[0], min(k + 1u, 65535u));
+#endif
+            continue;
+        }
+        vec3 col = COLOUR(i);
+        for (int y = s.box.y; y <= s.box.w; y++)
+            for (int x = s.box.x; x <= s.box.z; x++)
+                frag(s, x, y, col);
+    }
+#else
+    // One work group per big splat; each invocation takes one pixel of every 8x8 tile.
+    for (uint j = gl_WorkGroupID.x; j < big_count; j += gl_NumWorkGroups.x) {
+        uint i = big_list[j];
+        Splat s;
+        if (!setup_core(i, s) || !setup_raster(s)) continue;
+        vec3 col = COLOUR(i);
+        for (int y = s.box.y + int(gl_LocalInvocationID.y); y <= s.box.w; y += 8)
+            for (int x = s.box.x + int(gl_LocalInvocationID.x); x <= s.box.z; x += 8)
+                frag(s, x, y, col);
+    }
+#endif
+}

@@ -1,0 +1,779 @@
+/* test_render_splat.c — the `splat` pipeline (EWA surface splatting) on llvmpipe through the
+ * public renderer (render.h), against analytic expectations: hole filling, exact normalisation
+ * of a constant colour, visibility and depth of two planes, EWA anti-aliasing of a minified
+ * checkerboard, the elliptical footprint of an inclined disc, a real scan (stable across runs and
+ * against a golden image), and the fixed-point fallback and OSMesa back end.
+ *
+ * SPLATD_SPLAT_BENCH=1 adds a timing of 1M points at 1280x720, splat against points (printed). */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+#include <math.h>
+#include <png.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <time.h>
+
+#include "cloud.h"
+#include "prep.h"
+#include "render.h"
+#include "splat_math.h"
+#include "testutil.h"
+
+enum { W = 256, H = 256 };
+static const double OFF[3] = {500000.0, 4100000.0, 120.0}; /* a UTM-like offset */
+
+typedef struct fixture {
+    rnd_ctx *egl;
+} fixture;
+
+static rnd_ctx *make_ctx(rnd_backend_kind kind)
+{
+    rnd_desc d = {.backend = kind, .shader_dir = getenv("SPLATD_SHADERS")};
+    sd_err err = {0};
+    rnd_ctx *r = rnd_create(&d, &err);
+    if (!r) fprintf(stderr, "rnd_create: %s\n", err.msg);
+    return r;
+}
+
+static int setup(void **state)
+{
+    fixture *fx = calloc(1, sizeof *fx);
+    if (!fx) return -1;
+    fx->egl = make_ctx(RND_BACKEND_EGL);
+    if (!fx->egl) {
+        free(fx);
+        return -1;
+    }
+    *state = fx;
+    return 0;
+}
+
+static int teardown(void **state)
+{
+    fixture *fx = *state;
+    if (!fx) return 0;
+    rnd_destroy(fx->egl);
+    free(fx);
+    return 0;
+}
+
+/* An n-point cloud with every attribute, unit +z normals, white, radius 0.01, in batches of at
+ * most PC_BATCH_POINTS; the caller sets positions (local coordinates) and calls finish_cloud. */
+static void new_cloud(pc_prepared *pc, uint64_t n)
+{
+    memset(pc, 0, sizeof *pc);
+    pc->n = n;
+    pc->attrs = PC_ATTR_RGB | PC_ATTR_NORMAL | PC_ATTR_RADIUS | PC_ATTR_F | PC_ATTR_INTENSITY;
+    pc->nbatches = (n + PC_BATCH_POINTS - 1) / PC_BATCH_POINTS;
+    sd_err err = {0};
+    assert_int_equal(pc_prepared_alloc(pc, &err), 0);
+    for (uint64_t i = 0; i < n; i++) {
+        pc->normal[3 * i + 2] = 1;
+        pc->radius[i] = 0.01f;
+        for (int k = 0; k < 4; k++) pc->rgba[4 * i + k] = 255;
+    }
+}
+
+/* Batches of consecutive points and all bounds, from the positions. */
+static void finish_cloud(pc_prepared *pc)
+{
+    for (int k = 0; k < 3; k++) pc->bmin[k] = INFINITY, pc->bmax[k] = -INFINITY;
+    for (uint64_t b = 0; b < pc->nbatches; b++) {
+        pc_batch *bt = &pc->batches[b];
+        bt->first = (uint32_t)(b * PC_BATCH_POINTS);
+        bt->count = (uint32_t)(pc->n - bt->first < PC_BATCH_POINTS ? pc->n - bt->first
+                                                                   : PC_BATCH_POINTS);
+        for (int k = 0; k < 3; k++) bt->bmin[k] = INFINITY, bt->bmax[k] = -INFINITY;
+        for (uint32_t i = bt->first; i < bt->first + bt->count; i++) {
+            for (int k = 0; k < 3; k++) {
+                float x = pc->pos[3 * i + k];
+                bt->bmin[k] = fminf(bt->bmin[k], x);
+                bt->bmax[k] = fmaxf(bt->bmax[k], x);
+                pc->bmin[k] = fmin(pc->bmin[k], x + OFF[k]);
+                pc->bmax[k] = fmax(pc->bmax[k], x + OFF[k]);
+            }
+        }
+    }
+    memcpy(pc->offset, OFF, sizeof OFF);
+}
+
+/* Fills points [first, first + nx * ny) with a regular grid in the plane z = z0 centred on the
+ * origin, spacing h, radius r, colour rgb (or a checkerboard of `cell` points with rgb and rgb2
+ * when cell > 0). */
+static void grid(pc_prepared *pc, uint64_t first, int nx, int ny, float h, float z0, float r,
+                 const uint8_t rgb[3], const uint8_t rgb2[3], int cell)
+{
+    for (int j = 0; j < ny; j++)
+        for (int i = 0; i < nx; i++) {
+            uint64_t k = first + (uint64_t)j * nx + i;
+            pc->pos[3 * k] = (i - 0.5f * (nx - 1)) * h;
+            pc->pos[3 * k + 1] = (j - 0.5f * (ny - 1)) * h;
+            pc->pos[3 * k + 2] = z0;
+            pc->radius[k] = r;
+            const uint8_t *c = (cell > 0 && ((i / cell + j / cell) & 1)) ? rgb2 : rgb;
+            for (int q = 0; q < 3; q++) pc->rgba[4 * k + q] = c[q];
+        }
+}
+
+/* A camera at local (ex, ey, ez) looking at local (tx, ty, tz), up +y. */
+static rnd_camera cam_at(double ex, double ey, double ez, double tx, double ty, double tz,
+                         float fov, int w, int h)
+{
+    rnd_camera c = {{ex + OFF[0], ey + OFF[1], ez + OFF[2]},
+                    {tx + OFF[0], ty + OFF[1], tz + OFF[2]},
+                    {0, 1, 0}, fov, 0, 0, w, h};
+    return c;
+}
+
+static uint32_t upload(rnd_ctx *r, const pc_prepared *pc)
+{
+    sd_err err = {0};
+    int64_t id = rnd_upload(r, pc, &err);
+    if (id <= 0) fail_msg("upload: %s", err.msg);
+    return (uint32_t)id;
+}
+
+static void render(rnd_ctx *r, uint32_t id, const rnd_camera *cam, const sp_params *p,
+                   int want_float, rnd_frame *f)
+{
+    sd_err err = {0};
+    int rc = rnd_render(r, id, cam, p, want_float, f, &err);
+    if (rc < 0) fail_msg("render: %s", err.msg);
+}
+
+/* CPU time of the whole process (llvmpipe's threads included), seconds. */
+static double cpu_s(void)
+{
+    struct rusage ru;
+    getrusage(RUSAGE_SELF, &ru);
+    return ru.ru_utime.tv_sec + ru.ru_utime.tv_usec * 1e-6 + ru.ru_stime.tv_sec +
+           ru.ru_stime.tv_usec * 1e-6;
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* ---- projection, as camera.c builds it (gluLookAt + gluPerspective), for analytic pixels ---- */
+
+typedef struct proj {
+    double e[3], s[3], u[3], f[3];
+    double t, aspect;
+    int w, h;
+} proj;
+
+static void vnorm(double v[3])
+{
+    double l = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    v[0] /= l, v[1] /= l, v[2] /= l;
+}
+
+static proj proj_of(const rnd_camera *c)
+{
+    proj p;
+    for (int i = 0; i < 3; i++) p.e[i] = c->eye[i] - OFF[i], p.f[i] = c->target[i] - c->eye[i];
+    vnorm(p.f);
+    p.s[0] = p.f[1] * c->up[2] - p.f[2] * c->up[1];
+    p.s[1] = p.f[2] * c->up[0] - p.f[0] * c->up[2];
+    p.s[2] = p.f[0] * c->up[1] - p.f[1] * c->up[0];
+    vnorm(p.s);
+    p.u[0] = p.s[1] * p.f[2] - p.s[2] * p.f[1];
+    p.u[1] = p.s[2] * p.f[0] - p.s[0] * p.f[2];
+    p.u[2] = p.s[0] * p.f[1] - p.s[1] * p.f[0];
+    p.t = 1.0 / tan(c->fov_deg * M_PI / 360.0);
+    p.aspect = (double)c->width / c->height;
+    p.w = c->width, p.h = c->height;
+    return p;
+}
+
+/* Pixel position (sx, sy) and eye depth of local point (x, y, z). */
+static void project(const proj *p, double x, double y, double z, double *sx, double *sy, double *d)
+{
+    double q[3] = {x - p->e[0], y - p->e[1], z - p->e[2]};
+    double xe = q[0] * p->s[0] + q[1] * p->s[1] + q[2] * p->s[2];
+    double ye = q[0] * p->u[0] + q[1] * p->u[1] + q[2] * p->u[2];
+    double de = q[0] * p->f[0] + q[1] * p->f[1] + q[2] * p->f[2];
+    *sx = (xe * p->t / p->aspect / de + 1) * 0.5 * p->w;
+    *sy = (ye * p->t / de + 1) * 0.5 * p->h;
+    if (d) *d = de;
+}
+
+/* The pixel rectangle [x0, x1] x [y0, y1] inside the projection of the local axis-aligned
+ * rectangle [ax, bx] x [ay, by] at height z (seen straight down: an exact screen rectangle),
+ * shrunk by m pixels. */
+static void rect_px(const proj *p, double ax, double bx, double ay, double by, double z, int m,
+                    int r[4])
+{
+    double sx0, sy0, sx1, sy1;
+    project(p, ax, ay, z, &sx0, &sy0, NULL);
+    project(p, bx, by, z, &sx1, &sy1, NULL);
+    r[0] = (int)ceil(fmin(sx0, sx1)) + m, r[1] = (int)ceil(fmin(sy0, sy1)) + m;
+    r[2] = (int)floor(fmax(sx0, sx1)) - 1 - m, r[3] = (int)floor(fmax(sy0, sy1)) - 1 - m;
+}
+
+static const uint8_t *pix(const rnd_frame *f, int x, int y)
+{
+    return f->rgba8 + 4 * ((size_t)y * f->width + x);
+}
+
+static int is_bg(const uint8_t *q)
+{
+    return q[0] == 0 && q[1] == 0 && q[2] == 0;
+}
+
+static uint64_t rng_next(uint64_t *s)
+{
+    *s = *s * 6364136223846793005ull + 1442695040888963407ull;
+    return *s >> 33;
+}
+
+static float rng_unit(uint64_t *s) /* in [-1, 1) */
+{
+    return (float)rng_next(s) / (float)(1u << 30) - 1.0f;
+}
+
+/* ---- tests ---- */
+
+/* A dense regular plane facing the camera: `splat` leaves no background pixel inside the
+ * projected rectangle of the outermost point centres (shrunk by 2 px: the Gaussian rim is
+ * sampled at pixel centres, so the last pixel row may be partly covered), in both regimes:
+ * spacing 1.6 px (minified: deposited splats, holes filled by the low-pass) and 5 px
+ * (magnified: rasterised ellipses, radius 1.2 spacings). `points` of the first, with spacing
+ * 1.6 px > 1 px, must leave holes: that is what the splats fill. */
+static void test_hole_filling(void **state)
+{
+    fixture *fx = *state;
+    enum { N = 100 };
+    const float h = 0.01f;
+    const uint8_t white[3] = {255, 255, 255};
+    const double px_per_unit_at_1 = W / (2 * tan(30 * M_PI / 180)); /* fov 60 */
+    const double spacing_px[2] = {1.6, 5.0}, rfac[2] = {1.0, 1.2};
+    for (int k = 0; k < 2; k++) {
+        pc_prepared pc;
+        new_cloud(&pc, (uint64_t)N * N);
+        grid(&pc, 0, N, N, h, 0, h * (float)rfac[k], white, white, 0);
+        finish_cloud(&pc);
+        uint32_t id = upload(fx->egl, &pc);
+        pc_prepared_free(&pc);
+        double dist = h * px_per_unit_at_1 / spacing_px[k];
+        rnd_camera cam = cam_at(0, 0, dist, 0, 0, 0, 60, W, H);
+        proj pj = proj_of(&cam);
+        int r[4];
+        double half = 0.5 * (N - 1) * h;
+        rect_px(&pj, -half, half, -half, half, 0, 2, r);
+        int rx0 = r[0] < 0 ? 0 : r[0], ry0 = r[1] < 0 ? 0 : r[1];
+        int rx1 = r[2] >= W ? W - 1 : r[2], ry1 = r[3] >= H ? H - 1 : r[3];
+        assert_true(rx1 - rx0 > 50 && ry1 - ry0 > 50);
+        sp_params p;
+        sp_params_defaults(&p);
+        rnd_frame f = {0};
+        render(fx->egl, id, &cam, &p, 0, &f);
+        int holes = 0;
+        for (int y = ry0; y <= ry1; y++)
+            for (int x = rx0; x <= rx1; x++) holes += is_bg(pix(&f, x, y));
+        if (holes) fail_msg("splat, spacing %.1f px: %d background pixels inside the plane", spacing_px[k], holes);
+        if (k == 0) {
+            p.pipeline = SP_PIPE_POINTS;
+            render(fx->egl, id, &cam, &p, 0, &f);
+            holes = 0;
+            for (int y = ry0; y <= ry1; y++)
+                for (int x = rx0; x <= rx1; x++) holes += is_bg(pix(&f, x, y));
+            /* 1-px points 1.6 px apart cover about 1 / 1.6^2 = 39 % of the pixels. */
+            assert_true(holes > (rx1 - rx0) * (ry1 - ry0) / 4);
+        }
+        rnd_frame_free(&f);
+        rnd_release(fx->egl, id);
+    }
+}
+
+/* A constant-colour plane with jittered sampling (so overlapping weights differ from pixel to
+ * pixel) facing the camera, lit along the view axis: every covered pixel normalises to exactly
+ * the colour. Tolerance 1/255: the RGBA16F target's rounding (11-bit mantissa) then GL's float
+ * to unorm8 conversion; the sums themselves are exact to float rounding (1e-6). Three regimes. */
+static void check_constant_colour(rnd_ctx *r, const char *label)
+{
+    enum { N = 100 };
+    const float h = 0.01f;
+    const uint8_t col[3] = {200, 100, 50};
+    const double px_per_unit_at_1 = W / (2 * tan(30 * M_PI / 180));
+    /* Spacings: minified (deposited), magnified (sampled), close-up (splats of ~26 px radius,
+     * boxes over SPLAT_BIG_PIXELS: the 8x8 work-group path). */
+    const double spacing_px[3] = {1.3, 6.0, 20.0};
+    for (int k = 0; k < 3; k++) {
+        pc_prepared pc;
+        new_cloud(&pc, (uint64_t)N * N);
+        grid(&pc, 0, N, N, h, 0, h * 1.3f, col, col, 0);
+        uint64_t seed = 12345;
+        for (uint64_t i = 0; i < pc.n; i++) {
+            pc.pos[3 * i] += 0.3f * h * rng_unit(&seed);
+            pc.pos[3 * i + 1] += 0.3f * h * rng_unit(&seed);
+        }
+        finish_cloud(&pc);
+        uint32_t id = upload(r, &pc);
+        pc_prepared_free(&pc);
+        rnd_camera cam = cam_at(0, 0, h * px_per_unit_at_1 / spacing_px[k], 0, 0, 0, 60, W, H);
+        sp_params p;
+        sp_params_defaults(&p);
+        p.light[0] = 0, p.light[1] = 0, p.light[2] = 1;
+        rnd_frame f = {0};
+        render(r, id, &cam, &p, 0, &f);
+        int covered = 0, bad = 0;
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++) {
+                const uint8_t *q = pix(&f, x, y);
+                if (is_bg(q)) continue;
+                covered++;
+                for (int c = 0; c < 3; c++) bad += abs(q[c] - col[c]) > 1;
+            }
+        if (bad) fail_msg("%s, spacing %.1f px: %d channel values differ from the colour by more than 1", label, spacing_px[k], bad);
+        assert_true(covered > 5000);
+        if (k == 2) assert_int_equal(covered, W * H); /* the close-up fills the frame */
+        rnd_frame_free(&f);
+        rnd_release(r, id);
+    }
+}
+
+static void test_constant_colour(void **state)
+{
+    fixture *fx = *state;
+    check_constant_colour(fx->egl, "egl, float atomics");
+}
+
+/* Two parallel planes facing the camera, the nearer (z = 0, colour A, 1 x 1) in front of a
+ * larger farther one (z = -0.3, colour B, 1.6 x 1.6), far plane's points first in the buffer:
+ * only A shows where A covers, B around it, and depth_eye equals the analytic eye depth (eye
+ * at z = dist: A at dist, B at dist + 0.3) within 1e-3 relative (the ray-plane depth of a
+ * facing plane is exact to float rounding, 1e-6). Margins: 2 px inside A (rim sampling and the
+ * one-pixel low-pass gather), A's projected radius + 2.5 px outside A for B. */
+static void check_two_planes(rnd_ctx *r, const char *label)
+{
+    enum { NA = 100, NB = 160 };
+    const float h = 0.01f;
+    const uint8_t ca[3] = {220, 40, 40}, cb[3] = {40, 40, 220};
+    pc_prepared pc;
+    new_cloud(&pc, (uint64_t)NA * NA + (uint64_t)NB * NB);
+    grid(&pc, 0, NB, NB, h, -0.3f, h * 1.3f, cb, cb, 0);
+    grid(&pc, (uint64_t)NB * NB, NA, NA, h, 0, h * 1.3f, ca, ca, 0);
+    finish_cloud(&pc);
+    uint32_t id = upload(r, &pc);
+    pc_prepared_free(&pc);
+    const double dist = 1.6;
+    rnd_camera cam = cam_at(0, 0, dist, 0, 0, 0, 60, W, H);
+    proj pj = proj_of(&cam);
+    int ra[4], ra_out[4], rb[4];
+    double ha = 0.5 * (NA - 1) * h, hb = 0.5 * (NB - 1) * h;
+    rect_px(&pj, -ha, ha, -ha, ha, 0, 2, ra);
+    /* A's splats reach r (1.3 spacings = 1.8 px here) plus the low-pass (about 1.5 px) beyond
+     * its outermost centres. */
+    double r_px = 1.3 * h * W / (2 * dist * tan(30 * M_PI / 180));
+    rect_px(&pj, -ha, ha, -ha, ha, 0, -(int)ceil(r_px + 2.5), ra_out);
+    rect_px(&pj, -hb, hb, -hb, hb, -0.3, 2, rb);
+    sp_params p;
+    sp_params_defaults(&p);
+    p.light[0] = 0, p.light[1] = 0, p.light[2] = 1;
+    rnd_frame f = {0};
+    render(r, id, &cam, &p, 1, &f);
+    int na = 0, nb = 0;
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            int in_a = x >= ra[0] && x <= ra[2] && y >= ra[1] && y <= ra[3];
+            int near_a = x >= ra_out[0] && x <= ra_out[2] && y >= ra_out[1] && y <= ra_out[3];
+            int in_b = x >= rb[0] && x <= rb[2] && y >= rb[1] && y <= rb[3];
+            const uint8_t *want = in_a ? ca : (in_b && !near_a) ? cb : NULL;
+            if (!want) continue;
+            const uint8_t *q = pix(&f, x, y);
+            for (int c = 0; c < 3; c++)
+                if (abs(q[c] - want[c]) > 1)
+                    fail_msg("%s: pixel (%d, %d) is %d,%d,%d, not plane %c's %d,%d,%d", label, x,
+                             y, q[0], q[1], q[2], in_a ? 'A' : 'B', want[0], want[1], want[2]);
+            double dz = in_a ? dist : dist + 0.3;
+            float d = f.depth[(size_t)y * W + x];
+            if (!(fabs(d - dz) <= 1e-3 * dz))
+                fail_msg("%s: pixel (%d, %d) depth %.6f, expected %.6f", label, x, y, d, dz);
+            in_a ? na++ : nb++;
+        }
+    assert_true(na > 5000 && nb > 5000);
+    rnd_frame_free(&f);
+    rnd_release(r, id);
+}
+
+static void test_two_planes(void **state)
+{
+    fixture *fx = *state;
+    check_two_planes(fx->egl, "egl, float atomics");
+}
+
+/* The same two tests through the fixed-point accumulation (GPUs without
+ * GL_NV_shader_atomic_float) and through OSMesa. */
+static void test_fixed_point_and_osmesa(void **state)
+{
+    (void)state;
+    /* The pipeline reads the variable when it is created, at its first frame. */
+    setenv("SPLATD_SPLAT_FIXED", "1", 1);
+    rnd_ctx *r = make_ctx(RND_BACKEND_EGL);
+    assert_non_null(r);
+    check_constant_colour(r, "egl, fixed point");
+    unsetenv("SPLATD_SPLAT_FIXED");
+    check_two_planes(r, "egl, fixed point");
+    rnd_destroy(r);
+    r = make_ctx(RND_BACKEND_OSMESA);
+    assert_non_null(r);
+    check_two_planes(r, "osmesa");
+    rnd_destroy(r);
+}
+
+/* Stripes: with SPLATD_SPLAT_STRIPE_ROWS=37 the frame is rendered 37 rows at a time (as frames
+ * over the storage-block limit are, e.g. 4K on llvmpipe), each with a halo row for the 3x3
+ * low-pass; the image must equal the one-stripe render: every channel within 1 (float atomics
+ * add in a different order) and depth within 1e-6 relative. Jittered plane in both regimes and
+ * a magnified inclined splat crossing stripe borders. */
+static void test_stripes(void **state)
+{
+    fixture *fx = *state;
+    setenv("SPLATD_SPLAT_STRIPE_ROWS", "37", 1); /* read when the pipeline is created */
+    rnd_ctx *rs = make_ctx(RND_BACKEND_EGL);
+    assert_non_null(rs);
+    enum { N = 100 };
+    const float h = 0.01f;
+    pc_prepared pc;
+    new_cloud(&pc, (uint64_t)N * N + 1);
+    const uint8_t a[3] = {200, 150, 50}, b[3] = {50, 100, 200};
+    grid(&pc, 0, N, N, h, 0, h * 1.3f, a, b, 7);
+    uint64_t seed = 777;
+    for (uint64_t i = 0; i < (uint64_t)N * N; i++) {
+        pc.pos[3 * i] += 0.3f * h * rng_unit(&seed);
+        pc.pos[3 * i + 1] += 0.3f * h * rng_unit(&seed);
+        pc.pos[3 * i + 2] = 0.05f * sinf(20 * pc.pos[3 * i]);
+    }
+    uint64_t big = (uint64_t)N * N; /* one big tilted splat in front */
+    pc.pos[3 * big] = 0.1f, pc.pos[3 * big + 1] = 0.05f, pc.pos[3 * big + 2] = 0.2f;
+    pc.normal[3 * big + 1] = 0.6f, pc.normal[3 * big + 2] = 0.8f;
+    pc.radius[big] = 0.15f;
+    finish_cloud(&pc);
+    uint32_t id1 = upload(fx->egl, &pc), id2 = upload(rs, &pc);
+    pc_prepared_free(&pc);
+    const double dists[2] = {1.0, 0.35};
+    for (int k = 0; k < 2; k++) {
+        rnd_camera cam = cam_at(0.02, -0.01, dists[k], 0, 0, 0, 60, W, H);
+        sp_params p;
+        sp_params_defaults(&p);
+        rnd_frame f1 = {0}, f2 = {0};
+        render(fx->egl, id1, &cam, &p, 1, &f1);
+        render(rs, id2, &cam, &p, 1, &f2);
+        unsetenv("SPLATD_SPLAT_STRIPE_ROWS");
+        int maxd = 0, covered = 0;
+        for (size_t i = 0; i < (size_t)W * H; i++) {
+            covered += !is_bg(f1.rgba8 + 4 * i);
+            for (int c = 0; c < 3; c++) {
+                int d = abs(f1.rgba8[4 * i + c] - f2.rgba8[4 * i + c]);
+                if (d > maxd) maxd = d;
+            }
+            if (isinf(f1.depth[i]) != isinf(f2.depth[i]) ||
+                (!isinf(f1.depth[i]) && fabsf(f1.depth[i] - f2.depth[i]) > 1e-6f * f1.depth[i]))
+                fail_msg("distance %.2f: depth of pixel %zu differs: %g vs %g", dists[k], i,
+                         f1.depth[i], f2.depth[i]);
+        }
+        if (maxd > 1) fail_msg("distance %.2f: striped render differs by %d", dists[k], maxd);
+        assert_true(covered > W * H / 4);
+        rnd_frame_free(&f1);
+        rnd_frame_free(&f2);
+    }
+    rnd_release(fx->egl, id1);
+    rnd_release(rs, id2);
+    rnd_destroy(rs);
+}
+
+/* Luminance mean and variance over a pixel rectangle; counts background pixels. */
+static void region_stats(const rnd_frame *f, const int r[4], double *mean, double *var, int *bg)
+{
+    double s = 0, s2 = 0;
+    int n = 0;
+    *bg = 0;
+    for (int y = r[1]; y <= r[3]; y++)
+        for (int x = r[0]; x <= r[2]; x++) {
+            const uint8_t *q = pix(f, x, y);
+            double l = (q[0] + q[1] + q[2]) / 3.0;
+            s += l, s2 += l * l, n++;
+            *bg += is_bg(q);
+        }
+    *mean = s / n;
+    *var = s2 / n - *mean * *mean;
+}
+
+/* EWA anti-aliasing: a black-and-white checkerboard (cells of 2 x 2 points, 0.02 units) seen at
+ * a grazing angle. In the far region (4.5 to 8 units away, about 0.04 px per cell vertically)
+ * the pattern is far above the Nyquist rate: without the low-pass (lowpass = 0) the discs are
+ * point-sampled and the pixels alias to a noisy mix of black, white and misses; with lowpass 1
+ * every pixel averages many splats. Asserts variance(lowpass 1) < 0.5 variance(lowpass 0) (the
+ * measured ratio is far smaller; 0.5 is the brief's bound) and no background pixel in the
+ * region with the low-pass on (minified splats never vanish). */
+static void test_ewa_antialiasing(void **state)
+{
+    fixture *fx = *state;
+    enum { NX = 200, NY = 1000 };
+    const float h = 0.01f;
+    const uint8_t wh[3] = {240, 240, 240}, bk[3] = {20, 20, 20};
+    pc_prepared pc;
+    new_cloud(&pc, (uint64_t)NX * NY);
+    grid(&pc, 0, NX, NY, h, 0, h, wh, bk, 2);
+    for (uint64_t i = 0; i < pc.n; i++) pc.pos[3 * i + 1] += 0.5f * NY * h; /* y in [0, 10] */
+    finish_cloud(&pc);
+    uint32_t id = upload(fx->egl, &pc);
+    pc_prepared_free(&pc);
+    rnd_camera cam = cam_at(0, -0.5, 0.3, 0, 10, 0, 40, W, H);
+    proj pj = proj_of(&cam);
+    double sx0, sy0, sx1, sy1;
+    project(&pj, -0.3, 4.5, 0, &sx0, &sy0, NULL);
+    project(&pj, 0.3, 8.0, 0, &sx1, &sy1, NULL);
+    int reg[4] = {(int)ceil(sx0) + 1, (int)ceil(sy0) + 1, (int)floor(sx1) - 2, (int)floor(sy1) - 2};
+    assert_true(reg[2] - reg[0] >= 10 && reg[3] - reg[1] >= 4);
+    sp_params p;
+    sp_params_defaults(&p);
+    rnd_frame f = {0};
+    double mean[2], var[2];
+    int bg[2];
+    for (int k = 0; k < 2; k++) {
+        p.lowpass = k ? 1.0f : 0.0f;
+        render(fx->egl, id, &cam, &p, 0, &f);
+        region_stats(&f, reg, &mean[k], &var[k], &bg[k]);
+    }
+    printf("anti-aliasing: region %dx%d px, variance %.1f (lowpass 0) vs %.1f (lowpass 1), "
+           "background pixels %d vs %d\n", reg[2] - reg[0] + 1, reg[3] - reg[1] + 1, var[0],
+           var[1], bg[0], bg[1]);
+    assert_true(var[1] < 0.5 * var[0]);
+    assert_int_equal(bg[1], 0);
+    rnd_frame_free(&f);
+    rnd_release(fx->egl, id);
+}
+
+/* A single disc tilted by theta = 60 degrees about the x axis, seen head-on from a distance
+ * (fov 20, so the projection is nearly affine): its covered pixels form an ellipse whose minor
+ * (y) to major (x) axis ratio is cos(theta) = 0.5. Measured by the second moments of the
+ * coverage mask (a uniform ellipse with semi-axes a, b has m_xx = a^2 / 4, m_yy = b^2 / 4), so
+ * aspect = sqrt(m_yy / m_xx); tolerance 10 % (the brief's; pixel quantisation of a 6 px disc
+ * and, for the big one, the one-pixel low-pass rim stay well inside it). Two sizes: a 6 px
+ * radius (one invocation loops over its box; lowpass 0, the pure disc) and a 25 px radius
+ * (the big-splat path of 8x8 work groups; default lowpass 1). The major semi-axis must also
+ * equal the projected radius within 10 %. */
+static void test_inclined_footprint(void **state)
+{
+    fixture *fx = *state;
+    const double theta = 60 * M_PI / 180, dist = 10;
+    const double px_per_unit = H / (2 * dist * tan(10 * M_PI / 180));
+    const double radius_px[2] = {6, 25};
+    for (int k = 0; k < 2; k++) {
+        pc_prepared pc;
+        new_cloud(&pc, 1);
+        pc.normal[0] = 0, pc.normal[1] = (float)sin(theta), pc.normal[2] = (float)cos(theta);
+        pc.radius[0] = (float)(radius_px[k] / px_per_unit);
+        finish_cloud(&pc);
+        uint32_t id = upload(fx->egl, &pc);
+        pc_prepared_free(&pc);
+        rnd_camera cam = cam_at(0, 0, dist, 0, 0, 0, 20, W, H);
+        sp_params p;
+        sp_params_defaults(&p);
+        p.lowpass = k ? 1.0f : 0.0f;
+        rnd_frame f = {0};
+        render(fx->egl, id, &cam, &p, 0, &f);
+        double n = 0, mx = 0, my = 0, mxx = 0, myy = 0;
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++)
+                if (!is_bg(pix(&f, x, y))) n++, mx += x, my += y;
+        assert_true(n > 10);
+        mx /= n, my /= n;
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++)
+                if (!is_bg(pix(&f, x, y))) mxx += (x - mx) * (x - mx), myy += (y - my) * (y - my);
+        mxx /= n, myy /= n;
+        double aspect = sqrt(myy / mxx), major = 2 * sqrt(mxx);
+        printf("footprint r = %.0f px: %0.f pixels, major semi-axis %.2f px, aspect %.4f (cos "
+               "theta = %.4f)\n", radius_px[k], n, major, aspect, cos(theta));
+        assert_true(fabs(aspect - cos(theta)) <= 0.1 * cos(theta));
+        assert_true(fabs(major - radius_px[k]) <= 0.1 * radius_px[k]);
+        rnd_frame_free(&f);
+        rnd_release(fx->egl, id);
+    }
+}
+
+/* ---- a real scan ---- */
+
+/* Reads an 8-bit RGB or RGBA PNG into rgba (bottom-up rows, like rnd_frame). Returns 0. */
+static int png_read_rgba(const char *path, int *w, int *h, uint8_t **rgba)
+{
+    png_image im;
+    memset(&im, 0, sizeof im);
+    im.version = PNG_IMAGE_VERSION;
+    if (!png_image_begin_read_from_file(&im, path)) return -1;
+    im.format = PNG_FORMAT_RGBA;
+    *w = (int)im.width, *h = (int)im.height;
+    *rgba = malloc(PNG_IMAGE_SIZE(im));
+    if (!*rgba) return -1;
+    /* Negative stride: the first row in memory is the bottom one. */
+    if (!png_image_finish_read(&im, NULL, *rgba, -(png_int_32)PNG_IMAGE_ROW_STRIDE(im), NULL)) {
+        free(*rgba);
+        return -1;
+    }
+    return 0;
+}
+
+static int png_write_rgba(const char *path, int w, int h, const uint8_t *rgba)
+{
+    png_image im;
+    memset(&im, 0, sizeof im);
+    im.version = PNG_IMAGE_VERSION;
+    im.width = (png_uint_32)w, im.height = (png_uint_32)h;
+    im.format = PNG_FORMAT_RGBA;
+    return png_image_write_to_file(&im, path, 0, rgba, -(png_int_32)(w * 4), NULL) ? 0 : -1;
+}
+
+/* Guanyin (238k points, colours, no normals): loaded, preprocessed (normals, radii), rendered
+ * with the default framing camera at 640x480. Non-blank (over 5 % covered), the same on a
+ * second run (every channel within 1: float atomics add in a different order per run, which
+ * moves sums by a few ulps), and equal to the golden image tests/data/golden_guanyin_splat.png
+ * with PSNR >= 40 dB (run-to-run noise is under 1/255 and gives > 60 dB; 40 dB leaves room for
+ * another Mesa/LLVM build's rounding while failing on any visible change). The golden was made
+ * with this pipeline; SPLATD_WRITE_GOLDEN=1 rewrites it. */
+static void test_guanyin(void **state)
+{
+    fixture *fx = *state;
+    char path[4096], gpath[4096];
+    tu_data("Guanyin.ply", path, sizeof path);
+    tu_data("golden_guanyin_splat.png", gpath, sizeof gpath);
+    sd_err err = {0};
+    pc_cloud cl;
+    if (pc_load(path, &cl, &err) < 0) fail_msg("%s", err.msg);
+    prep_desc pd = {0};
+    pc_prepared pc;
+    if (prep_run(&cl, &pd, &pc, &err) < 0) fail_msg("%s", err.msg);
+    pc_cloud_free(&cl);
+    uint32_t id = upload(fx->egl, &pc);
+    rnd_camera cam;
+    rnd_camera_frame(pc.bmin, pc.bmax, 640, 480, &cam);
+    pc_prepared_free(&pc);
+    sp_params p;
+    sp_params_defaults(&p);
+    rnd_frame f[2] = {{0}, {0}};
+    for (int k = 0; k < 2; k++) render(fx->egl, id, &cam, &p, 0, &f[k]);
+    size_t npx = (size_t)640 * 480, covered = 0;
+    int maxdiff = 0;
+    for (size_t i = 0; i < npx; i++) {
+        covered += !is_bg(f[0].rgba8 + 4 * i);
+        for (int c = 0; c < 3; c++) {
+            int d = abs(f[0].rgba8[4 * i + c] - f[1].rgba8[4 * i + c]);
+            if (d > maxdiff) maxdiff = d;
+        }
+    }
+    printf("guanyin: %zu of %zu pixels covered, run-to-run max difference %d\n", covered, npx, maxdiff);
+    assert_true(covered > npx / 20);
+    assert_true(maxdiff <= 1);
+    const char *wg = getenv("SPLATD_WRITE_GOLDEN");
+    if (wg && *wg == '1') {
+        assert_int_equal(png_write_rgba(gpath, 640, 480, f[0].rgba8), 0);
+        printf("wrote %s\n", gpath);
+    }
+    if (!strstr(rnd_renderer_string(fx->egl), "llvmpipe")) {
+        /* The golden image is llvmpipe's; another driver rounds differently. */
+        printf("guanyin: renderer is not llvmpipe; golden comparison skipped\n");
+        rnd_frame_free(&f[0]);
+        rnd_frame_free(&f[1]);
+        rnd_release(fx->egl, id);
+        return;
+    }
+    int gw, gh;
+    uint8_t *g = NULL;
+    if (png_read_rgba(gpath, &gw, &gh, &g) < 0) fail_msg("cannot read the golden image %s", gpath);
+    assert_int_equal(gw, 640);
+    assert_int_equal(gh, 480);
+    double se = 0;
+    for (size_t i = 0; i < npx; i++)
+        for (int c = 0; c < 3; c++) {
+            double d = (double)f[0].rgba8[4 * i + c] - g[4 * i + c];
+            se += d * d;
+        }
+    double mse = se / (3.0 * npx);
+    double psnr = mse > 0 ? 10 * log10(255.0 * 255.0 / mse) : INFINITY;
+    printf("guanyin: PSNR against the golden image %.1f dB\n", psnr);
+    assert_true(psnr >= 40.0);
+    free(g);
+    rnd_frame_free(&f[0]);
+    rnd_frame_free(&f[1]);
+    rnd_release(fx->egl, id);
+}
+
+/* SPLATD_SPLAT_BENCH=1: 1M points (a 1000 x 1000 wavy sheet) at 1280x720 through the default
+ * framing camera, splat and points interleaved, median render time of 10 frames each. Prints
+ * only; there is nothing to assert about timings on a shared machine. */
+static void test_bench_1m(void **state)
+{
+    fixture *fx = *state;
+    const char *on = getenv("SPLATD_SPLAT_BENCH");
+    if (!on || *on != '1') skip();
+    enum { N = 1000 };
+    pc_prepared pc;
+    new_cloud(&pc, (uint64_t)N * N);
+    const uint8_t a[3] = {200, 120, 60}, b[3] = {60, 120, 200};
+    grid(&pc, 0, N, N, 0.002f, 0, 0.002f * 1.5f, a, b, 25);
+    for (uint64_t k = 0; k < pc.n; k++) {
+        float x = pc.pos[3 * k], y = pc.pos[3 * k + 1];
+        pc.pos[3 * k + 2] = 0.1f * sinf(6 * x) * cosf(5 * y);
+        float nx = -0.6f * cosf(6 * x) * cosf(5 * y), ny = 0.5f * sinf(6 * x) * sinf(5 * y);
+        float l = sqrtf(nx * nx + ny * ny + 1);
+        pc.normal[3 * k] = nx / l, pc.normal[3 * k + 1] = ny / l, pc.normal[3 * k + 2] = 1 / l;
+    }
+    finish_cloud(&pc);
+    uint32_t id = upload(fx->egl, &pc);
+    rnd_camera cam;
+    rnd_camera_frame(pc.bmin, pc.bmax, 1280, 720, &cam);
+    pc_prepared_free(&pc);
+    sp_params p;
+    sp_params_defaults(&p);
+    double t[2][10], cpu[2][10];
+    rnd_frame f = {0};
+    for (int pi = 0; pi < 2; pi++) { /* warm-up: shader compilation, buffer allocation */
+        p.pipeline = pi ? SP_PIPE_SPLAT : SP_PIPE_POINTS;
+        render(fx->egl, id, &cam, &p, 0, &f);
+    }
+    for (int k = 0; k < 10; k++)
+        for (int pi = 0; pi < 2; pi++) {
+            p.pipeline = pi ? SP_PIPE_SPLAT : SP_PIPE_POINTS;
+            double c0 = cpu_s();
+            render(fx->egl, id, &cam, &p, 0, &f);
+            cpu[pi][k] = (cpu_s() - c0) * 1e3;
+            t[pi][k] = f.render_us / 1e3;
+        }
+    for (int pi = 0; pi < 2; pi++) {
+        qsort(t[pi], 10, sizeof(double), cmp_double);
+        qsort(cpu[pi], 10, sizeof(double), cmp_double);
+    }
+    double mp = 0.5 * (t[0][4] + t[0][5]), ms = 0.5 * (t[1][4] + t[1][5]);
+    double cp = 0.5 * (cpu[0][4] + cpu[0][5]), cs = 0.5 * (cpu[1][4] + cpu[1][5]);
+    printf("bench 1M points 1280x720 (%s), %u points drawn, median of 10: points %.1f ms, "
+           "splat %.1f ms, ratio %.2f; CPU time (all threads, incl. read-back) points %.1f ms, "
+           "splat %.1f ms, ratio %.2f\n", rnd_renderer_string(fx->egl), (unsigned)f.points_drawn,
+           mp, ms, ms / mp, cp, cs, cs / cp);
+    rnd_frame_free(&f);
+    rnd_release(fx->egl, id);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_hole_filling),
+        cmocka_unit_test(test_constant_colour),
+        cmocka_unit_test(test_two_planes),
+        cmocka_unit_test(test_fixed_point_and_osmesa),
+        cmocka_unit_test(test_stripes),
+        cmocka_unit_test(test_ewa_antialiasing),
+        cmocka_unit_test(test_inclined_footprint),
+        cmocka_unit_test(test_guanyin),
+        cmocka_unit_test(test_bench_1m),
+    };
+    return cmocka_run_group_tests(tests, setup, teardown);
+}
