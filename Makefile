@@ -5,6 +5,7 @@
 #   make asan       only the AddressSanitizer + UBSan test run
 #   make bench      measured numbers (see README.md)
 #   make run        start the daemon on a bundled scan and render an orbit into ./out/
+#   make fuzz       libFuzzer targets for the protocol and every parser (FUZZ_SECONDS=60 each)
 #   make install    PREFIX=/usr/local DESTDIR=
 #
 # Every dependency comes through pkg-config; when a check fails, deploy/deps.sh installs the
@@ -142,7 +143,7 @@ $(BUILD)/gen/shaders_gen.c $(BUILD)/gen/shaders_gen.h &: $(BUILD)/embed_shaders 
 	@mkdir -p $(BUILD)/gen
 	$(BUILD)/embed_shaders $(BUILD)/gen/shaders_gen $(SHADERS)
 
-.PHONY: all test asan check-tests bench run install clean
+.PHONY: all test asan bench fuzz run install clean
 all: $(BUILD)/bin/splatd $(BUILD)/bin/splat $(BUILD)/libsplatclient.a $(BUILD)/libsplatclient.so $(TOOLS)
 
 $(BUILD)/libsplatclient.so: $(call obj,$(BUILD),$(CLIENT_LIB_SRC) $(PROTO_SRC))
@@ -167,6 +168,9 @@ asan: $(ASAN_TESTS) $(BUILD)/asan/bin/splatd $(BUILD)/asan/bin/splat $(ASAN_TOOL
 
 bench: all $(BENCHES)
 	@$(call TEST_ENV,$(BUILD)) SPLATD_BENCH=$(abspath $(BUILD)/bench) sh tests/bench/bench.sh
+
+fuzz:
+	@sh tests/fuzz/run.sh $(FUZZ_SECONDS)
 
 run: all
 	@sh deploy/run-demo.sh $(BUILD)/bin/splatd $(BUILD)/bin/splat

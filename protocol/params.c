@@ -115,6 +115,11 @@ int sp_param_set_text(sp_params *p, const char *name, const char *value, char *e
     case SP_T_VEC3: {
         double v[3];
         char tmp[128];
+        if (strlen(value) >= sizeof tmp) { /* longer than tmp: would be cut, not refused */
+            snprintf(err, errlen, "parameter '%s': value of %zu bytes is too long", name,
+                     strlen(value));
+            return -1;
+        }
         snprintf(tmp, sizeof tmp, "%s", value);
         char *save = NULL, *tok = strtok_r(tmp, ",", &save);
         int k = 0;

@@ -40,3 +40,7 @@ int cache_open_cloud(const char *src, const cache_desc *d, pc_prepared *out, cac
 
 /* cache_path_for: the cache file path for src under directory dir (NULL: the default). */
 int cache_path_for(const char *src, const char *dir, int k, char *buf, size_t len, sd_err *err);
+
+/* cache__set_version: rewrites the version field of a cache file (with a valid checksum), so
+ * tests can check that a cache of another version is rebuilt. Internal; returns 0 or -1. */
+int cache__set_version(const char *cache_path, uint32_t version);

@@ -119,7 +119,7 @@ int pc_finalize(pc_raw *raw, pc_cloud *out, const char *path, sd_err *err)
     for (int k = 0; k < 3; k++) {
         out->bmin[k] = lo[k];
         out->bmax[k] = hi[k];
-        out->offset[k] = 0.5 * (lo[k] + hi[k]);
+        out->offset[k] = 0.5 * lo[k] + 0.5 * hi[k]; /* lo + hi may overflow */
     }
     size_t j = 0;
     for (size_t i = 0; i < n; i++) {
@@ -128,12 +128,14 @@ int pc_finalize(pc_raw *raw, pc_cloud *out, const char *path, sd_err *err)
             out->pos[3 * j + k] = (float)(raw->xyz[3 * i + k] - out->offset[k]);
         j++;
     }
-    compact(raw->rgba, 4, keep, n);
-    compact(raw->normal, 3 * sizeof(float), keep, n);
-    compact(raw->intensity, sizeof(float), keep, n);
-    compact(raw->cls, 1, keep, n);
-    compact(raw->radius, sizeof(float), keep, n);
-    compact(raw->scalar, sizeof(float), keep, n);
+    if (kept != n) {
+        compact(raw->rgba, 4, keep, n);
+        compact(raw->normal, 3 * sizeof(float), keep, n);
+        compact(raw->intensity, sizeof(float), keep, n);
+        compact(raw->cls, 1, keep, n);
+        compact(raw->radius, sizeof(float), keep, n);
+        compact(raw->scalar, sizeof(float), keep, n);
+    }
     free(keep);
 
     out->n = kept;

@@ -1,0 +1,372 @@
+/* cache.c — prepared-cloud cache files (see cache.h).
+ *
+ * File layout (host byte order; the byte_order field rejects a file from another-endian host):
+ *   [0, 4096)            cache_header (below), zero padded
+ *   [4096, 4096 + len)   the prepared array block of prepared.h, verbatim
+ * header_hash covers the header bytes before it; block_hash covers the block, so a truncated or
+ * bit-flipped cache is detected and rebuilt, never used. */
+#include "cache.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <libgen.h>
+#include <limits.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "cloud.h"
+#include "prep.h"
+#include "sd_hash.h"
+
+/* Bump when the layout of prepared.h or the meaning of any prepared value changes. */
+#define CACHE_VERSION 1u
+#define CACHE_MAGIC "SPLATDC\0"
+#define CACHE_BLOCK_OFFSET 4096u
+
+typedef struct cache_header {
+    char magic[8];
+    uint32_t version;
+    uint32_t byte_order;       /* 0x01020304 as written */
+    uint64_t src_size;
+    int64_t src_mtime_ns;
+    uint64_t src_hash;         /* sd_hash64 of the whole source file */
+    uint32_t k, attrs;
+    uint64_t n, nbatches, block_len, block_hash;
+    double offset[3], bmin[3], bmax[3];
+    float sigma, F_raw_p99, F_pct[5], radius_median;
+    uint64_t n_dropped;
+    char format[64];
+    char scalar_name[32];
+    pc_prep_stats stats;
+    uint64_t header_hash;      /* sd_hash64 of every byte above */
+} cache_header;
+_Static_assert(sizeof(cache_header) <= CACHE_BLOCK_OFFSET, "cache header must fit its page");
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static int mkdir_p(const char *dir)
+{
+    char tmp[PATH_MAX];
+    snprintf(tmp, sizeof tmp, "%s", dir);
+    for (char *p = tmp + 1; *p; p++) {
+        if (*p != '/') continue;
+        *p = 0;
+        if (mkdir(tmp, 0755) < 0 && errno != EEXIST) return -1;
+        *p = '/';
+    }
+    if (mkdir(tmp, 0755) < 0 && errno != EEXIST) return -1;
+    return 0;
+}
+
+/* Picks the default cache directory (see cache_desc.dir) for src. */
+static void default_dir(const char *src, char *buf, size_t len)
+{
+    const char *e;
+    if ((e = getenv("SPLATD_CACHE")) && *e) {
+        snprintf(buf, len, "%s", e);
+    } else if ((e = getenv("XDG_CACHE_HOME")) && *e) {
+        snprintf(buf, len, "%s/splatd", e);
+    } else if ((e = getenv("HOME")) && *e) {
+        snprintf(buf, len, "%s/.cache/splatd", e);
+    } else {
+        char tmp[PATH_MAX];
+        snprintf(tmp, sizeof tmp, "%s", src);
+        snprintf(buf, len, "%s/.splatd-cache", dirname(tmp));
+    }
+}
+
+int cache_path_for(const char *src, const char *dir, int k, char *buf, size_t len, sd_err *err)
+{
+    char real[PATH_MAX], d[PATH_MAX];
+    if (!realpath(src, real))
+        return sd_errf(err, SD_EIO, "%s: %s", src, strerror(errno));
+    if (dir && *dir) snprintf(d, sizeof d, "%s", dir);
+    else default_dir(real, d, sizeof d);
+    char tmp[PATH_MAX];
+    snprintf(tmp, sizeof tmp, "%s", real);
+    const char *base = basename(tmp);
+    /* The absolute path's hash keeps two files of the same name in one cache apart. */
+    uint64_t ph = sd_hash64(real, strlen(real), 0);
+    int w = snprintf(buf, len, "%s/%s.%016llx.k%d.splc", d, base, (unsigned long long)ph, k);
+    if (w < 0 || (size_t)w >= len) return sd_errf(err, SD_ELIMIT, "%s: cache path too long", src);
+    return 0;
+}
+
+/* Hashes the whole file at fd (size bytes) through a read-only mapping. */
+static int hash_file(int fd, uint64_t size, uint64_t *out)
+{
+    if (size == 0) {
+        *out = sd_hash64("", 0, 0);
+        return 0;
+    }
+    void *m = mmap(NULL, (size_t)size, PROT_READ, MAP_PRIVATE, fd, 0);
+    if (m == MAP_FAILED) return -1;
+    madvise(m, (size_t)size, MADV_SEQUENTIAL);
+    *out = sd_hash64(m, (size_t)size, 0);
+    munmap(m, (size_t)size);
+    return 0;
+}
+
+typedef struct src_key {
+    uint64_t size, hash;
+    int64_t mtime_ns;
+} src_key;
+
+static int source_key(const char *src, src_key *key, sd_err *err)
+{
+    int fd = open(src, O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return sd_errf(err, SD_EIO, "%s: %s", src, strerror(errno));
+    struct stat st;
+    if (fstat(fd, &st) < 0 || !S_ISREG(st.st_mode)) {
+        close(fd);
+        return sd_errf(err, SD_EIO, "%s: not a regular file", src);
+    }
+    key->size = (uint64_t)st.st_size;
+    key->mtime_ns = (int64_t)st.st_mtim.tv_sec * 1000000000LL + st.st_mtim.tv_nsec;
+    int rc = hash_file(fd, key->size, &key->hash);
+    close(fd);
+    if (rc < 0) return sd_errf(err, SD_EIO, "%s: cannot map for hashing: %s", src, strerror(errno));
+    return 0;
+}
+
+/* Tries to map a valid cache. Returns 1 on success, 0 when there is none or it is out of date
+ * (why says which), -1 when it is damaged (why says how: the caller warns). */
+static int try_load(const char *cpath, const src_key *key, int k, pc_prepared *out, char *why,
+                    size_t whylen)
+{
+    int fd = open(cpath, O_RDONLY | O_CLOEXEC);
+    if (fd < 0) {
+        snprintf(why, whylen, "no cache");
+        return 0;
+    }
+    struct stat st;
+    cache_header h;
+    int rc = -1;
+    if (fstat(fd, &st) < 0 || (uint64_t)st.st_size < CACHE_BLOCK_OFFSET ||
+        pread(fd, &h, sizeof h, 0) != (ssize_t)sizeof h) {
+        snprintf(why, whylen, "it is truncated (%lld bytes)", (long long)st.st_size);
+        goto out;
+    }
+    if (memcmp(h.magic, CACHE_MAGIC, 8) != 0 || h.byte_order != 0x01020304u) {
+        snprintf(why, whylen, "it has a wrong magic or byte order");
+        goto out;
+    }
+    if (h.header_hash != sd_hash64(&h, offsetof(cache_header, header_hash), 0)) {
+        snprintf(why, whylen, "its header is corrupt (checksum mismatch)");
+        goto out;
+    }
+    rc = 0;
+    if (h.version != CACHE_VERSION) {
+        snprintf(why, whylen, "cache version %u, this splatd writes %u", h.version, CACHE_VERSION);
+        goto out;
+    }
+    if (h.src_size != key->size || h.src_mtime_ns != key->mtime_ns || h.src_hash != key->hash) {
+        snprintf(why, whylen, "source changed (size, mtime or content)");
+        goto out;
+    }
+    if ((int)h.k != k) {
+        snprintf(why, whylen, "cache built with k = %u, k = %d asked", h.k, k);
+        goto out;
+    }
+    rc = -1;
+    uint64_t want = pc_prepared_block_len(h.n, h.attrs, h.nbatches);
+    if (want != h.block_len || (uint64_t)st.st_size != CACHE_BLOCK_OFFSET + h.block_len) {
+        snprintf(why, whylen, "it is truncated or has a wrong size (%lld bytes, %llu expected)",
+                 (long long)st.st_size, (unsigned long long)(CACHE_BLOCK_OFFSET + want));
+        goto out;
+    }
+    size_t maplen = (size_t)st.st_size;
+    uint8_t *m = mmap(NULL, maplen, PROT_READ, MAP_PRIVATE, fd, 0);
+    if (m == MAP_FAILED) {
+        snprintf(why, whylen, "it cannot be mapped: %s", strerror(errno));
+        goto out;
+    }
+    if (sd_hash64(m + CACHE_BLOCK_OFFSET, h.block_len, 0) != h.block_hash) {
+        munmap(m, maplen);
+        snprintf(why, whylen, "its data is corrupt (checksum mismatch)");
+        goto out;
+    }
+    memset(out, 0, sizeof *out);
+    out->n = h.n;
+    out->attrs = h.attrs;
+    out->k = h.k;
+    out->nbatches = h.nbatches;
+    memcpy(out->offset, h.offset, sizeof h.offset);
+    memcpy(out->bmin, h.bmin, sizeof h.bmin);
+    memcpy(out->bmax, h.bmax, sizeof h.bmax);
+    out->sigma = h.sigma;
+    out->F_raw_p99 = h.F_raw_p99;
+    memcpy(out->F_pct, h.F_pct, sizeof h.F_pct);
+    out->radius_median = h.radius_median;
+    out->n_dropped = h.n_dropped;
+    memcpy(out->format, h.format, sizeof out->format);
+    memcpy(out->scalar_name, h.scalar_name, sizeof out->scalar_name);
+    out->format[sizeof out->format - 1] = 0;
+    out->scalar_name[sizeof out->scalar_name - 1] = 0;
+    out->stats = h.stats;
+    out->map = m;
+    out->map_len = maplen;
+    pc_prepared_bind(out, m + CACHE_BLOCK_OFFSET);
+    rc = 1;
+out:
+    close(fd);
+    return rc;
+}
+
+static int write_all(int fd, const void *p, size_t len)
+{
+    const uint8_t *b = p;
+    while (len) {
+        ssize_t w = write(fd, b, len);
+        if (w < 0) {
+            if (errno == EINTR) continue;
+            return -1;
+        }
+        b += w;
+        len -= (size_t)w;
+    }
+    return 0;
+}
+
+/* Writes p to cpath through a temporary file, fsync and rename. */
+static int write_cache(const char *cpath, const src_key *key, const pc_prepared *p, sd_err *err)
+{
+    char dir[PATH_MAX], tmp[PATH_MAX + 32];
+    snprintf(dir, sizeof dir, "%s", cpath);
+    char *slash = strrchr(dir, '/');
+    if (slash) *slash = 0;
+    if (mkdir_p(dir) < 0)
+        return sd_errf(err, SD_EIO, "cannot create cache directory %s: %s", dir, strerror(errno));
+    snprintf(tmp, sizeof tmp, "%s.tmp.%ld", cpath, (long)getpid());
+
+    static const uint8_t zero[CACHE_BLOCK_OFFSET];
+    cache_header h;
+    memset(&h, 0, sizeof h);
+    memcpy(h.magic, CACHE_MAGIC, 8);
+    h.version = CACHE_VERSION;
+    h.byte_order = 0x01020304u;
+    h.src_size = key->size;
+    h.src_mtime_ns = key->mtime_ns;
+    h.src_hash = key->hash;
+    h.k = p->k;
+    h.attrs = p->attrs;
+    h.n = p->n;
+    h.nbatches = p->nbatches;
+    h.block_len = p->block_len;
+    h.block_hash = sd_hash64(p->block, p->block_len, 0);
+    memcpy(h.offset, p->offset, sizeof h.offset);
+    memcpy(h.bmin, p->bmin, sizeof h.bmin);
+    memcpy(h.bmax, p->bmax, sizeof h.bmax);
+    h.sigma = p->sigma;
+    h.F_raw_p99 = p->F_raw_p99;
+    memcpy(h.F_pct, p->F_pct, sizeof h.F_pct);
+    h.radius_median = p->radius_median;
+    h.n_dropped = p->n_dropped;
+    memcpy(h.format, p->format, sizeof h.format);
+    memcpy(h.scalar_name, p->scalar_name, sizeof h.scalar_name);
+    h.stats = p->stats;
+    h.header_hash = sd_hash64(&h, offsetof(cache_header, header_hash), 0);
+
+    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0) return sd_errf(err, SD_EIO, "cannot write cache %s: %s", tmp, strerror(errno));
+    int bad = write_all(fd, &h, sizeof h) || write_all(fd, zero, CACHE_BLOCK_OFFSET - sizeof h) ||
+              write_all(fd, p->block, p->block_len) || fsync(fd);
+    int saved = errno;
+    if (close(fd) < 0 && !bad) {
+        bad = 1;
+        saved = errno;
+    }
+    if (bad || rename(tmp, cpath) < 0) {
+        if (!bad) saved = errno;
+        unlink(tmp);
+        return sd_errf(err, SD_EIO, "cannot write cache %s: %s", cpath, strerror(saved));
+    }
+    int dfd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (dfd >= 0) {
+        fsync(dfd); /* make the rename durable */
+        close(dfd);
+    }
+    return 0;
+}
+
+int cache_open_cloud(const char *src, const cache_desc *d, pc_prepared *out, cache_result *res,
+                     sd_err *err)
+{
+    cache_desc dd = d ? *d : (cache_desc){0};
+    if (dd.k <= 0) dd.k = 24;
+    cache_result rr;
+    memset(&rr, 0, sizeof rr);
+    memset(out, 0, sizeof *out);
+    int rc;
+
+    double t0 = now_s();
+    src_key key = {0};
+    if ((rc = source_key(src, &key, err)) < 0) return rc;
+    rr.file_size = key.size;
+    if ((rc = cache_path_for(src, dd.dir, dd.k, rr.path, sizeof rr.path, err)) < 0) return rc;
+
+    if (!dd.force) {
+        int got = try_load(rr.path, &key, dd.k, out, rr.why, sizeof rr.why);
+        if (got == 1) {
+            rr.hit = 1;
+            rr.t_read = now_s() - t0;
+            snprintf(rr.why, sizeof rr.why, "cache valid");
+            if (res) *res = rr;
+            return 0;
+        }
+        if (got < 0 && dd.warn) {
+            char msg[4600];
+            snprintf(msg, sizeof msg, "cache %s: %s; rebuilding it", rr.path, rr.why);
+            dd.warn(dd.user, msg);
+        }
+    } else {
+        snprintf(rr.why, sizeof rr.why, "rebuild forced");
+    }
+
+    pc_cloud cloud;
+    if ((rc = pc_load(src, &cloud, err)) < 0) return rc;
+    rr.t_read = now_s() - t0;
+
+    double t1 = now_s();
+    prep_desc pd = {.k = dd.k, .threads = dd.threads, .progress = dd.progress, .user = dd.user};
+    rc = prep_run(&cloud, &pd, out, err);
+    pc_cloud_free(&cloud);
+    if (rc < 0) return rc;
+    rr.t_prep = now_s() - t1;
+
+    double t2 = now_s();
+    sd_err werr = {0};
+    if (write_cache(rr.path, &key, out, &werr) < 0 && dd.warn) {
+        char msg[700];
+        snprintf(msg, sizeof msg, "%s (continuing without a cache)", werr.msg);
+        dd.warn(dd.user, msg);
+    }
+    rr.t_write = now_s() - t2;
+    if (res) *res = rr;
+    return 0;
+}
+
+int cache__set_version(const char *cache_path, uint32_t version)
+{
+    int fd = open(cache_path, O_RDWR | O_CLOEXEC);
+    if (fd < 0) return -1;
+    cache_header h;
+    int rc = -1;
+    if (pread(fd, &h, sizeof h, 0) == (ssize_t)sizeof h) {
+        h.version = version;
+        h.header_hash = sd_hash64(&h, offsetof(cache_header, header_hash), 0);
+        if (pwrite(fd, &h, sizeof h, 0) == (ssize_t)sizeof h) rc = 0;
+    }
+    close(fd);
+    return rc;
+}

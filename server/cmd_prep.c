@@ -1,0 +1,114 @@
+/* cmd_prep.c — `splatd prep FILE [--k N] [--cache DIR] [--threads N] [--force]`: loads (or
+ * reloads from the cache) one cloud and prints its summary and the time of each phase. */
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "cache.h"
+#include "commands.h"
+#include "prep.h"
+
+static void warn_stderr(void *user, const char *msg)
+{
+    (void)user;
+    fprintf(stderr, "splatd prep: warning: %s\n", msg);
+}
+
+static int parse_int(const char *opt, const char *s, int lo, int hi, int *out)
+{
+    char *end;
+    errno = 0;
+    long v = strtol(s ? s : "", &end, 10);
+    if (!s || end == s || *end || errno || v < lo || v > hi) {
+        fprintf(stderr, "splatd prep: %s needs an integer in [%d, %d], got '%s'\n", opt, lo, hi,
+                s ? s : "(nothing)");
+        return -1;
+    }
+    *out = (int)v;
+    return 0;
+}
+
+int cmd_prep(int argc, char **argv)
+{
+    const char *file = NULL;
+    cache_desc d = {.k = 24, .warn = warn_stderr, .progress = prep_progress_stderr};
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        if (!strcmp(a, "--k")) {
+            if (parse_int("--k", i + 1 < argc ? argv[++i] : NULL, 1, 256, &d.k) < 0) return 2;
+        } else if (!strcmp(a, "--threads")) {
+            if (parse_int("--threads", i + 1 < argc ? argv[++i] : NULL, 1, 1024, &d.threads) < 0)
+                return 2;
+        } else if (!strcmp(a, "--cache")) {
+            if (i + 1 >= argc) {
+                fprintf(stderr, "splatd prep: --cache needs a directory\n");
+                return 2;
+            }
+            d.dir = argv[++i];
+        } else if (!strcmp(a, "--force")) {
+            d.force = 1;
+        } else if (!strcmp(a, "--quiet")) {
+            d.progress = NULL;
+        } else if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
+            printf("usage: splatd prep FILE [--k N] [--cache DIR] [--threads N] [--force] [--quiet]\n"
+                   "  Loads FILE (ply, pcd, las, xyz, pts, txt), computes normals, splat radii,\n"
+                   "  the uncertainty field F and point spacing with k nearest neighbours\n"
+                   "  (default k = 24), caches the result and prints a summary.\n");
+            return 0;
+        } else if (a[0] == '-') {
+            fprintf(stderr, "splatd prep: unknown option '%s' (see splatd prep --help)\n", a);
+            return 2;
+        } else if (!file) {
+            file = a;
+        } else {
+            fprintf(stderr, "splatd prep: one FILE only ('%s' is extra)\n", a);
+            return 2;
+        }
+    }
+    if (!file) {
+        fprintf(stderr, "usage: splatd prep FILE [--k N] [--cache DIR] [--threads N] [--force]\n");
+        return 2;
+    }
+
+    pc_prepared p;
+    cache_result r;
+    sd_err err = {0};
+    if (cache_open_cloud(file, &d, &p, &r, &err) < 0) {
+        fprintf(stderr, "splatd prep: %s\n", err.msg);
+        return 1;
+    }
+    char attrs[128];
+    pc_attr_names(p.attrs, attrs, sizeof attrs);
+    printf("file        %s (%llu bytes)\n", file, (unsigned long long)r.file_size);
+    printf("format      %s\n", p.format);
+    printf("points      %llu kept, %llu dropped (non-finite)\n", (unsigned long long)p.n,
+           (unsigned long long)p.n_dropped);
+    printf("bounds      x [%.6f, %.6f]  y [%.6f, %.6f]  z [%.6f, %.6f]\n", p.bmin[0], p.bmax[0],
+           p.bmin[1], p.bmax[1], p.bmin[2], p.bmax[2]);
+    printf("offset      %.6f %.6f %.6f (subtracted; float32 coordinates are relative to it)\n",
+           p.offset[0], p.offset[1], p.offset[2]);
+    printf("attributes  %s%s%s\n", attrs, p.scalar_name[0] ? "  scalar=" : "", p.scalar_name);
+    printf("k           %u\n", p.k);
+    printf("batches     %llu (up to %d points each, Morton order)\n",
+           (unsigned long long)p.nbatches, PC_BATCH_POINTS);
+    printf("sigma       %.6g (median nearest-neighbour distance)\n", p.sigma);
+    printf("radius      %.6g (median splat radius)\n", p.radius_median);
+    printf("F           p1 %.3f  p25 %.3f  p50 %.3f  p75 %.3f  p99 %.3f  (raw p99 %.4g)\n",
+           p.F_pct[0], p.F_pct[1], p.F_pct[2], p.F_pct[3], p.F_pct[4], p.F_raw_p99);
+    printf("cache       %s (%s)\n", r.path, r.hit ? "hit" : r.why);
+    if (r.hit) {
+        printf("time        cached load %.1f ms\n", r.t_read * 1e3);
+        printf("            (first prep: knn build %.3f s, knn query %.3f s, normals %.3f s, "
+               "radius %.3f s, field %.3f s, reorder %.3f s)\n",
+               p.stats.t_knn_build, p.stats.t_knn_query, p.stats.t_normals, p.stats.t_radius,
+               p.stats.t_field, p.stats.t_reorder);
+    } else {
+        printf("time        read %.3f s, prep %.3f s (reorder %.3f, knn build %.3f, knn query %.3f, "
+               "normals %.3f, radius %.3f, field %.3f), cache write %.3f s\n",
+               r.t_read, r.t_prep, p.stats.t_reorder, p.stats.t_knn_build, p.stats.t_knn_query,
+               p.stats.t_normals, p.stats.t_radius, p.stats.t_field, r.t_write);
+    }
+    pc_prepared_free(&p);
+    return 0;
+}

@@ -1,0 +1,403 @@
+/* prep.c — preprocessing orchestration; see prep.h for the steps and rules. */
+#include "prep.h"
+
+#include <float.h>
+#include <math.h>
+#include <stddef.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "morton.h"
+#include "pca.h"
+
+enum { CHUNK = 16384 }; /* queries per parallel work unit */
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+/* ---- selection ---- */
+
+float prep_percentile(float *v, size_t n, double q)
+{
+    if (n == 0) return 0;
+    if (!(q >= 0)) q = 0;
+    if (q > 1) q = 1;
+    ptrdiff_t want = (ptrdiff_t)floor(q * (double)(n - 1) + 0.5);
+    ptrdiff_t lo = 0, hi = (ptrdiff_t)n - 1;
+    /* Quickselect with Hoare partitioning around a median of three; scans stop on elements
+     * equal to the pivot, so runs of equal values (regular grids, clamped F) stay O(n). */
+    while (lo < hi) {
+        ptrdiff_t mid = lo + (hi - lo) / 2;
+        float a = v[lo], b = v[mid], c = v[hi];
+        float piv = a < b ? (b < c ? b : (a < c ? c : a)) : (a < c ? a : (b < c ? c : b));
+        ptrdiff_t i = lo, j = hi;
+        while (i <= j) {
+            while (v[i] < piv) i++;
+            while (v[j] > piv) j--;
+            if (i <= j) {
+                float t = v[i]; v[i] = v[j]; v[j] = t;
+                i++;
+                j--;
+            }
+        }
+        /* now v[lo..j] <= piv, v[j+1..i-1] == piv, v[i..hi] >= piv */
+        if (want <= j) hi = j;
+        else if (want >= i) lo = i;
+        else return v[want];
+    }
+    return v[want];
+}
+
+/* ---- the job shared by the workers ---- */
+
+typedef struct worker {
+    prep_knn_scratch *ks;
+    uint32_t *idx;          /* CHUNK * K, when neighbour lists are not kept */
+    float *d2;              /* CHUNK * K */
+    double t_query, t_normal, t_radius, t_field;
+} worker;
+
+typedef struct job {
+    pc_prepared *p;
+    const prep_knn *kn;
+    int K;
+    uint32_t *nbr;          /* n * K kept neighbour lists, or NULL */
+    float *nnd;             /* n nearest-neighbour distances */
+    int need_normal, need_radius;
+    double centroid[3];
+    worker *w;
+} job;
+
+/* Orients the unit normal n of point p by the rule of prep.h. */
+static void orient(float n[3], const float p[3], const double c[3])
+{
+    double u[3] = {p[0] - c[0], p[1] - c[1], p[2] - c[2]};
+    double d = n[0] * u[0] + n[1] * u[1] + n[2] * u[2];
+    double ul = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+    int flip;
+    if (fabs(d) >= 0.17364817766693 * ul && ul > 0) /* cos 80 degrees */
+        flip = d < 0;
+    else if (fabs(n[2]) >= 0.1f)
+        flip = n[2] < 0;
+    else if (fabs(n[1]) >= 0.1f)
+        flip = n[1] < 0;
+    else
+        flip = n[0] < 0;
+    if (flip) {
+        n[0] = -n[0];
+        n[1] = -n[1];
+        n[2] = -n[2];
+    }
+}
+
+/* The chunk's neighbour lists: the kept ones, or a fresh query into the worker's buffer. */
+static int chunk_neighbours(job *jb, worker *w, size_t first, size_t m, int query,
+                            uint32_t **idx, sd_err *err)
+{
+    *idx = jb->nbr ? jb->nbr + first * (size_t)jb->K : w->idx;
+    if (!query) return 0;
+    double t0 = now_s();
+    int rc = prep_knn_query(jb->kn, NULL, first, m, jb->K, *idx, w->d2, w->ks, err);
+    w->t_query += now_s() - t0;
+    return rc;
+}
+
+/* Phase 1 for one chunk: kNN, nearest distance, radius and normal of its points. */
+static int chunk_normals(void *ctx, size_t c, int tid, sd_err *err)
+{
+    job *jb = ctx;
+    worker *w = &jb->w[tid];
+    pc_prepared *p = jb->p;
+    size_t first = c * CHUNK, m = p->n - first < CHUNK ? p->n - first : CHUNK;
+    int K = jb->K;
+    uint32_t *idx;
+    int rc = chunk_neighbours(jb, w, first, m, 1, &idx, err);
+    if (rc != 0) return rc;
+    double t0 = now_s();
+    float inv_sqrt_k = (float)(1.0 / sqrt((double)K));
+    for (size_t i = 0; i < m; i++) {
+        const float *d = w->d2 + i * (size_t)K;
+        jb->nnd[first + i] = sqrtf(d[0]);
+        if (jb->need_radius) p->radius[first + i] = 2.0f * sqrtf(d[K - 1]) * inv_sqrt_k;
+    }
+    double t1 = now_s();
+    w->t_radius += t1 - t0;
+    if (jb->need_normal) {
+        for (size_t i = 0; i < m; i++) {
+            size_t pi = first + i;
+            float *n = p->normal + 3 * pi;
+            prep_pca_normal(p->pos, (uint32_t)pi, idx + i * (size_t)K, K, n, NULL);
+            orient(n, p->pos + 3 * pi, jb->centroid);
+        }
+        w->t_normal += now_s() - t1;
+    }
+    return 0;
+}
+
+/* Phase 2 for one chunk: raw F (eq. 21) into p->F. */
+static int chunk_field(void *ctx, size_t c, int tid, sd_err *err)
+{
+    job *jb = ctx;
+    worker *w = &jb->w[tid];
+    pc_prepared *p = jb->p;
+    size_t first = c * CHUNK, m = p->n - first < CHUNK ? p->n - first : CHUNK;
+    int K = jb->K;
+    uint32_t *idx;
+    int rc = chunk_neighbours(jb, w, first, m, jb->nbr == NULL, &idx, err);
+    if (rc != 0) return rc;
+    double t0 = now_s();
+    for (size_t i = 0; i < m; i++) {
+        size_t pi = first + i;
+        const float *ni = p->normal + 3 * pi;
+        const uint32_t *nb = idx + i * (size_t)K;
+        float s = 0;
+        for (int j = 0; j < K; j++) {
+            const float *nj = p->normal + 3 * (size_t)nb[j];
+            float dd = fabsf(ni[0] * nj[0] + ni[1] * nj[1] + ni[2] * nj[2]);
+            if (dd > 1) dd = 1; /* file normals may be slightly off unit length */
+            float t = 2 - dd;
+            s += t * t;
+        }
+        float f = p->radius[pi] * s / (float)K;
+        /* a file's radius or normal may be non-finite or negative: such a point gets F = 0
+         * rather than poisoning the percentiles */
+        p->F[pi] = f >= 0 && f <= FLT_MAX ? f : 0.0f;
+    }
+    w->t_field += now_s() - t0;
+    return 0;
+}
+
+/* ---- steps ---- */
+
+/* Checks the cloud and the desc; fills d with defaults. */
+static int check_input(const pc_cloud *in, const prep_desc *desc, prep_desc *d, sd_err *err)
+{
+    *d = desc ? *desc : (prep_desc){0};
+    if (d->k == 0) d->k = 24;
+    if (d->threads <= 0) d->threads = prep_default_threads();
+    if (d->max_nbr_bytes == 0) d->max_nbr_bytes = (size_t)1 << 30;
+    if (!in) return sd_errf(err, SD_EINVAL, "prep: no cloud given");
+    if (d->k < 1 || d->k > 256)
+        return sd_errf(err, SD_EINVAL, "prep: k = %d neighbours is outside [1, 256]", d->k);
+    if (d->knn != PREP_KNN_GRID && d->knn != PREP_KNN_FLANN)
+        return sd_errf(err, SD_EINVAL, "prep: unknown kNN method %d", (int)d->knn);
+    if (in->n == 0 || !in->pos) return sd_errf(err, SD_EINVAL, "prep: the cloud has no points");
+    if (in->n >= ((size_t)1 << 31))
+        return sd_errf(err, SD_ELIMIT, "prep: %zu points is over the limit of 2^31 - 1", in->n);
+    struct { uint32_t bit; const void *arr; const char *name; } a[] = {
+        {PC_ATTR_RGB, in->rgba, "rgb"},           {PC_ATTR_NORMAL, in->normal, "normal"},
+        {PC_ATTR_INTENSITY, in->intensity, "intensity"}, {PC_ATTR_CLASS, in->cls, "class"},
+        {PC_ATTR_RADIUS, in->radius, "radius"},   {PC_ATTR_SCALAR, in->scalar, "scalar"},
+    };
+    for (size_t i = 0; i < sizeof a / sizeof a[0]; i++)
+        if ((in->attrs & a[i].bit) && !a[i].arr)
+            return sd_errf(err, SD_EINVAL, "prep: the cloud claims a %s attribute but has no "
+                           "%s array", a[i].name, a[i].name);
+    return 0;
+}
+
+/* Step 1: Morton order, attribute permutation, batches, summary. Allocates out. */
+static int reorder(const pc_cloud *in, int K, pc_prepared *out, double centroid[3], sd_err *err)
+{
+    size_t n = in->n;
+    prep_morton_frame f;
+    prep_morton_frame_of(in->pos, n, &f);
+    uint64_t *codes = malloc(n * sizeof *codes);
+    uint32_t *perm = malloc(n * sizeof *perm);
+    if (!codes || !perm) {
+        free(codes); free(perm);
+        return sd_errf(err, SD_ENOMEM, "prep: out of memory ordering %zu points", n);
+    }
+    int rc = prep_morton_sort(in->pos, n, &f, codes, perm, err);
+    free(codes);
+    if (rc != 0) {
+        free(perm);
+        return rc;
+    }
+    out->n = n;
+    out->attrs = (in->attrs & (PC_ATTR_RGB | PC_ATTR_NORMAL | PC_ATTR_INTENSITY | PC_ATTR_CLASS |
+                               PC_ATTR_RADIUS | PC_ATTR_SCALAR)) |
+                 PC_ATTR_NORMAL | PC_ATTR_RADIUS | PC_ATTR_F;
+    out->nbatches = (n + PC_BATCH_POINTS - 1) / PC_BATCH_POINTS;
+    out->k = (uint32_t)K;
+    rc = pc_prepared_alloc(out, err);
+    if (rc != 0) {
+        free(perm);
+        return rc;
+    }
+    double c[3] = {0, 0, 0};
+    for (size_t i = 0; i < n; i++) {
+        size_t s = perm[i];
+        memcpy(out->pos + 3 * i, in->pos + 3 * s, 3 * sizeof(float));
+        for (int a = 0; a < 3; a++) c[a] += out->pos[3 * i + a];
+        if (in->attrs & PC_ATTR_NORMAL) memcpy(out->normal + 3 * i, in->normal + 3 * s, 12);
+        if (in->attrs & PC_ATTR_RADIUS) out->radius[i] = in->radius[s];
+        if (in->attrs & PC_ATTR_RGB) memcpy(out->rgba + 4 * i, in->rgba + 4 * s, 4);
+        if (in->attrs & PC_ATTR_INTENSITY) out->intensity[i] = in->intensity[s];
+        if (in->attrs & PC_ATTR_CLASS) out->cls[i] = in->cls[s];
+        if (in->attrs & PC_ATTR_SCALAR) out->scalar[i] = in->scalar[s];
+    }
+    free(perm);
+    for (int a = 0; a < 3; a++) centroid[a] = c[a] / (double)n;
+    for (uint64_t b = 0; b < out->nbatches; b++) {
+        pc_batch *bt = &out->batches[b];
+        bt->first = (uint32_t)(b * PC_BATCH_POINTS);
+        bt->count = (uint32_t)(n - bt->first < PC_BATCH_POINTS ? n - bt->first : PC_BATCH_POINTS);
+        const float *p = out->pos + 3 * (size_t)bt->first;
+        for (int a = 0; a < 3; a++) bt->bmin[a] = bt->bmax[a] = p[a];
+        for (uint32_t i = 1; i < bt->count; i++)
+            for (int a = 0; a < 3; a++) {
+                float v = p[3 * i + a];
+                if (v < bt->bmin[a]) bt->bmin[a] = v;
+                if (v > bt->bmax[a]) bt->bmax[a] = v;
+            }
+    }
+    memcpy(out->offset, in->offset, sizeof out->offset);
+    memcpy(out->bmin, in->bmin, sizeof out->bmin);
+    memcpy(out->bmax, in->bmax, sizeof out->bmax);
+    out->n_dropped = in->n_dropped;
+    memcpy(out->format, in->format, sizeof out->format);
+    memcpy(out->scalar_name, in->scalar_name, sizeof out->scalar_name);
+    out->format[sizeof out->format - 1] = 0;
+    out->scalar_name[sizeof out->scalar_name - 1] = 0;
+    return 0;
+}
+
+/* A cloud of one point has no neighbours: an upward normal, radius 1, F 0, sigma 0. */
+static void single_point(pc_prepared *p, int had_normal, int had_radius)
+{
+    if (!had_normal) { p->normal[0] = 0; p->normal[1] = 0; p->normal[2] = 1; }
+    if (!had_radius) p->radius[0] = 1;
+    p->F[0] = 0;
+    p->radius_median = p->radius[0];
+}
+
+/* Step 6 and F's normalisation: percentiles over the whole cloud. tmp holds n floats. */
+static void summarise(pc_prepared *p, const float *nnd, float *tmp)
+{
+    size_t n = p->n;
+    memcpy(tmp, nnd, n * sizeof *tmp);
+    p->sigma = prep_percentile(tmp, n, 0.5);
+    memcpy(tmp, p->radius, n * sizeof *tmp);
+    p->radius_median = prep_percentile(tmp, n, 0.5);
+    memcpy(tmp, p->F, n * sizeof *tmp);
+    float p99 = prep_percentile(tmp, n, 0.99);
+    p->F_raw_p99 = p99;
+    for (size_t i = 0; i < n; i++) {
+        float v = p99 > 0 ? p->F[i] / p99 : (p->F[i] > 0 ? 1.0f : 0.0f);
+        p->F[i] = v < 0 ? 0 : (v > 1 ? 1 : v);
+    }
+    static const double q[5] = {0.01, 0.25, 0.5, 0.75, 0.99};
+    memcpy(tmp, p->F, n * sizeof *tmp);
+    for (int i = 0; i < 5; i++) p->F_pct[i] = prep_percentile(tmp, n, q[i]);
+}
+
+int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err *err)
+{
+    prep_desc d;
+    if (out) memset(out, 0, sizeof *out);
+    if (!out) return sd_errf(err, SD_EINVAL, "prep: no output given");
+    int rc = check_input(in, desc, &d, err);
+    if (rc != 0) return rc;
+    size_t n = in->n;
+    int K = (size_t)d.k < n ? d.k : (int)(n - 1);
+    prep_progress pr;
+    job jb = {.p = out, .K = K};
+    jb.need_normal = !(in->attrs & PC_ATTR_NORMAL);
+    jb.need_radius = !(in->attrs & PC_ATTR_RADIUS);
+    prep_knn *kn = NULL;
+    worker *w = NULL;
+    float *tmp = NULL;
+    size_t nchunks = (n + CHUNK - 1) / CHUNK;
+    int threads = d.threads < 1 ? 1 : ((size_t)d.threads > nchunks ? (int)nchunks : d.threads);
+    double wall, tq, tn, tr, tf, sum;
+
+    double t0 = now_s();
+    prep_progress_begin(&pr, d.progress, d.user, "reorder");
+    rc = reorder(in, K, out, jb.centroid, err);
+    if (rc != 0) goto fail;
+    prep_progress_end(&pr);
+    out->stats.t_reorder = now_s() - t0;
+    if (n == 1) {
+        single_point(out, !jb.need_normal, !jb.need_radius);
+        return 0;
+    }
+
+    t0 = now_s();
+    prep_progress_begin(&pr, d.progress, d.user, "knn-build");
+    prep_knn_opts ko = {.method = d.knn, .leaf_size = d.knn_leaf, .flann_cores = 1};
+    rc = prep_knn_build(out->pos, n, &ko, &kn, err);
+    if (rc != 0) goto fail;
+    prep_progress_end(&pr);
+    out->stats.t_knn_build = now_s() - t0;
+
+    size_t per_nbr = (size_t)K * sizeof(uint32_t);
+    int keep = n <= d.max_nbr_bytes / per_nbr;
+    jb.kn = kn;
+    jb.nnd = malloc(n * sizeof *jb.nnd);
+    jb.nbr = keep ? malloc(n * per_nbr) : NULL;
+    w = calloc((size_t)threads, sizeof *w);
+    if (!jb.nnd || (keep && !jb.nbr) || !w) goto nomem;
+    jb.w = w;
+    for (int t = 0; t < threads; t++) {
+        w[t].ks = prep_knn_scratch_new();
+        w[t].d2 = malloc((size_t)CHUNK * per_nbr);
+        w[t].idx = keep ? NULL : malloc((size_t)CHUNK * per_nbr);
+        if (!w[t].ks || !w[t].d2 || (!keep && !w[t].idx)) goto nomem;
+    }
+
+    t0 = now_s();
+    prep_progress_begin(&pr, d.progress, d.user, "normals");
+    rc = prep_par_for(threads, nchunks, chunk_normals, &jb, &pr, err);
+    if (rc != 0) goto fail;
+    wall = now_s() - t0;
+    tq = tn = tr = 0;
+    for (int t = 0; t < threads; t++) {
+        tq += w[t].t_query; tn += w[t].t_normal; tr += w[t].t_radius;
+        w[t].t_query = 0;
+    }
+    /* The three run fused per chunk: split the wall time in proportion to the work. */
+    sum = tq + tn + tr > 0 ? tq + tn + tr : 1;
+    out->stats.t_knn_query = wall * tq / sum;
+    out->stats.t_normals = wall * tn / sum;
+    out->stats.t_radius = wall * tr / sum;
+
+    t0 = now_s();
+    prep_progress_begin(&pr, d.progress, d.user, "field");
+    rc = prep_par_for(threads, nchunks, chunk_field, &jb, &pr, err);
+    if (rc != 0) goto fail;
+    tmp = malloc(n * sizeof *tmp);
+    if (!tmp) goto nomem;
+    summarise(out, jb.nnd, tmp);
+    wall = now_s() - t0;
+    tf = tq = 0;
+    for (int t = 0; t < threads; t++) { tq += w[t].t_query; tf += w[t].t_field; }
+    sum = tq + tf > 0 ? tq + tf : 1;
+    out->stats.t_knn_query += wall * tq / sum;
+    out->stats.t_field = wall * tf / sum;
+    rc = 0;
+    goto done;
+
+nomem:
+    rc = sd_errf(err, SD_ENOMEM, "prep: out of memory for the neighbours of %zu points", n);
+fail:
+    pc_prepared_free(out);
+done:
+    free(tmp);
+    if (w)
+        for (int t = 0; t < threads; t++) {
+            prep_knn_scratch_free(w[t].ks);
+            free(w[t].d2);
+            free(w[t].idx);
+        }
+    free(w);
+    free(jb.nnd);
+    free(jb.nbr);
+    prep_knn_free(kn);
+    return rc;
+}

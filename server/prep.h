@@ -1,0 +1,56 @@
+/* prep.h — preprocessing: a pc_cloud becomes a pc_prepared (prepared.h).
+ *
+ * Steps, in this order:
+ *  1. Morton order: 63-bit codes over the cloud's bounding cube, stable radix sort, and every
+ *     attribute permuted alongside (colour and the rest stay with their point). Then batches of
+ *     PC_BATCH_POINTS consecutive points with tight bounding boxes. Doing this first makes the
+ *     kNN queries below run in Morton order, which keeps their memory accesses local.
+ *  2. k nearest neighbours of every point (knn.h: the Morton-cell grid by default, FLANN's
+ *     exact single kd-tree on request), on desc.threads threads, in chunks of 16384 queries.
+ *  3. Normals, only when the file has none: PCA of the point and its k neighbours (eigenvector
+ *     of the covariance's smallest eigenvalue, pca.h). Orientation rule: away from the cloud's
+ *     centroid c, n . (p - c) >= 0; where that says little (n within 10 degrees of perpendicular
+ *     to p - c, e.g. any plane through c) the normal faces up instead: n_z >= 0, or when
+ *     |n_z| < 0.1 (near-vertical surfaces) n_y >= 0, or when |n_y| < 0.1 too, n_x >= 0.
+ *  4. Radius, only when the file has none: r = 2 R / sqrt(K), R = distance to the farthest of
+ *     the K neighbours (Soft Transparency eq. 20 as DESIGN.md interprets it).
+ *  5. F (eq. 21 with |n_i . n_j|, PCA normals being unoriented):
+ *     F_i = r_i * sum_j (2 - |n_i . n_j|)^2 / K, divided by the cloud's 99th percentile of F
+ *     (F_raw_p99) and clamped to [0, 1].
+ *  6. sigma = the median distance to the nearest other point; radius_median; F percentiles.
+ * Neighbour lists are kept between steps 3 and 5 (K * 4 bytes a point: 96 MB for 1M points,
+ * k = 24) when they fit desc.max_nbr_bytes; otherwise step 5 runs the kNN a second time.
+ * Results do not depend on the thread count. */
+#pragma once
+#include <stddef.h>
+
+#include "cloud.h"
+#include "knn.h"
+#include "prepared.h"
+#include "progress.h"
+#include "sd_err.h"
+
+typedef struct prep_desc {
+    int k;                 /* default 24: neighbours per point, 1..256 (fewer when the cloud
+                              has no more than k points: then n - 1) */
+    int threads;           /* default 0: every online core */
+    prep_knn_method knn;   /* default PREP_KNN_GRID; PREP_KNN_FLANN: FLANN's kd-tree */
+    int knn_leaf;          /* default 0: the method's default leaf size (knn.h) */
+    size_t max_nbr_bytes;  /* default 0: 1 GiB. Neighbour lists above this are recomputed for F
+                              instead of kept */
+    void (*progress)(void *user, const char *phase, double fraction); /* default none; called
+                              on the calling thread, phases "reorder", "knn-build", "normals",
+                              "field", increasing multiples of 1/20 from 0 to 1 (progress.h) */
+    void *user;
+} prep_desc;
+
+/* prep_run: preprocesses in (unchanged) into out, a heap pc_prepared (free it with
+ * pc_prepared_free). out is zeroed first. Returns 0, or SD_EINVAL (bad desc or cloud: no points,
+ * an attribute bit without its array), SD_ELIMIT (2^31 points or more) or SD_ENOMEM, with err
+ * filled and out empty. */
+int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err *err);
+
+/* prep_percentile: the q-quantile (0..1, nearest rank on the sorted values: index
+ * round(q * (n - 1))) of the n values v, which it reorders (selection, not a full sort).
+ * 0 when n is 0. */
+float prep_percentile(float *v, size_t n, double q);

@@ -1,0 +1,218 @@
+/* gen_cloud — a deterministic synthetic scan-like point cloud, as binary little-endian PLY.
+ *
+ *   gen_cloud N out.ply [--seed S]
+ *
+ * Writes N points (x y z float, red green blue uchar) of a 100 m outdoor scene in metres:
+ *   50 %  ground: a disc of radius 50 m with gentle undulation, sampled like a terrestrial
+ *         scanner at the origin would (areal density falling as 1 / distance);
+ *   20 %  four box buildings (walls and roofs), 7 % three cylinders (poles, a tank),
+ *    5 %  a sphere of radius 4 m, 17 % a 'vegetation' blob: points scattered through a ball
+ *         (a tree crown);
+ *    1 %  noise: points scattered uniformly through the scene's box (mixed pixels, birds);
+ * every surface point moved by Gaussian noise of 1 cm per axis. Same N and seed, same bytes:
+ * the generator is splitmix64 with a fixed default seed. Only standard C; 1M points take well
+ * under a second. */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct rng {
+    uint64_t s;
+} rng;
+
+/* splitmix64: the next 64 random bits. */
+static uint64_t next64(rng *r)
+{
+    uint64_t z = (r->s += 0x9e3779b97f4a7c15ull);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
+}
+
+/* Uniform in [0, 1). */
+static double uni(rng *r)
+{
+    return (double)(next64(r) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+/* Standard normal (Box-Muller, one value per call for simplicity). */
+static double gauss(rng *r)
+{
+    double u = uni(r), v = uni(r);
+    return sqrt(-2.0 * log(1.0 - u)) * cos(6.283185307179586 * v);
+}
+
+typedef struct pt {
+    float x, y, z;
+    uint8_t c[3];
+} pt;
+
+static const double NOISE = 0.01; /* metres, per axis */
+
+static double ground_z(double x, double y)
+{
+    return 0.3 * sin(x / 7.0) * cos(y / 9.0) + 0.1 * sin(x / 2.3 + y / 3.1);
+}
+
+static void colour(pt *p, rng *r, int R, int G, int B)
+{
+    int v = (int)(uni(r) * 30) - 15;
+    int c[3] = {R + v, G + v, B + v};
+    for (int i = 0; i < 3; i++) p->c[i] = (uint8_t)(c[i] < 0 ? 0 : (c[i] > 255 ? 255 : c[i]));
+}
+
+static void jitter(pt *p, rng *r, double x, double y, double z)
+{
+    p->x = (float)(x + NOISE * gauss(r));
+    p->y = (float)(y + NOISE * gauss(r));
+    p->z = (float)(z + NOISE * gauss(r));
+}
+
+static void ground(pt *p, rng *r)
+{
+    double t = 6.283185307179586 * uni(r), d = 1.0 + 49.0 * uni(r);
+    double x = d * cos(t), y = d * sin(t);
+    jitter(p, r, x, y, ground_z(x, y));
+    colour(p, r, 110, 120, 70);
+}
+
+static void building(pt *p, rng *r)
+{
+    static const double b[4][5] = { /* centre x, y, size x, y, height */
+        {20, 15, 12, 8, 9}, {-25, 10, 10, 14, 14}, {10, -30, 15, 10, 6}, {-15, -25, 8, 8, 11}};
+    const double *B = b[next64(r) % 4];
+    double aw = B[2] * B[4], ad = B[3] * B[4], ar = B[2] * B[3];
+    double u = uni(r) * (2 * aw + 2 * ad + ar), s = uni(r), t = uni(r);
+    double x0 = B[0] - B[2] / 2, y0 = B[1] - B[3] / 2, x, y, z;
+    if (u < 2 * aw) { x = x0 + s * B[2]; y = u < aw ? y0 : y0 + B[3]; z = t * B[4]; }
+    else if (u < 2 * aw + 2 * ad) { y = y0 + s * B[3]; x = u < 2 * aw + ad ? x0 : x0 + B[2]; z = t * B[4]; }
+    else { x = x0 + s * B[2]; y = y0 + t * B[3]; z = B[4]; }
+    jitter(p, r, x, y, z + ground_z(B[0], B[1]));
+    colour(p, r, 160, 155, 150);
+}
+
+static void cylinder(pt *p, rng *r)
+{
+    static const double c[3][4] = {{5, 5, 0.3, 8}, {-5, 30, 3, 6}, {35, -10, 0.5, 10}};
+    const double *C = c[next64(r) % 3];
+    double t = 6.283185307179586 * uni(r);
+    jitter(p, r, C[0] + C[2] * cos(t), C[1] + C[2] * sin(t), uni(r) * C[3]);
+    colour(p, r, 60, 90, 170);
+}
+
+static void sphere(pt *p, rng *r)
+{
+    double z = 2 * uni(r) - 1, t = 6.283185307179586 * uni(r), s = sqrt(1 - z * z);
+    jitter(p, r, 0 + 4 * s * cos(t), 25 + 4 * s * sin(t), 6 + 4 * z);
+    colour(p, r, 190, 60, 50);
+}
+
+static void vegetation(pt *p, rng *r)
+{
+    double x, y, z;
+    do {
+        x = 2 * uni(r) - 1; y = 2 * uni(r) - 1; z = 2 * uni(r) - 1;
+    } while (x * x + y * y + z * z > 1);
+    jitter(p, r, -30 + 5 * x, -5 + 5 * y, 7 + 4 * z);
+    colour(p, r, 50, 130, 40);
+}
+
+static void noise(pt *p, rng *r)
+{
+    p->x = (float)(100 * uni(r) - 50);
+    p->y = (float)(100 * uni(r) - 50);
+    p->z = (float)(16 * uni(r) - 1);
+    colour(p, r, 128, 128, 128);
+}
+
+/* Which generator makes point i of n: fixed shares of the scene, interleaved so any prefix of
+ * the file is a thinned version of the whole scene. */
+static void make_point(pt *p, rng *r)
+{
+    uint64_t u = next64(r) % 1000;
+    if (u < 500) ground(p, r);
+    else if (u < 700) building(p, r);
+    else if (u < 770) cylinder(p, r);
+    else if (u < 820) sphere(p, r);
+    else if (u < 990) vegetation(p, r);
+    else noise(p, r);
+}
+
+static void put_f32(uint8_t *b, float v)
+{
+    uint32_t u;
+    memcpy(&u, &v, 4);
+    b[0] = (uint8_t)u; b[1] = (uint8_t)(u >> 8); b[2] = (uint8_t)(u >> 16); b[3] = (uint8_t)(u >> 24);
+}
+
+int main(int argc, char **argv)
+{
+    const char *out = NULL;
+    long long n = -1;
+    uint64_t seed = 0x5eed5eedull;
+    for (int i = 1; i < argc; i++) {
+        if (!strcmp(argv[i], "--seed") && i + 1 < argc) {
+            seed = strtoull(argv[++i], NULL, 0);
+        } else if (n < 0) {
+            char *e;
+            n = strtoll(argv[i], &e, 10);
+            if (*e || n < 1 || n > 2000000000LL) {
+                fprintf(stderr, "gen_cloud: N must be an integer in [1, 2e9], got '%s'\n", argv[i]);
+                return 2;
+            }
+        } else if (!out) {
+            out = argv[i];
+        } else {
+            fprintf(stderr, "usage: gen_cloud N out.ply [--seed S]\n");
+            return 2;
+        }
+    }
+    if (n < 0 || !out) {
+        fprintf(stderr, "usage: gen_cloud N out.ply [--seed S]\n");
+        return 2;
+    }
+    FILE *f = fopen(out, "wb");
+    if (!f) {
+        perror(out);
+        return 1;
+    }
+    fprintf(f, "ply\nformat binary_little_endian 1.0\ncomment gen_cloud seed %llu\n"
+               "element vertex %lld\nproperty float x\nproperty float y\nproperty float z\n"
+               "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
+            (unsigned long long)seed, n);
+    enum { BLOCK = 65536, REC = 15 };
+    uint8_t *buf = malloc((size_t)BLOCK * REC);
+    if (!buf) {
+        fprintf(stderr, "gen_cloud: out of memory\n");
+        fclose(f);
+        return 1;
+    }
+    rng r = {seed};
+    for (long long done = 0; done < n;) {
+        long long m = n - done < BLOCK ? n - done : BLOCK;
+        for (long long i = 0; i < m; i++) {
+            pt p;
+            make_point(&p, &r);
+            uint8_t *b = buf + i * REC;
+            put_f32(b, p.x);
+            put_f32(b + 4, p.y);
+            put_f32(b + 8, p.z);
+            memcpy(b + 12, p.c, 3);
+        }
+        if (fwrite(buf, REC, (size_t)m, f) != (size_t)m) {
+            perror(out);
+            free(buf);
+            fclose(f);
+            return 1;
+        }
+        done += m;
+    }
+    free(buf);
+    if (fclose(f) != 0) {
+        perror(out);
+        return 1;
+    }
+    return 0;
+}
