@@ -1,6 +1,7 @@
 /* splat_client.c — libsplatclient's requests: list, open, camera, parameters, frames,
  * streaming, ping (see splat_client.h; the connection layer is spc_conn.c). */
 #include "spc_internal.h"
+#include "framing.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -154,29 +155,8 @@ void spc_camera_frame(const spc_info *info, uint32_t width, uint32_t height, spc
     cam->width = width;
     cam->height = height;
     cam->fov_deg = 45.0f;
-    double ctr[3], ext[3];
-    for (int i = 0; i < 3; i++) {
-        ctr[i] = 0.5 * (info->bmin[i] + info->bmax[i]);
-        ext[i] = info->bmax[i] - info->bmin[i];
-    }
-    double r = 0.5 * sqrt(ext[0] * ext[0] + ext[1] * ext[1] + ext[2] * ext[2]);
-    if (!(r > 0)) r = 1.0;
-    /* the server's rnd_camera_frame rule: flat in z -> from above, up +y; else a diagonal */
-    double dir[3] = {0.55, 1, 0.45}, up[3] = {0, 0, 1};
-    if (ext[2] < 0.1 * fmax(ext[0], ext[1])) {
-        dir[0] = 0, dir[1] = -0.35, dir[2] = 1;
-        up[0] = 0, up[1] = 1, up[2] = 0;
-    }
-    double l = sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
-    double fy = cam->fov_deg * M_PI / 180.0;
-    double aspect = height > 0 ? (double)width / height : 1.0;
-    double fx = 2 * atan(tan(fy / 2) * aspect);
-    double dist = r / sin(0.5 * fmin(fx, fy)) * 1.02;
-    for (int i = 0; i < 3; i++) {
-        cam->target[i] = ctr[i];
-        cam->eye[i] = ctr[i] + dir[i] / l * dist;
-        cam->up[i] = up[i];
-    }
+    sp_frame_box(info->bmin, info->bmax, (int)width, (int)height, cam->fov_deg, cam->eye,
+                 cam->target, cam->up);
 }
 
 void spc_camera_orbit(const spc_info *info, const double up_in[3], int i, int n, float fov_deg,
@@ -186,41 +166,8 @@ void spc_camera_orbit(const spc_info *info, const double up_in[3], int i, int n,
     cam->width = width;
     cam->height = height;
     cam->fov_deg = fov_deg > 0 && fov_deg < 180 ? fov_deg : 45.0f;
-    double up[3] = {0, 0, 1};
-    if (up_in) memcpy(up, up_in, sizeof up);
-    double ul = sqrt(up[0] * up[0] + up[1] * up[1] + up[2] * up[2]);
-    if (!(ul > 0)) { up[0] = 0; up[1] = 0; up[2] = 1; ul = 1; }
-    for (int k = 0; k < 3; k++) up[k] /= ul;
-    /* a = the axis most perpendicular to up, made exactly perpendicular; b = up x a */
-    int ax = 0;
-    for (int k = 1; k < 3; k++) if (fabs(up[k]) < fabs(up[ax])) ax = k;
-    double a[3] = {0, 0, 0}, b[3];
-    a[ax] = 1;
-    double d = a[0] * up[0] + a[1] * up[1] + a[2] * up[2];
-    for (int k = 0; k < 3; k++) a[k] -= d * up[k];
-    double al = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
-    for (int k = 0; k < 3; k++) a[k] /= al;
-    b[0] = up[1] * a[2] - up[2] * a[1];
-    b[1] = up[2] * a[0] - up[0] * a[2];
-    b[2] = up[0] * a[1] - up[1] * a[0];
-    double ctr[3], ext[3];
-    for (int k = 0; k < 3; k++) {
-        ctr[k] = 0.5 * (info->bmin[k] + info->bmax[k]);
-        ext[k] = info->bmax[k] - info->bmin[k];
-    }
-    double r = 0.5 * sqrt(ext[0] * ext[0] + ext[1] * ext[1] + ext[2] * ext[2]);
-    if (!(r > 0)) r = 1.0;
-    double fy = cam->fov_deg * M_PI / 180.0;
-    double aspect = height > 0 ? (double)width / height : 1.0;
-    double fx = 2 * atan(tan(fy / 2) * aspect);
-    double dist = r / sin(0.5 * fmin(fx, fy)) * 1.02; /* the bounding sphere fits */
-    double th = n > 0 ? 2 * M_PI * i / n : 0, el = 25.0 * M_PI / 180.0;
-    for (int k = 0; k < 3; k++) {
-        double dir = cos(el) * (cos(th) * a[k] + sin(th) * b[k]) + sin(el) * up[k];
-        cam->target[k] = ctr[k];
-        cam->eye[k] = ctr[k] + dist * dir;
-        cam->up[k] = up[k];
-    }
+    sp_frame_orbit(info->bmin, info->bmax, up_in, i, n, (int)width, (int)height, cam->fov_deg,
+                   cam->eye, cam->target, cam->up);
 }
 
 /* ---- parameters ------------------------------------------------------------------------- */

@@ -1,5 +1,6 @@
 /* camera.c — default camera, view and projection matrices, near/far, frustum culling. */
 #include "camera.h"
+#include "framing.h"
 
 #include <math.h>
 #include <string.h>
@@ -36,33 +37,7 @@ void rnd_camera_frame(const double bmin[3], const double bmax[3], int width, int
     cam->width = width;
     cam->height = height;
     cam->fov_deg = 45.0f;
-    double c[3], ext[3];
-    for (int i = 0; i < 3; i++) {
-        c[i] = 0.5 * (bmin[i] + bmax[i]);
-        ext[i] = bmax[i] - bmin[i];
-    }
-    double r = 0.5 * sqrt(ddot(ext, ext));
-    if (!(r > 0)) r = 1.0; /* a single point: look at it from one unit away */
-    /* Flat in z (an airborne scan, a terrain): look down from above, a little from -y, up +y.
-     * Otherwise from the +y-ish diagonal, up +z. */
-    double dir[3], up[3] = {0, 0, 1};
-    if (ext[2] < 0.1 * fmax(ext[0], ext[1])) {
-        dir[0] = 0, dir[1] = -0.35, dir[2] = 1;
-        up[0] = 0, up[1] = 1, up[2] = 0;
-    } else {
-        dir[0] = 0.55, dir[1] = 1, dir[2] = 0.45;
-    }
-    dnorm(dir);
-    double fov_y = cam->fov_deg * M_PI / 180.0;
-    double aspect = height > 0 ? (double)width / height : 1.0;
-    double fov_x = 2 * atan(tan(fov_y / 2) * aspect);
-    double half = 0.5 * fmin(fov_x, fov_y);
-    double dist = r / sin(half) * 1.02; /* the bounding sphere fits, with a small margin */
-    for (int i = 0; i < 3; i++) {
-        cam->target[i] = c[i];
-        cam->eye[i] = c[i] + dir[i] * dist;
-        cam->up[i] = up[i];
-    }
+    sp_frame_box(bmin, bmax, width, height, cam->fov_deg, cam->eye, cam->target, cam->up);
 }
 
 /* Column-major 4x4 product o = a * b. */

@@ -29,7 +29,7 @@ typedef struct rnd_camera {
 } rnd_camera;
 
 /* rnd_camera_frame: a camera that frames the bounding box [bmin, bmax] (file coordinates):
- * looking at its centre from the +y-ish diagonal, up +z unless the box is flat in z. */
+ * by the rule of protocol/framing.h (sp_frame_box), shared with the client. */
 void rnd_camera_frame(const double bmin[3], const double bmax[3], int width, int height,
                       rnd_camera *cam);
 
