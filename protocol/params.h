@@ -14,6 +14,7 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(PIPELINE,     "pipeline",     SP_T_ENUM,  pipeline,     0,    0,        "splat",  "points|splat") \
     X(SPLAT_SCALE,  "splat_scale",  SP_T_FLOAT, splat_scale,  0.01, 100,      "1",      NULL)     \
     X(LOWPASS,      "lowpass",      SP_T_FLOAT, lowpass,      0,    16,       "1",      NULL)     \
+    X(EWA,          "ewa",          SP_T_ENUM,  ewa,          0,    0,        "auto",   "auto|exact|split") \
     X(POINT_SIZE,   "point_size",   SP_T_FLOAT, point_size,   1,    64,       "1",      NULL)     \
     X(POINT_BUDGET, "point_budget", SP_T_INT,   point_budget, 0,    4e9,      "0",      NULL)     \
     X(COLOR,        "color",        SP_T_ENUM,  color,        0,    0,        "rgb",    "rgb|field|normal|depth|intensity") \
@@ -32,6 +33,11 @@ enum {
 
 /* Enum values by index, matching the lists above. */
 enum { SP_PIPE_POINTS = 0, SP_PIPE_SPLAT = 1 };
+/* ewa: the splat footprint filter. exact: J V_r J^T + lowpass I per splat, every splat
+ * rasterised; split: lowpass/4 per splat, sub-pixel splats deposited in one pixel, the rest of
+ * the low-pass in the resolve (pipe_splat.c); auto: exact on a GPU, split on a software
+ * renderer. */
+enum { SP_EWA_AUTO = 0, SP_EWA_EXACT, SP_EWA_SPLIT };
 enum { SP_COLOR_RGB = 0, SP_COLOR_FIELD, SP_COLOR_NORMAL, SP_COLOR_DEPTH, SP_COLOR_INTENSITY };
 enum { SP_FMT_JPEG = 0, SP_FMT_PNG, SP_FMT_LZ4, SP_FMT_RAW, SP_FMT_EXR };
 enum { SP_SUB_444 = 0, SP_SUB_422, SP_SUB_420, SP_SUB_GRAY };
@@ -40,6 +46,7 @@ typedef struct sp_params {
     int32_t pipeline;
     float splat_scale;
     float lowpass;
+    int32_t ewa;
     float point_size;
     int64_t point_budget;   /* 0: every point */
     int32_t color;

@@ -7,13 +7,22 @@
  *   pass 2, attributes   splat_raster.comp PASS 2: fragments within eps * radius of that depth
  *                        add w*colour, w*normal and w (float atomicAdd with
  *                        GL_NV_shader_atomic_float, fixed-point uint atomicAdd without it);
- *   pass 3, resolve      splat_resolve.vert/.frag, a full-frame triangle: the rest of the
- *                        low-pass as a depth-aware 3x3 Gaussian over the sums, division by the
- *                        weight, deferred shading; writes the target's colour and depth_eye.
+ *   pass 3, resolve      splat_resolve.vert/.frag, a full-frame triangle: (ewa=split) the rest
+ *                        of the low-pass as a depth-aware 3x3 Gaussian over the sums, division
+ *                        by the weight, deferred shading; writes the target's colour and
+ *                        depth_eye.
  *
  * Botsch et al. push pass 1's depths back by eps and test z <= zbuf in pass 2; here pass 1 keeps
  * the exact nearest depth (so depth_eye is the visible surface's depth) and pass 2 accepts
  * z <= zbuf + eps * r, the same test with a per-splat eps (r = the splat's radius).
+ *
+ * Two filters, chosen per frame by the parameter `ewa` (both through the same programs: the
+ * modes differ only in the uniforms u_pre, u_subpx and u_post, see set_uniforms):
+ *   exact   the textbook resampling filter: every splat's footprint is J V_r J^T + lowpass I,
+ *           cut off at 2 standard deviations, every splat sampled over its full footprint; no
+ *           resolve blur. The default on a hardware GPU (ewa=auto).
+ *   split   the form below, for software rasterisers (ewa=auto on llvmpipe/softpipe/swrast,
+ *           decided from GL_RENDERER at create time).
  *
  * Why compute, and why the low-pass is split. On llvmpipe (2 cores, 1M points, 1280x720) a
  * three-pass point-sprite splatter takes 850-2000 ms, and even as compute passes every fragment
@@ -43,7 +52,16 @@
  * stripes, each with a halo row above and below for the 3x3 gather.
  *
  * Measured (tests/test_render_splat.c, SPLATD_SPLAT_BENCH=1: 1M points, 1280x720, llvmpipe on
- * 2 shared cores): splat 2.9-3.5x `points` in wall time, 3.1-3.5x in CPU time. */
+ * 2 shared cores): split 2.9-3.7x `points` in wall time, 3.1-3.6x in CPU time; exact ~15x
+ * (every minified splat ~13 fragments of 7 atomics).
+ *
+ * Quality is not a clear win for exact either: at a grazing angle (test_ewa_antialiasing) the
+ * low-pass fringes of nearer minified splats, whose depths are clamped to their centre's +- r,
+ * win the visibility pass, so a pixel blends only about one row of splats (pixel variance 499
+ * exact vs 11 split, 1436 without low-pass); split's depth-aware resolve gather does not have
+ * that problem. Widening the clamp to the plane's depths over the footprint fixed that case
+ * (variance 0) but let near-edge-on splats at creases occlude the surface (dark lines on
+ * Guanyin), so it was not kept. */
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -91,6 +109,7 @@ typedef struct splat_state {
     GLuint prog[P_COUNT];
     GLint loc[P_COUNT][U_COUNT];
     int float_atomics;         /* GL_NV_shader_atomic_float in use */
+    int software;              /* GL_RENDERER names a software rasteriser: ewa=auto is split */
     GLuint groups_cap;         /* most work groups per splat dispatch; invocations loop over
                                   the points (grid stride). llvmpipe pays ~3 us a work group, so
                                   there 1024 groups of 64 (1M points: 15 each) measured 20-25 %
@@ -220,8 +239,9 @@ static int splat_create(const gl_api *gl, const rnd_shaders *sh, void **state, s
     if (!s) return sd_errf(err, SD_ENOMEM, "out of memory creating the splat pipeline");
     const char *force = getenv("SPLATD_SPLAT_FIXED");
     const char *renderer = (const char *)gl->GetString(GL_RENDERER);
-    int software = renderer && (strstr(renderer, "llvmpipe") || strstr(renderer, "softpipe"));
-    s->groups_cap = software ? SPLAT_SW_GROUPS : SPLAT_MAX_GROUPS;
+    s->software = renderer && (strstr(renderer, "llvmpipe") || strstr(renderer, "softpipe") ||
+                               strstr(renderer, "swrast"));
+    s->groups_cap = s->software ? SPLAT_SW_GROUPS : SPLAT_MAX_GROUPS;
     s->float_atomics = gl_has_extension(gl, "GL_NV_shader_atomic_float") && !(force && *force == '1');
     const char *fa = s->float_atomics
                          ? "#extension GL_NV_shader_atomic_float : require\n#define FLOAT_ATOMICS 1\n"
@@ -303,15 +323,18 @@ static void set_uniforms(const gl_api *gl, const splat_state *s, int p, const rn
     if (l[U_RAYD] >= 0) gl->Uniform4fv(l[U_RAYD], 1, rayd);
     if (l[U_SIZE] >= 0) gl->Uniform2i(l[U_SIZE], v->width, v->height);
     if (l[U_SCALE] >= 0) gl->Uniform1f(l[U_SCALE], prm->splat_scale);
-    /* The low-pass split (see splat_raster.comp): a quarter in every footprint, the rest in the
-     * resolve's 3x3 Gaussian of variance 0.75 lowpass; sub-pixel splats deposited when
-     * lowpass > 0. The gather's depth tolerance: 4 pixel widths at the reference depth, as a
+    /* ewa=split (see splat_raster.comp): a quarter of the low-pass in every footprint, the rest
+     * in the resolve's 3x3 Gaussian of variance 0.75 lowpass; sub-pixel splats deposited when
+     * lowpass > 0. ewa=exact: the whole low-pass in every footprint, nothing deposited, no
+     * gather (the textbook resampling filter). The two modes differ only in these three
+     * uniforms. The gather's depth tolerance: 4 pixel widths at the reference depth, as a
      * fraction of that depth (a perspective camera: rnd_camera has no orthographic mode). */
+    int split = prm->ewa == SP_EWA_SPLIT || (prm->ewa == SP_EWA_AUTO && s->software);
     float lp = prm->lowpass;
-    float h1 = lp > 0.0f ? expf(-1.0f / (2.0f * 0.75f * lp)) : 0.0f;
+    float h1 = split && lp > 0.0f ? expf(-1.0f / (2.0f * 0.75f * lp)) : 0.0f;
     const float post[3] = {1.0f, h1, h1 * h1};
-    if (l[U_PRE] >= 0) gl->Uniform1f(l[U_PRE], 0.25f * lp);
-    if (l[U_SUBPX] >= 0) gl->Uniform1f(l[U_SUBPX], lp > 0.0f ? 2.0f : 0.0f);
+    if (l[U_PRE] >= 0) gl->Uniform1f(l[U_PRE], split ? 0.25f * lp : lp);
+    if (l[U_SUBPX] >= 0) gl->Uniform1f(l[U_SUBPX], split && lp > 0.0f ? 2.0f : 0.0f);
     if (l[U_POST] >= 0) gl->Uniform3fv(l[U_POST], 1, post);
     if (l[U_EPSG] >= 0) gl->Uniform1f(l[U_EPSG], 4.0f * 2.0f / ((float)v->height * v->proj[5]));
     if (l[U_ACC] >= 0) gl->Uniform1i(l[U_ACC], 0);

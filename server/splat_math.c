@@ -1,7 +1,8 @@
 /* splat_math.c — EWA footprint reference and eye-ray coefficients (see splat_math.h). The
- * footprint code follows setup() in shaders/splat_raster.comp.glsl, except that it adds the
- * whole low-pass to the covariance (the exact EWA resampling filter), where the pipeline adds a
- * quarter per splat and applies the rest in its resolve (see pipe_splat.c). */
+ * footprint code follows setup_core() in shaders/splat_raster.comp.glsl; it adds the whole
+ * low-pass to the covariance (the exact EWA resampling filter, the pipeline's ewa=exact), where
+ * the pipeline's ewa=split adds a quarter per splat and applies the rest in its resolve (see
+ * pipe_splat.c). */
 #include "splat_math.h"
 
 #include <math.h>

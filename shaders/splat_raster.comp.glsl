@@ -20,9 +20,11 @@
 // standard deviation sigma = r / 2 (the disc's rim is the 2-sigma contour). J = d(pixel)/d(u,v)
 // is the Jacobian of the projection at c along an orthonormal tangent basis (u, v) of the disc,
 // V_k = sigma^2 J J^T the warped reconstruction kernel. The resampling filter is
-// V = V_k + lowpass * I; pipe_splat.c splits the low-pass into u_pre (added here) and the rest,
-// which splat_resolve.frag applies as a depth-aware 3x3 Gaussian over the accumulated sums
-// (convolution is linear, so filtering the sums equals widening every footprint). Splats whose
+// V = V_k + lowpass * I. With ewa=exact pipe_splat.c sets u_pre = lowpass and u_subpx = 0: that
+// filter per splat, every splat sampled. With ewa=split it splits the low-pass into u_pre =
+// lowpass / 4 (added here) and the rest, which splat_resolve.frag applies as a depth-aware 3x3
+// Gaussian over the accumulated sums (convolution is linear, so filtering the sums equals
+// widening every footprint). Splats whose
 // kernel V_k is small (2 sigma < u_subpx = 2 px along x and y) and lowpass > 0 deposit
 // their whole weight in the pixel holding their centre (area sampling: a box filter of one
 // pixel, so minified splats never vanish and cost one fragment); the others are sampled at pixel

@@ -5,7 +5,8 @@
 //  1. the rest of the low-pass filter: a 3x3 Gaussian (weights u_post: centre, edge, corner)
 //     over the accumulated sums of the neighbourhood, depth-aware like the extended z-buffer:
 //     only neighbours whose depth lies within u_epsg * z of the nearest one take part, so a
-//     surface never bleeds into the one in front of it (with lowpass 0 only the centre counts);
+//     surface never bleeds into the one in front of it (with lowpass 0 or ewa=exact, u_post =
+//     (1, 0, 0), only the centre counts);
 //  2. normalisation: divide by the summed weight;
 //  3. deferred shading from the normalised normal (ambient + Lambert + a little Blinn-Phong);
 //  4. writes colour (alpha 1 = covered) and the eye depth of the visible surface; background
