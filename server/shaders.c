@@ -76,8 +76,9 @@ static int ends_with(const char *s, const char *suffix)
     return a >= b && !strcmp(s + a - b, suffix);
 }
 
-int rnd_shaders_source(const rnd_shaders *sh, const char *name, const char **text, char **owned,
-                       char *origin, size_t origin_len, sd_err *err)
+/* The text of one shader file, before #include expansion (see rnd_shaders_source). */
+static int lookup(const rnd_shaders *sh, const char *name, const char **text, char **owned,
+                  char *origin, size_t origin_len, sd_err *err)
 {
     *text = NULL;
     *owned = NULL;
@@ -110,6 +111,87 @@ int rnd_shaders_source(const rnd_shaders *sh, const char *name, const char **tex
     return sd_errf(err, SD_ENOTFOUND, "shader '%s' not found (looked for %s.glsl%s%s)", name,
                    name, sh && sh->dir ? " in --shader-dir " : " in the embedded table",
                    sh && sh->dir ? sh->dir : "");
+}
+
+/* Appends len bytes of s to the growing buffer *b (used *n, capacity *cap). */
+static int append(char **b, size_t *n, size_t *cap, const char *s, size_t len)
+{
+    if (*n + len + 1 > *cap) {
+        size_t c = (*n + len + 1) * 2;
+        char *q = realloc(*b, c);
+        if (!q) return -1;
+        *b = q;
+        *cap = c;
+    }
+    memcpy(*b + *n, s, len);
+    *n += len;
+    (*b)[*n] = 0;
+    return 0;
+}
+
+/* Expands the lines `#include "NAME"` of text into *out (malloc'd), recursively up to depth 4.
+ * GLSL has no include; this is how shaders share library code (shaders/lib_*.glsl). The
+ * #line directives keep the compiler's line numbers pointing into the including file. */
+static int expand(const rnd_shaders *sh, const char *text, const char *origin, int depth,
+                  char **out, size_t *n, size_t *cap, sd_err *err)
+{
+    if (depth > 4) return sd_errf(err, SD_ELIMIT, "%s: #include nested too deeply", origin);
+    int line = 1;
+    for (const char *p = text; *p;) {
+        const char *e = strchr(p, '\n');
+        size_t len = e ? (size_t)(e - p) + 1 : strlen(p);
+        const char *q = p;
+        while (*q == ' ' || *q == '\t') q++;
+        if (!strncmp(q, "#include", 8)) {
+            const char *a = strchr(q, '"');
+            const char *b = a ? strchr(a + 1, '"') : NULL;
+            if (!a || !b || b > p + len || b - a - 1 <= 0 || b - a - 1 >= 128)
+                return sd_errf(err, SD_EINVAL, "%s:%d: malformed #include (want #include \"NAME\")",
+                               origin, line);
+            char name[128], inc_origin[512];
+            memcpy(name, a + 1, (size_t)(b - a - 1));
+            name[b - a - 1] = 0;
+            const char *itext;
+            char *iowned;
+            if (lookup(sh, name, &itext, &iowned, inc_origin, sizeof inc_origin, err) < 0) {
+                char why[sizeof err->msg];
+                snprintf(why, sizeof why, "%s", err->msg);
+                return sd_errf(err, err->code, "%s:%d: %s", origin, line, why);
+            }
+            char ln[32];
+            int rc = expand(sh, itext, inc_origin, depth + 1, out, n, cap, err);
+            free(iowned);
+            if (rc < 0) return rc;
+            snprintf(ln, sizeof ln, "\n#line %d\n", line + 1);
+            if (append(out, n, cap, ln, strlen(ln)) < 0) goto oom;
+        } else if (append(out, n, cap, p, len) < 0) {
+            goto oom;
+        }
+        p += len;
+        line++;
+    }
+    return 0;
+oom:
+    return sd_errf(err, SD_ENOMEM, "%s: out of memory expanding #include", origin);
+}
+
+int rnd_shaders_source(const rnd_shaders *sh, const char *name, const char **text, char **owned,
+                       char *origin, size_t origin_len, sd_err *err)
+{
+    int rc = lookup(sh, name, text, owned, origin, origin_len, err);
+    if (rc < 0 || !strstr(*text, "#include")) return rc;
+    char *buf = NULL;
+    size_t n = 0, cap = 0;
+    rc = expand(sh, *text, origin, 0, &buf, &n, &cap, err);
+    free(*owned);
+    *owned = NULL;
+    *text = NULL;
+    if (rc < 0) {
+        free(buf);
+        return rc;
+    }
+    *text = *owned = buf;
+    return 0;
 }
 
 int rnd_shader_stage(const char *name, const char *text, GLenum *stage, sd_err *err)

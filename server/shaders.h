@@ -18,7 +18,8 @@
 rnd_shaders *rnd_shaders_create(const char *dir, sd_err *err);
 void rnd_shaders_destroy(rnd_shaders *sh);
 
-/* rnd_shaders_source: the text of shader `name`. Sets *text (valid until *owned is freed, or
+/* rnd_shaders_source: the text of shader `name`, with its `#include "lib_x.glsl"` lines replaced
+ * by those files (library code shared between shaders, which GLSL itself cannot include). Sets *text (valid until *owned is freed, or
  * for the life of the process when *owned is NULL) and writes where it came from ("embedded
  * points.vert.glsl" or the file path) to origin. Returns 0, SD_ENOTFOUND or SD_EIO. */
 int rnd_shaders_source(const rnd_shaders *sh, const char *name, const char **text, char **owned,

@@ -14,6 +14,7 @@
 #include "gl_backend.h"
 #include "gl_names.h"
 #include "shaders.h"
+#include "testutil.h"
 #include "shaders_gen.h"
 
 /* Opens a back end and loads the GL table; fails the test with the message otherwise. */
@@ -106,6 +107,51 @@ static void test_shader_stage_names(void **state)
     assert_non_null(strstr(err.msg, "mystery.glsl"));
 }
 
+/* #include "NAME" lines are replaced by that shader's text (from --shader-dir first), nested;
+ * a missing or malformed include is an error naming the including file and its line. */
+static void test_shader_include(void **state)
+{
+    (void)state;
+    char dir[512], path[600];
+    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    snprintf(path, sizeof path, "%s/lib_a.glsl", dir);
+    assert_int_equal(tu_write_file(path, "int a;\n#include \"lib_b.glsl\"\n", 30), 0);
+    snprintf(path, sizeof path, "%s/lib_b.glsl", dir);
+    assert_int_equal(tu_write_file(path, "int b;\n", 7), 0);
+    snprintf(path, sizeof path, "%s/x.frag.glsl", dir);
+    const char *x = "#version 430\n#include \"lib_a.glsl\"\nint c;\n";
+    assert_int_equal(tu_write_file(path, x, strlen(x)), 0);
+    snprintf(path, sizeof path, "%s/bad.frag.glsl", dir);
+    const char *bad = "#version 430\n\n#include \"lib_nope.glsl\"\n";
+    assert_int_equal(tu_write_file(path, bad, strlen(bad)), 0);
+    snprintf(path, sizeof path, "%s/worse.frag.glsl", dir);
+    assert_int_equal(tu_write_file(path, "#include lib_a\n", 15), 0);
+
+    sd_err err = {0};
+    rnd_shaders *sh = rnd_shaders_create(dir, &err);
+    assert_non_null(sh);
+    const char *text;
+    char *owned, origin[512];
+    assert_int_equal(rnd_shaders_source(sh, "x.frag.glsl", &text, &owned, origin, sizeof origin, &err), 0);
+    const char *want = "#version 430\nint a;\nint b;\n\n#line 3\n\n#line 3\nint c;\n";
+    assert_string_equal(text, want);
+    free(owned);
+    assert_int_equal(rnd_shaders_source(sh, "bad.frag.glsl", &text, &owned, origin, sizeof origin, &err),
+                     SD_ENOTFOUND);
+    assert_non_null(strstr(err.msg, "bad.frag.glsl:3"));
+    assert_non_null(strstr(err.msg, "lib_nope"));
+    assert_int_equal(rnd_shaders_source(sh, "worse.frag.glsl", &text, &owned, origin, sizeof origin, &err),
+                     SD_EINVAL);
+    assert_non_null(strstr(err.msg, "worse.frag.glsl:1: malformed #include"));
+    /* the embedded colour map is included by the embedded shaders */
+    assert_int_equal(rnd_shaders_source(sh, "points.vert.glsl", &text, &owned, origin, sizeof origin, &err), 0);
+    assert_non_null(strstr(text, "vec3 colormap(float t)"));
+    assert_null(strstr(text, "#include \""));
+    free(owned);
+    rnd_shaders_destroy(sh);
+    tu_rm_rf(dir);
+}
+
 /* Every shader compiled into the binary compiles on llvmpipe; a broken one is named. */
 static void test_embedded_shaders_compile(void **state)
 {
@@ -114,14 +160,21 @@ static void test_embedded_shaders_compile(void **state)
     gl_backend *b = open_backend(&gl_backend_egl, &gl);
     sd_err err = {0};
     int failures = 0;
+    rnd_shaders *lib = rnd_shaders_create(NULL, &err);
+    assert_non_null(lib);
     for (const shader_src *s = shaders_embedded; s->name; s++) {
         GLenum stage;
-        if (rnd_shader_stage(s->name, s->text, &stage, &err) < 0) {
+        if (!strncmp(s->name, "lib_", 4)) continue; /* included by the others, not compiled alone */
+        const char *text;
+        char *owned, origin[512];
+        if (rnd_shaders_source(lib, s->name, &text, &owned, origin, sizeof origin, &err) < 0 ||
+            rnd_shader_stage(s->name, text, &stage, &err) < 0) {
             print_error("%s\n", err.msg);
             failures++;
             continue;
         }
-        GLuint sh = gl_shader_compile(&gl, stage, s->text, s->name, &err);
+        GLuint sh = gl_shader_compile(&gl, stage, text, s->name, &err);
+        free(owned);
         if (!sh) {
             print_error("%s\n", err.msg);
             failures++;
@@ -136,6 +189,7 @@ static void test_embedded_shaders_compile(void **state)
     assert_non_null(strstr(err.msg, "broken.frag"));
     assert_int_equal(gl_check(&gl, "shader compilation", &err), 0);
     print_message("%d embedded shaders compiled\n", shaders_embedded_count);
+    rnd_shaders_destroy(lib);
     gl_backend_egl.destroy(b);
 }
 
@@ -185,6 +239,7 @@ int main(void)
         cmocka_unit_test(test_egl),
         cmocka_unit_test(test_osmesa),
         cmocka_unit_test(test_backends_in_sequence),
+        cmocka_unit_test(test_shader_include),
         cmocka_unit_test(test_embedded_shaders_compile),
         cmocka_unit_test(test_shader_dir_override),
     };
