@@ -1,6 +1,7 @@
 /* cloud.c — raw cloud growth, finalisation (NaN removal, re-centring) and reader dispatch. */
 #include "cloud.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -111,6 +112,14 @@ int pc_finalize(pc_raw *raw, pc_cloud *out, const char *path, sd_err *err)
         return sd_errf(err, SD_EEMPTY, "%s: no finite points (%zu read)", path, n);
     }
 
+    for (int k = 0; k < 3; k++) {
+        /* re-centred coordinates reach half the span: it must fit a float */
+        if (!(0.5 * hi[k] - 0.5 * lo[k] <= FLT_MAX)) {
+            free(keep);
+            return sd_errf(err, SD_ELIMIT, "%s: the points span %g along %c, more than float32 holds",
+                           path, hi[k] - lo[k], "xyz"[k]);
+        }
+    }
     out->pos = malloc(kept * 3 * sizeof(float));
     if (!out->pos) {
         free(keep);

@@ -1,0 +1,642 @@
+/* fuzz_targets.c — the fuzz target bodies and their oracles (see fuzz_targets.h).
+ *
+ * Plain C11 + Linux (memfd_create), compiled by gcc into every test and by clang with
+ * -fsanitize=fuzzer into the fuzzers: nothing compiler-specific here. */
+#include "fuzz_targets.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
+#include <unistd.h>
+
+#include "cloud.h"
+#include "lzf.h"
+#include "params.h"
+#include "proto.h"
+#include "sd_err.h"
+
+/* ---- failing an oracle ------------------------------------------------------------------- */
+
+static void fz_fail(const char *where, const char *fmt, ...) __attribute__((format(printf, 2, 3),
+                                                                            noreturn));
+static void fz_fail(const char *where, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    fprintf(stderr, "fuzz oracle failed (%s): ", where);
+    vfprintf(stderr, fmt, ap);
+    fputc('\n', stderr);
+    va_end(ap);
+    abort();
+}
+
+/* FNV-1a, to compare two runs of the decoder without storing their messages. */
+static uint64_t fnv(uint64_t h, const void *p, size_t n)
+{
+    const uint8_t *b = p;
+    for (size_t i = 0; i < n; i++) h = (h ^ b[i]) * 1099511628211ull;
+    return h;
+}
+
+/* ---- protocol ---------------------------------------------------------------------------- */
+
+/* check_proto_err: a parser's or the decoder's failure must be a known negative code with a
+ * sentence in e. */
+static void check_proto_err(int rc, const proto_error *e, const char *what)
+{
+    if (rc >= 0) return;
+    if (e->code != -rc || !e->msg[0] || !strcmp(proto_err_name(rc), "UNKNOWN"))
+        fz_fail("proto", "%s returned %d but the error says code %d, message '%s'", what, rc,
+                e->code, e->msg);
+}
+
+/* check_reenc: the message that parsed must re-encode (enc_rc from its proto_enc_*) to exactly
+ * the header and payload that were decoded. Frees b. */
+static void check_reenc(const proto_msg *m, proto_buf *b, int enc_rc)
+{
+    const char *name = proto_msg_name(m->h.type);
+    if (enc_rc != 0)
+        fz_fail("proto", "%s parsed but its encoder refused the parsed struct (%d)", name, enc_rc);
+    proto_header h;
+    if (b->len < PROTO_HEADER_LEN)
+        fz_fail("proto", "%s re-encoded to %zu bytes, less than a header", name, b->len);
+    proto_get_header(b->data, &h);
+    if (b->len != PROTO_HEADER_LEN + (size_t)m->len || h.magic != m->h.magic ||
+        h.version != m->h.version || h.type != m->h.type || h.seq != m->h.seq ||
+        h.len != m->h.len)
+        fz_fail("proto", "%s re-encoded to a different header or length (%zu bytes, len %u; "
+                "decoded len %u)", name, b->len, h.len, m->len);
+    if (m->len && memcmp(b->data + PROTO_HEADER_LEN, m->payload, m->len) != 0)
+        fz_fail("proto", "%s re-encoded to different payload bytes (%u bytes)", name, m->len);
+    proto_buf_free(b);
+}
+
+/* params_equal: 1 when a and b hold the same value of every parameter (bitwise). */
+static int params_equal(const sp_params *a, const sp_params *b)
+{
+    for (int id = 0; id < SP_PARAM_COUNT; id++) {
+        proto_param_rec ra, rb;
+        proto_param_rec_from(a, id, &ra);
+        proto_param_rec_from(b, id, &rb);
+        if (memcmp(&ra, &rb, sizeof ra) != 0) return 0;
+    }
+    return 1;
+}
+
+/* check_params_msg: PARAMS applies all records or none; what it applied travels through the
+ * encoder and parser unchanged. Returns the parse code. */
+static int check_params_msg(const proto_msg *m, proto_error *e)
+{
+    sp_params p, before;
+    sp_params_defaults(&p);
+    before = p;
+    uint64_t changed = 0;
+    int rc = proto_parse_params(m->payload, m->len, &p, &changed, e);
+    check_proto_err(rc, e, "proto_parse_params");
+    if (rc < 0) {
+        if (!params_equal(&p, &before))
+            fz_fail("proto", "PARAMS failed (%s) but changed the parameters", e->msg);
+        return rc;
+    }
+    if (changed >> SP_PARAM_COUNT)
+        fz_fail("proto", "PARAMS changed mask 0x%llx has bits past the %d parameters",
+                (unsigned long long)changed, SP_PARAM_COUNT);
+    proto_param_rec recs[SP_PARAM_COUNT];
+    for (int id = 0; id < SP_PARAM_COUNT; id++) proto_param_rec_from(&p, id, &recs[id]);
+    proto_buf b = {0};
+    int erc = proto_enc_params(&b, 1, recs, SP_PARAM_COUNT);
+    if (erc != 0) fz_fail("proto", "PARAMS values that parsed do not encode (%d)", erc);
+    sp_params q;
+    sp_params_defaults(&q);
+    proto_error e2 = {0};
+    int prc = proto_parse_params(b.data + PROTO_HEADER_LEN, (uint32_t)(b.len - PROTO_HEADER_LEN),
+                                 &q, NULL, &e2);
+    proto_buf_free(&b);
+    if (prc != 0 || !params_equal(&p, &q))
+        fz_fail("proto", "PARAMS values that parsed do not survive encode + parse (%d: %s)", prc,
+                e2.msg);
+    return 0;
+}
+
+/* parse_msg: runs the message's parser and, when it accepts, the re-encoding check. Returns
+ * the parser's code. */
+static int parse_msg(const proto_msg *m)
+{
+    proto_error e;
+    memset(&e, 0, sizeof e);
+    proto_buf b = {0};
+    b.version = m->h.version;
+    uint32_t seq = m->h.seq;
+    const uint8_t *pl = m->payload;
+    uint32_t n = m->len;
+    int rc;
+    switch (m->h.type) {
+    case PROTO_MSG_HELLO: {
+        proto_hello x;
+        rc = proto_parse_hello(pl, n, &x, &e);
+        if (rc == 0) {
+            check_reenc(m, &b, proto_enc_hello(&b, seq, &x));
+            proto_error ve;
+            int v = proto_pick_version(x.min_version, x.max_version, &ve);
+            if (v >= 0 && (v < x.min_version || v > x.max_version || v < (int)PROTO_VERSION_MIN ||
+                           v > (int)PROTO_VERSION_MAX))
+                fz_fail("proto", "proto_pick_version(%u, %u) chose %d", x.min_version,
+                        x.max_version, v);
+        }
+        break;
+    }
+    case PROTO_MSG_OPEN: {
+        char name[PROTO_MAX_NAME + 1];
+        rc = proto_parse_open(pl, n, name, &e);
+        if (rc == 0) {
+            if (strchr(name, '/') || !strcmp(name, "..") || !strcmp(name, "."))
+                fz_fail("proto", "OPEN accepted the name '%s'", name);
+            check_reenc(m, &b, proto_enc_open(&b, seq, name));
+        }
+        break;
+    }
+    case PROTO_MSG_CAMERA: {
+        proto_camera x;
+        rc = proto_parse_camera(pl, n, &x, &e);
+        if (rc == 0) check_reenc(m, &b, proto_enc_camera(&b, seq, &x));
+        break;
+    }
+    case PROTO_MSG_PARAMS:
+        rc = check_params_msg(m, &e);
+        break;
+    case PROTO_MSG_STREAM: {
+        proto_stream x;
+        rc = proto_parse_stream(pl, n, &x, &e);
+        if (rc == 0) check_reenc(m, &b, proto_enc_stream(&b, seq, &x));
+        break;
+    }
+    case PROTO_MSG_PING: {
+        proto_ping x;
+        rc = proto_parse_ping(pl, n, &x, &e);
+        if (rc == 0) check_reenc(m, &b, proto_enc_ping(&b, seq, &x));
+        break;
+    }
+    case PROTO_MSG_WELCOME: {
+        proto_welcome x;
+        rc = proto_parse_welcome(pl, n, &x, &e);
+        if (rc == 0) check_reenc(m, &b, proto_enc_welcome(&b, seq, &x));
+        break;
+    }
+    case PROTO_MSG_CLOUDS: {
+        proto_clouds x;
+        rc = proto_parse_clouds(pl, n, &x, &e);
+        if (rc == 0) {
+            check_reenc(m, &b, proto_enc_clouds(&b, seq, x.items, x.count));
+            proto_clouds_free(&x);
+        }
+        break;
+    }
+    case PROTO_MSG_INFO: {
+        proto_info x;
+        rc = proto_parse_info(pl, n, &x, &e);
+        if (rc == 0) check_reenc(m, &b, proto_enc_info(&b, seq, &x));
+        break;
+    }
+    case PROTO_MSG_PROGRESS: {
+        proto_progress x;
+        rc = proto_parse_progress(pl, n, &x, &e);
+        if (rc == 0) check_reenc(m, &b, proto_enc_progress(&b, seq, &x));
+        break;
+    }
+    case PROTO_MSG_FRAME: {
+        proto_frame x;
+        rc = proto_parse_frame(pl, n, &x, &e);
+        if (rc == 0) {
+            if (x.data < pl || x.data_len > n || x.data + x.data_len != pl + n)
+                fz_fail("proto", "FRAME data does not end where the payload ends");
+            check_reenc(m, &b, proto_enc_frame(&b, seq, &x));
+        }
+        break;
+    }
+    case PROTO_MSG_PONG: {
+        proto_pong x;
+        rc = proto_parse_pong(pl, n, &x, &e);
+        if (rc == 0) check_reenc(m, &b, proto_enc_pong(&b, seq, &x));
+        break;
+    }
+    case PROTO_MSG_ERROR: {
+        proto_errmsg x;
+        rc = proto_parse_error(pl, n, &x, &e);
+        if (rc == 0) check_reenc(m, &b, proto_enc_error(&b, seq, x.code, x.text));
+        break;
+    }
+    default: /* LIST, RENDER, BYE, OK: the decoder lets no unknown type through */
+        if (!proto_msg_dir(m->h.type))
+            fz_fail("proto", "the decoder passed unknown message type %u", m->h.type);
+        rc = proto_parse_empty(m->h.type, n, &e);
+        if (rc == 0) check_reenc(m, &b, proto_enc_empty(&b, m->h.type, seq));
+        break;
+    }
+    check_proto_err(rc, &e, proto_msg_name(m->h.type));
+    proto_buf_free(&b);
+    return rc;
+}
+
+/* What one pass of the decoder over the stream saw. */
+typedef struct dec_run {
+    uint64_t hash;    /* of every message (header + payload) and the final code */
+    unsigned msgs;
+    int rc;           /* the first decoder error, 0 when none */
+    int parse_rc;     /* the first parser error, 0 when none */
+} dec_run;
+
+static void decoder_setup(proto_decoder *d, uint8_t cfg)
+{
+    proto_decoder_init(d, (uint8_t)(cfg & 3));
+    d->preauth = (cfg >> 2) & 1;
+    d->version = (cfg >> 3) & 1;
+    if (cfg & 0x10) d->max_payload = 4u << 20;
+}
+
+/* run_decoder: feeds data to a fresh decoder chunk bytes at a time (parse: also parses each
+ * message) and records what came out in r. */
+static void run_decoder(uint8_t cfg, const uint8_t *data, size_t len, size_t chunk, int parse,
+                        dec_run *r)
+{
+    proto_decoder d;
+    decoder_setup(&d, cfg);
+    memset(r, 0, sizeof *r);
+    r->hash = 1469598103934665603ull;
+    size_t pos = 0;
+    while (pos < len) {
+        size_t n = len - pos < chunk ? len - pos : chunk, used = 99;
+        proto_msg m;
+        proto_error e;
+        memset(&e, 0, sizeof e);
+        int rc = proto_decode(&d, data + pos, n, &used, &m, &e);
+        if (used > n) fz_fail("proto", "proto_decode used %zu of %zu bytes", used, n);
+        pos += used;
+        if (rc < 0) {
+            check_proto_err(rc, &e, "proto_decode");
+            if (rc != -PROTO_E_BAD_MAGIC && rc != -PROTO_E_BAD_VERSION &&
+                rc != -PROTO_E_UNKNOWN_TYPE && rc != -PROTO_E_TOO_LARGE &&
+                rc != -PROTO_E_AUTH_REQUIRED)
+                fz_fail("proto", "proto_decode returned %d (%s), not a documented code", rc,
+                        proto_err_name(rc));
+            size_t u2 = 99;
+            proto_error e2;
+            memset(&e2, 0, sizeof e2);
+            int rc2 = proto_decode(&d, data + pos, len - pos, &u2, &m, &e2);
+            if (rc2 != rc || u2 != 0)
+                fz_fail("proto", "decoder error %d is not sticky: next call gave %d, used %zu",
+                        rc, rc2, u2);
+            r->rc = rc;
+            break;
+        }
+        if (rc == PROTO_NEED_MORE) {
+            if (used != n) fz_fail("proto", "NEED_MORE after using %zu of %zu bytes", used, n);
+            continue;
+        }
+        if (rc != PROTO_ONE_MSG) fz_fail("proto", "proto_decode returned %d", rc);
+        uint8_t hb[PROTO_HEADER_LEN];
+        proto_put_header(hb, &m.h);
+        if (m.len != m.h.len) fz_fail("proto", "message len %u, header len %u", m.len, m.h.len);
+        r->hash = fnv(fnv(r->hash, hb, sizeof hb), m.payload, m.len);
+        r->msgs++;
+        if (parse) {
+            int prc = parse_msg(&m);
+            if (prc < 0 && !r->parse_rc) r->parse_rc = prc;
+        }
+    }
+    r->hash = fnv(r->hash, &r->rc, sizeof r->rc);
+    proto_decoder_free(&d);
+}
+
+int fuzz_one_proto(const uint8_t *data, size_t len)
+{
+    if (len < 1) return 0;
+    uint8_t cfg = data[0];
+    data++;
+    len--;
+    size_t chunk = 1 + (size_t)(cfg >> 5) * 7;
+    dec_run a, b;
+    run_decoder(cfg, data, len, chunk, 1, &a);
+    run_decoder(cfg, data, len, len ? len : 1, 0, &b);
+    if (a.hash != b.hash || a.msgs != b.msgs || a.rc != b.rc)
+        fz_fail("proto", "fed in %zu-byte chunks the decoder gave %u messages and code %d; fed "
+                "at once, %u messages and code %d (or different bytes)", chunk, a.msgs, a.rc,
+                b.msgs, b.rc);
+    return a.rc ? a.rc : a.parse_rc;
+}
+
+/* ---- file readers ------------------------------------------------------------------------ */
+
+typedef int (*reader_fn)(const char *path, pc_raw *raw, sd_err *err);
+
+/* check_sd_err: a failure is a known SD_E* code with a message naming the file. */
+static void check_sd_err(int rc, const sd_err *err, const char *path, const char *what)
+{
+    if (rc == 0) return;
+    if (rc < SD_ENOTFOUND || rc > SD_EIO)
+        fz_fail(what, "returned %d, not 0 or an SD_E* code", rc);
+    if (err->code != rc || !err->msg[0])
+        fz_fail(what, "returned %d but the error holds code %d, message '%s'", rc, err->code,
+                err->msg);
+    if (!strstr(err->msg, path))
+        fz_fail(what, "the error message does not name the file %s: '%s'", path, err->msg);
+}
+
+/* touch: reads every byte of an n-element array so that ASan sees one that is too short. */
+static unsigned touch(const void *p, size_t n, size_t elem, uint32_t attrs, uint32_t bit,
+                      const char *what, const char *name)
+{
+    if (bit && !(attrs & bit)) return 0;
+    if (n == 0) return 0;
+    if (!p) fz_fail(what, "attribute %s is set but its array is NULL", name);
+    const uint8_t *b = p;
+    unsigned s = 0;
+    for (size_t i = 0; i < n * elem; i++) s += b[i];
+    return s;
+}
+
+/* check_raw: what any reader leaves in raw (success or failure) fits what len file bytes can
+ * hold, and on success every present attribute array holds n points. */
+static void check_raw(const pc_raw *raw, size_t len, int ok, const char *what)
+{
+    /* The densest encoding is PCD binary_compressed: LZF makes at most 88 bytes of one input
+     * byte, and a point takes at least 3 bytes (x y z of 1 byte each), so under 30 points
+     * per file byte. Everything else needs at least 3 bytes per point. */
+    size_t bound = 30 * len + 64;
+    if (raw->cap > bound || raw->n > raw->cap)
+        fz_fail(what, "%zu points reserved (%zu read) for a %zu-byte file", raw->cap, raw->n,
+                len);
+    if (!memchr(raw->format, 0, sizeof raw->format) ||
+        !memchr(raw->scalar_name, 0, sizeof raw->scalar_name))
+        fz_fail(what, "format or scalar_name is not NUL-terminated");
+    if (!ok) return;
+    if (!raw->format[0]) fz_fail(what, "the reader succeeded but set no format string");
+    size_t n = raw->n;
+    unsigned s = touch(raw->xyz, n, 3 * sizeof(double), raw->attrs, 0, what, "xyz");
+    s += touch(raw->rgba, n, 4, raw->attrs, PC_ATTR_RGB, what, "rgb");
+    s += touch(raw->normal, n, 3 * sizeof(float), raw->attrs, PC_ATTR_NORMAL, what, "normal");
+    s += touch(raw->intensity, n, sizeof(float), raw->attrs, PC_ATTR_INTENSITY, what, "intensity");
+    s += touch(raw->cls, n, 1, raw->attrs, PC_ATTR_CLASS, what, "class");
+    s += touch(raw->radius, n, sizeof(float), raw->attrs, PC_ATTR_RADIUS, what, "radius");
+    s += touch(raw->scalar, n, sizeof(float), raw->attrs, PC_ATTR_SCALAR, what, "scalar");
+    (void)s;
+}
+
+/* check_cloud: pc_finalize kept the finite points of n, with a finite bounding box that holds
+ * them and a finite offset. */
+static void check_cloud(const pc_cloud *c, size_t n, const char *what)
+{
+    if (c->n == 0 || c->n + c->n_dropped != n)
+        fz_fail(what, "pc_finalize kept %zu and dropped %llu of %zu points", c->n,
+                (unsigned long long)c->n_dropped, n);
+    for (int k = 0; k < 3; k++)
+        if (!isfinite(c->bmin[k]) || !isfinite(c->bmax[k]) || !(c->bmin[k] <= c->bmax[k]) ||
+            !isfinite(c->offset[k]))
+            fz_fail(what, "pc_finalize: axis %d bounds [%g, %g], offset %g", k, c->bmin[k],
+                    c->bmax[k], c->offset[k]);
+    /* pc_finalize refuses a cloud whose half span passes FLT_MAX, so every kept point converts
+     * to finite float coordinates. */
+    for (size_t i = 0; i < 3 * c->n; i++)
+        if (!isfinite(c->pos[i]))
+            fz_fail(what, "pc_finalize: point %zu has a non-finite float coordinate %g", i / 3,
+                    (double)c->pos[i]);
+    unsigned s = touch(c->pos, c->n, 3 * sizeof(float), c->attrs, 0, what, "pos");
+    s += touch(c->rgba, c->n, 4, c->attrs, PC_ATTR_RGB, what, "rgb");
+    s += touch(c->normal, c->n, 3 * sizeof(float), c->attrs, PC_ATTR_NORMAL, what, "normal");
+    s += touch(c->intensity, c->n, sizeof(float), c->attrs, PC_ATTR_INTENSITY, what, "intensity");
+    s += touch(c->cls, c->n, 1, c->attrs, PC_ATTR_CLASS, what, "class");
+    s += touch(c->radius, c->n, sizeof(float), c->attrs, PC_ATTR_RADIUS, what, "radius");
+    s += touch(c->scalar, c->n, sizeof(float), c->attrs, PC_ATTR_SCALAR, what, "scalar");
+    (void)s;
+}
+
+/* fuzz_reader: data as a file through a memfd; reader, then pc_finalize, then the checks.
+ * Returns the first non-zero code. */
+static int fuzz_reader(reader_fn rd, const char *what, const uint8_t *data, size_t len)
+{
+    int fd = memfd_create("splatd-fuzz", MFD_CLOEXEC);
+    if (fd < 0) {
+        perror("memfd_create");
+        abort(); /* not the input's fault: the harness cannot run here */
+    }
+    for (size_t off = 0; off < len;) {
+        ssize_t w = write(fd, data + off, len - off);
+        if (w <= 0) {
+            perror("write to memfd");
+            abort();
+        }
+        off += (size_t)w;
+    }
+    char path[64];
+    snprintf(path, sizeof path, "/proc/self/fd/%d", fd);
+    pc_raw raw;
+    memset(&raw, 0, sizeof raw);
+    sd_err err;
+    memset(&err, 0, sizeof err);
+    int rc = rd(path, &raw, &err);
+    check_sd_err(rc, &err, path, what);
+    check_raw(&raw, len, rc == 0, what);
+    if (rc == 0) {
+        size_t n = raw.n;
+        pc_cloud c;
+        memset(&err, 0, sizeof err);
+        rc = pc_finalize(&raw, &c, path, &err);
+        check_sd_err(rc, &err, path, "pc_finalize");
+        if (rc == 0) check_cloud(&c, n, what);
+        else if (rc != SD_EEMPTY && rc != SD_ELIMIT) fz_fail(what, "pc_finalize returned %d", rc);
+        pc_cloud_free(&c);
+    }
+    pc_raw_free(&raw);
+    close(fd);
+    return rc;
+}
+
+int fuzz_one_ply(const uint8_t *data, size_t len) { return fuzz_reader(pc_read_ply, "ply", data, len); }
+int fuzz_one_pcd(const uint8_t *data, size_t len) { return fuzz_reader(pc_read_pcd, "pcd", data, len); }
+int fuzz_one_las(const uint8_t *data, size_t len) { return fuzz_reader(pc_read_las, "las", data, len); }
+int fuzz_one_xyz(const uint8_t *data, size_t len) { return fuzz_reader(pc_read_xyz, "xyz", data, len); }
+
+/* ---- LZF --------------------------------------------------------------------------------- */
+
+/* ref_lzf: the LZF format decoded one byte at a time, as lzf.h describes it; 0 when in
+ * decodes to exactly out_len bytes, -1 when not. */
+static int ref_lzf(const uint8_t *in, size_t in_len, uint8_t *out, size_t out_len)
+{
+    size_t ip = 0, op = 0;
+    while (ip < in_len) {
+        unsigned c = in[ip++];
+        if (c < 32) {
+            for (unsigned k = 0; k <= c; k++) {
+                if (ip >= in_len || op >= out_len) return -1;
+                out[op++] = in[ip++];
+            }
+            continue;
+        }
+        size_t l = c >> 5;
+        if (l == 7) {
+            if (ip >= in_len) return -1;
+            l += in[ip++];
+        }
+        if (ip >= in_len) return -1;
+        size_t dist = ((size_t)(c & 31) << 8) + in[ip++] + 1;
+        if (dist > op) return -1;
+        for (size_t k = 0; k < l + 2; k++) {
+            if (op >= out_len) return -1;
+            out[op] = out[op - dist];
+            op++;
+        }
+    }
+    return op == out_len ? 0 : -1;
+}
+
+int fuzz_one_lzf(const uint8_t *data, size_t len)
+{
+    if (len < 3) return 0;
+    size_t out_len = (size_t)data[0] | (size_t)data[1] << 8 | (size_t)(data[2] & 0x0f) << 16;
+    const uint8_t *in = data + 3;
+    size_t in_len = len - 3;
+    uint8_t *out = malloc(out_len ? out_len : 1), *ref = malloc(out_len ? out_len : 1);
+    if (!out || !ref) {
+        free(out);
+        free(ref);
+        return SD_ENOMEM;
+    }
+    sd_err err;
+    memset(&err, 0, sizeof err);
+    int rc = pc_lzf_decompress(in, in_len, out, out_len, "lzf-input", 1000, &err);
+    check_sd_err(rc, &err, "lzf-input", "lzf");
+    if (rc != 0 && rc != SD_ETRUNC && rc != SD_EFORMAT)
+        fz_fail("lzf", "pc_lzf_decompress returned %d", rc);
+    int rrc = ref_lzf(in, in_len, ref, out_len);
+    if ((rc == 0) != (rrc == 0))
+        fz_fail("lzf", "pc_lzf_decompress says %d (%s), the reference decoder %s", rc, err.msg,
+                rrc == 0 ? "decodes it" : "rejects it");
+    if (rc == 0 && out_len && memcmp(out, ref, out_len) != 0)
+        fz_fail("lzf", "pc_lzf_decompress and the reference decoder disagree on the bytes");
+    free(out);
+    free(ref);
+    return rc;
+}
+
+/* ---- parameters -------------------------------------------------------------------------- */
+
+/* close_enough: b is a within the precision "%g" prints (6 significant digits). */
+static int close_enough(double a, double b)
+{
+    return fabs(a - b) <= 1e-5 * fmax(1.0, fabs(a));
+}
+
+/* check_vec3_text: an accepted vec3 value, read independently over its whole length (the
+ * ','-separated non-empty tokens, each a whole finite strtod number, exactly three), must be
+ * what was stored. */
+static void check_vec3_text(const char *kv, const char *value, const float stored[3])
+{
+    double v[3];
+    int k = 0;
+    const char *p = value;
+    while (*p) {
+        const char *e = strchr(p, ',');
+        size_t n = e ? (size_t)(e - p) : strlen(p);
+        if (n > 0) {
+            char tok[4097];
+            memcpy(tok, p, n);
+            tok[n] = 0;
+            char *end;
+            double x = strtod(tok, &end);
+            if (k == 3 || end == tok || *end || !isfinite(x))
+                fz_fail("params", "'%.80s...' (%zu bytes) was accepted, but its value is not "
+                        "three numbers", kv, strlen(kv));
+            v[k++] = x;
+        }
+        p += n;
+        if (*p == ',') p++;
+    }
+    if (k != 3)
+        fz_fail("params", "'%.80s' was accepted with %d numbers", kv, k);
+    for (k = 0; k < 3; k++)
+        if ((float)v[k] != stored[k])
+            fz_fail("params", "'%.80s...' (%zu bytes) stored component %d as %g; the text says "
+                    "%g", kv, strlen(kv), k, (double)stored[k], v[k]);
+}
+
+int fuzz_one_params(const uint8_t *data, size_t len)
+{
+    char s[4097];
+    size_t n = len < sizeof s - 1 ? len : sizeof s - 1;
+    memcpy(s, data, n);
+    s[n] = 0;
+    sp_params p, before;
+    sp_params_defaults(&p);
+    before = p;
+    char err[256] = "";
+    int rc = sp_param_set_kv(&p, s, err, sizeof err);
+    if (rc != 0) {
+        if (rc != -1 || !err[0])
+            fz_fail("params", "sp_param_set_kv returned %d with message '%s'", rc, err);
+        if (!params_equal(&p, &before))
+            fz_fail("params", "sp_param_set_kv failed (%s) but changed a parameter", err);
+        return -1;
+    }
+    const char *eq = strchr(s, '=');
+    char name[64];
+    size_t l = eq ? (size_t)(eq - s) : 0;
+    if (!eq || l == 0 || l >= sizeof name) fz_fail("params", "accepted '%s'", s);
+    memcpy(name, s, l);
+    name[l] = 0;
+    int id = sp_param_find(name);
+    if (id < 0) fz_fail("params", "accepted unknown parameter '%s'", name);
+    for (int k = 0; k < SP_PARAM_COUNT; k++) {
+        if (k == id) continue;
+        proto_param_rec ra, rb;
+        proto_param_rec_from(&p, k, &ra);
+        proto_param_rec_from(&before, k, &rb);
+        if (memcmp(&ra, &rb, sizeof ra) != 0)
+            fz_fail("params", "setting '%s' changed '%s'", name, sp_param_table[k].name);
+    }
+    /* The stored value prints and reads back. */
+    char txt[256], err2[256] = "";
+    sp_param_get_text(&p, id, txt, sizeof txt);
+    sp_params q;
+    sp_params_defaults(&q);
+    if (sp_param_set_text(&q, name, txt, err2, sizeof err2) != 0)
+        fz_fail("params", "'%s' was accepted but its printed value '%s' is not (%s)", s, txt, err2);
+    proto_param_rec rp, rq;
+    proto_param_rec_from(&p, id, &rp);
+    proto_param_rec_from(&q, id, &rq);
+    int same = 1;
+    switch (rp.type) {
+    case SP_T_ENUM: same = rp.u.e == rq.u.e; break;
+    case SP_T_INT: same = rp.u.i == rq.u.i; break;
+    case SP_T_FLOAT: same = close_enough(rp.u.f, rq.u.f); break;
+    case SP_T_VEC3:
+        for (int k = 0; k < 3; k++) same &= close_enough(rp.u.v[k], rq.u.v[k]);
+        break;
+    }
+    if (!same) fz_fail("params", "'%s' prints as '%s', which reads back differently", s, txt);
+    if (rp.type == SP_T_VEC3) check_vec3_text(s, eq + 1, rp.u.v);
+    /* What the text syntax accepts, the wire accepts too (same table, same ranges). */
+    proto_error pe;
+    memset(&pe, 0, sizeof pe);
+    sp_params w;
+    sp_params_defaults(&w);
+    if (proto_param_apply(&rp, &w, NULL, &pe) != 0)
+        fz_fail("params", "'%s' is accepted as text but refused on the wire: %s", s, pe.msg);
+    return 0;
+}
+
+/* ---- lookup ------------------------------------------------------------------------------ */
+
+fuzz_fn fuzz_target_find(const char *name)
+{
+    static const struct { const char *name; fuzz_fn fn; } targets[] = {
+        {"proto", fuzz_one_proto}, {"ply", fuzz_one_ply}, {"pcd", fuzz_one_pcd},
+        {"las", fuzz_one_las},     {"xyz", fuzz_one_xyz}, {"lzf", fuzz_one_lzf},
+        {"params", fuzz_one_params},
+    };
+    for (size_t i = 0; i < sizeof targets / sizeof targets[0]; i++)
+        if (!strcmp(targets[i].name, name)) return targets[i].fn;
+    return NULL;
+}

@@ -1,0 +1,50 @@
+/* fuzz_targets.h — the bodies of the fuzz targets, shared by the libFuzzer wrappers
+ * (tests/fuzz/fuzz_*.c, built with clang by tests/fuzz/run.sh) and by the regression test
+ * tests/test_fuzz_regress.c (built with gcc by make test), which replays every corpus and
+ * crash file through the same functions.
+ *
+ * Each fuzz_one_<target> takes arbitrary bytes and must never crash, leak or touch memory it
+ * does not own. Beyond "no crash" each checks properties that hold for any input (oracles):
+ * a failure returns a negative code with a non-empty message; what parsed re-encodes to the
+ * same bytes; what a reader accepted fits in what the file can hold; two decoders agree. A
+ * broken property prints what broke to stderr and calls abort(), which both libFuzzer and
+ * cmocka report as a failure.
+ *
+ * Return value: 0 when the input was accepted as valid, a negative code when it was rejected
+ * (SD_E* for the file readers and LZF, -PROTO_E_* for the protocol, -1 for parameters). The
+ * libFuzzer wrappers ignore it; the regression test checks it for the hand-made seeds. */
+#pragma once
+#include <stddef.h>
+#include <stdint.h>
+
+/* fuzz_one_proto: byte 0 configures a proto_decoder (bits 0-1 accept_dir, bit 2 preauth,
+ * bit 3 fixed version 1, bit 4 a 4 MiB payload limit, bits 5-7 the feed chunk size); the
+ * rest is a byte stream fed to proto_decode in chunks and, separately, all at once (both
+ * must give the same messages and error). Each message is parsed by its proto_parse_* and,
+ * when it parses, re-encoded by its proto_enc_* and compared byte for byte. Returns 0 when
+ * the whole stream decoded and every message parsed, else the first negative code. */
+int fuzz_one_proto(const uint8_t *data, size_t len);
+
+/* fuzz_one_ply / pcd / las / xyz: the bytes as a file (a memfd, read through
+ * /proc/self/fd/N) given to pc_read_<fmt>, then pc_finalize. Returns the reader's or
+ * pc_finalize's code. */
+int fuzz_one_ply(const uint8_t *data, size_t len);
+int fuzz_one_pcd(const uint8_t *data, size_t len);
+int fuzz_one_las(const uint8_t *data, size_t len);
+int fuzz_one_xyz(const uint8_t *data, size_t len);
+
+/* fuzz_one_lzf: bytes 0-2 (little-endian, low 20 bits) are the declared output size, the
+ * rest an LZF stream given to pc_lzf_decompress with an exactly sized output buffer. A plain
+ * reference decoder must agree on success and on the bytes. Returns its code. */
+int fuzz_one_lzf(const uint8_t *data, size_t len);
+
+/* fuzz_one_params: the bytes (up to the first NUL) as a "name=value" string for
+ * sp_param_set_kv on the defaults. On success the stored value must print and read back
+ * (sp_param_get_text, sp_param_set_text) to within the printing precision; on failure the
+ * parameters must be unchanged and the message non-empty. Returns 0 or -1. */
+int fuzz_one_params(const uint8_t *data, size_t len);
+
+/* fuzz_target_find: the fuzz_one_* function of a target name ("proto", "ply", "pcd", "las",
+ * "xyz", "lzf", "params"), or NULL. */
+typedef int (*fuzz_fn)(const uint8_t *data, size_t len);
+fuzz_fn fuzz_target_find(const char *name);

@@ -1,0 +1,353 @@
+#!/usr/bin/env python3
+"""make_corpus.py: writes the hand-made fuzz seeds into tests/fuzz/corpus/<target>/.
+
+    python3 tests/fuzz/make_corpus.py        (from the repository root)
+
+Every seed is a small valid input, except those named bad_*, which each target must reject.
+tests/test_fuzz_regress.c checks both: valid seeds give 0, bad_* seeds a negative code.
+The layouts follow the readers' and protocol/proto.h's descriptions of the formats.
+"""
+import os
+import struct
+import sys
+
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "corpus")
+
+
+def put(target, name, data):
+    d = os.path.join(ROOT, target)
+    os.makedirs(d, exist_ok=True)
+    if isinstance(data, str):
+        data = data.encode()
+    with open(os.path.join(d, name), "wb") as f:
+        f.write(data)
+
+
+# ---------------------------------------------------------------- protocol
+
+MAGIC = 0x544C5053
+T = dict(HELLO=1, LIST=2, OPEN=3, CAMERA=4, PARAMS=5, RENDER=6, STREAM=7, PING=8, BYE=9,
+         WELCOME=129, CLOUDS=130, INFO=131, PROGRESS=132, FRAME=133, PONG=134, ERROR=135, OK=136)
+
+
+def msg(t, payload=b"", seq=1, ver=1):
+    return struct.pack("<IHHII", MAGIC, ver, T[t], seq, len(payload)) + payload
+
+
+def s8(s):
+    b = s.encode()
+    return bytes([len(b)]) + b
+
+
+def hello(proof=b""):
+    return struct.pack("<HH", 1, 1) + s8("splat 0.1") + bytes([len(proof)]) + proof
+
+
+def camera(w=64, h=48):
+    return struct.pack("<9d3f2I", 0, 0, 5, 0, 0, 0, 0, 1, 0, 45.0, 0.0, 0.0, w, h)
+
+
+def params_payload():
+    recs = [("pipeline", 1, struct.pack("<I", 0)), ("splat_scale", 2, struct.pack("<f", 1.5)),
+            ("point_budget", 3, struct.pack("<Q", 100000)),
+            ("light", 4, struct.pack("<3f", 0.0, 0.5, 1.0)), ("format", 1, struct.pack("<I", 1))]
+    b = struct.pack("<H", len(recs))
+    for n, t, v in recs:
+        b += s8(n) + bytes([t]) + v
+    return b
+
+
+def c2s_session():
+    seq = iter(range(1, 100))
+    return b"".join([
+        msg("HELLO", hello(), next(seq)), msg("LIST", b"", next(seq)),
+        msg("OPEN", s8("bun000.ply"), next(seq)), msg("CAMERA", camera(), next(seq)),
+        msg("PARAMS", params_payload(), next(seq)), msg("STREAM", struct.pack("<Bf", 1, 30.0), next(seq)),
+        msg("RENDER", b"", next(seq)), msg("PING", struct.pack("<Q", 123456789), next(seq)),
+        msg("BYE", b"", next(seq))])
+
+
+def welcome():
+    return (struct.pack("<HBB", 1, 1, 0) + bytes(range(32)) + struct.pack("<3I", 65536, 4096, 4096)
+            + s8("splatd 0.1") + s8("osmesa") + s8("llvmpipe (LLVM 15.0.6, 256 bits)"))
+
+
+def clouds():
+    items = [("bun000.ply", 1988159, 40256, 1), ("autzen_trim.las", 3742038, 0, 3)]
+    b = struct.pack("<I", len(items))
+    for n, by, pts, fl in items:
+        b += s8(n) + struct.pack("<QQI", by, pts, fl)
+    return b
+
+
+def info():
+    return (s8("bun000.ply") + struct.pack("<QQ", 40256, 0)
+            + struct.pack("<9d", -0.09, 0.03, -0.06, 0.06, 0.18, 0.06, -0.015, 0.105, 0.0)
+            + struct.pack("<IfI", 3, 0.0005, 16) + s8("PLY binary_little_endian 1.0"))
+
+
+def frame(fmt, w, h, data):
+    return struct.pack("<IBBHII4Q", 7, 1, fmt, 0, w, h, 1200, 300, 450, 40256) + data
+
+
+def s2c_session():
+    return b"".join([
+        msg("WELCOME", welcome(), 1), msg("CLOUDS", clouds(), 2), msg("INFO", info(), 3),
+        msg("PROGRESS", struct.pack("<Bf", 1, 0.41) + s8("kNN 41%"), 3),
+        msg("FRAME", frame(3, 2, 2, bytes(range(16))), 4),
+        msg("FRAME", frame(0, 64, 48, b"\xff\xd8\xff\xe0jpeg-ish"), 5),
+        msg("PONG", struct.pack("<QQ", 123456789, 987654321), 6),
+        msg("ERROR", struct.pack("<IH", 10, 13) + b"no such cloud", 7), msg("OK", b"", 8)])
+
+
+def proto():
+    put("proto", "c2s_session", bytes([0x01]) + c2s_session())
+    put("proto", "c2s_session_chunk50", bytes([0xE1]) + c2s_session())
+    put("proto", "s2c_session", bytes([0x12]) + s2c_session())
+    put("proto", "s2c_session_chunk22", bytes([0x72]) + s2c_session())
+    put("proto", "preauth_hello_proof", bytes([0x05]) + msg("HELLO", hello(bytes(range(32, 64)))))
+    put("proto", "either_dir", bytes([0x28]) + msg("PING", struct.pack("<Q", 1))
+        + msg("PONG", struct.pack("<QQ", 1, 2)))
+    put("proto", "bad_magic", bytes([0x01]) + b"GET / HTTP/1.1\r\n\r\n")
+    put("proto", "bad_preauth_list", bytes([0x05]) + msg("LIST"))
+    put("proto", "bad_camera_eye_is_target",
+        bytes([0x01]) + msg("CAMERA", struct.pack("<9d3f2I", 1, 1, 1, 1, 1, 1, 0, 1, 0, 45, 0, 0,
+                                                  8, 8)))
+    put("proto", "bad_open_dotdot", bytes([0x01]) + msg("OPEN", s8("..")))
+    put("proto", "bad_clouds_count", bytes([0x02]) + msg("CLOUDS", struct.pack("<I", 1000000)))
+
+
+# ---------------------------------------------------------------- PLY
+
+def ply():
+    verts = [(0.0, 0.0, 0.0), (1.0, 0.0, 0.5), (0.0, 1.0, -0.25), (1.0, 1.0, 2.0)]
+    a = ("ply\nformat ascii 1.0\ncomment made by make_corpus.py\nelement vertex 4\n"
+         "property float x\nproperty float y\nproperty float z\nproperty uchar red\n"
+         "property uchar green\nproperty uchar blue\nproperty float nx\nproperty float ny\n"
+         "property float nz\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n")
+    for i, (x, y, z) in enumerate(verts):
+        a += "%g %g %g %d %d %d 0 0 1\n" % (x, y, z, 60 * i, 255 - 60 * i, 7)
+    a += "3 0 1 2\n3 1 3 2\n"
+    put("ply", "ascii_rgb_normal_faces.ply", a)
+
+    h = ("ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\n"
+         "property float y\nproperty float z\nproperty uchar red\nproperty uchar green\n"
+         "property uchar blue\nproperty uchar alpha\nproperty float quality\nend_header\n")
+    b = h.encode()
+    for i, (x, y, z) in enumerate(verts):
+        b += struct.pack("<3f4Bf", x, y, z, 10 * i, 20 * i, 30 * i, 255, 0.25 * i)
+    put("ply", "binary_le_rgba_quality.ply", b)
+
+    h = ("ply\nformat binary_big_endian 1.0\nelement face 1\n"
+         "property list uchar uint vertex_indices\nelement vertex 4\nproperty double x\n"
+         "property double y\nproperty double z\nproperty ushort intensity\nproperty float radius\n"
+         "property short red\nproperty short green\nproperty short blue\nend_header\n")
+    b = h.encode() + struct.pack(">B3I", 3, 0, 1, 2)
+    for i, (x, y, z) in enumerate(verts):
+        b += struct.pack(">3dHf3h", x, y, z, 1000 * i, 0.01, 0, 30000, 65535 // 2)
+    put("ply", "binary_be_face_first_intensity_radius.ply", b)
+
+    put("ply", "bad_empty.ply", b"")
+    put("ply", "bad_truncated.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+        "property float y\nproperty float z\nend_header\n0 0 0\n1 1 1\n")
+    put("ply", "bad_no_z.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n"
+        "property float y\nend_header\n0 0\n")
+
+
+# ---------------------------------------------------------------- PCD
+
+def lzf_compress(data):
+    """A small greedy LZF compressor (literal runs and back references up to 8 KiB back)."""
+    out, lit, i, n = bytearray(), bytearray(), 0, len(data)
+
+    def flush():
+        nonlocal lit
+        while lit:
+            chunk, lit = lit[:32], lit[32:]
+            out.append(len(chunk) - 1)
+            out.extend(chunk)
+
+    while i < n:
+        best_len, best_dist = 0, 0
+        for j in range(max(0, i - 8192), i):
+            k = 0
+            while i + k < n and k < 264 and data[j + k] == data[i + k]:
+                k += 1
+            if k > best_len:
+                best_len, best_dist = k, i - j
+        if best_len >= 3:
+            flush()
+            ln, d = best_len - 2, best_dist - 1
+            if ln < 7:
+                out.append((ln << 5) | (d >> 8))
+            else:
+                out.append((7 << 5) | (d >> 8))
+                out.append(ln - 7)
+            out.append(d & 0xFF)
+            i += best_len
+        else:
+            lit.append(data[i])
+            i += 1
+    flush()
+    return bytes(out)
+
+
+def pcd_header(fields, size, typ, count, n, data):
+    return ("# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS %s\nSIZE %s\n"
+            "TYPE %s\nCOUNT %s\nWIDTH %d\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS %d\nDATA %s\n"
+            % (fields, size, typ, count, n, n, data))
+
+
+def pcd():
+    pts = [(0.0, 0.0, 0.0), (1.0, 0.5, 0.25), (-1.0, 2.0, 0.5), (0.5, -0.5, 1.0), (2.0, 2.0, 2.0)]
+    rgb = [0x00FF0000, 0x0000FF00, 0x000000FF, 0x00808080, 0x00FFFFFF]
+    a = pcd_header("x y z rgb", "4 4 4 4", "F F F U", "1 1 1 1", len(pts), "ascii")
+    for (x, y, z), c in zip(pts, rgb):
+        a += "%g %g %g %d\n" % (x, y, z, c)
+    put("pcd", "ascii_xyz_rgb.pcd", a)
+
+    b = pcd_header("x y z intensity normal_x normal_y normal_z _ classification",
+                   "4 4 4 4 4 4 4 1 1", "F F F F F F F U U", "1 1 1 1 1 1 1 4 1", len(pts),
+                   "binary").encode()
+    for i, (x, y, z) in enumerate(pts):
+        b += struct.pack("<7f4BB", x, y, z, 0.1 * i, 0, 0, 1, 0, 0, 0, 0, i)
+    put("pcd", "binary_intensity_normal_pad_class.pcd", b)
+
+    # binary_compressed: each field's values for all points, one field after another.
+    soa = b"".join(struct.pack("<f", p[k]) for k in range(3) for p in pts)
+    soa += b"".join(struct.pack("<I", c) for c in rgb)
+    z = lzf_compress(soa)
+    c = pcd_header("x y z rgb", "4 4 4 4", "F F F U", "1 1 1 1", len(pts), "binary_compressed")
+    put("pcd", "binary_compressed_xyz_rgb.pcd", c.encode() + struct.pack("<II", len(z), len(soa)) + z)
+
+    many = pts * 4
+    soa = b"".join(struct.pack("<d", p[k]) for k in range(3) for p in many)
+    soa += bytes(i * 10 % 256 for i in range(len(many))) + bytes([20] * len(many))
+    soa += bytes([30] * len(many))
+    z = lzf_compress(soa)
+    c = pcd_header("x y z red green blue", "8 8 8 1 1 1", "F F F U U U", "1 1 1 1 1 1",
+                   len(pts) * 4, "binary_compressed")
+    put("pcd", "binary_compressed_double_sep_rgb.pcd",
+        c.encode() + struct.pack("<II", len(z), len(soa)) + z)
+
+    put("pcd", "bad_points_over_file.pcd",
+        pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 1000000, "binary") + "abcd")
+    put("pcd", "bad_compressed_size.pcd",
+        pcd_header("x y z", "4 4 4", "F F F", "1 1 1", 2, "binary_compressed").encode()
+        + struct.pack("<II", 4, 0x7FFFFFFF) + b"\x00abc")
+
+
+# ---------------------------------------------------------------- LAS
+
+def las_header(minor, fmt, rec_len, n, scale=0.01, offset=(100.0, 200.0, 0.0)):
+    size = {2: 227, 3: 235, 4: 375}[minor]
+    h = bytearray(size)
+    h[0:4] = b"LASF"
+    h[24], h[25] = 1, minor
+    h[26:26 + 10] = b"make_corpu"
+    struct.pack_into("<HHHIIBHI", h, 90, 1, 2024, size, size, 0, fmt, rec_len,
+                     0 if minor == 4 else n)
+    struct.pack_into("<3d3d", h, 131, scale, scale, scale, *offset)
+    struct.pack_into("<6d", h, 179, 110, 100, 210, 200, 5, 0)
+    if minor == 4:
+        struct.pack_into("<Q", h, 247, n)
+    return bytes(h)
+
+
+def las():
+    xyz = [(0, 0, 0), (1000, 0, 100), (0, 1000, 200), (1000, 1000, 500), (-5, 7, 9)]
+    b = las_header(2, 3, 34, len(xyz))
+    for i, (x, y, z) in enumerate(xyz):
+        b += struct.pack("<3iHBBbBHd3H", x, y, z, 100 * i, 0x11, 2 + i, 0, 0, 1, 0.5 * i,
+                         50 * i, 40, 200)
+    put("las", "las12_format3_rgb.las", b)
+
+    b = las_header(2, 1, 28 + 4, len(xyz))  # 4 extra bytes per record
+    for i, (x, y, z) in enumerate(xyz):
+        b += struct.pack("<3iHBBbBHd", x, y, z, 7 * i, 0x11, 6, 0, 0, 1, 0.0) + b"xtra"
+    put("las", "las12_format1_extra_bytes.las", b)
+
+    b = las_header(4, 7, 36, len(xyz), scale=0.001)
+    for i, (x, y, z) in enumerate(xyz):
+        b += struct.pack("<3iHBBBBhHd3H", x, y, z, 10 * i, 0x11, 0, 9 + i, 0, 0, 1, 1.0 * i,
+                         1000 * i, 65535, 300)
+    put("las", "las14_format7_rgb16.las", b)
+
+    b = las_header(3, 0, 20, 2)
+    for x, y, z in xyz[:2]:
+        b += struct.pack("<3iHBBbBH", x, y, z, 1, 0x11, 2, 0, 0, 1)
+    put("las", "las13_format0.las", b)
+
+    # One point at -1.16e308: the bounding-box centre overflowed to -inf before the fix.
+    b = las_header(2, 0, 20, 1, scale=1e303, offset=(0.0, 0.0, 0.0))
+    b += struct.pack("<3iHBBbBH", -115790, 0, 0, 1, 0x11, 2, 0, 0, 1)
+    put("las", "huge_coordinate_single_point.las", b)
+
+    put("las", "bad_count_over_file.las", las_header(2, 0, 20, 1000) + bytes(40))
+    put("las", "bad_laz.las", las_header(2, 0x83, 34, 1) + bytes(34))
+
+
+# ---------------------------------------------------------------- XYZ
+
+def xyz():
+    put("xyz", "plain.xyz", "0 0 0\n1 0 0\n0 1 0\n0 0 1.5e-1\n")
+    put("xyz", "rgb_commas_crlf.xyz", "# x,y,z,r,g,b\r\n1.5,2.5,3.5,255,0,0\r\n"
+        "-1,-2,-3,0,255,0\r\n\r\n4;5;6;0;0;255\r\n")
+    put("xyz", "pts_count_irgb.pts", "3\n0 0 0 -1200 10 20 30\n1 1 1 0 40 50 60\n"
+        "2 2 2 1500 70 80 90\n")
+    put("xyz", "float_colour_intensity.txt", "// comment\n0 0 0 0.5\t0.1 0.2 0.3\n"
+        "1 2 3 0.25\t0.4 0.5 0.6\n")
+    put("xyz", "two_blocks.pts", "2\n0 0 0 1\n1 1 1 2\n1\n5 5 5 3\n")
+    put("xyz", "nan_row_no_newline.xyz", "0 0 0\nnan 1 1\n2 2 2")
+    put("xyz", "bad_empty.xyz", b"")
+    put("xyz", "bad_token.xyz", "0 0 0\n1 x 1\n")
+    put("xyz", "bad_count_mismatch.pts", "5\n0 0 0\n1 1 1\n")
+
+
+# ---------------------------------------------------------------- LZF, params
+
+def lzf():
+    def seed(name, raw):
+        z = lzf_compress(raw)
+        n = len(raw)
+        put("lzf", name, bytes([n & 0xFF, (n >> 8) & 0xFF, (n >> 16) & 0x0F]) + z)
+
+    seed("literals", bytes(range(100)))
+    seed("run_dist1", b"a" * 300)
+    seed("pattern_dist3", b"xyz" * 120 + b"end")
+    seed("long_dist", bytes(range(256)) * 3 + bytes(40))
+    seed("floats", b"".join(struct.pack("<f", i * 0.5) for i in range(200)))
+    put("lzf", "empty", b"\x00\x00\x00")
+    put("lzf", "bad_backref_before_start", b"\x10\x00\x00\x20\x05")
+    put("lzf", "bad_literal_cut", b"\x05\x00\x00\x04ab")
+
+
+def params():
+    for i, kv in enumerate(["pipeline=points", "splat_scale=2.5", "lowpass=0", "point_size=3",
+                            "point_budget=4000000000", "color=normal", "light=0.3,-0.4,1",
+                            "background=0.1,0.2,0.3", "format=exr", "quality=100",
+                            "subsampling=gray"]):
+        put("params", "ok_%02d" % i, kv)
+    for i, kv in enumerate(["nosuch=1", "quality=101", "light=1,2", "splat_scale=nan", "=1",
+                            "pipeline", "point_budget=1.5",
+                            # 9 after 130 zeros: was cut at 127 bytes and stored as 0
+                            "background=0,0," + "0" * 130 + "9"]):
+        put("params", "bad_%02d" % i, kv)
+
+
+def main():
+    proto()
+    ply()
+    pcd()
+    las()
+    xyz()
+    lzf()
+    params()
+    total = sum(os.path.getsize(os.path.join(dp, f))
+                for dp, _, fs in os.walk(ROOT) for f in fs)
+    print("corpus: %d bytes under %s" % (total, ROOT))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
