@@ -68,6 +68,7 @@ typedef struct job {
     int K;
     uint32_t *nbr;          /* n * K kept neighbour lists, or NULL */
     float *nnd;             /* n nearest-neighbour distances */
+    float *rcap;            /* n radius limits (computed radii only), or NULL */
     int need_normal, need_radius;
     double centroid[3];
     worker *w;
@@ -163,6 +164,13 @@ static int chunk_field(void *ctx, size_t c, int tid, sd_err *err)
             float t = 2 - dd;
             s += t * t;
         }
+        if (jb->rcap) {
+            /* the median radius of the neighbours: an isolated outlier's own eq. 20 radius
+             * reaches to the surface it strays from, its neighbours' radii do not */
+            float rn[PREP_MAX_K];
+            for (int j = 0; j < K; j++) rn[j] = p->radius[nb[j]];
+            jb->rcap[pi] = PREP_RADIUS_CAP * prep_percentile(rn, (size_t)K, 0.5);
+        }
         float f = p->radius[pi] * s / (float)K;
         /* a file's radius or normal may be non-finite or negative: such a point gets F = 0
          * rather than poisoning the percentiles */
@@ -182,7 +190,7 @@ static int check_input(const pc_cloud *in, const prep_desc *desc, prep_desc *d, 
     if (d->threads <= 0) d->threads = prep_default_threads();
     if (d->max_nbr_bytes == 0) d->max_nbr_bytes = (size_t)1 << 30;
     if (!in) return sd_errf(err, SD_EINVAL, "prep: no cloud given");
-    if (d->k < 1 || d->k > 256)
+    if (d->k < 1 || d->k > PREP_MAX_K)
         return sd_errf(err, SD_EINVAL, "prep: k = %d neighbours is outside [1, 256]", d->k);
     if (d->knn != PREP_KNN_GRID && d->knn != PREP_KNN_FLANN)
         return sd_errf(err, SD_EINVAL, "prep: unknown kNN method %d", (int)d->knn);
@@ -340,6 +348,8 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
     int keep = n <= d.max_nbr_bytes / per_nbr;
     jb.kn = kn;
     jb.nnd = malloc(n * sizeof *jb.nnd);
+    jb.rcap = jb.need_radius ? malloc(n * sizeof *jb.rcap) : NULL;
+    if (jb.need_radius && !jb.rcap) goto nomem;
     jb.nbr = keep ? malloc(n * per_nbr) : NULL;
     w = calloc((size_t)threads, sizeof *w);
     if (!jb.nnd || (keep && !jb.nbr) || !w) goto nomem;
@@ -371,6 +381,9 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
     prep_progress_begin(&pr, d.progress, d.user, "field");
     rc = prep_par_for(threads, nchunks, chunk_field, &jb, &pr, err);
     if (rc != 0) goto fail;
+    if (jb.rcap) /* after F, which uses the radius of eq. 20 itself */
+        for (size_t i = 0; i < n; i++)
+            if (out->radius[i] > jb.rcap[i]) out->radius[i] = jb.rcap[i];
     tmp = malloc(n * sizeof *tmp);
     if (!tmp) goto nomem;
     summarise(out, jb.nnd, tmp);
@@ -397,6 +410,7 @@ done:
         }
     free(w);
     free(jb.nnd);
+    free(jb.rcap);
     free(jb.nbr);
     prep_knn_free(kn);
     return rc;

@@ -13,7 +13,12 @@
  *     to p - c, e.g. any plane through c) the normal faces up instead: n_z >= 0, or when
  *     |n_z| < 0.1 (near-vertical surfaces) n_y >= 0, or when |n_y| < 0.1 too, n_x >= 0.
  *  4. Radius, only when the file has none: r = 2 R / sqrt(K), R = distance to the farthest of
- *     the K neighbours (Soft Transparency eq. 20 as DESIGN.md interprets it).
+ *     the K neighbours (Soft Transparency eq. 20 as DESIGN.md interprets it), then limited to
+ *     PREP_RADIUS_CAP times the median radius of the point's neighbours (after F is computed
+ *     with the unlimited value): a stray point's R reaches to the surface it strayed from and
+ *     would otherwise be drawn as a disc covering that surface. Density changes across a scan
+ *     (terrestrial scans thin out with distance) move the neighbours' radii too, so the limit
+ *     follows them, unlike a cap on the cloud's global median.
  *  5. F (eq. 21 with |n_i . n_j|, PCA normals being unoriented):
  *     F_i = r_i * sum_j (2 - |n_i . n_j|)^2 / K, divided by the cloud's 99th percentile of F
  *     (F_raw_p99) and clamped to [0, 1].
@@ -29,6 +34,9 @@
 #include "prepared.h"
 #include "progress.h"
 #include "sd_err.h"
+
+enum { PREP_MAX_K = 256 };       /* most neighbours per point */
+#define PREP_RADIUS_CAP 2.0f     /* computed radius <= this x the neighbours' median radius */
 
 typedef struct prep_desc {
     int k;                 /* default 24: neighbours per point, 1..256 (fewer when the cloud

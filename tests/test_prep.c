@@ -533,6 +533,47 @@ static void test_radius_sigma_grid(void **state)
     pc_cloud_free(&c);
 }
 
+/* The grid plane above plus one stray point 20 units above its middle. Eq. 20 alone would give
+ * the stray point r = 2 R / sqrt(24) with R ~ 20 (a disc hiding the plane); the limit holds it
+ * to PREP_RADIUS_CAP times its neighbours' median radius (the plane's r), while F, computed with
+ * the unlimited radius, marks it as the most uncertain point (F = 1). Plane radii are untouched. */
+static void test_radius_outlier_limited(void **state)
+{
+    (void)state;
+    int side = 64;
+    double h = 0.5;
+    size_t n = (size_t)side * side + 1;
+    pc_cloud c = make_cloud(n);
+    for (int i = 0; i < side; i++)
+        for (int j = 0; j < side; j++) {
+            float *p = c.pos + 3 * ((size_t)i * side + j);
+            p[0] = (float)(i * h); p[1] = (float)(j * h); p[2] = 7;
+        }
+    float *o = c.pos + 3 * (n - 1);
+    o[0] = 16; o[1] = 16; o[2] = 27;
+    prep_desc d = {.k = 24, .threads = 2};
+    pc_prepared p;
+    sd_err err = {0};
+    assert_int_equal(prep_run(&c, &d, &p, &err), 0);
+    double want = 2 * sqrt(8.0) * h / sqrt(24.0);
+    int found = 0;
+    for (size_t i = 0; i < p.n; i++) {
+        const float *q = p.pos + 3 * i;
+        if (q[2] > 10) {
+            found++;
+            assert_true(p.radius[i] <= PREP_RADIUS_CAP * want * (1 + 1e-6));
+            assert_true(p.radius[i] >= want); /* limited, not shrunk below the plane's */
+            assert_true(p.F[i] == 1.0f);
+        } else if (q[0] >= 3 * h && q[1] >= 3 * h && q[0] <= (side - 4) * h && q[1] <= (side - 4) * h &&
+                   fabs(q[0] - 16) > 4 && fabs(q[1] - 16) > 4) {
+            assert_true(fabs(p.radius[i] - want) <= 1e-6 * want);
+        }
+    }
+    assert_int_equal(found, 1);
+    pc_prepared_free(&p);
+    pc_cloud_free(&c);
+}
+
 /* A noise-free plane and a 'vegetation' ball of random points, far apart in one cloud (so they
  * share F's normalisation). On the plane every term of eq. 21 is (2 - 1)^2 = 1, so F_raw = r.
  * In the ball PCA normals are close to random directions, for which |n_i . n_j| is uniform on
@@ -977,6 +1018,7 @@ int main(void)
         cmocka_unit_test(test_normals_sphere),
         cmocka_unit_test(test_file_normals_kept),
         cmocka_unit_test(test_radius_sigma_grid),
+        cmocka_unit_test(test_radius_outlier_limited),
         cmocka_unit_test(test_field_vegetation_vs_plane),
         cmocka_unit_test(test_morton_order_and_attributes),
         cmocka_unit_test(test_morton_locality_cube),
