@@ -50,6 +50,26 @@ done
 "$pb" "$tmp/synth1m.ply" --knn-only --knn both --threads "$threads" --file-order --runs 1
 
 echo
+echo "## Cached reload (splatd prep, first load vs the mmapped cache, median of 3 reloads)"
+echo
+splatd=${SPLATD_BIN:-$root/build/bin/splatd}
+if [ -x "$splatd" ]; then
+    echo "| file | first load s (read + prep + cache write) | cached reload ms | reload / first |"
+    echo "|---|---|---|---|"
+    for f in $files; do
+        first=$("$splatd" prep "$f" --cache "$tmp/cache" --quiet | sed -n \
+            's/^time *read \([0-9.]*\) s, prep \([0-9.]*\) s.*cache write \([0-9.]*\) s.*/\1 \2 \3/p' |
+            awk '{print $1 + $2 + $3}')
+        reload=$(for r in 1 2 3; do "$splatd" prep "$f" --cache "$tmp/cache" --quiet |
+            awk '/cached load/ {print $4}'; done | sort -n | sed -n 2p)
+        awk -v b="$(basename "$f")" -v a="$first" -v r="$reload" \
+            'BEGIN{printf "| %s | %.3f | %.1f | %.2f %% |\n", b, a, r, 100 * r / 1000 / a}'
+    done
+else
+    echo "cached reload skipped: $splatd is not built"
+fi
+
+echo
 pcl_bin=${PCL_NORMALS_BIN:-}
 pcl_ver=""
 if [ -z "$pcl_bin" ]; then
