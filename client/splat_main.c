@@ -39,7 +39,7 @@ static void usage(FILE *f)
         "                    camera (file coordinates); without --eye the view frames the cloud\n"
         "  --path FILE       one camera per line: eye x y z, target x y z, up x y z, fov;\n"
         "                    '#' comments; spaces and/or commas between numbers\n"
-        "  --orbit N         N cameras around the bounding-box centre (axis --up, default +z)\n"
+        "  --orbit N         N cameras around the bounding-box centre (axis --up, default: the up axis the default camera guesses)\n"
         "  --inflight K      frames in flight in a path job (default 2, 1..64)\n"
         "  --force           re-render frames that already exist\n"
         "  -q, --quiet       no progress output\n"
