@@ -7,10 +7,11 @@
  *   pass 2, attributes   splat_raster.comp PASS 2: fragments within eps * radius of that depth
  *                        add w*colour, w*normal and w (float atomicAdd with
  *                        GL_NV_shader_atomic_float, fixed-point uint atomicAdd without it);
- *   pass 3, resolve      splat_resolve.vert/.frag, a full-frame triangle: (ewa=split) the rest
- *                        of the low-pass as a depth-aware 3x3 Gaussian over the sums, division
- *                        by the weight, deferred shading; writes the target's colour and
- *                        depth_eye.
+ *   pass 3, resolve      splat_resolve.vert/.frag, two triangles over the rectangle of pixels
+ *                        pass 1 touched (its atomicMin/Max box, read by the vertex shader):
+ *                        (ewa=split) the rest of the low-pass as a depth-aware 3x3 Gaussian
+ *                        over the sums, division by the weight, deferred shading; writes the
+ *                        target's colour and depth_eye.
  *
  * Botsch et al. push pass 1's depths back by eps and test z <= zbuf in pass 2; here pass 1 keeps
  * the exact nearest depth (so depth_eye is the visible surface's depth) and pass 2 accepts
@@ -117,7 +118,7 @@ typedef struct splat_state {
     GLint64 max_ssbo;          /* GL_MAX_SHADER_STORAGE_BLOCK_SIZE */
     GLint64 max_texels;        /* GL_MAX_TEXTURE_BUFFER_SIZE */
     int max_rows;              /* SPLATD_SPLAT_STRIPE_ROWS (tests): rows per stripe, 0 = any */
-    GLuint vao;                /* empty, for the resolve's full-frame triangle */
+    GLuint vao;                /* empty, for the resolve's two triangles       */
     GLuint frame_buf;          /* the accumulation buffer: Px per pixel of one stripe */
     GLuint frame_tex;          /* the same buffer as a buffer texture, for the resolve */
     GLuint key_buf, key_tex;   /* the visibility keys (uint a pixel), and as a texture */
@@ -127,6 +128,8 @@ typedef struct splat_state {
     GLuint ras_buf;            /* dispatch header + sampled (not deposited) splat indices */
     uint64_t list_cap;         /* indices each holds */
     GLuint range_buf;          /* uvec2 (first point, first visible index) per range */
+    GLuint rect_buf;           /* ivec4: the pixels pass 1 touched in the stripe (the resolve's
+                                  rectangle) */
     uint32_t range_cap;
     uint32_t *range_tmp;
 } splat_state;
@@ -222,8 +225,9 @@ static void splat_destroy(const gl_api *gl, void *state)
     if (s->key_tex) gl->DeleteTextures(1, &s->key_tex);
     if (s->cloud_tex[0]) gl->DeleteTextures(4, s->cloud_tex);
     if (s->vao) gl->DeleteVertexArrays(1, &s->vao);
-    GLuint bufs[5] = {s->frame_buf, s->key_buf, s->big_buf, s->ras_buf, s->range_buf};
-    for (int i = 0; i < 5; i++)
+    GLuint bufs[6] = {s->frame_buf, s->key_buf, s->big_buf, s->ras_buf, s->range_buf,
+                      s->rect_buf};
+    for (int i = 0; i < 6; i++)
         if (bufs[i]) gl->DeleteBuffers(1, &bufs[i]);
     free(s->range_tmp);
     memset(s, 0, sizeof *s);
@@ -429,6 +433,7 @@ static int splat_render(const gl_api *gl, void *state, const rnd_gpu_cloud *c, c
     int grown = ensure_buffer(gl, &s->big_buf, list_have, list_bytes);
     grown |= ensure_buffer(gl, &s->ras_buf, list_have, list_bytes);
     if (grown) s->list_cap = (uint64_t)total;
+    ensure_buffer(gl, &s->rect_buf, 16, 16);
 
     float rayo[4], rayd[4], light[3];
     splat_ray_coeffs(v->proj, v->width, v->height, rayo, rayd);
@@ -452,6 +457,7 @@ static int splat_render(const gl_api *gl, void *state, const rnd_gpu_cloud *c, c
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 5, s->big_buf);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, s->range_buf);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, s->ras_buf);
+    gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 8, s->rect_buf);
 
     uint64_t groups64 = ((uint64_t)total + SPLAT_GROUP - 1) / SPLAT_GROUP;
     GLuint groups = groups64 > s->groups_cap ? s->groups_cap : (GLuint)groups64;
@@ -473,6 +479,9 @@ static int splat_render(const gl_api *gl, void *state, const rnd_gpu_cloud *c, c
         gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, sizeof header, header);
         gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->ras_buf);
         gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, sizeof header, header);
+        const GLint rect0[4] = {INT32_MAX, INT32_MAX, -1, -1};
+        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->rect_buf);
+        gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, sizeof rect0, rect0);
         for (int p_ = 0; p_ < P_COUNT; p_++) {
             gl->UseProgram(s->prog[p_]);
             if (s->loc[p_][U_STRIPE] >= 0) gl->Uniform2i(s->loc[p_][U_STRIPE], yb, nb);
@@ -483,8 +492,10 @@ static int splat_render(const gl_api *gl, void *state, const rnd_gpu_cloud *c, c
                 gl->BindBuffer(GL_DISPATCH_INDIRECT_BUFFER, big ? s->big_buf : s->ras_buf);
                 gl->DispatchComputeIndirect(0);
             } else {
-                /* Full-frame triangle into the target (bound by the renderer, both draw
-                 * buffers), limited to this stripe's rows by the scissor. */
+                /* Two triangles over the rectangle pass 1 touched (grown by the gather's
+                 * pixel; the vertex shader reads it from rect_buf, no read-back) into the
+                 * target (bound by the renderer, both draw buffers), limited to this stripe's
+                 * rows by the scissor. */
                 gl->Disable(GL_DEPTH_TEST);
                 gl->Disable(GL_BLEND);
                 gl->Enable(GL_SCISSOR_TEST);
@@ -492,7 +503,7 @@ static int splat_render(const gl_api *gl, void *state, const rnd_gpu_cloud *c, c
                 gl->BindFramebuffer(GL_FRAMEBUFFER, t->fbo);
                 gl->Viewport(0, 0, v->width, v->height);
                 gl->BindVertexArray(s->vao);
-                gl->DrawArrays(GL_TRIANGLES, 0, 3);
+                gl->DrawArrays(GL_TRIANGLES, 0, 6);
                 gl->BindVertexArray(0);
                 gl->Disable(GL_SCISSOR_TEST);
             }

@@ -72,6 +72,10 @@ layout(std430, binding = 0) restrict buffer Keys { uint keys[]; };
 layout(std430, binding = 5) restrict buffer Big { uint big_groups[3]; uint big_count; uint big_list[]; };
 layout(std430, binding = 7) restrict buffer Ras { uint ras_groups[3]; uint ras_count; uint ras_list[]; };
 
+// Pass 1: the bounding box (x0, y0, x1, y1 inclusive, frame pixels) of every pixel any splat
+// touches in this stripe, reset to (big, big, -1, -1) per stripe; the resolve draws only it.
+layout(std430, binding = 8) restrict buffer Rect { ivec4 rect; };
+
 // Visible ranges after culling: (first point, first visible index) per range.
 layout(std430, binding = 6) readonly restrict buffer Ranges { uvec2 ranges[]; };
 
@@ -261,6 +265,26 @@ void frag(Splat s, int x, int y, vec3 col)
     put(x, y, z, exp(-0.5 * q), col, s.n, s.r);
 }
 
+#if PASS == 1
+// Merges an invocation's box bb into the stripe's rect: an atomic only where it grows the rect
+// (a stale read costs one needless atomic, never a wrong rect).
+void grow_rect(ivec4 bb)
+{
+    if (bb.x > bb.z) return;
+    if (bb.x < rect.x) atomicMin(rect.x, bb.x);
+    if (bb.y < rect.y) atomicMin(rect.y, bb.y);
+    if (bb.z > rect.z) atomicMax(rect.z, bb.z);
+    if (bb.w > rect.w) atomicMax(rect.w, bb.w);
+}
+#define BOX_INIT ivec4 bb = ivec4(0x7fffffff, 0x7fffffff, -1, -1)
+#define BOX_ADD(b) bb = ivec4(min(bb.xy, (b).xy), max(bb.zw, (b).zw))
+#define BOX_DONE grow_rect(bb)
+#else
+#define BOX_INIT
+#define BOX_ADD(b)
+#define BOX_DONE
+#endif
+
 #if PASS == 2
 #define COLOUR(i) base_colour(i)
 #else
@@ -271,11 +295,13 @@ void main()
 {
 #if MODE == 0
     uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+    BOX_INIT;
     for (uint g = gl_GlobalInvocationID.x; g < u_total; g += stride) {
         uint i = u_nranges == 1u ? ranges[0].x + g : point_of(g);
         Splat s;
         if (!setup_core(i, s)) continue;
         if (s.dep) {
+            BOX_ADD(s.box);
             put(s.box.x, s.box.y, s.dc, 1.0, COLOUR(i), s.n, s.r);
             continue;
         }
@@ -285,12 +311,15 @@ void main()
         atomicMax(ras_groups[0], min(k / gl_WorkGroupSize.x + 1u, 65535u));
 #endif
     }
+    BOX_DONE;
 #elif MODE == 1
     uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+    BOX_INIT;
     for (uint j = gl_GlobalInvocationID.x; j < ras_count; j += stride) {
         uint i = ras_list[j];
         Splat s;
         if (!setup_core(i, s) || !setup_raster(s)) continue;
+        BOX_ADD(s.box);
         uint area = uint(s.box.z - s.box.x + 1) * uint(s.box.w - s.box.y + 1);
         if (area > u_big) {
 #if PASS == 1
@@ -305,6 +334,7 @@ void main()
             for (int x = s.box.x; x <= s.box.z; x++)
                 frag(s, x, y, col);
     }
+    BOX_DONE;
 #else
     // One work group per big splat; each invocation takes one pixel of every 8x8 tile.
     for (uint j = gl_WorkGroupID.x; j < big_count; j += gl_NumWorkGroups.x) {

@@ -1,7 +1,7 @@
 #version 430
-// splat_resolve.frag — EWA splatting pass 3, a full-frame fragment pass (splat_resolve.vert; the
-// stripe's rows by the scissor): llvmpipe shades whole pixel quads at once, where compute
-// image stores go lane by lane. Per pixel:
+// splat_resolve.frag — EWA splatting pass 3, a fragment pass over the rectangle of pixels pass 1
+// touched, grown by one pixel (splat_resolve.vert; the stripe's rows by the scissor): llvmpipe
+// shades whole pixel quads at once, where compute image stores go lane by lane. Per pixel:
 //  1. the rest of the low-pass filter: a 3x3 Gaussian (weights u_post: centre, edge, corner)
 //     over the accumulated sums of the neighbourhood, depth-aware like the extended z-buffer:
 //     only neighbours whose depth lies within u_epsg * z of the nearest one take part, so a
