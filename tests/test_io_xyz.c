@@ -435,28 +435,9 @@ static void growth(void **state)
     pc_cloud_free(&c);
 }
 
-/* Each test that writes files gets a fresh directory in *state, removed even when it fails. */
-static int tmp_setup(void **state)
-{
-    char *d = malloc(512);
-    if (!d || !tu_tmpdir(d, 512)) {
-        free(d);
-        return -1;
-    }
-    *state = d;
-    return 0;
-}
-
-static int tmp_teardown(void **state)
-{
-    tu_rm_rf(*state);
-    free(*state);
-    return 0;
-}
-
 int main(void)
 {
-#define TMP_TEST(f) cmocka_unit_test_setup_teardown(f, tmp_setup, tmp_teardown)
+#define TMP_TEST(f) cmocka_unit_test_setup_teardown(f, tu_tmpdir_setup, tu_tmpdir_teardown)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(bunny_pts),
         cmocka_unit_test(agisoft_xyz),

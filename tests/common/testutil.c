@@ -54,3 +54,21 @@ void tu_rm_rf(const char *path)
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", path);
     if (system(cmd) != 0) fprintf(stderr, "testutil: could not remove %s\n", path);
 }
+
+int tu_tmpdir_setup(void **state)
+{
+    char *d = malloc(512);
+    if (!d || !tu_tmpdir(d, 512)) {
+        free(d);
+        return -1;
+    }
+    *state = d;
+    return 0;
+}
+
+int tu_tmpdir_teardown(void **state)
+{
+    tu_rm_rf(*state);
+    free(*state);
+    return 0;
+}

@@ -21,3 +21,8 @@ void tu_rm_rf(const char *path);
 
 /* tu_env: getenv with a default. */
 const char *tu_env(const char *name, const char *def);
+
+/* tu_tmpdir_setup / tu_tmpdir_teardown: cmocka setup and teardown giving each test a fresh
+ * directory (a malloc'd path) in *state, removed even when the test fails. */
+int tu_tmpdir_setup(void **state);
+int tu_tmpdir_teardown(void **state);
