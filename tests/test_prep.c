@@ -20,28 +20,7 @@
 
 /* ---- helpers ---- */
 
-typedef struct rng {
-    uint64_t s;
-} rng;
-
-static uint64_t next64(rng *r)
-{
-    uint64_t z = (r->s += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
-}
-
-static double uni(rng *r)
-{
-    return (double)(next64(r) >> 11) * (1.0 / 9007199254740992.0);
-}
-
-static double gauss(rng *r)
-{
-    double u = uni(r), v = uni(r);
-    return sqrt(-2.0 * log(1.0 - u)) * cos(6.283185307179586 * v);
-}
+#include "rng.h"
 
 /* A cloud of n points with only positions, owning pos (freed by pc_cloud_free). */
 static pc_cloud make_cloud(size_t n)
