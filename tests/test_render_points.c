@@ -17,6 +17,7 @@
 
 #include "commands.h"
 #include "render.h"
+#include "rndtest.h"
 #include "testutil.h"
 
 enum { NR = 6, W = 256, H = 256 };
@@ -115,22 +116,6 @@ static rnd_camera cam_down(double ex, double ey, double ez, float fov)
     return c;
 }
 
-static uint32_t upload(rnd_ctx *r, const pc_prepared *pc)
-{
-    sd_err err = {0};
-    int64_t id = rnd_upload(r, pc, &err);
-    if (id <= 0) fail_msg("upload: %s", err.msg);
-    return (uint32_t)id;
-}
-
-static void render(rnd_ctx *r, uint32_t id, const rnd_camera *cam, const sp_params *p,
-                   int want_float, rnd_frame *f)
-{
-    sd_err err = {0};
-    int rc = rnd_render(r, id, cam, p, want_float, f, &err);
-    if (rc < 0) fail_msg("render: %s", err.msg);
-}
-
 static const uint8_t *px(const rnd_frame *f, int x, int y)
 {
     return f->rgba8 + 4 * ((size_t)y * f->width + x);
@@ -169,9 +154,9 @@ static void test_projection_and_depth(void **state)
     sp_params_defaults(&p);
     p.pipeline = SP_PIPE_POINTS;
     for (int ri = 0; ri < NR; ri++) {
-        uint32_t id = upload(fx->r[ri], &pc);
+        uint32_t id = tu_upload(fx->r[ri], &pc);
         rnd_frame f = {0};
-        render(fx->r[ri], id, &cam, &p, 1, &f);
+        tu_render(fx->r[ri], id, &cam, &p, 1, &f);
         assert_int_equal(f.points_drawn, N);
         const double t = 1.0 / tan(30 * M_PI / 180);
         int covered = 0;
@@ -204,7 +189,7 @@ static void test_projection_and_depth(void **state)
          * first (the compute forms clear only the cloud's screen rectangle). */
         rnd_camera cam2 = cam_down(0.3, -0.2, 5, 60);
         rnd_frame f2 = {0};
-        render(fx->r[ri], id, &cam2, &p, 0, &f2);
+        tu_render(fx->r[ri], id, &cam2, &p, 0, &f2);
         int covered2 = 0;
         for (int y = 0; y < H; y++)
             for (int x = 0; x < W; x++) covered2 += !is_bg(px(&f2, x, y), (uint8_t[3]){0, 0, 0});
@@ -237,9 +222,9 @@ static void test_nearer_wins(void **state)
         p.pipeline = SP_PIPE_POINTS;
         p.point_size = 3; /* both squares cover the same 3x3 pixels */
         for (int ri = 0; ri < NR; ri++) {
-            uint32_t id = upload(fx->r[ri], &pc);
+            uint32_t id = tu_upload(fx->r[ri], &pc);
             rnd_frame f = {0};
-            render(fx->r[ri], id, &cam, &p, 1, &f);
+            tu_render(fx->r[ri], id, &cam, &p, 1, &f);
             int red = 0, blue = 0;
             for (int i = 0; i < W * H; i++) {
                 red += f.rgba8[4 * i] == 255 && f.rgba8[4 * i + 2] == 0;
@@ -281,18 +266,18 @@ static void test_culling_and_background(void **state)
     p.background[0] = 0.2f, p.background[1] = 0.4f, p.background[2] = 0.6f;
     const uint8_t bg[3] = {51, 102, 153}; /* round(255 * background) */
     for (int ri = 0; ri < NR; ri++) {
-        uint32_t id = upload(fx->r[ri], &pc);
+        uint32_t id = tu_upload(fx->r[ri], &pc);
         rnd_frame f = {0};
         /* The cloud behind the camera: the eye at z = -5 looking towards -z. */
         rnd_camera cam = {{OFF[0], OFF[1], OFF[2] - 5}, {OFF[0], OFF[1], OFF[2] - 10}, {0, 1, 0},
                           40, 0, 0, W, H};
-        render(fx->r[ri], id, &cam, &p, 0, &f);
+        tu_render(fx->r[ri], id, &cam, &p, 0, &f);
         assert_int_equal(f.points_drawn, 0);
         for (int i = 0; i < W * H; i++) assert_true(is_bg(f.rgba8 + 4 * i, bg));
         /* Beside the frustum: at distance 5, fov 40 sees +-1.82; the grid (+-0.315) is 10
          * units to the side. */
         cam = cam_down(10, 0, 5, 40);
-        render(fx->r[ri], id, &cam, &p, 0, &f);
+        tu_render(fx->r[ri], id, &cam, &p, 0, &f);
         assert_int_equal(f.points_drawn, 0);
         for (int i = 0; i < W * H; i++) assert_true(is_bg(f.rgba8 + 4 * i, bg));
         /* Batches are bands of 16 grid rows; the top one (rows 48-63) spans y in
@@ -300,10 +285,10 @@ static void test_culling_and_background(void **state)
          * y in [cy - 0.364, cy + 0.364]: cy = 0.70 sees none of them, cy = 0.57 (bottom edge
          * 0.206) exactly the top band. */
         cam = cam_down(0, 0.70, 1, 40);
-        render(fx->r[ri], id, &cam, &p, 0, &f);
+        tu_render(fx->r[ri], id, &cam, &p, 0, &f);
         assert_int_equal(f.points_drawn, 0);
         cam = cam_down(0, 0.57, 1, 40);
-        render(fx->r[ri], id, &cam, &p, 0, &f);
+        tu_render(fx->r[ri], id, &cam, &p, 0, &f);
         assert_int_equal(f.points_drawn, 16 * 64);
         rnd_release(fx->r[ri], id);
         rnd_frame_free(&f);
@@ -322,13 +307,13 @@ static void test_point_budget(void **state)
     p.pipeline = SP_PIPE_POINTS;
     rnd_camera cam = cam_down(0, 0, 3, 40);
     for (int ri = 0; ri < NR; ri++) {
-        uint32_t id = upload(fx->r[ri], &pc);
+        uint32_t id = tu_upload(fx->r[ri], &pc);
         rnd_frame f = {0};
         p.point_budget = 0;
-        render(fx->r[ri], id, &cam, &p, 0, &f);
+        tu_render(fx->r[ri], id, &cam, &p, 0, &f);
         assert_int_equal(f.points_drawn, 4096);
         p.point_budget = 1500;
-        render(fx->r[ri], id, &cam, &p, 0, &f);
+        tu_render(fx->r[ri], id, &cam, &p, 0, &f);
         assert_int_equal(f.points_drawn, 1500);
         rnd_release(fx->r[ri], id);
         rnd_frame_free(&f);
@@ -354,11 +339,11 @@ static void test_sparse_plane_has_holes(void **state)
     double pxu = 256 / (2 * 2 * tan(20 * M_PI / 180)); /* pixels per unit at depth 2 */
     int lo = (int)ceil(128 - 0.47 * pxu), hi = (int)floor(128 + 0.47 * pxu);
     for (int ri = 0; ri < NR; ri++) {
-        uint32_t id = upload(fx->r[ri], &pc);
+        uint32_t id = tu_upload(fx->r[ri], &pc);
         rnd_frame f = {0};
         for (int size = 1; size <= 3; size += 2) {
             p.point_size = (float)size;
-            render(fx->r[ri], id, &cam, &p, 0, &f);
+            tu_render(fx->r[ri], id, &cam, &p, 0, &f);
             int covered = 0, holes = 0;
             for (int i = 0; i < W * H; i++) covered += f.rgba8[4 * i] == 255;
             for (int y = lo; y < hi; y++)
@@ -395,7 +380,7 @@ static void test_colours(void **state)
     rnd_camera cam = cam_down(0, 0, 2, 40);
     cam.znear = 1, cam.zfar = 5;
     for (int ri = 0; ri < NR; ri++) {
-        uint32_t id = upload(fx->r[ri], &pc);
+        uint32_t id = tu_upload(fx->r[ri], &pc);
         rnd_frame f = {0};
         /* depth: 1 - (2 - near 1) / (far 5 - near 1) = 0.75; field: F = 0 is the colour
          * map's first entry, viridis (0.2777, 0.0054, 0.3341). */
@@ -405,7 +390,7 @@ static void test_colours(void **state)
                              SP_COLOR_FIELD};
         for (int m = 0; m < 5; m++) {
             p.color = mode[m];
-            render(fx->r[ri], id, &cam, &p, 0, &f);
+            tu_render(fx->r[ri], id, &cam, &p, 0, &f);
             int covered = 0, wrong = 0;
             for (int i = 0; i < W * H; i++) {
                 const uint8_t *q = f.rgba8 + 4 * i;
@@ -451,8 +436,8 @@ static void test_backends_agree(void **state)
     rnd_frame f[NR];
     memset(f, 0, sizeof f);
     for (int ri = 0; ri < NR; ri++) {
-        uint32_t id = upload(fx->r[ri], &pc);
-        render(fx->r[ri], id, &cam, &p, 1, &f[ri]);
+        uint32_t id = tu_upload(fx->r[ri], &pc);
+        tu_render(fx->r[ri], id, &cam, &p, 1, &f[ri]);
         assert_int_equal(f[ri].points_drawn, N);
         rnd_release(fx->r[ri], id);
     }
@@ -492,12 +477,12 @@ static void test_stale_id(void **state)
     rnd_ctx *r = fx->r[0];
     rnd_frame f = {0};
     sd_err err = {0};
-    uint32_t id = upload(r, &pc);
+    uint32_t id = tu_upload(r, &pc);
     assert_int_equal(rnd_render(r, id, &cam, &p, 0, &f, &err), 0);
     rnd_release(r, id);
     assert_int_equal(rnd_render(r, id, &cam, &p, 0, &f, &err), SD_EINVAL);
     assert_non_null(strstr(err.msg, "cloud id"));
-    uint32_t id2 = upload(r, &pc);
+    uint32_t id2 = tu_upload(r, &pc);
     assert_true(id2 != id);
     assert_int_equal(rnd_render(r, id, &cam, &p, 0, &f, &err), SD_EINVAL);
     assert_int_equal(rnd_render(r, 0, &cam, &p, 0, &f, &err), SD_EINVAL);

@@ -26,6 +26,7 @@
 #include "cloud.h"
 #include "prep.h"
 #include "render.h"
+#include "rndtest.h"
 #include "splat_math.h"
 #include "testutil.h"
 
@@ -133,22 +134,6 @@ static rnd_camera cam_at(double ex, double ey, double ez, double tx, double ty, 
                     {tx + OFF[0], ty + OFF[1], tz + OFF[2]},
                     {0, 1, 0}, fov, 0, 0, w, h};
     return c;
-}
-
-static uint32_t upload(rnd_ctx *r, const pc_prepared *pc)
-{
-    sd_err err = {0};
-    int64_t id = rnd_upload(r, pc, &err);
-    if (id <= 0) fail_msg("upload: %s", err.msg);
-    return (uint32_t)id;
-}
-
-static void render(rnd_ctx *r, uint32_t id, const rnd_camera *cam, const sp_params *p,
-                   int want_float, rnd_frame *f)
-{
-    sd_err err = {0};
-    int rc = rnd_render(r, id, cam, p, want_float, f, &err);
-    if (rc < 0) fail_msg("render: %s", err.msg);
 }
 
 /* CPU time of the whole process (llvmpipe's threads included), seconds. */
@@ -269,7 +254,7 @@ static void check_hole_filling(rnd_ctx *rc, int ewa)
         new_cloud(&pc, (uint64_t)N * N);
         grid(&pc, 0, N, N, h, 0, h * (float)rfac[k], white, white, 0);
         finish_cloud(&pc);
-        uint32_t id = upload(rc, &pc);
+        uint32_t id = tu_upload(rc, &pc);
         pc_prepared_free(&pc);
         double dist = h * px_per_unit_at_1 / spacing_px[k];
         rnd_camera cam = cam_at(0, 0, dist, 0, 0, 0, 60, W, H);
@@ -284,14 +269,14 @@ static void check_hole_filling(rnd_ctx *rc, int ewa)
         sp_params_defaults(&p);
         p.ewa = ewa;
         rnd_frame f = {0};
-        render(rc, id, &cam, &p, 0, &f);
+        tu_render(rc, id, &cam, &p, 0, &f);
         int holes = 0;
         for (int y = ry0; y <= ry1; y++)
             for (int x = rx0; x <= rx1; x++) holes += is_bg(pix(&f, x, y));
         if (holes) fail_msg("splat ewa=%s, spacing %.1f px: %d background pixels inside the plane", ewa_name(ewa), spacing_px[k], holes);
         if (k == 0 && ewa == SP_EWA_SPLIT) {
             p.pipeline = SP_PIPE_POINTS;
-            render(rc, id, &cam, &p, 0, &f);
+            tu_render(rc, id, &cam, &p, 0, &f);
             holes = 0;
             for (int y = ry0; y <= ry1; y++)
                 for (int x = rx0; x <= rx1; x++) holes += is_bg(pix(&f, x, y));
@@ -333,7 +318,7 @@ static void check_constant_colour(rnd_ctx *r, const char *label, int ewa)
             pc.pos[3 * i + 1] += 0.3f * h * rng_unit(&seed);
         }
         finish_cloud(&pc);
-        uint32_t id = upload(r, &pc);
+        uint32_t id = tu_upload(r, &pc);
         pc_prepared_free(&pc);
         rnd_camera cam = cam_at(0, 0, h * px_per_unit_at_1 / spacing_px[k], 0, 0, 0, 60, W, H);
         sp_params p;
@@ -341,7 +326,7 @@ static void check_constant_colour(rnd_ctx *r, const char *label, int ewa)
         p.light[0] = 0, p.light[1] = 0, p.light[2] = 1;
         p.ewa = ewa;
         rnd_frame f = {0};
-        render(r, id, &cam, &p, 0, &f);
+        tu_render(r, id, &cam, &p, 0, &f);
         int covered = 0, bad = 0;
         for (int y = 0; y < H; y++)
             for (int x = 0; x < W; x++) {
@@ -381,7 +366,7 @@ static void check_two_planes(rnd_ctx *r, const char *label, int ewa)
     grid(&pc, 0, NB, NB, h, -0.3f, h * 1.3f, cb, cb, 0);
     grid(&pc, (uint64_t)NB * NB, NA, NA, h, 0, h * 1.3f, ca, ca, 0);
     finish_cloud(&pc);
-    uint32_t id = upload(r, &pc);
+    uint32_t id = tu_upload(r, &pc);
     pc_prepared_free(&pc);
     const double dist = 1.6;
     rnd_camera cam = cam_at(0, 0, dist, 0, 0, 0, 60, W, H);
@@ -399,7 +384,7 @@ static void check_two_planes(rnd_ctx *r, const char *label, int ewa)
     p.light[0] = 0, p.light[1] = 0, p.light[2] = 1;
     p.ewa = ewa;
     rnd_frame f = {0};
-    render(r, id, &cam, &p, 1, &f);
+    tu_render(r, id, &cam, &p, 1, &f);
     int na = 0, nb = 0;
     for (int y = 0; y < H; y++)
         for (int x = 0; x < W; x++) {
@@ -480,7 +465,7 @@ static void test_stripes(void **state)
     pc.normal[3 * big + 1] = 0.6f, pc.normal[3 * big + 2] = 0.8f;
     pc.radius[big] = 0.15f;
     finish_cloud(&pc);
-    uint32_t id1 = upload(fx->egl, &pc), id2 = upload(rs, &pc);
+    uint32_t id1 = tu_upload(fx->egl, &pc), id2 = tu_upload(rs, &pc);
     pc_prepared_free(&pc);
     const double dists[2] = {1.0, 0.35};
     for (int km = 0; km < 4; km++) { /* both distances, ewa split then exact */
@@ -490,8 +475,8 @@ static void test_stripes(void **state)
         sp_params_defaults(&p);
         p.ewa = km < 2 ? SP_EWA_SPLIT : SP_EWA_EXACT;
         rnd_frame f1 = {0}, f2 = {0};
-        render(fx->egl, id1, &cam, &p, 1, &f1);
-        render(rs, id2, &cam, &p, 1, &f2);
+        tu_render(fx->egl, id1, &cam, &p, 1, &f1);
+        tu_render(rs, id2, &cam, &p, 1, &f2);
         unsetenv("SPLATD_SPLAT_STRIPE_ROWS");
         int maxd = 0, covered = 0;
         for (size_t i = 0; i < (size_t)W * H; i++) {
@@ -554,7 +539,7 @@ static void test_ewa_antialiasing(void **state)
     grid(&pc, 0, NX, NY, h, 0, h, wh, bk, 2);
     for (uint64_t i = 0; i < pc.n; i++) pc.pos[3 * i + 1] += 0.5f * NY * h; /* y in [0, 10] */
     finish_cloud(&pc);
-    uint32_t id = upload(fx->egl, &pc);
+    uint32_t id = tu_upload(fx->egl, &pc);
     pc_prepared_free(&pc);
     rnd_camera cam = cam_at(0, -0.5, 0.3, 0, 10, 0, 40, W, H);
     proj pj = proj_of(&cam);
@@ -573,7 +558,7 @@ static void test_ewa_antialiasing(void **state)
         p.ewa = modes[m];
         for (int k = 0; k < 2; k++) {
             p.lowpass = k ? 1.0f : 0.0f;
-            render(fx->egl, id, &cam, &p, 0, &f);
+            tu_render(fx->egl, id, &cam, &p, 0, &f);
             region_stats(&f, reg, &mean[k], &var[k], &bg[k]);
         }
         printf("anti-aliasing, ewa=%s: region %dx%d px, mean %.1f / %.1f, variance %.1f "
@@ -609,7 +594,7 @@ static void test_inclined_footprint(void **state)
         pc.normal[0] = 0, pc.normal[1] = (float)sin(theta), pc.normal[2] = (float)cos(theta);
         pc.radius[0] = (float)(radius_px[k] / px_per_unit);
         finish_cloud(&pc);
-        uint32_t id = upload(fx->egl, &pc);
+        uint32_t id = tu_upload(fx->egl, &pc);
         pc_prepared_free(&pc);
         rnd_camera cam = cam_at(0, 0, dist, 0, 0, 0, 20, W, H);
         sp_params p;
@@ -617,7 +602,7 @@ static void test_inclined_footprint(void **state)
         p.lowpass = k ? 1.0f : 0.0f;
         p.ewa = ewa;
         rnd_frame f = {0};
-        render(fx->egl, id, &cam, &p, 0, &f);
+        tu_render(fx->egl, id, &cam, &p, 0, &f);
         double n = 0, mx = 0, my = 0, mxx = 0, myy = 0;
         for (int y = 0; y < H; y++)
             for (int x = 0; x < W; x++)
@@ -676,7 +661,7 @@ static uint32_t weight_scene(rnd_ctx *r, rnd_camera *cam, rnd_view *v, float *r_
     for (int k = 0; k < 3; k++) lmin[k] = (float)(pc.bmin[k] - OFF[k]), lmax[k] = (float)(pc.bmax[k] - OFF[k]);
     sd_err err = {0};
     if (rnd__view_setup(cam, OFF, lmin, lmax, v, &err) < 0) fail_msg("view: %s", err.msg);
-    uint32_t id = upload(r, &pc);
+    uint32_t id = tu_upload(r, &pc);
     pc_prepared_free(&pc);
     return id;
 }
@@ -703,7 +688,7 @@ static void test_exact_footprint_moments(void **state)
     p.ewa = SP_EWA_EXACT;
     p.light[0] = 0, p.light[1] = 0, p.light[2] = 1;
     rnd_frame f = {0};
-    render(fx->egl, id, &cam, &p, 1, &f);
+    tu_render(fx->egl, id, &cam, &p, 1, &f);
     assert_non_null(f.rgba16f);
     double sw = 0, sxx = 0, syy = 0, vxx = 0, vyy = 0;
     for (int k = 1; k <= MOM_G * MOM_G; k++) {
@@ -758,7 +743,7 @@ static void test_ewa_auto(void **state)
     const int modes[3] = {SP_EWA_AUTO, SP_EWA_SPLIT, SP_EWA_EXACT};
     for (int m = 0; m < 3; m++) {
         p.ewa = modes[m];
-        render(fx->egl, id, &cam, &p, 0, &f[m]);
+        tu_render(fx->egl, id, &cam, &p, 0, &f[m]);
     }
     int d[3] = {0, 0, 0}; /* max difference of auto against split and exact */
     for (size_t i = 0; i < (size_t)4 * W * H; i++)
@@ -826,14 +811,14 @@ static void test_guanyin(void **state)
     pc_prepared pc;
     if (prep_run(&cl, &pd, &pc, &err) < 0) fail_msg("%s", err.msg);
     pc_cloud_free(&cl);
-    uint32_t id = upload(fx->egl, &pc);
+    uint32_t id = tu_upload(fx->egl, &pc);
     rnd_camera cam;
     rnd_camera_frame(pc.bmin, pc.bmax, 640, 480, &cam);
     pc_prepared_free(&pc);
     sp_params p;
     sp_params_defaults(&p);
     rnd_frame f[2] = {{0}, {0}};
-    for (int k = 0; k < 2; k++) render(fx->egl, id, &cam, &p, 0, &f[k]);
+    for (int k = 0; k < 2; k++) tu_render(fx->egl, id, &cam, &p, 0, &f[k]);
     size_t npx = (size_t)640 * 480, covered = 0;
     int maxdiff = 0;
     for (size_t i = 0; i < npx; i++) {
@@ -902,7 +887,7 @@ static void test_bench_1m(void **state)
         pc.normal[3 * k] = nx / l, pc.normal[3 * k + 1] = ny / l, pc.normal[3 * k + 2] = 1 / l;
     }
     finish_cloud(&pc);
-    uint32_t id = upload(fx->egl, &pc);
+    uint32_t id = tu_upload(fx->egl, &pc);
     rnd_camera cam;
     rnd_camera_frame(pc.bmin, pc.bmax, 1280, 720, &cam);
     pc_prepared_free(&pc);
@@ -916,7 +901,7 @@ static void test_bench_1m(void **state)
             p.pipeline = pi ? SP_PIPE_SPLAT : SP_PIPE_POINTS;
             p.ewa = pi == 2 ? SP_EWA_EXACT : SP_EWA_SPLIT;
             double c0 = cpu_s();
-            render(fx->egl, id, &cam, &p, 0, &f);
+            tu_render(fx->egl, id, &cam, &p, 0, &f);
             if (k < 0) continue;
             cpu[pi][k] = (cpu_s() - c0) * 1e3;
             t[pi][k] = f.render_us / 1e3;
