@@ -252,19 +252,7 @@ static int reorder(const pc_cloud *in, int K, pc_prepared *out, double centroid[
     }
     free(perm);
     for (int a = 0; a < 3; a++) centroid[a] = c[a] / (double)n;
-    for (uint64_t b = 0; b < out->nbatches; b++) {
-        pc_batch *bt = &out->batches[b];
-        bt->first = (uint32_t)(b * PC_BATCH_POINTS);
-        bt->count = (uint32_t)(n - bt->first < PC_BATCH_POINTS ? n - bt->first : PC_BATCH_POINTS);
-        const float *p = out->pos + 3 * (size_t)bt->first;
-        for (int a = 0; a < 3; a++) bt->bmin[a] = bt->bmax[a] = p[a];
-        for (uint32_t i = 1; i < bt->count; i++)
-            for (int a = 0; a < 3; a++) {
-                float v = p[3 * i + a];
-                if (v < bt->bmin[a]) bt->bmin[a] = v;
-                if (v > bt->bmax[a]) bt->bmax[a] = v;
-            }
-    }
+    pc_prepared_make_batches(out, PC_BATCH_POINTS);
     memcpy(out->offset, in->offset, sizeof out->offset);
     memcpy(out->bmin, in->bmin, sizeof out->bmin);
     memcpy(out->bmax, in->bmax, sizeof out->bmax);

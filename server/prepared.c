@@ -57,6 +57,24 @@ int pc_prepared_alloc(pc_prepared *p, sd_err *err)
     return 0;
 }
 
+void pc_prepared_make_batches(pc_prepared *p, uint32_t per)
+{
+    for (uint64_t b = 0; b < p->nbatches; b++) {
+        pc_batch *bt = &p->batches[b];
+        bt->first = (uint32_t)(b * per);
+        bt->count = (uint32_t)(bt->first >= p->n ? 0 : p->n - bt->first < per ? p->n - bt->first : per);
+        if (bt->count == 0) continue; /* nbatches larger than needed: empty batches, zero bounds */
+        const float *q = p->pos + 3 * (size_t)bt->first;
+        for (int a = 0; a < 3; a++) bt->bmin[a] = bt->bmax[a] = q[a];
+        for (uint32_t i = 1; i < bt->count; i++)
+            for (int a = 0; a < 3; a++) {
+                float v = q[3 * i + a];
+                if (v < bt->bmin[a]) bt->bmin[a] = v;
+                if (v > bt->bmax[a]) bt->bmax[a] = v;
+            }
+    }
+}
+
 void pc_prepared_free(pc_prepared *p)
 {
     if (p->heap) free(p->heap);

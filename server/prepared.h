@@ -65,5 +65,10 @@ void pc_prepared_bind(pc_prepared *p, void *block);
  * Returns 0 or SD_ENOMEM. */
 int pc_prepared_alloc(pc_prepared *p, sd_err *err);
 
+/* pc_prepared_make_batches: cuts p's n points into p->nbatches batches of `per` consecutive
+ * points (the last one shorter; nbatches must be ceil(n / per)) and sets each batch's bounds
+ * from pos. */
+void pc_prepared_make_batches(pc_prepared *p, uint32_t per);
+
 /* pc_prepared_free: releases the heap block or the mapping; safe to call twice. */
 void pc_prepared_free(pc_prepared *p);

@@ -88,21 +88,12 @@ static void new_cloud(pc_prepared *pc, uint64_t n)
 /* Batches of consecutive points and all bounds, from the positions. */
 static void finish_cloud(pc_prepared *pc)
 {
-    for (int k = 0; k < 3; k++) pc->bmin[k] = INFINITY, pc->bmax[k] = -INFINITY;
-    for (uint64_t b = 0; b < pc->nbatches; b++) {
-        pc_batch *bt = &pc->batches[b];
-        bt->first = (uint32_t)(b * PC_BATCH_POINTS);
-        bt->count = (uint32_t)(pc->n - bt->first < PC_BATCH_POINTS ? pc->n - bt->first
-                                                                   : PC_BATCH_POINTS);
-        for (int k = 0; k < 3; k++) bt->bmin[k] = INFINITY, bt->bmax[k] = -INFINITY;
-        for (uint32_t i = bt->first; i < bt->first + bt->count; i++) {
-            for (int k = 0; k < 3; k++) {
-                float x = pc->pos[3 * i + k];
-                bt->bmin[k] = fminf(bt->bmin[k], x);
-                bt->bmax[k] = fmaxf(bt->bmax[k], x);
-                pc->bmin[k] = fmin(pc->bmin[k], x + OFF[k]);
-                pc->bmax[k] = fmax(pc->bmax[k], x + OFF[k]);
-            }
+    pc_prepared_make_batches(pc, PC_BATCH_POINTS);
+    for (int k = 0; k < 3; k++) {
+        pc->bmin[k] = INFINITY, pc->bmax[k] = -INFINITY;
+        for (uint64_t b = 0; b < pc->nbatches; b++) {
+            pc->bmin[k] = fmin(pc->bmin[k], pc->batches[b].bmin[k] + OFF[k]);
+            pc->bmax[k] = fmax(pc->bmax[k], pc->batches[b].bmax[k] + OFF[k]);
         }
     }
     memcpy(pc->offset, OFF, sizeof OFF);
