@@ -19,6 +19,7 @@
 
 #include "cloud.h"
 #include "common/testutil.h"
+#include "cloudtest.h"
 
 static char g_tmp[512];
 
@@ -33,21 +34,6 @@ static int teardown(void **state)
     (void)state;
     tu_rm_rf(g_tmp);
     return 0;
-}
-
-static uint8_t *read_data(const char *name, size_t *len)
-{
-    char p[1024];
-    uint8_t *b = tu_read_file(tu_data(name, p, sizeof p), len);
-    assert_non_null(b);
-    return b;
-}
-
-static void load_ok(const char *path, pc_cloud *c)
-{
-    sd_err e = {0};
-    int rc = pc_load(path, c, &e);
-    if (rc != 0) fail_msg("%s: %d %s", path, rc, e.msg);
 }
 
 /* Writes len bytes to a temporary file name and expects code from pc_load, with a message
@@ -114,7 +100,7 @@ static void test_autzen_trim(void **state)
     /* Independent scan of the format 3 records (34 bytes: XYZ int32, intensity u16, return
      * byte, class byte, scan angle, user data, source id u16, GPS time f64, RGB u16 x 3). */
     size_t len;
-    uint8_t *b = read_data("autzen_trim.las", &len);
+    uint8_t *b = tu_read_data("autzen_trim.las", &len);
     uint32_t off = get32(b + 96), n = get32(b + 107);
     assert_int_equal(b[104], 3);
     assert_int_equal(get16(b + 105), 34);
@@ -138,7 +124,7 @@ static void test_autzen_trim(void **state)
     }
 
     pc_cloud c;
-    load_ok(p, &c);
+    tu_load_ok(p, &c);
     assert_int_equal(c.n, 110000);
     assert_int_equal(c.n_dropped, 0);
     assert_int_equal(c.attrs, PC_ATTR_RGB | PC_ATTR_INTENSITY | PC_ATTR_CLASS);
@@ -180,7 +166,7 @@ static void test_las14_format6(void **state)
     double hlo[3], hhi[3];
     header_box("file_with_both_wkt_and_geotiff_vlrs.las", hlo, hhi);
     pc_cloud c;
-    load_ok(p, &c);
+    tu_load_ok(p, &c);
     /* SOURCES.md (laspy): 25,408 points (legacy count 0, 64-bit count at byte 247), classes
      * {2: 9,808, 3: 158, 4: 724, 5: 10,956, 6: 3,737, 7: 25}, intensity 996-57,345. */
     assert_int_equal(c.n, 25408);
@@ -267,7 +253,7 @@ static void test_format7_extra_bytes_16bit_rgb(void **state)
     snprintf(p, sizeof p, "%s/f7.las", g_tmp);
     assert_int_equal(tu_write_file(p, b, sizeof b), 0);
     pc_cloud c;
-    load_ok(p, &c);
+    tu_load_ok(p, &c);
     assert_int_equal(c.n, 3);
     assert_int_equal(c.attrs, PC_ATTR_RGB | PC_ATTR_INTENSITY | PC_ATTR_CLASS);
     assert_string_equal(c.format, "LAS 1.4 format 7");
@@ -311,7 +297,7 @@ static void test_legacy_formats(void **state)
         snprintf(p, sizeof p, "%s/fmt%u.las", g_tmp, cases[t].fmt);
         assert_int_equal(tu_write_file(p, b, h + 2 * rl), 0);
         pc_cloud c;
-        load_ok(p, &c);
+        tu_load_ok(p, &c);
         assert_int_equal(c.n, 2);
         char want[32];
         snprintf(want, sizeof want, "LAS 1.%u format %u", cases[t].minor, cases[t].fmt);
@@ -343,7 +329,7 @@ static void test_truncated(void **state)
                                         "file_with_both_wkt_and_geotiff_vlrs.las"};
     for (int f = 0; f < 2; f++) {
         size_t len;
-        uint8_t *b = read_data(files[f], &len);
+        uint8_t *b = tu_read_data(files[f], &len);
         size_t hsize = get16(b + 94), off = get32(b + 96), rl = get16(b + 105);
         const size_t cuts[] = {0, 3, 100, 226, hsize - 1, hsize, off - 1, off, off + 7,
                                off + rl * 1000 + rl / 2, len - 1};
@@ -360,7 +346,7 @@ static void test_header_errors(void **state)
 {
     (void)state;
     size_t len;
-    uint8_t *orig = read_data("autzen_trim.las", &len);
+    uint8_t *orig = tu_read_data("autzen_trim.las", &len);
     uint8_t *b = malloc(len);
     const char *msg;
 
@@ -433,7 +419,7 @@ static void test_header_errors(void **state)
     free(orig);
 
     /* LAS 1.4: the 64-bit count. */
-    orig = read_data("file_with_both_wkt_and_geotiff_vlrs.las", &len);
+    orig = tu_read_data("file_with_both_wkt_and_geotiff_vlrs.las", &len);
     b = malloc(len);
     memcpy(b, orig, len);
     set64(b, 247, 25409);
@@ -451,7 +437,7 @@ static void test_header_errors(void **state)
     free(orig);
 
     /* A PCD renamed to .las. */
-    orig = read_data("rops_cloud.pcd", &len);
+    orig = tu_read_data("rops_cloud.pcd", &len);
     expect_fail_bytes("pcd.las", orig, len, SD_EFORMAT);
     free(orig);
 }

@@ -21,6 +21,7 @@
 #include "cloud.h"
 #include "lzf.h"
 #include "common/testutil.h"
+#include "cloudtest.h"
 
 static char g_tmp[512];
 
@@ -41,14 +42,6 @@ static const char *tmp_path(const char *name, char *buf, size_t len)
 {
     snprintf(buf, len, "%s/%s", g_tmp, name);
     return buf;
-}
-
-static uint8_t *read_data(const char *name, size_t *len)
-{
-    char p[1024];
-    uint8_t *b = tu_read_file(tu_data(name, p, sizeof p), len);
-    assert_non_null(b);
-    return b;
 }
 
 /* Tolerance for bounding boxes: 1e-3 of the box's extent on that axis. The readers copy the
@@ -89,19 +82,12 @@ static void expect_fail_bytes(const char *name, const void *data, size_t len, in
     expect_fail(p, code);
 }
 
-static void load_ok(const char *path, pc_cloud *c)
-{
-    sd_err e = {0};
-    int rc = pc_load(path, c, &e);
-    if (rc != 0) fail_msg("%s: %d %s", path, rc, e.msg);
-}
-
 static void load_text(const char *name, const char *text, pc_cloud *c)
 {
     char p[1024];
     tmp_path(name, p, sizeof p);
     assert_int_equal(tu_write_file(p, text, strlen(text)), 0);
-    load_ok(p, c);
+    tu_load_ok(p, c);
 }
 
 /* Offset of the first byte after the "DATA ..." header line. */
@@ -226,7 +212,7 @@ static void test_mug_compressed_rgba(void **state)
     (void)state;
     char p[1024];
     pc_cloud c;
-    load_ok(tu_data("table_scene_mug_stereo_textured.pcd", p, sizeof p), &c);
+    tu_load_ok(tu_data("table_scene_mug_stereo_textured.pcd", p, sizeof p), &c);
     /* Counts from SOURCES.md (PCL 1.13) and the throwaway decoder: 640 x 480, NaN holes. */
     assert_int_equal(c.n, 209280);
     assert_int_equal(c.n_dropped, 97920);
@@ -257,7 +243,7 @@ static void test_mug_compressed_rgba(void **state)
     double t[5];
     for (int r = 0; r < 5; r++) {
         double t0 = now_s();
-        load_ok(p, &c);
+        tu_load_ok(p, &c);
         t[r] = now_s() - t0;
         pc_cloud_free(&c);
     }
@@ -270,7 +256,7 @@ static void test_samp11_compressed_utm(void **state)
     (void)state;
     char p[1024];
     pc_cloud c;
-    load_ok(tu_data("samp11-utm.pcd", p, sizeof p), &c);
+    tu_load_ok(tu_data("samp11-utm.pcd", p, sizeof p), &c);
     assert_int_equal(c.n, 38010);
     assert_int_equal(c.n_dropped, 0);
     assert_int_equal(c.attrs, 0);
@@ -294,7 +280,7 @@ static void test_rops_ascii(void **state)
     tu_data("rops_cloud.pcd", p, sizeof p);
     /* Independent parse: everything after "DATA ascii\n" is "x y z" lines. */
     size_t len;
-    uint8_t *b = read_data("rops_cloud.pcd", &len);
+    uint8_t *b = tu_read_data("rops_cloud.pcd", &len);
     char *s = (char *)b + data_offset(b, len);
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     size_t n = 0;
@@ -314,7 +300,7 @@ static void test_rops_ascii(void **state)
     free(b);
     assert_int_equal(n, 32087);
     pc_cloud c;
-    load_ok(p, &c);
+    tu_load_ok(p, &c);
     assert_int_equal(c.n, n);
     assert_int_equal(c.n_dropped, 0);
     assert_int_equal(c.attrs, 0);
@@ -332,7 +318,7 @@ static void test_autzen_binary(void **state)
      * X Y Z Intensity ReturnNumber NumberOfReturns ScanDirectionFlag EdgeOfFlightLine
      * Classification ScanAngleRank UserData PointSourceId GpsTime Red Green Blue. */
     size_t len;
-    uint8_t *b = read_data("autzen-utm.pcd", &len);
+    uint8_t *b = tu_read_data("autzen-utm.pcd", &len);
     const char *sz = strstr((char *)b, "\nSIZE ");
     assert_non_null(sz);
     int size[16], off[17] = {0};
@@ -369,7 +355,7 @@ static void test_autzen_binary(void **state)
     }
 
     pc_cloud c;
-    load_ok(p, &c);
+    tu_load_ok(p, &c);
     assert_int_equal(c.n, n);
     assert_int_equal(c.attrs, PC_ATTR_RGB | PC_ATTR_INTENSITY | PC_ATTR_CLASS);
     assert_string_equal(c.format, "PCD 0.7 binary");
@@ -475,7 +461,7 @@ static void test_binary_types(void **state)
     tmp_path("types.pcd", p, sizeof p);
     assert_int_equal(tu_write_file(p, buf, h + 2 * REC), 0);
     pc_cloud c;
-    load_ok(p, &c);
+    tu_load_ok(p, &c);
     assert_int_equal(c.n, 2);
     assert_int_equal(c.attrs, PC_ATTR_RGB | PC_ATTR_CLASS);
     assert_string_equal(c.format, "PCD 0.5 binary");
@@ -522,7 +508,7 @@ static void test_truncated_files(void **state)
                                         "samp11-utm.pcd", "autzen-utm.pcd", "rops_cloud.pcd"};
     for (size_t f = 0; f < 4; f++) {
         size_t len;
-        uint8_t *b = read_data(files[f], &len);
+        uint8_t *b = tu_read_data(files[f], &len);
         size_t d0 = data_offset(b, len);
         char tag[8];
         snprintf(tag, sizeof tag, "%zu", f);
@@ -545,7 +531,7 @@ static void test_truncated_files(void **state)
             tmp_path("payload_end.pcd", p, sizeof p);
             assert_int_equal(tu_write_file(p, b, end), 0);
             pc_cloud c;
-            load_ok(p, &c);
+            tu_load_ok(p, &c);
             assert_int_equal(c.n + c.n_dropped, f == 0 ? 307200 : 38010);
             pc_cloud_free(&c);
         } else if (f == 2) {
@@ -567,7 +553,7 @@ static void test_header_errors(void **state)
 {
     (void)state;
     size_t len;
-    uint8_t *mug = read_data("table_scene_mug_stereo_textured.pcd", &len);
+    uint8_t *mug = tu_read_data("table_scene_mug_stereo_textured.pcd", &len);
     uint8_t *b = malloc(len);
     char p[1024];
     size_t d0 = data_offset(mug, len);
@@ -632,17 +618,17 @@ static void test_header_errors(void **state)
     free(mug);
 
     /* A PLY (wrong magic) renamed to .pcd. */
-    uint8_t *ply = read_data("Guanyin.ply", &len);
+    uint8_t *ply = tu_read_data("Guanyin.ply", &len);
     expect_fail_bytes("ply.pcd", ply, len, SD_EFORMAT);
     free(ply);
 
     /* More points than the binary data holds (same digit count keeps the layout). */
-    uint8_t *az = read_data("autzen-utm.pcd", &len);
+    uint8_t *az = tu_read_data("autzen-utm.pcd", &len);
     patch(az, "WIDTH 1065", "WIDTH 1066");
     patch(az, "POINTS 1065", "POINTS 1066");
     expect_fail_bytes("az_more.pcd", az, len, SD_ETRUNC);
     free(az);
-    uint8_t *rops = read_data("rops_cloud.pcd", &len);
+    uint8_t *rops = tu_read_data("rops_cloud.pcd", &len);
     patch(rops, "WIDTH 32087", "WIDTH 32088");
     patch(rops, "POINTS 32087", "POINTS 32088");
     expect_fail_bytes("rops_more.pcd", rops, len, SD_ETRUNC);

@@ -19,6 +19,7 @@
 
 #include "cloud.h"
 #include "common/testutil.h"
+#include "cloudtest.h"
 
 /* ------------------------------------------------------------------ helpers */
 
@@ -65,16 +66,6 @@ static void check_box(const pc_cloud *c, const ref_box *b)
     }
 }
 
-/* Point i of c in file coordinates equals p within tol. */
-static void check_point(const pc_cloud *c, size_t i, const double p[3], double tol)
-{
-    for (int k = 0; k < 3; k++) {
-        double got = c->pos[3 * i + k] + c->offset[k];
-        if (fabs(got - p[k]) > tol)
-            fail_msg("point %zu axis %d: got %.9g, expected %.9g (tol %g)", i, k, got, p[k], tol);
-    }
-}
-
 /* pc_load must fail with code, and the message must name the file and a line or byte offset. */
 static void expect_fail(const char *path, int code)
 {
@@ -88,13 +79,6 @@ static void expect_fail(const char *path, int code)
     if (!strstr(e.msg, "offset") && !strstr(e.msg, "line"))
         fail_msg("message names neither line nor offset: %s", e.msg);
     assert_null(c.pos);
-}
-
-static void load_ok(const char *path, pc_cloud *c)
-{
-    sd_err e = {0};
-    int rc = pc_load(path, c, &e);
-    if (rc != 0) fail_msg("%s: %d %s", path, rc, e.msg);
 }
 
 static size_t header_len(const uint8_t *d, size_t n)
@@ -156,7 +140,7 @@ static void guanyin(void **state)
     assert_int_equal(h + 15 * 238154, len);
 
     pc_cloud c;
-    load_ok(path, &c);
+    tu_load_ok(path, &c);
     check_box(&c, &b);
     assert_int_equal(c.n, 238154);
     assert_int_equal(c.n_dropped, 0);
@@ -167,10 +151,10 @@ static void guanyin(void **state)
      * to an offset of size ~1 is good to ~1e-7. */
     const double f0[3] = {0.04723000153899193, 0.13373799622058868, 0.2726989984512329};
     const double f1[3] = {-0.304733008146286, 0.679032027721405, -0.011362999677658081};
-    check_point(&c, 0, f0, 2e-7);
-    check_point(&c, c.n - 1, f1, 2e-7);
-    check_point(&c, 0, b.first, 2e-7);
-    check_point(&c, c.n - 1, b.last, 2e-7);
+    tu_check_point(&c, 0, f0, 2e-7);
+    tu_check_point(&c, c.n - 1, f1, 2e-7);
+    tu_check_point(&c, 0, b.first, 2e-7);
+    tu_check_point(&c, c.n - 1, b.last, 2e-7);
     assert_memory_equal(c.rgba, ((uint8_t[]){82, 43, 17, 255}), 4);
     assert_memory_equal(c.rgba + 4 * (c.n - 1), ((uint8_t[]){77, 39, 18, 255}), 4);
     assert_memory_equal(c.rgba, c0, 3);
@@ -218,7 +202,7 @@ static void bun000(void **state)
     assert_int_equal(grid, 204800); /* the range_grid rows the reader must skip */
 
     pc_cloud c;
-    load_ok(path, &c);
+    tu_load_ok(path, &c);
     check_box(&c, &b);
     assert_int_equal(c.n, 40256);
     assert_int_equal(c.n_dropped, 0);
@@ -226,10 +210,10 @@ static void bun000(void **state)
     assert_string_equal(c.format, "PLY ascii 1.0");
     /* First and last vertex lines, read with awk: "-0.06325 0.0359793 0.0420873" and
      * "-0.018 0.18794 -0.0197253". Float pos near offsets ~0.1: 1e-8 is a few ulps. */
-    check_point(&c, 0, (double[]){-0.06325, 0.0359793, 0.0420873}, 1e-8);
-    check_point(&c, c.n - 1, (double[]){-0.018, 0.18794, -0.0197253}, 1e-8);
-    check_point(&c, 0, b.first, 1e-8);
-    check_point(&c, c.n - 1, b.last, 1e-8);
+    tu_check_point(&c, 0, (double[]){-0.06325, 0.0359793, 0.0420873}, 1e-8);
+    tu_check_point(&c, c.n - 1, (double[]){-0.018, 0.18794, -0.0197253}, 1e-8);
+    tu_check_point(&c, 0, b.first, 1e-8);
+    tu_check_point(&c, c.n - 1, b.last, 1e-8);
     pc_cloud_free(&c);
 }
 
@@ -495,7 +479,7 @@ static void synthetic_same(void **state)
     char path[1024];
     for (size_t v = 0; v < NVARIANTS; v++) {
         pc_cloud c;
-        load_ok(write_variant(tmp, &variants[v], path, sizeof path), &c);
+        tu_load_ok(write_variant(tmp, &variants[v], path, sizeof path), &c);
         assert_int_equal(c.n, SYN_N);
         assert_int_equal(c.n_dropped, 0);
         assert_int_equal(c.attrs, PC_ATTR_RGB | PC_ATTR_NORMAL);
@@ -507,7 +491,7 @@ static void synthetic_same(void **state)
             syn_normal(i, n);
             syn_colour(i, col);
             box_add(&b, p);
-            check_point(&c, (size_t)i, p, 0.0);
+            tu_check_point(&c, (size_t)i, p, 0.0);
             for (int k = 0; k < 3; k++) {
                 if (c.rgba[4 * i + k] != col[k])
                     fail_msg("%s point %d colour %d: %d != %d", variants[v].file, i, k,
@@ -543,12 +527,12 @@ static void synthetic_georef(void **state)
         }
         fclose(f);
         pc_cloud c;
-        load_ok(path, &c);
+        tu_load_ok(path, &c);
         assert_int_equal(c.n, 25);
         for (int i = 0; i < 25; i++) {
             double p[3] = {665171.123456789 + 0.37 * i, 5648340.987654321 + 0.41 * i,
                            233.5 + 0.05 * i};
-            check_point(&c, (size_t)i, p, 1e-6);
+            tu_check_point(&c, (size_t)i, p, 1e-6);
         }
         assert_true(fabs(c.bmin[0] - 665171.123456789) < 1e-9);
         assert_true(fabs(c.bmax[1] - (5648340.987654321 + 0.41 * 24)) < 1e-9);
@@ -569,7 +553,7 @@ static void synthetic_attrs(void **state)
                        {"float x", "float y", "float z", "int scalar_a", "double confidence",
                         "float radius", "float red"}, 0, 0};
     pc_cloud c;
-    load_ok(write_variant(tmp, &a, path, sizeof path), &c);
+    tu_load_ok(write_variant(tmp, &a, path, sizeof path), &c);
     assert_int_equal(c.attrs, PC_ATTR_SCALAR | PC_ATTR_INTENSITY | PC_ATTR_RADIUS);
     assert_string_equal(c.scalar_name, "quality");
     for (int i = 0; i < SYN_N; i++) {
@@ -585,19 +569,19 @@ static void synthetic_attrs(void **state)
                "property float z\nproperty ushort red\nproperty ushort green\n"
                "property ushort blue\nproperty float diffuse_red\nend_header\n"
                "0 0 0 32767 32768 65535 0\n1 1 1 0 257 514 0\n", path, sizeof path);
-    load_ok(path, &c);
+    tu_load_ok(path, &c);
     assert_memory_equal(c.rgba, ((uint8_t[]){127, 128, 255, 255, 0, 1, 2, 255}), 8);
     pc_cloud_free(&c);
     write_text(tmp, "roundf.ply",
                "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
                "property float z\nproperty double r\nproperty float g\nproperty float b\n"
                "end_header\n0 0 0 0.5 0.498 1.5\n1 1 1 -0.2 0.00196 1\n", path, sizeof path);
-    load_ok(path, &c);
+    tu_load_ok(path, &c);
     assert_memory_equal(c.rgba, ((uint8_t[]){128, 127, 255, 255, 0, 0, 255, 255}), 8);
     pc_cloud_free(&c);
 
     /* Without quality, confidence wins over scalar_a; a lone 'red' is not a colour. */
-    load_ok(write_variant(tmp, &b, path, sizeof path), &c);
+    tu_load_ok(write_variant(tmp, &b, path, sizeof path), &c);
     assert_int_equal(c.attrs, PC_ATTR_SCALAR | PC_ATTR_RADIUS);
     assert_string_equal(c.scalar_name, "confidence");
     assert_true(c.scalar[7] == 107.0f);
@@ -701,7 +685,7 @@ static void broken(void **state)
     snprintf(longc + 2000, sizeof longc - 2000, "\nelement vertex 1\nproperty float x\n"
              "property float y\nproperty float z\nend_header\n1 2 3\n");
     pc_cloud c1;
-    load_ok(write_text(tmp, "longcomment.ply", longc, path, sizeof path), &c1);
+    tu_load_ok(write_text(tmp, "longcomment.ply", longc, path, sizeof path), &c1);
     assert_int_equal(c1.n, 1);
     pc_cloud_free(&c1);
     memcpy(longc + 21, "element", 7);
@@ -722,7 +706,7 @@ static void broken(void **state)
                 SD_ETRUNC);
     buf[sizeof neg - 2] = 0; /* an empty list, then the 12-byte vertex: valid */
     pc_cloud c;
-    load_ok(write_cut(tmp, "listok.ply", buf, sizeof neg - 1 + 12, path, sizeof path), &c);
+    tu_load_ok(write_cut(tmp, "listok.ply", buf, sizeof neg - 1 + 12, path, sizeof path), &c);
     assert_int_equal(c.n, 1);
     pc_cloud_free(&c);
 }
@@ -739,9 +723,9 @@ static void vertex_with_list(void **state)
     snprintf(text, sizeof text, h, "ascii");
     strcat(text, "1 2 7 8 2 3 10 20 30\n4 0 5 6 40 50 60\n7 3 1 2 3 8 9 70 80 90\n");
     pc_cloud c;
-    load_ok(write_text(tmp, "vlist.ply", text, path, sizeof path), &c);
+    tu_load_ok(write_text(tmp, "vlist.ply", text, path, sizeof path), &c);
     assert_int_equal(c.n, 3);
-    check_point(&c, 2, (double[]){7, 8, 9}, 0);
+    tu_check_point(&c, 2, (double[]){7, 8, 9}, 0);
     assert_memory_equal(c.rgba + 4, ((uint8_t[]){40, 50, 60, 255}), 4);
     pc_cloud_free(&c);
 
@@ -769,10 +753,10 @@ static void vertex_with_list(void **state)
         }
         for (int k = 0; k < 3; k++) bin[n++] = (uint8_t)(10 * (3 * i + k + 1));
     }
-    load_ok(write_cut(tmp, "vlist_be.ply", bin, n, path, sizeof path), &c);
+    tu_load_ok(write_cut(tmp, "vlist_be.ply", bin, n, path, sizeof path), &c);
     assert_int_equal(c.n, 3);
-    check_point(&c, 1, (double[]){4, 5, 6}, 0);
-    check_point(&c, 2, (double[]){7, 8, 9}, 0);
+    tu_check_point(&c, 1, (double[]){4, 5, 6}, 0);
+    tu_check_point(&c, 2, (double[]){7, 8, 9}, 0);
     assert_memory_equal(c.rgba + 8, ((uint8_t[]){70, 80, 90, 255}), 4);
     pc_cloud_free(&c);
     expect_fail(write_cut(tmp, "vlist_be_cut.ply", bin, n - 1, path, sizeof path), SD_ETRUNC);
@@ -825,10 +809,10 @@ static void empty_and_nan(void **state)
                "property uchar blue\nend_header\n"
                "1 2 3 10 20 30\nnan 2 3 0 0 0\n4 inf 6 0 0 0\n7 8 -inf 0 0 0\n-NaN 1 1 0 0 0\n"
                "9 8 7 40 50 60\n", path, sizeof path);
-    load_ok(path, &c);
+    tu_load_ok(path, &c);
     assert_int_equal(c.n, 2);
     assert_int_equal(c.n_dropped, 4);
-    check_point(&c, 1, (double[]){9, 8, 7}, 0);
+    tu_check_point(&c, 1, (double[]){9, 8, 7}, 0);
     assert_memory_equal(c.rgba + 4, ((uint8_t[]){40, 50, 60, 255}), 4);
     pc_cloud_free(&c);
     /* Binary: a float NaN in y of the first of three points. */
@@ -839,10 +823,10 @@ static void empty_and_nan(void **state)
     memcpy(bin, h, hl);
     float v[9] = {1, NAN, 3, 4, 5, 6, 7, 8, 9};
     memcpy(bin + hl, v, sizeof v);
-    load_ok(write_cut(tmp, "nan_bin.ply", bin, hl + sizeof v, path, sizeof path), &c);
+    tu_load_ok(write_cut(tmp, "nan_bin.ply", bin, hl + sizeof v, path, sizeof path), &c);
     assert_int_equal(c.n, 2);
     assert_int_equal(c.n_dropped, 1);
-    check_point(&c, 0, (double[]){4, 5, 6}, 0);
+    tu_check_point(&c, 0, (double[]){4, 5, 6}, 0);
     pc_cloud_free(&c);
 }
 

@@ -18,6 +18,7 @@
 
 #include "cloud.h"
 #include "common/testutil.h"
+#include "cloudtest.h"
 
 /* ------------------------------------------------------------------ helpers */
 
@@ -82,22 +83,6 @@ static void check_scan(const pc_cloud *c, const ref_scan *r)
     }
 }
 
-static void check_point(const pc_cloud *c, size_t i, const double p[3], double tol)
-{
-    for (int k = 0; k < 3; k++) {
-        double got = c->pos[3 * i + k] + c->offset[k];
-        if (fabs(got - p[k]) > tol)
-            fail_msg("point %zu axis %d: got %.9f, expected %.9f (tol %g)", i, k, got, p[k], tol);
-    }
-}
-
-static void load_ok(const char *path, pc_cloud *c)
-{
-    sd_err e = {0};
-    int rc = pc_load(path, c, &e);
-    if (rc != 0) fail_msg("%s: %d %s", path, rc, e.msg);
-}
-
 /* pc_load must fail with code and a message naming the file and a line. */
 static void expect_fail(const char *path, int code)
 {
@@ -137,17 +122,17 @@ static void bunny_pts(void **state)
     assert_int_equal(count, 30571);
     assert_int_equal(r.n, 30571);
     pc_cloud c;
-    load_ok(path, &c);
+    tu_load_ok(path, &c);
     check_scan(&c, &r);
     assert_int_equal(c.attrs, 0);
     assert_int_equal(c.n_dropped, 0);
     assert_string_equal(c.format, "PTS text (x y z)");
     /* Second and last lines, read with sed/tail: "-0.037829 0.12794 0.004474",
      * "-0.07063 0.04015 0.001226". Float pos near an offset of ~0.1: 1e-8 is a few ulps. */
-    check_point(&c, 0, (double[]){-0.037829, 0.12794, 0.004474}, 1e-8);
-    check_point(&c, c.n - 1, (double[]){-0.07063, 0.04015, 0.001226}, 1e-8);
-    check_point(&c, 0, r.first, 1e-8);
-    check_point(&c, c.n - 1, r.last, 1e-8);
+    tu_check_point(&c, 0, (double[]){-0.037829, 0.12794, 0.004474}, 1e-8);
+    tu_check_point(&c, c.n - 1, (double[]){-0.07063, 0.04015, 0.001226}, 1e-8);
+    tu_check_point(&c, 0, r.first, 1e-8);
+    tu_check_point(&c, c.n - 1, r.last, 1e-8);
     pc_cloud_free(&c);
 
     double t[9];
@@ -175,7 +160,7 @@ static void agisoft_xyz(void **state)
     assert_int_equal(count, -1);
     assert_int_equal(r.n, 100);
     pc_cloud c;
-    load_ok(path, &c);
+    tu_load_ok(path, &c);
     check_scan(&c, &r);
     assert_int_equal(c.attrs, PC_ATTR_RGB);
     assert_string_equal(c.format, "XYZ text (x y z r g b)");
@@ -186,10 +171,10 @@ static void agisoft_xyz(void **state)
     /* First and last rows (head/tail): 665187.522077 5648349.895035 241.767693 117 73 49 and
      * 665186.236769 5648351.141146 244.871176 57 59 64. pos is float relative to the centre
      * of a ~42 m box: 4e-6 m is float's step there, 1e-5 leaves room. */
-    check_point(&c, 0, (double[]){665187.522077, 5648349.895035, 241.767693}, 1e-5);
-    check_point(&c, 99, (double[]){665186.236769, 5648351.141146, 244.871176}, 1e-5);
-    check_point(&c, 0, r.first, 1e-5);
-    check_point(&c, 99, r.last, 1e-5);
+    tu_check_point(&c, 0, (double[]){665187.522077, 5648349.895035, 241.767693}, 1e-5);
+    tu_check_point(&c, 99, (double[]){665186.236769, 5648351.141146, 244.871176}, 1e-5);
+    tu_check_point(&c, 0, r.first, 1e-5);
+    tu_check_point(&c, 99, r.last, 1e-5);
     assert_memory_equal(c.rgba, ((uint8_t[]){117, 73, 49, 255}), 4);
     assert_memory_equal(c.rgba + 4 * 99, ((uint8_t[]){57, 59, 64, 255}), 4);
     for (int k = 0; k < 3; k++) {
@@ -258,11 +243,11 @@ static void separators_and_comments(void **state)
         char name[32];
         snprintf(name, sizeof name, "sep%zu.%s", t, t == 3 ? "pts" : t == 2 ? "txt" : "xyz");
         pc_cloud c;
-        load_ok(write_text(tmp, name, texts[t], path, sizeof path), &c);
+        tu_load_ok(write_text(tmp, name, texts[t], path, sizeof path), &c);
         assert_int_equal(c.n, 5);
         assert_int_equal(c.attrs, 0);
         /* Offset (1.5, 9.875, 45.0005): pos is float, whose step near 45 is 4e-6. */
-        for (int i = 0; i < 5; i++) check_point(&c, (size_t)i, want[i], 4e-6);
+        for (int i = 0; i < 5; i++) tu_check_point(&c, (size_t)i, want[i], 4e-6);
         assert_true(c.bmin[2] == 0.001 && c.bmax[2] == 90);
         pc_cloud_free(&c);
     }
@@ -274,12 +259,12 @@ static void intensity_and_colour(void **state)
     char path[1024];
     pc_cloud c;
     /* x y z i */
-    load_ok(write_text(tmp, "i.xyz", "1 2 3 0.5\n4 5 6 -1200\n", path, sizeof path), &c);
+    tu_load_ok(write_text(tmp, "i.xyz", "1 2 3 0.5\n4 5 6 -1200\n", path, sizeof path), &c);
     assert_int_equal(c.attrs, PC_ATTR_INTENSITY);
     assert_true(c.intensity[0] == 0.5f && c.intensity[1] == -1200.0f);
     pc_cloud_free(&c);
     /* PTS with intensity then colour (7 columns). */
-    load_ok(write_text(tmp, "irgb.pts", "2\r\n1 2 3 -5 10 20 30\r\n4 5 6 7 255 0 128\r\n", path,
+    tu_load_ok(write_text(tmp, "irgb.pts", "2\r\n1 2 3 -5 10 20 30\r\n4 5 6 7 255 0 128\r\n", path,
                        sizeof path), &c);
     assert_int_equal(c.attrs, PC_ATTR_INTENSITY | PC_ATTR_RGB);
     assert_true(c.intensity[0] == -5.0f && c.intensity[1] == 7.0f);
@@ -287,16 +272,16 @@ static void intensity_and_colour(void **state)
     assert_string_equal(c.format, "PTS text (x y z i r g b)");
     pc_cloud_free(&c);
     /* 16-bit colour: one value over 255 scales all by 255/65535 (65535 -> 255, 257k -> k). */
-    load_ok(write_text(tmp, "rgb16.xyz", "1 2 3 65535 0 257\n4 5 6 32896 100 25700\n", path,
+    tu_load_ok(write_text(tmp, "rgb16.xyz", "1 2 3 65535 0 257\n4 5 6 32896 100 25700\n", path,
                        sizeof path), &c);
     assert_memory_equal(c.rgba, ((uint8_t[]){255, 0, 1, 255, 128, 0, 100, 255}), 8);
     pc_cloud_free(&c);
     /* 8-bit colour stays as is even when small. */
-    load_ok(write_text(tmp, "rgb8.xyz", "1 2 3 1 0 1\n4 5 6 0 1 0\n", path, sizeof path), &c);
+    tu_load_ok(write_text(tmp, "rgb8.xyz", "1 2 3 1 0 1\n4 5 6 0 1 0\n", path, sizeof path), &c);
     assert_memory_equal(c.rgba, ((uint8_t[]){1, 0, 1, 255, 0, 1, 0, 255}), 8);
     pc_cloud_free(&c);
     /* Float colour in [0,1] with fractions: scaled by 255. */
-    load_ok(write_text(tmp, "rgbf.xyz", "1 2 3 1.0 0.5 0\n4 5 6 0.2 0.8 1\n", path, sizeof path),
+    tu_load_ok(write_text(tmp, "rgbf.xyz", "1 2 3 1.0 0.5 0\n4 5 6 0.2 0.8 1\n", path, sizeof path),
             &c);
     assert_memory_equal(c.rgba, ((uint8_t[]){255, 128, 0, 255, 51, 204, 255, 255}), 8);
     pc_cloud_free(&c);
@@ -308,12 +293,12 @@ static void nan_rows(void **state)
     const char *tmp = *state;
     char path[1024];
     pc_cloud c;
-    load_ok(write_text(tmp, "nan.pts",
+    tu_load_ok(write_text(tmp, "nan.pts",
                        "5\n1 2 3 10 20 30\nnan 0 0 0 0 0\n0 inf 0 0 0 0\n0 0 -Infinity 0 0 0\n"
                        "7 8 9 40 50 60\n", path, sizeof path), &c);
     assert_int_equal(c.n, 2);
     assert_int_equal(c.n_dropped, 3);
-    check_point(&c, 1, (double[]){7, 8, 9}, 0);
+    tu_check_point(&c, 1, (double[]){7, 8, 9}, 0);
     assert_memory_equal(c.rgba + 4, ((uint8_t[]){40, 50, 60, 255}), 4);
     pc_cloud_free(&c);
 }
@@ -359,10 +344,10 @@ static void pts_blocks(void **state)
     const char *tmp = *state;
     char path[1024];
     pc_cloud c;
-    load_ok(write_text(tmp, "blocks.pts", "2\n1 2 3\n4 5 6\n3\n7 8 9\n1 1 1\n2 2 2\n0\n", path,
+    tu_load_ok(write_text(tmp, "blocks.pts", "2\n1 2 3\n4 5 6\n3\n7 8 9\n1 1 1\n2 2 2\n0\n", path,
                        sizeof path), &c);
     assert_int_equal(c.n, 5);
-    check_point(&c, 4, (double[]){2, 2, 2}, 0);
+    tu_check_point(&c, 4, (double[]){2, 2, 2}, 0);
     pc_cloud_free(&c);
     /* The first block is one row short: the error names its count line (line 1). */
     expect_fail(write_text(tmp, "blocks_short.pts", "2\n1 2 3\n1\n4 5 6\n", path, sizeof path),
@@ -425,11 +410,11 @@ static void growth(void **state)
         fprintf(f, "%d %d.5 %d %d %d %d\n", i % 1000, i / 1000, -i, i % 256, (i / 256) % 256, 9);
     fclose(f);
     pc_cloud c;
-    load_ok(path, &c);
+    tu_load_ok(path, &c);
     assert_int_equal(c.n, 200000);
     assert_true(c.bmin[0] == 0 && c.bmax[0] == 999 && c.bmin[1] == 0.5 && c.bmax[1] == 199.5);
     assert_true(c.bmin[2] == -199999 && c.bmax[2] == 0);
-    check_point(&c, 123456, (double[]){456, 123.5, -123456}, 0);
+    tu_check_point(&c, 123456, (double[]){456, 123.5, -123456}, 0);
     assert_memory_equal(c.rgba + 4 * 123456,
                         ((uint8_t[]){123456 % 256, 123456 / 256 % 256, 9, 255}), 4);
     pc_cloud_free(&c);
