@@ -6,9 +6,8 @@
  * run in both filter modes (ewa=exact: the textbook resampling filter per splat; ewa=split: part
  * of the low-pass in the resolve), and the second moments of one exact footprint are checked
  * against J V_r J^T + I from splat_math.c.
- *
- * SPLATD_SPLAT_BENCH=1 adds a timing of 1M points at 1280x720: points, splat split and splat
- * exact (printed). */
+ * Timings are in `make bench` (tests/bench/render_bench.c, with --set ewa=exact for the textbook
+ * filter), not here. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -19,7 +18,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/resource.h>
 #include <time.h>
 
 #include "camera.h"
@@ -125,21 +123,6 @@ static rnd_camera cam_at(double ex, double ey, double ez, double tx, double ty, 
                     {tx + OFF[0], ty + OFF[1], tz + OFF[2]},
                     {0, 1, 0}, fov, 0, 0, w, h};
     return c;
-}
-
-/* CPU time of the whole process (llvmpipe's threads included), seconds. */
-static double cpu_s(void)
-{
-    struct rusage ru;
-    getrusage(RUSAGE_SELF, &ru);
-    return ru.ru_utime.tv_sec + ru.ru_utime.tv_usec * 1e-6 + ru.ru_stime.tv_sec +
-           ru.ru_stime.tv_usec * 1e-6;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
 }
 
 /* ---- projection, as camera.c builds it (gluLookAt + gluPerspective), for analytic pixels ---- */
@@ -856,62 +839,6 @@ static void test_guanyin(void **state)
     rnd_release(fx->egl, id);
 }
 
-/* SPLATD_SPLAT_BENCH=1: 1M points (a 1000 x 1000 wavy sheet) at 1280x720 through the default
- * framing camera, points, splat ewa=split and splat ewa=exact interleaved, median render time
- * of 10 frames each. Prints only; there is nothing to assert about timings on a shared
- * machine. */
-static void test_bench_1m(void **state)
-{
-    fixture *fx = *state;
-    const char *on = getenv("SPLATD_SPLAT_BENCH");
-    if (!on || *on != '1') skip();
-    enum { N = 1000 };
-    pc_prepared pc;
-    new_cloud(&pc, (uint64_t)N * N);
-    const uint8_t a[3] = {200, 120, 60}, b[3] = {60, 120, 200};
-    grid(&pc, 0, N, N, 0.002f, 0, 0.002f * 1.5f, a, b, 25);
-    for (uint64_t k = 0; k < pc.n; k++) {
-        float x = pc.pos[3 * k], y = pc.pos[3 * k + 1];
-        pc.pos[3 * k + 2] = 0.1f * sinf(6 * x) * cosf(5 * y);
-        float nx = -0.6f * cosf(6 * x) * cosf(5 * y), ny = 0.5f * sinf(6 * x) * sinf(5 * y);
-        float l = sqrtf(nx * nx + ny * ny + 1);
-        pc.normal[3 * k] = nx / l, pc.normal[3 * k + 1] = ny / l, pc.normal[3 * k + 2] = 1 / l;
-    }
-    finish_cloud(&pc);
-    uint32_t id = tu_upload(fx->egl, &pc);
-    rnd_camera cam;
-    rnd_camera_frame(pc.bmin, pc.bmax, 1280, 720, &cam);
-    pc_prepared_free(&pc);
-    sp_params p;
-    sp_params_defaults(&p);
-    enum { NC = 3 }; /* points, splat split, splat exact */
-    double t[NC][10], cpu[NC][10];
-    rnd_frame f = {0};
-    for (int k = -1; k < 10; k++) /* k = -1: warm-up (shader compilation, buffers) */
-        for (int pi = 0; pi < NC; pi++) {
-            p.pipeline = pi ? SP_PIPE_SPLAT : SP_PIPE_POINTS;
-            p.ewa = pi == 2 ? SP_EWA_EXACT : SP_EWA_SPLIT;
-            double c0 = cpu_s();
-            tu_render(fx->egl, id, &cam, &p, 0, &f);
-            if (k < 0) continue;
-            cpu[pi][k] = (cpu_s() - c0) * 1e3;
-            t[pi][k] = f.render_us / 1e3;
-        }
-    double mt[NC], mc[NC];
-    for (int pi = 0; pi < NC; pi++) {
-        qsort(t[pi], 10, sizeof(double), cmp_double);
-        qsort(cpu[pi], 10, sizeof(double), cmp_double);
-        mt[pi] = 0.5 * (t[pi][4] + t[pi][5]), mc[pi] = 0.5 * (cpu[pi][4] + cpu[pi][5]);
-    }
-    printf("bench 1M points 1280x720 (%s), %u points drawn, median of 10: points %.1f ms, "
-           "splat split %.1f ms (x%.2f), splat exact %.1f ms (x%.2f); CPU time (all threads, "
-           "incl. read-back) points %.1f ms, split %.1f ms (x%.2f), exact %.1f ms (x%.2f)\n",
-           rnd_renderer_string(fx->egl), (unsigned)f.points_drawn, mt[0], mt[1], mt[1] / mt[0],
-           mt[2], mt[2] / mt[0], mc[0], mc[1], mc[1] / mc[0], mc[2], mc[2] / mc[0]);
-    rnd_frame_free(&f);
-    rnd_release(fx->egl, id);
-}
-
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -925,7 +852,6 @@ int main(void)
         cmocka_unit_test(test_exact_footprint_moments),
         cmocka_unit_test(test_ewa_auto),
         cmocka_unit_test(test_guanyin),
-        cmocka_unit_test(test_bench_1m),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }

@@ -3,6 +3,7 @@
  *
  *   render_bench FILE [--frames N] [--size WxH] [--backend auto|egl|osmesa]
  *                [--pipelines points,splat] [--label NAME] [--threads T] [--save DIR]
+ *                [--set key=value ...]   (parameters for every pipeline, e.g. ewa=exact)
  *
  * Loads FILE (pc_load) and preprocesses it (prep_run, default k, T threads: 0 = every core),
  * timing both; uploads the prepared cloud and renders, per pipeline, 1 + N frames of the
@@ -47,6 +48,8 @@ typedef struct bench_opts {
     rnd_backend_kind backend;
     int pipes[MAX_PIPES];
     int npipes;
+    const char *sets[MAX_PIPES]; /* --set key=value, applied to every pipeline's parameters */
+    int nsets;
 } bench_opts;
 
 typedef struct pipe_result {
@@ -79,7 +82,7 @@ static void usage(void)
     fprintf(stderr, "usage: render_bench FILE [--frames N (1-%d, default 10)] [--size WxH "
                     "(default 1280x720)]\n"
                     "       [--backend auto|egl|osmesa] [--pipelines points,splat] "
-                    "[--label NAME] [--threads T] [--save DIR]\n",
+                    "[--label NAME] [--threads T] [--save DIR] [--set key=value ...]\n",
             MAX_FRAMES);
 }
 
@@ -170,6 +173,16 @@ static int parse_args(int argc, char **argv, bench_opts *o)
             }
         } else if (!strcmp(a, "--pipelines")) {
             if (parse_pipelines(o, v) != 0) return -1;
+        } else if (!strcmp(a, "--set")) {
+            sp_params t;
+            char emsg[200];
+            sp_params_defaults(&t);
+            if (o->nsets == MAX_PIPES || sp_param_set_kv(&t, v, emsg, sizeof emsg) != 0) {
+                fprintf(stderr, "render_bench: --set %s: %s\n", v,
+                        o->nsets == MAX_PIPES ? "too many --set" : emsg);
+                return -1;
+            }
+            o->sets[o->nsets++] = v;
         } else if (!strcmp(a, "--label")) {
             o->label = v;
         } else if (!strcmp(a, "--save")) {
@@ -223,7 +236,9 @@ static int bench_pipeline(rnd_ctx *r, uint32_t id, const rnd_camera *cam0, int p
                           const bench_opts *o, enc_ctx *enc, pipe_result *res, sd_err *err)
 {
     sp_params p, jp;
+    char emsg[200];
     sp_params_defaults(&p);
+    for (int i = 0; i < o->nsets; i++) sp_param_set_kv(&p, o->sets[i], emsg, sizeof emsg);
     p.pipeline = pipe;
     jp = p;
     jp.format = SP_FMT_JPEG;
