@@ -464,6 +464,12 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     gl->DrawBuffers(1, &b0);
     gl->BlitFramebuffer(0, 0, cam->width, cam->height, 0, 0, cam->width, cam->height,
                         GL_COLOR_BUFFER_BIT, GL_NEAREST);
+    /* Frames are opaque: alpha 1 everywhere (the float target keeps coverage in alpha). */
+    const float opaque[4] = {0, 0, 0, 1};
+    gl->BindFramebuffer(GL_FRAMEBUFFER, r->fbo8);
+    gl->ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_TRUE);
+    gl->ClearBufferfv(GL_COLOR, 0, opaque);
+    gl->ColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
     gl->Finish();
     uint64_t t1 = now_us();
 
@@ -472,8 +478,6 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     gl->BindFramebuffer(GL_READ_FRAMEBUFFER, r->fbo8);
     gl->ReadBuffer(GL_COLOR_ATTACHMENT0);
     gl->ReadPixels(0, 0, cam->width, cam->height, GL_RGBA, GL_UNSIGNED_BYTE, frame->rgba8);
-    size_t npix = (size_t)cam->width * (size_t)cam->height;
-    for (size_t i = 0; i < npix; i++) frame->rgba8[4 * i + 3] = 255;
     gl->BindFramebuffer(GL_READ_FRAMEBUFFER, t->fbo);
     if (want_float) {
         gl->ReadBuffer(GL_COLOR_ATTACHMENT0);

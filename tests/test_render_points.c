@@ -173,6 +173,7 @@ static void test_projection_and_depth(void **state)
                     assert_true(fabsf(half_to_float(f.rgba16f[4 * ((size_t)y * W + x)]) -
                                       (30 + 40 * i) / 255.0f) < 1e-3f);
                     assert_true(half_to_float(f.rgba16f[4 * ((size_t)y * W + x) + 3]) == 1.0f);
+                    assert_int_equal(px(&f, x, y)[3], 255); /* 8-bit frames are opaque */
                 }
             if (found != 1) fail_msg("%s: point %d found on %d pixels", fx->label[ri], i, found);
         }
