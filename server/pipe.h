@@ -43,15 +43,21 @@ typedef struct rnd_view {
     uint64_t points_visible;
 } rnd_view;
 
-/* The output every pipeline writes: fbo with colour attachment 0 = color (RGBA16F, linear
- * colour, alpha = coverage) and attachment 1 = depth_eye (R32F, eye-space distance along the
- * view axis, +inf where nothing was drawn), plus a 24-bit depth renderbuffer for raster
- * pipelines, which the renderer does NOT clear: a pipeline that depth-tests clears it
+/* The output every pipeline writes: fbo with colour attachment 0 = color (linear colour,
+ * alpha = coverage) and, as draw buffer 1, depth_eye (eye-space distance along the view axis,
+ * +inf where nothing was drawn), plus a 24-bit depth renderbuffer for raster pipelines, which
+ * the renderer does NOT clear: a pipeline that depth-tests clears it
  * (glClearBufferfv(GL_DEPTH, 0, &one)); on llvmpipe that clear costs ~5 ms at 1280x720.
- * Compute pipelines may bind color and depth_eye as images (rgba16f, r32f). */
+ * Two kinds, picked per frame by the renderer:
+ *   is_float  color RGBA16F, depth_eye R32F (frames with float colour and depth: EXR);
+ *   8-bit     color RGBA8, depth_eye 0 (draw buffer 1 is GL_NONE, so depth output is
+ *             dropped), alpha already cleared to 1 and write-masked (glColorMaski) so that
+ *             frames are opaque: pipelines leave the colour mask alone.
+ * Compute pipelines may bind color and depth_eye as images (rgba16f or rgba8, r32f). */
 typedef struct rnd_target {
     GLuint fbo, color, depth_eye, depth_rb;
     int width, height;
+    int is_float;
 } rnd_target;
 
 typedef struct rnd_shaders rnd_shaders; /* shader source lookup (embedded or --shader-dir) */
@@ -68,7 +74,7 @@ typedef struct rnd_pipeline {
     int (*create)(const gl_api *gl, const rnd_shaders *sh, void **state, sd_err *err);
     void (*destroy)(const gl_api *gl, void *state);
     /* render: draws cloud c seen through v with params p into t (already bound, cleared to the
-     * background with depth_eye = +inf). Returns 0 or SD_E*. */
+     * background, depth_eye to +inf when t has one). Returns 0 or SD_E*. */
     int (*render)(const gl_api *gl, void *state, const rnd_gpu_cloud *c, const rnd_view *v,
                   const sp_params *p, const rnd_target *t, sd_err *err);
 } rnd_pipeline;

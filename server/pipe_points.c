@@ -310,7 +310,7 @@ static int render_compute(const gl_api *gl, points_state *s, const rnd_gpu_cloud
 static int points_render(const gl_api *gl, void *state, const rnd_gpu_cloud *c,
                          const rnd_view *v, const sp_params *p, const rnd_target *t, sd_err *err)
 {
-    (void)t; /* already bound by the renderer, colour and depth_eye as draw buffers 0 and 1 */
+    (void)t; /* already bound by the renderer, with its draw buffers (pipe.h) */
     points_state *s = state;
     if (!v->nranges || !v->points_visible) return 0;
     int mode = s->mode;

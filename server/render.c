@@ -20,6 +20,7 @@
 static const rnd_pipeline *const pipelines[] = {&pipe_points, &pipe_splat};
 enum { NPIPES = sizeof pipelines / sizeof pipelines[0] };
 enum { MAX_SLOTS = 0xFFFF, ID_INDEX_BITS = 16 };
+enum { TARGET_8 = 0, TARGET_F = 1 };
 
 typedef struct cloud_slot {
     rnd_gpu_cloud c;
@@ -38,11 +39,13 @@ struct rnd_ctx {
     int pcreated[NPIPES];
     cloud_slot *slots;
     uint32_t nslots;
-    rnd_target target;
-    /* RGBA8 copy of the target's colour: glReadPixels of RGBA16F as unsigned bytes takes
-     * Mesa's slow per-pixel conversion path (~15 ms at 1280x720), a blit into RGBA8 and a
-     * plain read take ~1 ms. */
-    GLuint fbo8, rb8;
+    /* The two targets (pipe.h), each made on first use and remade when the size changes:
+     * [TARGET_8] RGBA8 for 8-bit frames, read back as it is; [TARGET_F] RGBA16F + R32F depth
+     * for float frames, blitted into [TARGET_8] for their RGBA8 copy (glReadPixels of RGBA16F
+     * as unsigned bytes takes Mesa's per-pixel conversion path, ~15 ms at 1280x720).
+     * Rendering 8-bit frames straight into RGBA8 saves the float clear and that blit: ~10 ms
+     * of a 1280x720 frame on llvmpipe. */
+    rnd_target target[2];
     uint32_t *range_first, *range_count;
     uint64_t range_cap;
 };
@@ -125,16 +128,12 @@ fail:
     return NULL;
 }
 
-static void target_free(rnd_ctx *r)
+static void target_free(const gl_api *gl, rnd_target *t)
 {
-    rnd_target *t = &r->target;
-    if (r->fbo8) r->gl.DeleteFramebuffers(1, &r->fbo8);
-    if (r->rb8) r->gl.DeleteRenderbuffers(1, &r->rb8);
-    r->fbo8 = r->rb8 = 0;
-    if (t->fbo) r->gl.DeleteFramebuffers(1, &t->fbo);
+    if (t->fbo) gl->DeleteFramebuffers(1, &t->fbo);
     GLuint tex[2] = {t->color, t->depth_eye};
-    if (t->color || t->depth_eye) r->gl.DeleteTextures(2, tex);
-    if (t->depth_rb) r->gl.DeleteRenderbuffers(1, &t->depth_rb);
+    if (t->color || t->depth_eye) gl->DeleteTextures(2, tex);
+    if (t->depth_rb) gl->DeleteRenderbuffers(1, &t->depth_rb);
     memset(t, 0, sizeof *t);
 }
 
@@ -155,7 +154,8 @@ void rnd_destroy(rnd_ctx *r)
             if (r->pcreated[i]) pipelines[i]->destroy(&r->gl, r->pstate[i]);
         for (uint32_t i = 0; i < r->nslots; i++)
             if (r->slots[i].used) gpu_cloud_free(r, &r->slots[i].c);
-        target_free(r);
+        target_free(&r->gl, &r->target[TARGET_8]);
+        target_free(&r->gl, &r->target[TARGET_F]);
         r->ops->destroy(r->be);
     }
     rnd_shaders_destroy(r->sh);
@@ -322,25 +322,29 @@ void rnd_release(rnd_ctx *r, uint32_t cloud_id)
     s->used = 0;
 }
 
-/* Makes the target w x h (recreating its attachments when the size changes). Returns 0 or
- * SD_EGL naming the framebuffer status. */
-static int target_ensure(rnd_ctx *r, int w, int h, sd_err *err)
+static GLuint make_texture(const gl_api *gl, GLenum format, int w, int h)
 {
-    rnd_target *t = &r->target;
-    if (t->fbo && t->width == w && t->height == h) return 0;
-    const gl_api *gl = &r->gl;
-    target_free(r);
-    gl->GenTextures(1, &t->color);
-    gl->BindTexture(GL_TEXTURE_2D, t->color);
-    gl->TexStorage2D(GL_TEXTURE_2D, 1, GL_RGBA16F, w, h);
-    gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-    gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-    gl->GenTextures(1, &t->depth_eye);
-    gl->BindTexture(GL_TEXTURE_2D, t->depth_eye);
-    gl->TexStorage2D(GL_TEXTURE_2D, 1, GL_R32F, w, h);
+    GLuint tex = 0;
+    gl->GenTextures(1, &tex);
+    gl->BindTexture(GL_TEXTURE_2D, tex);
+    gl->TexStorage2D(GL_TEXTURE_2D, 1, format, w, h);
     gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
     gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
     gl->BindTexture(GL_TEXTURE_2D, 0);
+    return tex;
+}
+
+/* Makes target `which` w x h (recreating its attachments when the size changes). Returns 0 or
+ * SD_EGL. */
+static int target_ensure(rnd_ctx *r, int which, int w, int h, sd_err *err)
+{
+    rnd_target *t = &r->target[which];
+    if (t->fbo && t->width == w && t->height == h) return 0;
+    const gl_api *gl = &r->gl;
+    target_free(gl, t);
+    int is_float = which == TARGET_F;
+    t->color = make_texture(gl, is_float ? GL_RGBA16F : GL_RGBA8, w, h);
+    if (is_float) t->depth_eye = make_texture(gl, GL_R32F, w, h);
     gl->GenRenderbuffers(1, &t->depth_rb);
     gl->BindRenderbuffer(GL_RENDERBUFFER, t->depth_rb);
     gl->RenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, w, h);
@@ -348,33 +352,29 @@ static int target_ensure(rnd_ctx *r, int w, int h, sd_err *err)
     gl->GenFramebuffers(1, &t->fbo);
     gl->BindFramebuffer(GL_FRAMEBUFFER, t->fbo);
     gl->FramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, t->color, 0);
-    gl->FramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D, t->depth_eye, 0);
+    if (is_float)
+        gl->FramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D,
+                                 t->depth_eye, 0);
     gl->FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, t->depth_rb);
+    /* Fragment output 1 (eye depth) goes nowhere in the 8-bit target. */
+    const GLenum bufs[2] = {GL_COLOR_ATTACHMENT0, is_float ? GL_COLOR_ATTACHMENT1 : GL_NONE};
+    gl->DrawBuffers(2, bufs);
+    gl->ReadBuffer(GL_COLOR_ATTACHMENT0);
     GLenum st = gl->CheckFramebufferStatus(GL_FRAMEBUFFER);
+    gl->BindFramebuffer(GL_FRAMEBUFFER, 0);
     int rc = 0;
     char buf[32];
     if (st != GL_FRAMEBUFFER_COMPLETE)
-        rc = sd_errf(err, SD_EGL, "the %dx%d output framebuffer is incomplete: %s", w, h,
-                     gl_error_name(st, buf, sizeof buf));
-    gl->GenRenderbuffers(1, &r->rb8);
-    gl->BindRenderbuffer(GL_RENDERBUFFER, r->rb8);
-    gl->RenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, w, h);
-    gl->BindRenderbuffer(GL_RENDERBUFFER, 0);
-    gl->GenFramebuffers(1, &r->fbo8);
-    gl->BindFramebuffer(GL_FRAMEBUFFER, r->fbo8);
-    gl->FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, r->rb8);
-    st = gl->CheckFramebufferStatus(GL_FRAMEBUFFER);
-    if (rc == 0 && st != GL_FRAMEBUFFER_COMPLETE)
-        rc = sd_errf(err, SD_EGL, "the %dx%d RGBA8 read-back framebuffer is incomplete: %s", w,
-                     h, gl_error_name(st, buf, sizeof buf));
-    gl->BindFramebuffer(GL_FRAMEBUFFER, 0);
+        rc = sd_errf(err, SD_EGL, "the %dx%d %s output framebuffer is incomplete: %s", w, h,
+                     is_float ? "RGBA16F" : "RGBA8", gl_error_name(st, buf, sizeof buf));
     if (rc == 0) rc = gl_check(gl, "creating the output framebuffer", err);
     if (rc < 0) {
-        target_free(r);
+        target_free(gl, t);
         return rc;
     }
     t->width = w;
     t->height = h;
+    t->is_float = is_float;
     return 0;
 }
 
@@ -436,50 +436,55 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
         if (rc < 0) return rc;
         r->pcreated[pi] = 1;
     }
-    if ((rc = target_ensure(r, cam->width, cam->height, err)) < 0) return rc;
+    /* Float frames render into TARGET_F and are copied into TARGET_8 for their RGBA8. */
+    if ((rc = target_ensure(r, TARGET_8, cam->width, cam->height, err)) < 0) return rc;
+    if (want_float && (rc = target_ensure(r, TARGET_F, cam->width, cam->height, err)) < 0)
+        return rc;
     if ((rc = frame_ensure(frame, cam->width, cam->height, want_float, err)) < 0) return rc;
 
     uint64_t t0 = now_us();
-    const rnd_target *t = &r->target;
+    const rnd_target *t8 = &r->target[TARGET_8];
+    const rnd_target *t = want_float ? &r->target[TARGET_F] : t8;
     gl->BindFramebuffer(GL_FRAMEBUFFER, t->fbo);
-    const GLenum bufs[2] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
-    gl->DrawBuffers(2, bufs);
     gl->Viewport(0, 0, cam->width, cam->height);
-    const float bg[4] = {params->background[0], params->background[1], params->background[2], 0};
+    /* 8-bit frames are opaque: alpha is cleared to 1 and masked off while the pipeline draws
+     * (pipe.h); the float target keeps coverage in alpha. */
+    const float bg[4] = {params->background[0], params->background[1], params->background[2],
+                         t->is_float ? 0.0f : 1.0f};
     const float inf[4] = {INFINITY, 0, 0, 0};
     /* The depth renderbuffer is left to the pipelines that test depth (pipe.h). */
     gl->ClearBufferfv(GL_COLOR, 0, bg);
-    gl->ClearBufferfv(GL_COLOR, 1, inf);
+    if (t->is_float) gl->ClearBufferfv(GL_COLOR, 1, inf);
+    else gl->ColorMaski(0, GL_TRUE, GL_TRUE, GL_TRUE, GL_FALSE);
     rc = pipelines[pi]->render(gl, r->pstate[pi], c, &v, params, t, err);
-    if (rc < 0) return rc;
     /* The pipeline may have bound other framebuffers and state. */
+    gl->ColorMaski(0, GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
     gl->Disable(GL_DEPTH_TEST);
     gl->Disable(GL_BLEND);
     gl->Disable(GL_SCISSOR_TEST);
-    gl->ColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
-    gl->BindFramebuffer(GL_READ_FRAMEBUFFER, t->fbo);
-    gl->ReadBuffer(GL_COLOR_ATTACHMENT0);
-    gl->BindFramebuffer(GL_DRAW_FRAMEBUFFER, r->fbo8);
-    const GLenum b0 = GL_COLOR_ATTACHMENT0;
-    gl->DrawBuffers(1, &b0);
-    gl->BlitFramebuffer(0, 0, cam->width, cam->height, 0, 0, cam->width, cam->height,
-                        GL_COLOR_BUFFER_BIT, GL_NEAREST);
-    /* Frames are opaque: alpha 1 everywhere (the float target keeps coverage in alpha). */
-    const float opaque[4] = {0, 0, 0, 1};
-    gl->BindFramebuffer(GL_FRAMEBUFFER, r->fbo8);
-    gl->ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_TRUE);
-    gl->ClearBufferfv(GL_COLOR, 0, opaque);
-    gl->ColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+    if (rc < 0) return rc;
+    if (t->is_float) {
+        gl->BindFramebuffer(GL_READ_FRAMEBUFFER, t->fbo);
+        gl->ReadBuffer(GL_COLOR_ATTACHMENT0); /* the last read-back left it on the depth */
+        gl->BindFramebuffer(GL_DRAW_FRAMEBUFFER, t8->fbo);
+        gl->BlitFramebuffer(0, 0, cam->width, cam->height, 0, 0, cam->width, cam->height,
+                            GL_COLOR_BUFFER_BIT, GL_NEAREST);
+        const float opaque[4] = {0, 0, 0, 1};
+        gl->BindFramebuffer(GL_FRAMEBUFFER, t8->fbo);
+        gl->ColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_TRUE);
+        gl->ClearBufferfv(GL_COLOR, 0, opaque);
+        gl->ColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+    }
     gl->Finish();
     uint64_t t1 = now_us();
 
     gl->PixelStorei(GL_PACK_ALIGNMENT, 1);
     gl->BindBuffer(GL_PIXEL_PACK_BUFFER, 0);
-    gl->BindFramebuffer(GL_READ_FRAMEBUFFER, r->fbo8);
+    gl->BindFramebuffer(GL_READ_FRAMEBUFFER, t8->fbo);
     gl->ReadBuffer(GL_COLOR_ATTACHMENT0);
     gl->ReadPixels(0, 0, cam->width, cam->height, GL_RGBA, GL_UNSIGNED_BYTE, frame->rgba8);
-    gl->BindFramebuffer(GL_READ_FRAMEBUFFER, t->fbo);
     if (want_float) {
+        gl->BindFramebuffer(GL_READ_FRAMEBUFFER, t->fbo);
         gl->ReadBuffer(GL_COLOR_ATTACHMENT0);
         gl->ReadPixels(0, 0, cam->width, cam->height, GL_RGBA, GL_HALF_FLOAT, frame->rgba16f);
         gl->ReadBuffer(GL_COLOR_ATTACHMENT1);

@@ -791,20 +791,32 @@ static void test_guanyin(void **state)
     pc_prepared_free(&pc);
     sp_params p;
     sp_params_defaults(&p);
-    rnd_frame f[2] = {{0}, {0}};
-    for (int k = 0; k < 2; k++) tu_render(fx->egl, id, &cam, &p, 0, &f[k]);
+    /* Two 8-bit frames (rendered straight into RGBA8), then two float frames (RGBA16F, copied
+     * to RGBA8): the second of each kind checks that nothing a frame leaves behind changes the
+     * next. All four agree within 1/255 (the float target rounds to half first) and are
+     * opaque. */
+    rnd_frame f[4] = {{0}, {0}, {0}, {0}};
+    for (int k = 0; k < 4; k++) tu_render(fx->egl, id, &cam, &p, k >= 2, &f[k]);
     size_t npx = (size_t)640 * 480, covered = 0;
-    int maxdiff = 0;
+    int maxdiff = 0, maxdiff_float = 0, opaque = 1;
     for (size_t i = 0; i < npx; i++) {
         covered += !is_bg(f[0].rgba8 + 4 * i);
         for (int c = 0; c < 3; c++) {
             int d = abs(f[0].rgba8[4 * i + c] - f[1].rgba8[4 * i + c]);
             if (d > maxdiff) maxdiff = d;
+            for (int k = 2; k < 4; k++) {
+                d = abs(f[0].rgba8[4 * i + c] - f[k].rgba8[4 * i + c]);
+                if (d > maxdiff_float) maxdiff_float = d;
+            }
         }
+        for (int k = 0; k < 4; k++) opaque &= f[k].rgba8[4 * i + 3] == 255;
     }
-    printf("guanyin: %zu of %zu pixels covered, run-to-run max difference %d\n", covered, npx, maxdiff);
+    printf("guanyin: %zu of %zu pixels covered, run-to-run max difference %d, 8-bit vs float "
+           "target %d\n", covered, npx, maxdiff, maxdiff_float);
     assert_true(covered > npx / 20);
     assert_true(maxdiff <= 1);
+    assert_true(maxdiff_float <= 1);
+    assert_true(opaque);
     const char *wg = getenv("SPLATD_WRITE_GOLDEN");
     if (wg && *wg == '1') {
         assert_int_equal(png_write_rgba(gpath, 640, 480, f[0].rgba8), 0);
@@ -813,8 +825,7 @@ static void test_guanyin(void **state)
     if (!strstr(rnd_renderer_string(fx->egl), "llvmpipe")) {
         /* The golden image is llvmpipe's; another driver rounds differently. */
         printf("guanyin: renderer is not llvmpipe; golden comparison skipped\n");
-        rnd_frame_free(&f[0]);
-        rnd_frame_free(&f[1]);
+        for (int k = 0; k < 4; k++) rnd_frame_free(&f[k]);
         rnd_release(fx->egl, id);
         return;
     }
@@ -834,8 +845,7 @@ static void test_guanyin(void **state)
     printf("guanyin: PSNR against the golden image %.1f dB\n", psnr);
     assert_true(psnr >= 40.0);
     free(g);
-    rnd_frame_free(&f[0]);
-    rnd_frame_free(&f[1]);
+    for (int k = 0; k < 4; k++) rnd_frame_free(&f[k]);
     rnd_release(fx->egl, id);
 }
 

@@ -4,6 +4,7 @@
  *   render_bench FILE [--frames N] [--size WxH] [--backend auto|egl|osmesa]
  *                [--pipelines points,splat] [--label NAME] [--threads T] [--save DIR]
  *                [--set key=value ...]   (parameters for every pipeline, e.g. ewa=exact)
+ *                [--shader-dir DIR]      (read the .glsl files from DIR: try a shader edit unbuilt)
  *
  * Loads FILE (pc_load) and preprocesses it (prep_run, default k, T threads: 0 = every core),
  * timing both; uploads the prepared cloud and renders, per pipeline, 1 + N frames of the
@@ -44,6 +45,7 @@ typedef struct bench_opts {
     const char *file;
     const char *label;
     const char *save_dir;
+    const char *shader_dir;
     int frames, width, height, threads;
     rnd_backend_kind backend;
     int pipes[MAX_PIPES];
@@ -82,7 +84,8 @@ static void usage(void)
     fprintf(stderr, "usage: render_bench FILE [--frames N (1-%d, default 10)] [--size WxH "
                     "(default 1280x720)]\n"
                     "       [--backend auto|egl|osmesa] [--pipelines points,splat] "
-                    "[--label NAME] [--threads T] [--save DIR] [--set key=value ...]\n",
+                    "[--label NAME] [--threads T] [--save DIR] [--set key=value ...]\n"
+                    "       [--shader-dir DIR]\n",
             MAX_FRAMES);
 }
 
@@ -187,6 +190,8 @@ static int parse_args(int argc, char **argv, bench_opts *o)
             o->label = v;
         } else if (!strcmp(a, "--save")) {
             o->save_dir = v;
+        } else if (!strcmp(a, "--shader-dir")) {
+            o->shader_dir = v;
         } else if (!strcmp(a, "--threads")) {
             if (parse_int(v, 0, 1024, &o->threads)) {
                 fprintf(stderr, "render_bench: --threads '%s' is not in 0-1024\n", v);
@@ -326,6 +331,7 @@ int main(int argc, char **argv)
     rnd_desc rd;
     memset(&rd, 0, sizeof rd);
     rd.backend = o.backend;
+    rd.shader_dir = o.shader_dir;
     if (!(r = rnd_create(&rd, &err))) goto fail;
     printf("renderer: %s\n", rnd_renderer_string(r));
     fflush(stdout);
