@@ -69,6 +69,8 @@ typedef struct job {
     uint32_t *nbr;          /* n * K kept neighbour lists, or NULL */
     float *nnd;             /* n nearest-neighbour distances */
     float *rcap;            /* n radius limits (computed radii only), or NULL */
+    float *svar;            /* n surface variations (computed radii only), or NULL */
+    float scatter_cap;      /* radius limit of points whose neighbourhood is no surface */
     int need_normal, need_radius;
     double centroid[3];
     worker *w;
@@ -128,12 +130,14 @@ static int chunk_normals(void *ctx, size_t c, int tid, sd_err *err)
     }
     double t1 = now_s();
     w->t_radius += t1 - t0;
-    if (jb->need_normal) {
+    if (jb->need_normal || jb->svar) {
         for (size_t i = 0; i < m; i++) {
             size_t pi = first + i;
-            float *n = p->normal + 3 * pi;
-            prep_pca_normal(p->pos, (uint32_t)pi, idx + i * (size_t)K, K, n, NULL);
-            orient(n, p->pos + 3 * pi, jb->centroid);
+            float scratch[3];
+            float *n = jb->need_normal ? p->normal + 3 * pi : scratch;
+            prep_pca_normal(p->pos, (uint32_t)pi, idx + i * (size_t)K, K, n,
+                            jb->svar ? jb->svar + pi : NULL);
+            if (jb->need_normal) orient(n, p->pos + 3 * pi, jb->centroid);
         }
         w->t_normal += now_s() - t1;
     }
@@ -169,7 +173,10 @@ static int chunk_field(void *ctx, size_t c, int tid, sd_err *err)
              * reaches to the surface it strays from, its neighbours' radii do not */
             float rn[PREP_MAX_K];
             for (int j = 0; j < K; j++) rn[j] = p->radius[nb[j]];
-            jb->rcap[pi] = PREP_RADIUS_CAP * prep_percentile(rn, (size_t)K, 0.5);
+            float cap = PREP_RADIUS_CAP * prep_percentile(rn, (size_t)K, 0.5);
+            if (jb->svar[pi] > PREP_SURFACE_VAR_MAX && cap > jb->scatter_cap)
+                cap = jb->scatter_cap;
+            jb->rcap[pi] = cap;
         }
         float f = p->radius[pi] * s / (float)K;
         /* a file's radius or normal may be non-finite or negative: such a point gets F = 0
@@ -337,7 +344,9 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
     jb.kn = kn;
     jb.nnd = malloc(n * sizeof *jb.nnd);
     jb.rcap = jb.need_radius ? malloc(n * sizeof *jb.rcap) : NULL;
-    if (jb.need_radius && !jb.rcap) goto nomem;
+    jb.svar = jb.need_radius ? malloc(n * sizeof *jb.svar) : NULL;
+    tmp = malloc(n * sizeof *tmp);
+    if ((jb.need_radius && (!jb.rcap || !jb.svar)) || !tmp) goto nomem;
     jb.nbr = keep ? malloc(n * per_nbr) : NULL;
     w = calloc((size_t)threads, sizeof *w);
     if (!jb.nnd || (keep && !jb.nbr) || !w) goto nomem;
@@ -365,15 +374,18 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
     out->stats.t_normals = wall * tn / sum;
     out->stats.t_radius = wall * tr / sum;
 
+    if (jb.need_radius) {
+        memcpy(tmp, out->radius, n * sizeof *tmp);
+        jb.scatter_cap = PREP_SCATTER_CAP * prep_percentile(tmp, n, 0.5);
+    }
     t0 = now_s();
     prep_progress_begin(&pr, d.progress, d.user, "field");
     rc = prep_par_for(threads, nchunks, chunk_field, &jb, &pr, err);
     if (rc != 0) goto fail;
-    if (jb.rcap) /* after F, which uses the radius of eq. 20 itself */
+    if (jb.rcap) { /* after F, which uses the radius of eq. 20 itself */
         for (size_t i = 0; i < n; i++)
             if (out->radius[i] > jb.rcap[i]) out->radius[i] = jb.rcap[i];
-    tmp = malloc(n * sizeof *tmp);
-    if (!tmp) goto nomem;
+    }
     summarise(out, jb.nnd, tmp);
     wall = now_s() - t0;
     tf = tq = 0;
@@ -399,6 +411,7 @@ done:
     free(w);
     free(jb.nnd);
     free(jb.rcap);
+    free(jb.svar);
     free(jb.nbr);
     prep_knn_free(kn);
     return rc;

@@ -19,6 +19,15 @@
  *     would otherwise be drawn as a disc covering that surface. Density changes across a scan
  *     (terrestrial scans thin out with distance) move the neighbours' radii too, so the limit
  *     follows them, unlike a cap on the cloud's global median.
+ *     Eq. 20 shares the area of a surface among its points. Where the neighbourhood is no
+ *     surface, PCA surface variation lambda_min / (l0 + l1 + l2) above PREP_SURFACE_VAR_MAX
+ *     (0 on a plane, 1/3 for points scattered through a volume; a 90-degree edge gives
+ *     ~0.085), the radius is also limited to PREP_SCATTER_CAP times the cloud's median eq. 20
+ *     radius: scattered noise (birds, mixed pixels) and volumetric vegetation then render like
+ *     points instead of as discs the size of their empty neighbourhoods, which hid whole scenes
+ *     (the synthetic bench cloud's 1 % noise covered its ground and buildings). Planar regions
+ *     keep eq. 20 however sparse they are. The PCA runs for this even when the file has
+ *     normals (unless it has radii too).
  *  5. F (eq. 21 with |n_i . n_j|, PCA normals being unoriented):
  *     F_i = r_i * sum_j (2 - |n_i . n_j|)^2 / K, divided by the cloud's 99th percentile of F
  *     (F_raw_p99) and clamped to [0, 1].
@@ -37,6 +46,8 @@
 
 enum { PREP_MAX_K = 256 };       /* most neighbours per point */
 #define PREP_RADIUS_CAP 2.0f     /* computed radius <= this x the neighbours' median radius */
+#define PREP_SURFACE_VAR_MAX 0.10f /* above: the neighbourhood is no surface (step 4) */
+#define PREP_SCATTER_CAP 1.0f    /* there, radius <= this x the cloud's median eq. 20 radius */
 
 typedef struct prep_desc {
     int k;                 /* default 24: neighbours per point, 1..256 (fewer when the cloud

@@ -553,11 +553,84 @@ static void test_radius_outlier_limited(void **state)
     pc_cloud_free(&c);
 }
 
+/* Three parts far apart in one cloud: a dense grid plane (spacing 0.5, 4096 points: the median
+ * radius), a sparse grid plane (spacing 4, 256 points) and 400 points scattered uniformly
+ * through a 60-unit cube (noise, birds: spacing ~8). Eq. 20 gives the scattered points discs of
+ * radius ~8, bigger than the sparse plane's, and their neighbours are scattered too, so the
+ * neighbours' median does not limit them. Their neighbourhoods are no surface (PCA surface
+ * variation > PREP_SURFACE_VAR_MAX), so they are held to PREP_SCATTER_CAP x the cloud's median
+ * radius; the sparse plane is a surface and keeps its eq. 20 radius, 8x the dense plane's. */
+static void test_radius_scatter_limited(void **state)
+{
+    (void)state;
+    const int side = 64, sside = 16, nscatter = 400;
+    size_t n = (size_t)side * side + (size_t)sside * sside + nscatter;
+    pc_cloud c = make_cloud(n);
+    size_t k = 0;
+    for (int i = 0; i < side; i++)
+        for (int j = 0; j < side; j++, k++) {
+            c.pos[3 * k] = (float)(i * 0.5); c.pos[3 * k + 1] = (float)(j * 0.5); c.pos[3 * k + 2] = 0;
+        }
+    for (int i = 0; i < sside; i++)
+        for (int j = 0; j < sside; j++, k++) {
+            c.pos[3 * k] = (float)(200 + i * 4.0); c.pos[3 * k + 1] = (float)(j * 4.0); c.pos[3 * k + 2] = 0;
+        }
+    rng r = {42};
+    for (int i = 0; i < nscatter; i++, k++)
+        for (int a = 0; a < 3; a++) c.pos[3 * k + a] = (float)(uni(&r) * 60 + (a == 2 ? 100 : 0));
+    prep_desc d = {.k = 24, .threads = 2};
+    pc_prepared p;
+    sd_err err = {0};
+    assert_int_equal(prep_run(&c, &d, &p, &err), 0);
+    double dense = 2 * sqrt(8.0) * 0.5 / sqrt(24.0), sparse = 8 * dense;
+    assert_true(fabs(p.radius_median - dense) <= 1e-6 * dense);
+    size_t scattered = 0, held = 0, sparse_interior = 0;
+    for (size_t i = 0; i < p.n; i++) {
+        const float *q = p.pos + 3 * i;
+        if (q[2] > 50) {
+            scattered++;
+            held += p.radius[i] <= PREP_SCATTER_CAP * dense * (1 + 1e-6);
+        } else if (q[0] >= 200 + 3 * 4.0 && q[0] <= 200 + (sside - 4) * 4.0 && q[1] >= 3 * 4.0 &&
+                   q[1] <= (sside - 4) * 4.0) {
+            sparse_interior++;
+            assert_true(fabs(p.radius[i] - sparse) <= 1e-5 * sparse);
+        }
+    }
+    printf("scattered points held to the median radius: %zu of %zu\n", held, scattered);
+    assert_int_equal(scattered, nscatter);
+    assert_int_equal(sparse_interior, 100);
+    /* Random neighbourhoods can look planar by chance: nearly all, not all, are held. */
+    assert_true(held >= scattered * 9 / 10);
+    pc_prepared_free(&p);
+    pc_cloud_free(&c);
+}
+
+/* Eq. 20's r = 2 R / sqrt(k) of point i by brute force, R = the distance to its k-th nearest
+ * other point among the points on the same side of x = split. */
+static double eq20_radius_brute(const pc_prepared *p, size_t i, int k, float split)
+{
+    double best[PREP_MAX_K];
+    int nb = 0;
+    const float *a = p->pos + 3 * i;
+    for (size_t j = 0; j < p->n; j++) {
+        const float *b = p->pos + 3 * j;
+        if (j == i || (a[0] > split) != (b[0] > split)) continue;
+        double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
+        double d2 = dx * dx + dy * dy + dz * dz;
+        if (nb == k && d2 >= best[k - 1]) continue;
+        int at = nb < k ? nb++ : k - 1;
+        while (at > 0 && best[at - 1] > d2) { best[at] = best[at - 1]; at--; }
+        best[at] = d2;
+    }
+    return 2 * sqrt(best[k - 1]) / sqrt((double)k);
+}
+
 /* A noise-free plane and a 'vegetation' ball of random points, far apart in one cloud (so they
  * share F's normalisation). On the plane every term of eq. 21 is (2 - 1)^2 = 1, so F_raw = r.
  * In the ball PCA normals are close to random directions, for which |n_i . n_j| is uniform on
  * [0, 1] and (2 - |n_i . n_j|)^2 averages 7/3; the ball is also sparser (2x the spacing, as
- * vegetation in scans), so its radius is larger: its median F must exceed 3x the plane's. */
+ * vegetation in scans), so its eq. 20 radius is larger: its median F must exceed 3x the
+ * plane's. */
 static void test_field_vegetation_vs_plane(void **state)
 {
     (void)state;
@@ -590,7 +663,9 @@ static void test_field_vegetation_vs_plane(void **state)
     for (size_t i = 0; i < p.n; i++) {
         if (p.pos[3 * i] > 50) {
             fb[nv] = p.F[i];
-            sb[nv++] = p.F[i] * p.F_raw_p99 / p.radius[i]; /* the normal-variation factor */
+            /* the normal-variation factor: F_raw over the eq. 20 radius, which F uses (the ball
+             * is no surface, so the rendered radius is limited: step 4) */
+            sb[nv++] = p.F[i] * p.F_raw_p99 / eq20_radius_brute(&p, i, 24, 50);
         } else {
             fp[np++] = p.F[i];
             if (p.F[i] < 1) assert_true(fabs(p.F[i] * p.F_raw_p99 / p.radius[i] - 1) < 1e-4);
@@ -998,6 +1073,7 @@ int main(void)
         cmocka_unit_test(test_file_normals_kept),
         cmocka_unit_test(test_radius_sigma_grid),
         cmocka_unit_test(test_radius_outlier_limited),
+        cmocka_unit_test(test_radius_scatter_limited),
         cmocka_unit_test(test_field_vegetation_vs_plane),
         cmocka_unit_test(test_morton_order_and_attributes),
         cmocka_unit_test(test_morton_locality_cube),
