@@ -12,7 +12,9 @@
  *            over the visible ranges. 3-6x slower than packed on llvmpipe (2 cores, 1M points).
  * SPLATD_POINTS_RASTER=auto|packed|exact|gl picks one when the pipeline is created; auto
  * (the default) takes packed, else exact, else gl when a per-pixel buffer of the frame or the
- * cloud's position buffer passes the largest storage block the driver allows. All give the
+ * cloud's position buffer passes the largest storage block the driver allows, or the cloud
+ * passes GL_MAX_TEXTURE_BUFFER_SIZE / 3 points (the raster pass reads positions through an
+ * R32F buffer texture, lib_fetch.glsl: a gather on llvmpipe). All give the
  * same image up to pixel-edge rounding: a point covers the pixels whose centres lie in the
  * square of side point_size around its projection, the nearest point wins (packed: up to its
  * depth quantum), ties go to the lower index. */
@@ -31,17 +33,19 @@ enum { GROUP = 64, MAX_GROUPS_X = 65535 }; /* local_size_x of points_raster.comp
 typedef struct points_state {
     int mode;
     GLint64 max_ssbo;                 /* GL_MAX_SHADER_STORAGE_BLOCK_SIZE */
+    GLint64 max_texels;               /* GL_MAX_TEXTURE_BUFFER_SIZE */
     uint32_t per_invocation;          /* points per compute invocation */
     GLuint prog_gl, prog_raster, prog_resolve;
     GLuint vao;
     GLuint depth_buf, index_buf, range_buf;
-    GLuint pos_tex;                   /* buffer texture over the positions (RGB32F) */
+    GLuint pos_tex;                   /* buffer texture over the positions (R32F) */
+    GLuint depth_tex;                 /* buffer texture over depth_buf (R32UI) */
     uint64_t pix_cap, range_cap;      /* elements the buffers hold */
     uint32_t *range_tmp;              /* CPU staging for the range table (uvec2 per range) */
     /* uniform locations */
     GLint g_viewproj, g_point_size, g_color, g_znear, g_zfar;
     GLint r_viewproj, r_size, r_point_size, r_znear, r_zfar, r_total, r_nranges, r_first;
-    GLint r_stride, r_threads, r_per, r_pass, r_index_bits, r_log_near, r_log_scale, r_pos;
+    GLint r_stride, r_threads, r_per, r_pass, r_index_bits, r_log_near, r_log_scale, r_pos, r_depth;
     GLint s_width, s_color, s_znear, s_zfar, s_index_bits, s_viewproj;
 } points_state;
 
@@ -54,6 +58,7 @@ static void points_destroy(const gl_api *gl, void *state)
     if (s->prog_resolve) gl->DeleteProgram(s->prog_resolve);
     if (s->vao) gl->DeleteVertexArrays(1, &s->vao);
     if (s->pos_tex) gl->DeleteTextures(1, &s->pos_tex);
+    if (s->depth_tex) gl->DeleteTextures(1, &s->depth_tex);
     GLuint bufs[3] = {s->depth_buf, s->index_buf, s->range_buf};
     gl->DeleteBuffers(3, bufs);
     free(s->range_tmp);
@@ -79,6 +84,9 @@ static int points_create(const gl_api *gl, const rnd_shaders *sh, void **state, 
     GLint v = 0;
     gl->GetIntegerv(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &v);
     s->max_ssbo = v > 0 ? v : (GLint64)1 << 27;
+    v = 0;
+    gl->GetIntegerv(GL_MAX_TEXTURE_BUFFER_SIZE, &v);
+    s->max_texels = v > 0 ? v : 65536;
     /* llvmpipe spends ~50 ns on each compute invocation however little it does (measured:
      * one point per invocation costs twice as much as 32), so there each invocation takes a
      * run of points; a GPU wants one each. */
@@ -118,6 +126,7 @@ static int points_create(const gl_api *gl, const rnd_shaders *sh, void **state, 
     s->r_log_near = gl_uniform(gl, s->prog_raster, "u_log_near");
     s->r_log_scale = gl_uniform(gl, s->prog_raster, "u_log_scale");
     s->r_pos = gl_uniform(gl, s->prog_raster, "u_pos");
+    s->r_depth = gl_uniform(gl, s->prog_raster, "u_depth");
     s->s_index_bits = gl_uniform(gl, s->prog_resolve, "u_index_bits");
     s->s_viewproj = gl_uniform(gl, s->prog_resolve, "u_viewproj");
     s->s_width = gl_uniform(gl, s->prog_resolve, "u_width");
@@ -221,6 +230,11 @@ static int render_compute(const gl_api *gl, points_state *s, const rnd_gpu_cloud
         return sd_errf(err, SD_ELIMIT, "a %dx%d frame needs a %llu-byte storage buffer, over the "
                        "driver's %lld; use SPLATD_POINTS_RASTER=gl", v->width, v->height,
                        (unsigned long long)(npix * 4), (long long)s->max_ssbo);
+    if (c->n * 3 > (uint64_t)s->max_texels || c->n * 12 > (uint64_t)s->max_ssbo)
+        return sd_errf(err, SD_ELIMIT, "%llu points are more than the compute rasteriser reads "
+                       "(%lld texels of 3 floats, %lld-byte storage blocks); use "
+                       "SPLATD_POINTS_RASTER=gl", (unsigned long long)c->n,
+                       (long long)s->max_texels, (long long)s->max_ssbo);
     if (npix > s->pix_cap) {
         uint64_t cap = s->pix_cap;
         ensure_buffer(gl, s->depth_buf, &cap, npix, 4);
@@ -268,9 +282,15 @@ static int render_compute(const gl_api *gl, points_state *s, const rnd_gpu_cloud
     if (!s->pos_tex) gl->GenTextures(1, &s->pos_tex);
     gl->ActiveTexture(GL_TEXTURE0);
     gl->BindTexture(GL_TEXTURE_BUFFER, s->pos_tex);
-    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_RGB32F, c->pos);
+    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32F, c->pos); /* lib_fetch.glsl */
+    if (!s->depth_tex) gl->GenTextures(1, &s->depth_tex);
+    gl->ActiveTexture(GL_TEXTURE1);
+    gl->BindTexture(GL_TEXTURE_BUFFER, s->depth_tex);
+    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, s->depth_buf);
+    gl->ActiveTexture(GL_TEXTURE0);
     gl->UseProgram(s->prog_raster);
     gl->Uniform1i(s->r_pos, 0);
+    gl->Uniform1i(s->r_depth, 1);
     gl->UniformMatrix4fv(s->r_viewproj, 1, GL_FALSE, v->viewproj);
     gl->Uniform2i(s->r_size, v->width, v->height);
     gl->Uniform1f(s->r_point_size, p->point_size);
@@ -327,7 +347,8 @@ static int points_render(const gl_api *gl, void *state, const rnd_gpu_cloud *c,
     uint32_t ibits = index_bits(c->n);
     int packs = 32 - ibits >= PACKED_MIN_DEPTH_BITS;
     if (mode == RASTER_AUTO) {
-        if (npix * 4 > (uint64_t)s->max_ssbo || c->n * 12 > (uint64_t)s->max_ssbo)
+        if (npix * 4 > (uint64_t)s->max_ssbo || c->n * 12 > (uint64_t)s->max_ssbo ||
+            c->n * 3 > (uint64_t)s->max_texels)
             mode = RASTER_GL;
         else
             mode = packs ? RASTER_PACKED : RASTER_EXACT;

@@ -39,8 +39,9 @@
  * sampled discs, which alias and may vanish when minified.
  *
  * The cloud is read through buffer textures (texelFetch gathers all SIMD lanes at once on
- * llvmpipe; storage-buffer reads at varying addresses go lane by lane), the sums likewise in
- * the resolve. Each pass runs as three dispatches: one invocation per visible point does the
+ * llvmpipe; storage-buffer reads at varying addresses go lane by lane), positions and normals
+ * as R32F, three fetches a point (lib_fetch.glsl: RGB32F texels take a slow generic path, 15 %
+ * of the frame), the sums likewise in the resolve. Each pass runs as three dispatches: one invocation per visible point does the
  * deposited splats and (pass 1) lists the others, since llvmpipe executes a divergent branch's
  * loops under a mask for every point (25 % of the frame when they were inline); an indirect
  * dispatch then loops each listed splat over its pixel box, and one more gives every splat
@@ -398,10 +399,11 @@ static int splat_render(const gl_api *gl, void *state, const rnd_gpu_cloud *c, c
     for (uint32_t i = 0; i < v->nranges; i++)
         if ((uint64_t)v->range_first[i] + v->range_count[i] > last)
             last = (uint64_t)v->range_first[i] + v->range_count[i];
-    if (last > (uint64_t)s->max_texels)
+    if (3 * last > (uint64_t)s->max_texels)
         return sd_errf(err, SD_ELIMIT, "the splat pipeline reads points through buffer textures "
-                       "of at most %lld texels; this cloud has %llu points (lower point_budget)",
-                       (long long)s->max_texels, (unsigned long long)last);
+                       "of at most %lld texels, 3 a point: at most %lld points, and this cloud "
+                       "has %llu", (long long)s->max_texels, (long long)s->max_texels / 3,
+                       (unsigned long long)last);
 
     /* Accumulation buffer: as many rows as one storage block (and a buffer texture of 2 texels
      * a pixel) may hold, including one halo row above and below the stripe for the resolve's
@@ -446,7 +448,7 @@ static int splat_render(const gl_api *gl, void *state, const rnd_gpu_cloud *c, c
     /* The cloud's buffers as buffer textures on units 1-4 (see splat_raster.comp). */
     if (!s->cloud_tex[0]) gl->GenTextures(4, s->cloud_tex);
     const GLuint cbuf[4] = {c->pos, c->normal, c->radius, src};
-    const GLenum cfmt[4] = {GL_RGB32F, GL_RGB32F, GL_R32F, GL_R32UI};
+    const GLenum cfmt[4] = {GL_R32F, GL_R32F, GL_R32F, GL_R32UI}; /* lib_fetch.glsl */
     for (int k = 0; k < 4; k++) {
         gl->ActiveTexture(GL_TEXTURE1 + k);
         gl->BindTexture(GL_TEXTURE_BUFFER, s->cloud_tex[k]);

@@ -19,8 +19,15 @@
 
 layout(local_size_x = 64) in;
 
-layout(std430, binding = 0) readonly restrict buffer Pos { float pos[]; };
+// Positions as a buffer texture: texelFetch gathers all SIMD lanes at once on llvmpipe, where
+// storage-buffer reads at varying addresses run lane by lane.
+uniform samplerBuffer u_pos;     // R32F: x y z per point (lib_fetch.glsl)
+// depth[] again as a buffer texture, for the test before the atomic (the same gather).
+// Keys only ever decrease during the pass, so a stale read can cost a needless atomic but
+// never skip a needed one.
+uniform usamplerBuffer u_depth;  // R32UI over Depth
 layout(std430, binding = 5) restrict buffer Depth { uint depth[]; };
+#include "lib_fetch.glsl"
 layout(std430, binding = 6) restrict buffer Index { uint index[]; };
 // Visible ranges after culling: x = first point, y = position of that point in the sequence of
 // visible points (an exclusive prefix sum of the counts).
@@ -45,7 +52,7 @@ uniform float u_log_scale;  // packed: (2^(32 - u_index_bits) - 1) / log2(far / 
 void touch(uint pi, uint key, uint i)
 {
     if (u_pass != 1) {
-        if (key < depth[pi]) atomicMin(depth[pi], key);
+        if (key < texelFetch(u_depth, int(pi)).x) atomicMin(depth[pi], key);
     } else if (depth[pi] == key) {
         atomicMin(index[pi], i);
     }
@@ -68,7 +75,7 @@ void main()
             }
             i = ranges[lo].x + (k - ranges[lo].y);
         }
-        vec4 c = u_viewproj * vec4(pos[3u * i], pos[3u * i + 1u], pos[3u * i + 2u], 1.0);
+        vec4 c = u_viewproj * vec4(fetch3(u_pos, i), 1.0);
         float d = c.w;
         if (!(d >= u_znear && d <= u_zfar)) continue;
         vec2 px = (c.xy / c.w * 0.5 + 0.5) * vec2(u_size);

@@ -54,10 +54,11 @@ layout(local_size_x = 64) in;
 
 // The cloud's buffers, read as buffer textures: texelFetch gathers all lanes at once on
 // llvmpipe, where storage-buffer reads at varying addresses run lane by lane.
-uniform samplerBuffer u_pos;   // RGB32F
-uniform samplerBuffer u_nrm;   // RGB32F
+uniform samplerBuffer u_pos;   // R32F: x y z per point (lib_fetch.glsl)
+uniform samplerBuffer u_nrm;   // R32F: nx ny nz per point
 uniform samplerBuffer u_rad;   // R32F
 uniform usamplerBuffer u_src;  // R32UI: rgba8 (u_color 0) or float bits of field/intensity
+#include "lib_fetch.glsl"
 
 // One pixel of the stripe: accumulated attributes (32 bytes, one cache-line half), and apart
 // from them, in a compact array that pass 1's many reads keep in cache, the visibility key:
@@ -123,11 +124,11 @@ uint point_of(uint g)
 // false when it is behind the near plane, degenerate, or deposited off the stripe.
 bool setup_core(uint i, out Splat s)
 {
-    vec3 p = texelFetch(u_pos, int(i)).xyz;
+    vec3 p = fetch3(u_pos, i);
     precise vec3 c = (u_view * vec4(p, 1.0)).xyz;
     s.dc = -c.z;
     if (!(s.dc > u_znear)) return false;
-    vec3 n = mat3(u_view) * texelFetch(u_nrm, int(i)).xyz;
+    vec3 n = mat3(u_view) * fetch3(u_nrm, i);
     float nl = dot(n, n);
     n = nl > 0.0 ? n * inversesqrt(nl) : vec3(0.0, 0.0, 1.0);
     // The eye ray towards c (perspective: from the origin; orthographic: along -z).
