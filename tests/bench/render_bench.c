@@ -17,7 +17,9 @@
  *   ratio        ms/frame divided by the `points` pipeline's ms/frame of this run (when
  *                `points` is among the pipelines);
  *   readback ms  rnd_frame.readback_us (glReadPixels RGBA8);
- *   jpeg ms      enc_encode of the frame as JPEG q85 4:2:0 (the daemon's default format).
+ *   jpeg ms      enc_encode of the frame as JPEG q85 4:2:0 (the daemon's default format);
+ *   on stderr, "cpu: LABEL PIPELINE X ms/frame": the process CPU time of rnd_render (all
+ *   threads), steadier than wall time on a shared machine for comparing shader versions.
  * Output on stdout, line by line so that the shell script can pick the pieces:
  *   "renderer: <rnd_renderer_string>"
  *   "splat_radius_median: R"   (prep's median splat radius, for the ParaView comparison)
@@ -56,6 +58,7 @@ typedef struct bench_opts {
 
 typedef struct pipe_result {
     double frame_ms, readback_ms, jpeg_ms;
+    double cpu_ms;  /* process CPU time of rnd_render (all threads), median */
     uint64_t drawn;
 } pipe_result;
 
@@ -63,6 +66,15 @@ static double now_s(void)
 {
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+/* CPU time of the whole process (every llvmpipe thread): steadier than wall time on a shared
+ * machine, so better for comparing two versions of a shader. */
+static double cpu_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
     return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
@@ -249,18 +261,19 @@ static int bench_pipeline(rnd_ctx *r, uint32_t id, const rnd_camera *cam0, int p
     jp.format = SP_FMT_JPEG;
     jp.quality = 85;
     jp.subsampling = SP_SUB_420;
-    double *t_frame = calloc((size_t)o->frames * 3, sizeof(double));
+    double *t_frame = calloc((size_t)o->frames * 4, sizeof(double));
     if (!t_frame) return sd_errf(err, SD_ENOMEM, "render_bench: out of memory");
     double *t_read = t_frame + o->frames, *t_jpeg = t_read + o->frames;
+    double *t_cpu = t_jpeg + o->frames;
     rnd_frame f;
     memset(&f, 0, sizeof f);
     int rc = 0;
     for (int i = -1; i < o->frames && rc == 0; i++) {
         rnd_camera cam;
         orbit(cam0, (i + 1) * 0.5 * M_PI / 180.0, &cam);
-        double t0 = now_s();
+        double c0 = cpu_s(), t0 = now_s();
         rc = rnd_render(r, id, &cam, &p, 0, &f, err);
-        double t1 = now_s();
+        double t1 = now_s(), c1 = cpu_s();
         if (rc < 0) break;
         const uint8_t *out;
         size_t len;
@@ -270,12 +283,14 @@ static int bench_pipeline(rnd_ctx *r, uint32_t id, const rnd_camera *cam0, int p
         t_read[i] = (double)f.readback_us * 1e-3;
         t_frame[i] = (t1 - t0) * 1e3 - t_read[i];
         t_jpeg[i] = (t2 - t1) * 1e3;
+        t_cpu[i] = (c1 - c0) * 1e3;
         res->drawn = f.points_drawn;
     }
     if (rc == 0) {
         res->frame_ms = median(t_frame, o->frames);
         res->readback_ms = median(t_read, o->frames);
         res->jpeg_ms = median(t_jpeg, o->frames);
+        res->cpu_ms = median(t_cpu, o->frames);
         if (o->save_dir) {
             char path[4096], name[32];
             snprintf(path, sizeof path, "%s/%s-%s.png", o->save_dir, o->label,
@@ -358,6 +373,7 @@ int main(int argc, char **argv)
         printf("| %s | %llu | %s | %.1f | %s | %.2f | %.2f |\n", o.label,
                (unsigned long long)npts, name, res[k].frame_ms, ratio, res[k].readback_ms,
                res[k].jpeg_ms);
+        fprintf(stderr, "cpu: %s %s %.1f ms/frame\n", o.label, name, res[k].cpu_ms);
     }
     rc = 0;
 fail:
