@@ -34,28 +34,31 @@
  * 2 px (2 sigma) deposit their weight in the one pixel holding their centre (area sampling: a box
  * of one pixel, so they never vanish), and the resolve applies a 3x3 Gaussian of variance
  * 0.75 lowpass (truncated) across neighbours within a depth tolerance, as the extended z-buffer
- * would. A minified splat then costs one fragment, and the frame ~3x `points` (measured in
- * tests/test_render_splat.c, SPLATD_SPLAT_BENCH=1). lowpass = 0 turns all of it off: pure
- * sampled discs, which alias and may vanish when minified.
+ * would. A minified splat then costs one fragment, and the frame ~3.4x `points` (`make
+ * bench`). lowpass = 0 turns all of it off: pure sampled discs, which alias and may vanish when
+ * minified.
  *
  * The cloud is read through buffer textures (texelFetch gathers all SIMD lanes at once on
  * llvmpipe; storage-buffer reads at varying addresses go lane by lane), positions and normals
  * as R32F, three fetches a point (lib_fetch.glsl: RGB32F texels take a slow generic path, 15 %
- * of the frame), the sums likewise in the resolve. Each pass runs as three dispatches: one invocation per visible point does the
- * deposited splats and (pass 1) lists the others, since llvmpipe executes a divergent branch's
- * loops under a mask for every point (25 % of the frame when they were inline); an indirect
- * dispatch then loops each listed splat over its pixel box, and one more gives every splat
- * whose box has more than SPLAT_BIG_PIXELS pixels an 8x8 work group that walks it in tiles, so a
- * close-up costs its pixels, not one lane's serial loop. Pass 2 replays pass 1's lists. The
+ * of the frame), the sums likewise in the resolve. Each pass runs as three dispatches: one
+ * invocation per visible point does the deposited splats and (pass 1) lists the others, since
+ * llvmpipe executes a divergent branch's loops under a mask for every point (25 % of the frame
+ * when they were inline); an indirect dispatch then loops each listed splat over its pixel
+ * box, and one more gives every splat whose box has more than SPLAT_BIG_PIXELS pixels an 8x8
+ * work group that walks it in tiles, so a close-up costs its pixels, not one lane's serial
+ * loop. Pass 2 replays pass 1's lists. The
  * visibility keys live in their own compact buffer (4 bytes a pixel) beside the 32-byte sums.
  *
  * Frames larger than the accumulation buffer allowed by GL_MAX_SHADER_STORAGE_BLOCK_SIZE
  * (128 MiB on llvmpipe: 32 bytes a pixel, so a 3840x2160 frame) are rendered in horizontal
  * stripes, each with a halo row above and below for the 3x3 gather.
  *
- * Measured (tests/test_render_splat.c, SPLATD_SPLAT_BENCH=1: 1M points, 1280x720, llvmpipe on
- * 2 shared cores): split 2.9-3.7x `points` in wall time, 3.1-3.6x in CPU time; exact ~15x
- * (every minified splat ~13 fragments of 7 atomics).
+ * Measured (`make bench`: 1M points, 1280x720, llvmpipe on 2 shared cores): split 126 ms,
+ * 3.4x `points`; exact 785 ms, 21x (every minified splat ~13 fragments of 7 atomics). Of a
+ * split frame, each of the two passes spends ~24 ms visiting the points (fetch, project,
+ * classify), pass 1's atomicMax ~6 ms and pass 2's seven atomicAdds ~14 ms more; the resolve
+ * ~10 ms, clearing the sums ~4 ms.
  *
  * Quality is not a clear win for exact either: at a grazing angle (test_ewa_antialiasing) the
  * low-pass fringes of nearer minified splats, whose depths are clamped to their centre's +- r,
