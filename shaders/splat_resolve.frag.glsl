@@ -43,24 +43,35 @@ uniform mat4 u_view;      // local -> eye (color=normal shows local normals, as 
 
 void main()
 {
+    // Uniforms into locals first: llvmpipe reloads a uniform at every use (see
+    // splat_raster.comp).
+    ivec2 U_size = u_size;
+    ivec2 U_stripe = u_stripe;
+    vec3 U_post = u_post;
+    float U_epsg = u_epsg;
+    vec3 U_light = u_light;
+    int U_color = u_color;
+    float U_znear = u_znear;
+    float U_zfar = u_zfar;
+    mat4 U_view = u_view;
     ivec2 p = ivec2(gl_FragCoord.xy);
     int y = p.y;
     // The 3x3 neighbourhood's keys, fetched once (constant loops: unrolled, in registers).
-    bool wide = u_post.y > 0.0;
+    bool wide = U_post.y > 0.0;
     uint kk[9];
     bool ok[9];
     uint kmax = 0u;
     for (int j = 0; j < 9; j++) {
         int xx = p.x + j % 3 - 1, yy = y + j / 3 - 1;
-        ok[j] = (wide || j == 4) && xx >= 0 && xx < u_size.x && yy >= u_stripe.x &&
-                yy < u_stripe.x + u_stripe.y;
-        int i = (yy - u_stripe.x) * u_size.x + xx;
+        ok[j] = (wide || j == 4) && xx >= 0 && xx < U_size.x && yy >= U_stripe.x &&
+                yy < U_stripe.x + U_stripe.y;
+        int i = (yy - U_stripe.x) * U_size.x + xx;
         kk[j] = ok[j] ? texelFetch(u_keys, i).x : 0u;
         kmax = max(kmax, kk[j]);
     }
     if (kmax == 0u) discard; // background: the renderer cleared it
     float zref = uintBitsToFloat(~kmax);
-    float zlim = zref * (1.0 + u_epsg);
+    float zlim = zref * (1.0 + U_epsg);
     vec4 acc = vec4(0.0);
     vec3 n = vec3(0.0);
     float zc = zref;
@@ -68,8 +79,8 @@ void main()
         uint k = kk[j];
         float z = uintBitsToFloat(~k);
         if (!ok[j] || k == 0u || z > zlim) continue;
-        int i = (y + j / 3 - 1 - u_stripe.x) * u_size.x + p.x + j % 3 - 1;
-        float h = j == 4 ? u_post.x : (j & 1) == 1 ? u_post.y : u_post.z;
+        int i = (y + j / 3 - 1 - U_stripe.x) * U_size.x + p.x + j % 3 - 1;
+        float h = j == 4 ? U_post.x : (j & 1) == 1 ? U_post.y : U_post.z;
         acc += h * SUMS(texelFetch(u_acc, 2 * i));
         n += h * NSUM(texelFetch(u_acc, 2 * i + 1));
         if (j == 4) zc = z; // the pixel's own surface when it is the visible one
@@ -78,15 +89,15 @@ void main()
     vec3 col = acc.rgb / acc.w;
     float nl = dot(n, n);
     n = nl > 0.0 ? n * inversesqrt(nl) : vec3(0.0, 0.0, 1.0);
-    if (u_color == 2) {
-        col = transpose(mat3(u_view)) * n * 0.5 + 0.5;
-    } else if (u_color == 3) {
-        col = vec3(1.0 - clamp((zc - u_znear) / (u_zfar - u_znear), 0.0, 1.0));
+    if (U_color == 2) {
+        col = transpose(mat3(U_view)) * n * 0.5 + 0.5;
+    } else if (U_color == 3) {
+        col = vec3(1.0 - clamp((zc - U_znear) / (U_zfar - U_znear), 0.0, 1.0));
     } else {
         // Ambient + Lambert + Blinn-Phong with an infinite viewer (v = +z), weights summing to 1,
         // and the specular term scaled by the colour: a surface facing a light along the view
         // axis keeps exactly its colour; nothing exceeds it.
-        vec3 l = u_light;
+        vec3 l = U_light;
         vec3 hv = l + vec3(0.0, 0.0, 1.0);
         float hl = dot(hv, hv);
         float ndl = max(dot(n, l), 0.0);
