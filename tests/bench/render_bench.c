@@ -5,6 +5,7 @@
  *                [--pipelines points,splat] [--label NAME] [--threads T] [--save DIR]
  *                [--set key=value ...]   (parameters for every pipeline, e.g. ewa=exact)
  *                [--shader-dir DIR]      (read the .glsl files from DIR: try a shader edit unbuilt)
+ *                [--zoom Z]              (eye Z times closer to the target: a close-up, culled)
  *
  * Loads FILE (pc_load) and preprocesses it (prep_run, default k, T threads: 0 = every core),
  * timing both; uploads the prepared cloud and renders, per pipeline, 1 + N frames of the
@@ -48,6 +49,7 @@ typedef struct bench_opts {
     const char *label;
     const char *save_dir;
     const char *shader_dir;
+    double zoom;
     int frames, width, height, threads;
     rnd_backend_kind backend;
     int pipes[MAX_PIPES];
@@ -97,7 +99,7 @@ static void usage(void)
                     "(default 1280x720)]\n"
                     "       [--backend auto|egl|osmesa] [--pipelines points,splat] "
                     "[--label NAME] [--threads T] [--save DIR] [--set key=value ...]\n"
-                    "       [--shader-dir DIR]\n",
+                    "       [--shader-dir DIR] [--zoom Z]\n",
             MAX_FRAMES);
 }
 
@@ -204,6 +206,13 @@ static int parse_args(int argc, char **argv, bench_opts *o)
             o->save_dir = v;
         } else if (!strcmp(a, "--shader-dir")) {
             o->shader_dir = v;
+        } else if (!strcmp(a, "--zoom")) {
+            char *end;
+            o->zoom = strtod(v, &end);
+            if (*end || !(o->zoom >= 1 && o->zoom <= 1e6)) {
+                fprintf(stderr, "render_bench: --zoom '%s' is not a number in 1-1e6\n", v);
+                return -1;
+            }
         } else if (!strcmp(a, "--threads")) {
             if (parse_int(v, 0, 1024, &o->threads)) {
                 fprintf(stderr, "render_bench: --threads '%s' is not in 0-1024\n", v);
@@ -354,6 +363,9 @@ int main(int argc, char **argv)
     uint64_t npts = pc.n;
     rnd_camera cam0;
     rnd_camera_frame(pc.bmin, pc.bmax, o.width, o.height, &cam0);
+    if (o.zoom > 1)
+        for (int i = 0; i < 3; i++)
+            cam0.eye[i] = cam0.target[i] + (cam0.eye[i] - cam0.target[i]) / o.zoom;
     int64_t id = rnd_upload(r, &pc, &err);
     if (id < 0) goto fail;
     pc_prepared_free(&pc); /* the renderer keeps what it needs */
