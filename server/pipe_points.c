@@ -40,12 +40,13 @@ typedef struct points_state {
     GLuint depth_buf, index_buf, range_buf;
     GLuint pos_tex;                   /* buffer texture over the positions (R32F) */
     GLuint depth_tex;                 /* buffer texture over depth_buf (R32UI) */
+    GLuint range_tex;                 /* buffer texture over range_buf (RG32UI) */
     uint64_t pix_cap, range_cap;      /* elements the buffers hold */
     uint32_t *range_tmp;              /* CPU staging for the range table (uvec2 per range) */
     /* uniform locations */
     GLint g_viewproj, g_point_size, g_color, g_znear, g_zfar;
     GLint r_viewproj, r_size, r_point_size, r_znear, r_zfar, r_total, r_nranges, r_first;
-    GLint r_stride, r_threads, r_per, r_pass, r_index_bits, r_log_near, r_log_scale, r_pos, r_depth;
+    GLint r_stride, r_threads, r_per, r_pass, r_index_bits, r_log_near, r_log_scale, r_pos, r_depth, r_ranges;
     GLint s_width, s_color, s_znear, s_zfar, s_index_bits, s_viewproj;
 } points_state;
 
@@ -59,6 +60,7 @@ static void points_destroy(const gl_api *gl, void *state)
     if (s->vao) gl->DeleteVertexArrays(1, &s->vao);
     if (s->pos_tex) gl->DeleteTextures(1, &s->pos_tex);
     if (s->depth_tex) gl->DeleteTextures(1, &s->depth_tex);
+    if (s->range_tex) gl->DeleteTextures(1, &s->range_tex);
     GLuint bufs[3] = {s->depth_buf, s->index_buf, s->range_buf};
     gl->DeleteBuffers(3, bufs);
     free(s->range_tmp);
@@ -127,6 +129,7 @@ static int points_create(const gl_api *gl, const rnd_shaders *sh, void **state, 
     s->r_log_scale = gl_uniform(gl, s->prog_raster, "u_log_scale");
     s->r_pos = gl_uniform(gl, s->prog_raster, "u_pos");
     s->r_depth = gl_uniform(gl, s->prog_raster, "u_depth");
+    s->r_ranges = gl_uniform(gl, s->prog_raster, "u_ranges");
     s->s_index_bits = gl_uniform(gl, s->prog_resolve, "u_index_bits");
     s->s_viewproj = gl_uniform(gl, s->prog_resolve, "u_viewproj");
     s->s_width = gl_uniform(gl, s->prog_resolve, "u_width");
@@ -287,10 +290,15 @@ static int render_compute(const gl_api *gl, points_state *s, const rnd_gpu_cloud
     gl->ActiveTexture(GL_TEXTURE1);
     gl->BindTexture(GL_TEXTURE_BUFFER, s->depth_tex);
     gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, s->depth_buf);
+    if (!s->range_tex) gl->GenTextures(1, &s->range_tex);
+    gl->ActiveTexture(GL_TEXTURE2);
+    gl->BindTexture(GL_TEXTURE_BUFFER, s->range_tex);
+    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_RG32UI, s->range_buf);
     gl->ActiveTexture(GL_TEXTURE0);
     gl->UseProgram(s->prog_raster);
     gl->Uniform1i(s->r_pos, 0);
     gl->Uniform1i(s->r_depth, 1);
+    gl->Uniform1i(s->r_ranges, 2);
     gl->UniformMatrix4fv(s->r_viewproj, 1, GL_FALSE, v->viewproj);
     gl->Uniform2i(s->r_size, v->width, v->height);
     gl->Uniform1f(s->r_point_size, p->point_size);
@@ -331,7 +339,10 @@ static int render_compute(const gl_api *gl, points_state *s, const rnd_gpu_cloud
     gl->BindVertexArray(0);
     gl->Disable(GL_SCISSOR_TEST);
     for (GLuint i = 0; i < 8; i++) gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, i, 0);
-    gl->BindTexture(GL_TEXTURE_BUFFER, 0);
+    for (int k = 2; k >= 0; k--) {
+        gl->ActiveTexture(GL_TEXTURE0 + (GLenum)k);
+        gl->BindTexture(GL_TEXTURE_BUFFER, 0);
+    }
     gl->UseProgram(0);
     return GL_CHECK_PASS(gl, "the points passes (compute)", err);
 }

@@ -99,7 +99,8 @@ enum {
     X(PRE, "u_pre") X(SUBPX, "u_subpx") X(POST, "u_post") X(EPSG, "u_epsg") X(ACC, "u_acc")  \
     X(EPS, "u_eps") X(ZNEAR, "u_znear") X(TOTAL, "u_total") X(NRANGES, "u_nranges")          \
     X(BIGPX, "u_big") X(COLOR, "u_color") X(LIGHT, "u_light") X(ZFAR, "u_zfar")              \
-    X(TPOS, "u_pos") X(TNRM, "u_nrm") X(TRAD, "u_rad") X(TSRC, "u_src") X(KEYS, "u_keys")
+    X(TPOS, "u_pos") X(TNRM, "u_nrm") X(TRAD, "u_rad") X(TSRC, "u_src") X(KEYS, "u_keys")  \
+    X(TRANGES, "u_ranges")
 
 enum {
 #define SPLAT_U_ENUM_(id, name) U_##id,
@@ -132,6 +133,7 @@ typedef struct splat_state {
     GLuint ras_buf;            /* dispatch header + sampled (not deposited) splat indices */
     uint64_t list_cap;         /* indices each holds */
     GLuint range_buf;          /* uvec2 (first point, first visible index) per range */
+    GLuint range_tex;          /* RG32UI buffer texture over range_buf (lib_ranges.glsl) */
     GLuint rect_buf;           /* ivec4: the pixels pass 1 touched in the stripe (the resolve's
                                   rectangle) */
     uint32_t range_cap;
@@ -228,6 +230,7 @@ static void splat_destroy(const gl_api *gl, void *state)
     if (s->frame_tex) gl->DeleteTextures(1, &s->frame_tex);
     if (s->key_tex) gl->DeleteTextures(1, &s->key_tex);
     if (s->cloud_tex[0]) gl->DeleteTextures(4, s->cloud_tex);
+    if (s->range_tex) gl->DeleteTextures(1, &s->range_tex);
     if (s->vao) gl->DeleteVertexArrays(1, &s->vao);
     GLuint bufs[6] = {s->frame_buf, s->key_buf, s->big_buf, s->ras_buf, s->range_buf,
                       s->rect_buf};
@@ -349,6 +352,7 @@ static void set_uniforms(const gl_api *gl, const splat_state *s, int p, const rn
     for (int k = 0; k < 4; k++)
         if (l[U_TPOS + k] >= 0) gl->Uniform1i(l[U_TPOS + k], 1 + k);
     if (l[U_KEYS] >= 0) gl->Uniform1i(l[U_KEYS], 5);
+    if (l[U_TRANGES] >= 0) gl->Uniform1i(l[U_TRANGES], 6);
     if (l[U_EPS] >= 0) gl->Uniform1f(l[U_EPS], SPLAT_EPS);
     if (l[U_ZNEAR] >= 0) gl->Uniform1f(l[U_ZNEAR], v->znear);
     if (l[U_TOTAL] >= 0) gl->Uniform1ui(l[U_TOTAL], total);
@@ -460,7 +464,6 @@ static int splat_render(const gl_api *gl, void *state, const rnd_gpu_cloud *c, c
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, s->key_buf);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 4, s->frame_buf);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 5, s->big_buf);
-    gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, s->range_buf);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 7, s->ras_buf);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 8, s->rect_buf);
 
@@ -471,6 +474,10 @@ static int splat_render(const gl_api *gl, void *state, const rnd_gpu_cloud *c, c
 
     gl->ActiveTexture(GL_TEXTURE5);
     gl->BindTexture(GL_TEXTURE_BUFFER, s->key_tex);
+    if (!s->range_tex) gl->GenTextures(1, &s->range_tex);
+    gl->ActiveTexture(GL_TEXTURE6);
+    gl->BindTexture(GL_TEXTURE_BUFFER, s->range_tex);
+    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_RG32UI, s->range_buf);
     gl->ActiveTexture(GL_TEXTURE0);
     gl->BindTexture(GL_TEXTURE_BUFFER, s->frame_tex);
     for (int y0 = 0; y0 < v->height; y0 += rows) {
@@ -516,7 +523,7 @@ static int splat_render(const gl_api *gl, void *state, const rnd_gpu_cloud *c, c
                               GL_TEXTURE_FETCH_BARRIER_BIT);
         }
     }
-    for (int k = 5; k >= 0; k--) {
+    for (int k = 6; k >= 0; k--) {
         gl->ActiveTexture(GL_TEXTURE0 + k);
         gl->BindTexture(GL_TEXTURE_BUFFER, 0);
     }

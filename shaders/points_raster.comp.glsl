@@ -30,8 +30,9 @@ layout(std430, binding = 5) restrict buffer Depth { uint depth[]; };
 #include "lib_fetch.glsl"
 layout(std430, binding = 6) restrict buffer Index { uint index[]; };
 // Visible ranges after culling: x = first point, y = position of that point in the sequence of
-// visible points (an exclusive prefix sum of the counts).
-layout(std430, binding = 7) readonly restrict buffer Ranges { uvec2 ranges[]; };
+// visible points (an exclusive prefix sum of the counts), as an RG32UI buffer texture.
+uniform usamplerBuffer u_ranges;
+#include "lib_ranges.glsl"
 
 uniform mat4 u_viewproj;
 uniform ivec2 u_size;
@@ -77,15 +78,7 @@ void main()
         uint k = gid + j * threads;
         if (k >= total) break;
         uint i = first + k; // one range (everything visible): no table look-up
-        if (nranges > 1u) {
-            uint lo = 0u, hi = nranges - 1u;
-            while (lo < hi) {
-                uint mid = (lo + hi + 1u) >> 1;
-                if (ranges[mid].y <= k) lo = mid;
-                else hi = mid - 1u;
-            }
-            i = ranges[lo].x + (k - ranges[lo].y);
-        }
+        if (nranges > 1u) i = point_of(u_ranges, nranges, k);
         vec4 c = viewproj * vec4(fetch3(u_pos, i), 1.0);
         float d = c.w;
         if (!(d >= znear && d <= zfar)) continue;

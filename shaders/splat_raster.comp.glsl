@@ -77,8 +77,10 @@ layout(std430, binding = 7) restrict buffer Ras { uint ras_groups[3]; uint ras_c
 // touches in this stripe, reset to (big, big, -1, -1) per stripe; the resolve draws only it.
 layout(std430, binding = 8) restrict buffer Rect { ivec4 rect; };
 
-// Visible ranges after culling: (first point, first visible index) per range.
-layout(std430, binding = 6) readonly restrict buffer Ranges { uvec2 ranges[]; };
+// Visible ranges after culling: (first point, first visible index) per range, RG32UI
+// (lib_ranges.glsl).
+uniform usamplerBuffer u_ranges;
+#include "lib_ranges.glsl"
 
 uniform mat4 u_view;      // local -> eye
 uniform mat4 u_proj;      // eye -> clip
@@ -127,17 +129,6 @@ struct Splat {
     vec3 k;         // covariance V_k + U.pre I: xx, xy, yy (px^2)
     float nc;       // n . c
 };
-
-// The point index of visible index g (binary search over the ranges' first visible index).
-uint point_of(Uni U, uint g)
-{
-    uint lo = 0u, hi = U.nranges - 1u;
-    while (lo < hi) {
-        uint mid = (lo + hi + 1u) >> 1;
-        if (ranges[mid].y <= g) lo = mid; else hi = mid - 1u;
-    }
-    return ranges[lo].x + (g - ranges[lo].y);
-}
 
 // Splat i's centre, normal, covariance and whether it is deposited (then box.xy is its pixel);
 // false when it is behind the near plane, degenerate, or deposited off the stripe.
@@ -317,9 +308,9 @@ void main()
 #if MODE == 0
     uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     BOX_INIT;
-    uint first = ranges[0].x; // read once, as the uniforms
+    uint first = texelFetch(u_ranges, 0).x; // read once, as the uniforms
     for (uint g = gl_GlobalInvocationID.x; g < U.total; g += stride) {
-        uint i = U.nranges == 1u ? first + g : point_of(U, g);
+        uint i = U.nranges == 1u ? first + g : point_of(u_ranges, U.nranges, g);
         Splat s;
         if (!setup_core(U, i, s)) continue;
         if (s.dep) {

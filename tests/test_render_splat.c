@@ -765,6 +765,76 @@ static int png_write_rgba(const char *path, int w, int h, const uint8_t *rgba)
     return png_image_write_to_file(&im, path, 0, rgba, -(png_int_32)(w * 4), NULL) ? 0 : -1;
 }
 
+/* Culling that leaves several ranges: five batches of 64 x 64 points, three plane patches in
+ * view (batches 0, 2, 4) and two far outside it (1, 3), so the visible points are three
+ * separate ranges and the shaders map visible indices to points through the range table
+ * (lib_ranges.glsl). Each pipeline must draw exactly what it draws for a cloud of the three
+ * visible patches alone (one range): the same covered pixels, colours within 1/255 (float
+ * atomics add in a different order). */
+static void test_culled_ranges(void **state)
+{
+    fixture *fx = *state;
+    enum { SIDE = 64 };
+    const float h = 0.004f;
+    const uint8_t cols[5][3] = {{220, 40, 40}, {0, 0, 0}, {40, 220, 40}, {0, 0, 0}, {40, 40, 220}};
+    const float xs[5] = {-0.27f, 50.0f, 0.0f, -50.0f, 0.27f};
+    pc_prepared both[2];
+    for (int v = 0; v < 2; v++) {
+        uint64_t nb = v == 0 ? 5 : 3, b = 0;
+        new_cloud(&both[v], nb * SIDE * SIDE);
+        for (int k = 0; k < 5; k++) {
+            if (v == 1 && (k == 1 || k == 3)) continue;
+            uint64_t first = b * SIDE * SIDE;
+            grid(&both[v], first, SIDE, SIDE, h, 0, h * 1.2f, cols[k], cols[k], 0);
+            for (uint64_t q = first; q < first + SIDE * SIDE; q++) both[v].pos[3 * q] += xs[k];
+            b++;
+        }
+        finish_cloud(&both[v]);
+        assert_int_equal(both[v].nbatches, nb);
+    }
+    rnd_camera cam = cam_at(0, 0, 1.2, 0, 0, 0, 40, W, H);
+    for (int pipe = 0; pipe < 2; pipe++) {
+        sp_params p;
+        sp_params_defaults(&p);
+        p.pipeline = pipe == 0 ? SP_PIPE_POINTS : SP_PIPE_SPLAT;
+        rnd_frame f[2] = {{0}, {0}};
+        for (int v = 0; v < 2; v++) {
+            uint32_t id = tu_upload(fx->egl, &both[v]);
+            tu_render(fx->egl, id, &cam, &p, 0, &f[v]);
+            rnd_release(fx->egl, id);
+        }
+        assert_int_equal(f[0].points_drawn, 3 * SIDE * SIDE);
+        assert_int_equal(f[1].points_drawn, 3 * SIDE * SIDE);
+        int covered = 0, coverage_differs = 0, maxdiff = 0, hues = 0;
+        for (int i = 0; i < W * H; i++) {
+            const uint8_t *a = f[0].rgba8 + 4 * i, *c = f[1].rgba8 + 4 * i;
+            covered += !is_bg(a);
+            coverage_differs += is_bg(a) != is_bg(c);
+            for (int k = 0; k < 3; k++)
+                if (abs(a[k] - c[k]) > maxdiff) maxdiff = abs(a[k] - c[k]);
+        }
+        for (int k = 0; k < 5; k += 2) /* each patch shows, in its own colour, at its centre */
+            for (int i = 0; i < W * H; i++) {
+                const uint8_t *a = f[0].rgba8 + 4 * i;
+                int dom = cols[k][0] > 100 ? 0 : cols[k][1] > 100 ? 1 : 2;
+                if (!is_bg(a) && a[dom] > 2 * a[(dom + 1) % 3] && a[dom] > 2 * a[(dom + 2) % 3]) {
+                    hues++;
+                    break;
+                }
+            }
+        printf("culled ranges, %s: %d pixels covered, coverage differs at %d, max difference %d\n",
+               pipe == 0 ? "points" : "splat", covered, coverage_differs, maxdiff);
+        assert_true(covered > W * H / 20);
+        assert_int_equal(coverage_differs, 0);
+        assert_true(maxdiff <= 1);
+        assert_int_equal(hues, 3);
+        rnd_frame_free(&f[0]);
+        rnd_frame_free(&f[1]);
+    }
+    pc_prepared_free(&both[0]);
+    pc_prepared_free(&both[1]);
+}
+
 /* Guanyin (238k points, colours, no normals): loaded, preprocessed (normals, radii), rendered
  * with the default framing camera at 640x480. Non-blank (over 5 % covered), the same on a
  * second run (every channel within 1: float atomics add in a different order per run, which
@@ -861,6 +931,7 @@ int main(void)
         cmocka_unit_test(test_inclined_footprint),
         cmocka_unit_test(test_exact_footprint_moments),
         cmocka_unit_test(test_ewa_auto),
+        cmocka_unit_test(test_culled_ranges),
         cmocka_unit_test(test_guanyin),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
