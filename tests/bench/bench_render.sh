@@ -59,6 +59,11 @@ run_cloud synthetic-1M "$tmp/synthetic-1M.ply"
 "$bench/render_bench" "$tmp/synthetic-1M.ply" --frames 3 --size "$size" --backend "$backend" \
     --pipelines splat --set ewa=exact --label "synthetic-1M, ewa=exact" > "$tmp/exact.out" \
     2> "$tmp/exact.err" || echo "bench_render: ewa=exact run failed: $(tail -1 "$tmp/exact.err")" >&2
+# A close-up of the same cloud (eye 3x closer: culled, splats magnified to several pixels).
+"$bench/render_bench" "$tmp/synthetic-1M.ply" --frames "$frames" --size "$size" \
+    --backend "$backend" --pipelines points,splat --zoom 3 --label "synthetic-1M, close-up" \
+    > "$tmp/zoom.out" 2> "$tmp/zoom.err" ||
+    echo "bench_render: close-up run failed: $(tail -1 "$tmp/zoom.err")" >&2
 
 # ---- ParaView on the same 1M cloud, right after splatd's run on it -------------------------
 pv_status=""
@@ -124,10 +129,12 @@ for c in $clouds; do grep '^| ' "$tmp/$c.out"; done
 p1=$(awk -F'|' '$4 ~ "^ *points *$" { print $5 + 0 }' "$tmp/synthetic-1M.out")
 awk -F'|' -v p="$p1" 'BEGIN { OFS = "|" } /^\| / { $6 = sprintf(" %.2f ", $5 / p); print }' \
     "$tmp/exact.out" 2>/dev/null
+grep '^| ' "$tmp/zoom.out" 2>/dev/null
 echo
 echo "ms/frame: rnd_render wall-clock up to glFinish, read-back excluded (its own column);"
 echo "camera: default framing, turned 0.5 degrees per frame; jpeg: TurboJPEG q85 4:2:0."
-echo "splat uses ewa=auto (split on a software renderer); the ewa=exact row is 3 frames."
+echo "splat uses ewa=auto (split on a software renderer); the ewa=exact row is 3 frames;"
+echo "close-up: the eye 3x closer to the target (render_bench --zoom 3), its own ratio."
 [ -n "$note10" ] && echo "$note10"
 echo
 echo "#### Preprocessing (pc_load + prep_run, default k, every core)"
