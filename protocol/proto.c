@@ -244,21 +244,28 @@ int proto_decode(proto_decoder *d, const uint8_t *buf, size_t len, size_t *used,
             *used = u;
             return rc;
         }
-        if (d->h.len > d->cap) {
-            uint8_t *np = realloc(d->payload, d->h.len);
-            if (!np) {
-                d->failed = PROTO_E_NOMEM;
-                *used = u;
-                return proto_errorf(e, PROTO_E_NOMEM, "cannot allocate %u bytes for a %s "
-                                    "payload", d->h.len, proto_msg_name(d->h.type));
-            }
-            d->payload = np;
-            d->cap = d->h.len;
-        }
         d->have = 0;
     }
     size_t take = d->h.len - d->have;
     if (take > len - u) take = len - u;
+    if (take && d->have + take > d->cap) {
+        /* The buffer grows with the bytes that arrive (doubling, at least PROTO_GROW_MIN, at
+         * most the message), never to what a header merely claims before its payload comes. */
+        uint64_t want = (uint64_t)d->cap * 2;
+        if (want < PROTO_GROW_MIN) want = PROTO_GROW_MIN;
+        if (want < (uint64_t)d->have + take) want = (uint64_t)d->have + take;
+        if (want > d->h.len) want = d->h.len;
+        uint8_t *np = realloc(d->payload, (size_t)want);
+        if (!np) {
+            d->failed = PROTO_E_NOMEM;
+            *used = u;
+            return proto_errorf(e, PROTO_E_NOMEM, "cannot allocate %llu bytes for a %s payload "
+                                "of %u", (unsigned long long)want, proto_msg_name(d->h.type),
+                                d->h.len);
+        }
+        d->payload = np;
+        d->cap = (uint32_t)want;
+    }
     if (take) memcpy(d->payload + d->have, buf + u, take);
     d->have += (uint32_t)take;
     u += take;

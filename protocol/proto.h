@@ -166,8 +166,10 @@ void proto_get_header(const uint8_t *p, proto_header *h);
 /* ---- incremental decoder ----------------------------------------------------------------
  * One per connection and direction. Set the configuration fields after proto_decoder_init
  * (they may change between calls, e.g. max_payload after authentication). The payload buffer
- * grows only to the length of a header that passed every check. */
+ * grows with the payload bytes that have arrived (doubling from PROTO_GROW_MIN, up to the
+ * length of a header that passed every check): a header alone allocates nothing. */
 enum { PROTO_NEED_MORE = 0, PROTO_ONE_MSG = 1 };
+enum { PROTO_GROW_MIN = 64 * 1024 };
 
 typedef struct proto_decoder {
     /* configuration */

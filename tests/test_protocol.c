@@ -505,7 +505,7 @@ static void test_bad_headers(void **state)
     proto_decoder_init(&d, PROTO_C2S);
     assert_int_equal(header_rc(&d, PROTO_MAGIC, 1, PROTO_MSG_PARAMS, PROTO_MAX_REQUEST, &e),
                      PROTO_NEED_MORE);
-    assert_true(d.cap >= PROTO_MAX_REQUEST);
+    assert_int_equal(d.cap, 0); /* nothing allocated before payload bytes arrive */
     proto_decoder_free(&d);
     /* the client's frame limit; a huge claimed length is refused before any allocation */
     proto_decoder_init(&d, PROTO_S2C);
@@ -514,6 +514,54 @@ static void test_bad_headers(void **state)
                      -PROTO_E_TOO_LARGE);
     assert_int_equal(d.cap, 0);
     proto_decoder_free(&d);
+}
+
+/* A frame header may claim up to the client's limit (256 MiB): the decoder's buffer follows
+ * the bytes that arrive, so a header and 100 KiB of payload allocate 100 KiB, not 200 MiB; a
+ * 300 KiB frame fed in growing pieces decodes intact. */
+static void test_payload_grows_with_data(void **state)
+{
+    (void)state;
+    proto_decoder d;
+    proto_error e = {0};
+    proto_msg m;
+    size_t used;
+    proto_decoder_init(&d, PROTO_S2C);
+    d.max_payload = PROTO_MAX_FRAME;
+    assert_int_equal(header_rc(&d, PROTO_MAGIC, 1, PROTO_MSG_FRAME, 200u << 20, &e),
+                     PROTO_NEED_MORE);
+    assert_int_equal(d.cap, 0);
+    static uint8_t chunk[100 * 1024];
+    memset(chunk, 7, sizeof chunk);
+    assert_int_equal(proto_decode(&d, chunk, sizeof chunk, &used, &m, &e), PROTO_NEED_MORE);
+    assert_int_equal(used, sizeof chunk);
+    assert_int_equal(d.cap, sizeof chunk); /* what arrived, not the 200 MiB claimed */
+    proto_decoder_free(&d);
+
+    enum { LEN = 300 * 1024 };
+    uint8_t *msg = malloc(16 + LEN);
+    assert_non_null(msg);
+    proto_header h = {PROTO_MAGIC, 1, PROTO_MSG_FRAME, 9, LEN};
+    proto_put_header(msg, &h);
+    for (uint32_t i = 0; i < LEN; i++) msg[16 + i] = (uint8_t)(i * 31 + 7);
+    proto_decoder_init(&d, PROTO_S2C);
+    d.max_payload = PROTO_MAX_FRAME;
+    size_t at = 0, step = 1000;
+    int rc = PROTO_NEED_MORE;
+    while (rc == PROTO_NEED_MORE && at < 16 + (size_t)LEN) {
+        size_t n = 16 + (size_t)LEN - at < step ? 16 + (size_t)LEN - at : step;
+        rc = proto_decode(&d, msg + at, n, &used, &m, &e);
+        at += used;
+        assert_true(d.cap <= LEN);
+        step = step * 3 / 2;
+    }
+    assert_int_equal(rc, PROTO_ONE_MSG);
+    assert_int_equal(at, 16 + (size_t)LEN);
+    assert_int_equal(m.len, LEN);
+    assert_int_equal(m.h.seq, 9);
+    assert_memory_equal(m.payload, msg + 16, LEN);
+    proto_decoder_free(&d);
+    free(msg);
 }
 
 /* ---- truncated and over-long payloads ---------------------------------------------------- */
@@ -1030,6 +1078,7 @@ int main(void)
         cmocka_unit_test(test_byte_at_a_time),
         cmocka_unit_test(test_back_to_back),
         cmocka_unit_test(test_bad_headers),
+        cmocka_unit_test(test_payload_grows_with_data),
         cmocka_unit_test(test_truncated_payloads),
         cmocka_unit_test(test_malformed_payloads),
         cmocka_unit_test(test_camera_validation),
