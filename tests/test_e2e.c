@@ -856,6 +856,56 @@ static void test_auth(void **state)
     free(log);
 }
 
+/* ---- --max-clients: the connection over the limit gets ERROR BUSY and is closed ---- */
+
+static void test_max_clients(void **state)
+{
+    e2e *t = *state;
+    daemon_proc *d = &t->aux;
+    assert_int_equal(daemon_start(t, d, NULL, "--listen", "127.0.0.1:0", "--data", t->data,
+                                  "--cache", t->cache, "--max-clients", "2", (char *)NULL), 0);
+    raw a, b, c;
+    assert_int_equal(raw_connect(&a, d->port), 0);
+    raw_hello(&a);
+    assert_int_equal(raw_connect(&b, d->port), 0);
+    raw_hello(&b);
+    /* The third is refused at once, before any HELLO: ERROR BUSY (seq 0), then EOF. */
+    assert_int_equal(raw_connect(&c, d->port), 0);
+    raw_expect_error(&c, PROTO_E_BUSY, 0);
+    raw_expect_closed(&c);
+    raw_close(&c);
+    /* The library reports it as SPC_E_BUSY with the server's sentence. */
+    spc_client *cl = NULL;
+    char err[256];
+    spc_options o = {.host = "127.0.0.1", .port = d->port};
+    assert_int_equal(spc_connect(&o, &cl, err, sizeof err), SPC_E_BUSY);
+    assert_null(cl);
+    assert_non_null(strstr(err, "too many clients"));
+    /* The two admitted clients are served, and a freed place is taken again. */
+    raw_ping(&a);
+    raw_close(&b);
+    int admitted = 0;
+    for (int i = 0; i < 100 && !admitted; i++) { /* the server notices b's close */
+        usleep(20000);
+        assert_int_equal(raw_connect(&c, d->port), 0);
+        proto_buf pb = {0};
+        proto_hello h = {.min_version = 1, .max_version = 1};
+        snprintf(h.client, sizeof h.client, "test_e2e");
+        assert_int_equal(proto_enc_hello(&pb, ++c.seq, &h), 0);
+        raw_send_buf(&c, &pb);
+        admitted = raw_recv(&c) == PROTO_MSG_WELCOME;
+        raw_close(&c);
+    }
+    assert_true(admitted);
+    raw_close(&a);
+    size_t ll;
+    char *log = (char *)tu_read_file(d->log, &ll);
+    assert_non_null(log);
+    assert_non_null(strstr(log, "2 clients already connected (--max-clients)"));
+    free(log);
+    assert_int_equal(daemon_stop(d), 0);
+}
+
 /* ---- isolation: a client that never reads its stream does not slow another ---- */
 
 /* rate_run: frames/s of n RENDER round trips on r. */
@@ -1171,6 +1221,7 @@ int main(void)
         cmocka_unit_test(test_lossless_matches_render),
         cmocka_unit_test(test_jpeg_frame),
         cmocka_unit_test(test_auth),
+        cmocka_unit_test(test_max_clients),
         cmocka_unit_test(test_isolation),
         cmocka_unit_test(test_stream),
         cmocka_unit_test(test_load),
