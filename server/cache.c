@@ -139,6 +139,48 @@ static int source_key(const char *src, src_key *key, sd_err *err)
     return 0;
 }
 
+/* Reads and checks the header of the cache file open at fd: intact (magic, byte order,
+ * checksum), this version, built with k from a source of key's size and mtime (and content hash
+ * when check_hash), and a file of the size the header says. Returns 1 when it matches, 0 when it
+ * is out of date, -1 when it is damaged; why says which. */
+static int check_header(int fd, const struct stat *st, const src_key *key, int check_hash, int k,
+                        cache_header *h, char *why, size_t whylen)
+{
+    if ((uint64_t)st->st_size < CACHE_BLOCK_OFFSET ||
+        pread(fd, h, sizeof *h, 0) != (ssize_t)sizeof *h) {
+        snprintf(why, whylen, "it is truncated (%lld bytes)", (long long)st->st_size);
+        return -1;
+    }
+    if (memcmp(h->magic, CACHE_MAGIC, 8) != 0 || h->byte_order != 0x01020304u) {
+        snprintf(why, whylen, "it has a wrong magic or byte order");
+        return -1;
+    }
+    if (h->header_hash != sd_hash64(h, offsetof(cache_header, header_hash), 0)) {
+        snprintf(why, whylen, "its header is corrupt (checksum mismatch)");
+        return -1;
+    }
+    if (h->version != CACHE_VERSION) {
+        snprintf(why, whylen, "cache version %u, this splatd writes %u", h->version, CACHE_VERSION);
+        return 0;
+    }
+    if (h->src_size != key->size || h->src_mtime_ns != key->mtime_ns ||
+        (check_hash && h->src_hash != key->hash)) {
+        snprintf(why, whylen, "source changed (size, mtime or content)");
+        return 0;
+    }
+    if ((int)h->k != k) {
+        snprintf(why, whylen, "cache built with k = %u, k = %d asked", h->k, k);
+        return 0;
+    }
+    uint64_t want = pc_prepared_block_len(h->n, h->attrs, h->nbatches);
+    if (want != h->block_len || (uint64_t)st->st_size != CACHE_BLOCK_OFFSET + h->block_len) {
+        snprintf(why, whylen, "it is truncated or has a wrong size (%lld bytes, %llu expected)",
+                 (long long)st->st_size, (unsigned long long)(CACHE_BLOCK_OFFSET + want));
+        return -1;
+    }
+    return 1;
+}
+
 /* Tries to map a valid cache. Returns 1 on success, 0 when there is none or it is out of date
  * (why says which), -1 when it is damaged (why says how: the caller warns). */
 static int try_load(const char *cpath, const src_key *key, int k, pc_prepared *out, char *why,
@@ -152,39 +194,13 @@ static int try_load(const char *cpath, const src_key *key, int k, pc_prepared *o
     struct stat st;
     cache_header h;
     int rc = -1;
-    if (fstat(fd, &st) < 0 || (uint64_t)st.st_size < CACHE_BLOCK_OFFSET ||
-        pread(fd, &h, sizeof h, 0) != (ssize_t)sizeof h) {
-        snprintf(why, whylen, "it is truncated (%lld bytes)", (long long)st.st_size);
+    if (fstat(fd, &st) < 0) {
+        snprintf(why, whylen, "it cannot be read: %s", strerror(errno));
         goto out;
     }
-    if (memcmp(h.magic, CACHE_MAGIC, 8) != 0 || h.byte_order != 0x01020304u) {
-        snprintf(why, whylen, "it has a wrong magic or byte order");
-        goto out;
-    }
-    if (h.header_hash != sd_hash64(&h, offsetof(cache_header, header_hash), 0)) {
-        snprintf(why, whylen, "its header is corrupt (checksum mismatch)");
-        goto out;
-    }
-    rc = 0;
-    if (h.version != CACHE_VERSION) {
-        snprintf(why, whylen, "cache version %u, this splatd writes %u", h.version, CACHE_VERSION);
-        goto out;
-    }
-    if (h.src_size != key->size || h.src_mtime_ns != key->mtime_ns || h.src_hash != key->hash) {
-        snprintf(why, whylen, "source changed (size, mtime or content)");
-        goto out;
-    }
-    if ((int)h.k != k) {
-        snprintf(why, whylen, "cache built with k = %u, k = %d asked", h.k, k);
-        goto out;
-    }
+    rc = check_header(fd, &st, key, 1, k, &h, why, whylen);
+    if (rc != 1) goto out;
     rc = -1;
-    uint64_t want = pc_prepared_block_len(h.n, h.attrs, h.nbatches);
-    if (want != h.block_len || (uint64_t)st.st_size != CACHE_BLOCK_OFFSET + h.block_len) {
-        snprintf(why, whylen, "it is truncated or has a wrong size (%lld bytes, %llu expected)",
-                 (long long)st.st_size, (unsigned long long)(CACHE_BLOCK_OFFSET + want));
-        goto out;
-    }
     size_t maplen = (size_t)st.st_size;
     uint8_t *m = mmap(NULL, maplen, PROT_READ, MAP_PRIVATE, fd, 0);
     if (m == MAP_FAILED) {
@@ -221,6 +237,23 @@ static int try_load(const char *cpath, const src_key *key, int k, pc_prepared *o
 out:
     close(fd);
     return rc;
+}
+
+int cache_probe(const char *src, const char *dir, int k)
+{
+    if (k <= 0) k = PREP_DEFAULT_K;
+    char cpath[4096], why[256];
+    struct stat ss, cs;
+    if (cache_path_for(src, dir, k, cpath, sizeof cpath, NULL) != 0 || stat(src, &ss) != 0)
+        return 0;
+    src_key key = {.size = (uint64_t)ss.st_size,
+                   .mtime_ns = (int64_t)ss.st_mtim.tv_sec * 1000000000LL + ss.st_mtim.tv_nsec};
+    int fd = open(cpath, O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return 0;
+    cache_header h;
+    int ok = fstat(fd, &cs) == 0 && check_header(fd, &cs, &key, 0, k, &h, why, sizeof why) == 1;
+    close(fd);
+    return ok;
 }
 
 static int write_all(int fd, const void *p, size_t len)
@@ -303,7 +336,7 @@ int cache_open_cloud(const char *src, const cache_desc *d, pc_prepared *out, cac
                      sd_err *err)
 {
     cache_desc dd = d ? *d : (cache_desc){0};
-    if (dd.k <= 0) dd.k = 24;
+    if (dd.k <= 0) dd.k = PREP_DEFAULT_K;
     cache_result rr;
     memset(&rr, 0, sizeof rr);
     memset(out, 0, sizeof *out);

@@ -14,7 +14,7 @@
 typedef struct cache_desc {
     const char *dir;   /* default NULL: $SPLATD_CACHE, else $XDG_CACHE_HOME/splatd, else
                           ~/.cache/splatd, else a .splatd-cache directory beside the source */
-    int k;             /* default 24: neighbours for prep (part of the cache key) */
+    int k;             /* default PREP_DEFAULT_K (24): neighbours for prep (part of the key) */
     int threads;       /* default 0: every core */
     int force;         /* rebuild even when a valid cache exists */
     void (*progress)(void *user, const char *phase, double fraction); /* default: none */
@@ -37,6 +37,12 @@ typedef struct cache_result {
  * that cannot be written (read-only directory) is reported through warn, not as an error. */
 int cache_open_cloud(const char *src, const cache_desc *d, pc_prepared *out, cache_result *res,
                      sd_err *err);
+
+/* cache_probe: 1 when src has a cache under dir (NULL: the default) that cache_open_cloud
+ * would load for k (<= 0: the default): this version and k, the source's size and mtime, an
+ * intact header and the right file size. Cheap (one header read, no hashing), for listings;
+ * the load still checks the content hashes. 0 otherwise. */
+int cache_probe(const char *src, const char *dir, int k);
 
 /* cache_path_for: the cache file path for src under directory dir (NULL: the default). */
 int cache_path_for(const char *src, const char *dir, int k, char *buf, size_t len, sd_err *err);

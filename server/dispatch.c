@@ -286,16 +286,6 @@ static void on_hello(srv *sv, sess *s, const proto_msg *m)
     send_welcome(sv, s, m->h.seq);
 }
 
-/* cache_is_fresh: 1 when a cache file for path exists and is newer than it. A cheap hint for
- * LIST (no content hash): cache.c still validates the file on OPEN. */
-static int cache_is_fresh(const srv *sv, const char *path)
-{
-    char cp[PATH_MAX + 64];
-    struct stat cs, ss;
-    if (cache_path_for(path, sv->o.cache_dir, 24, cp, sizeof cp, NULL) != 0) return 0;
-    return stat(cp, &cs) == 0 && stat(path, &ss) == 0 && cs.st_mtime >= ss.st_mtime;
-}
-
 static void on_list(srv *sv, sess *s, const proto_msg *m)
 {
     proto_error pe;
@@ -321,7 +311,7 @@ static void on_list(srv *sv, sess *s, const proto_msg *m)
             if (c && c->state == SRV_CLOUD_READY) {
                 items[i].points = c->info.points;
                 items[i].flags = PROTO_CLOUD_LOADED | PROTO_CLOUD_PREPARED;
-            } else if (cache_is_fresh(sv, path)) {
+            } else if (cache_probe(path, sv->o.cache_dir, 0)) { /* the daemon's k */
                 items[i].flags = PROTO_CLOUD_PREPARED;
             }
         }

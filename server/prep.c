@@ -193,7 +193,7 @@ static int chunk_field(void *ctx, size_t c, int tid, sd_err *err)
 static int check_input(const pc_cloud *in, const prep_desc *desc, prep_desc *d, sd_err *err)
 {
     *d = desc ? *desc : (prep_desc){0};
-    if (d->k == 0) d->k = 24;
+    if (d->k == 0) d->k = PREP_DEFAULT_K;
     if (d->threads <= 0) d->threads = prep_default_threads();
     if (d->max_nbr_bytes == 0) d->max_nbr_bytes = (size_t)1 << 30;
     if (!in) return sd_errf(err, SD_EINVAL, "prep: no cloud given");

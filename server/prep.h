@@ -45,12 +45,13 @@
 #include "sd_err.h"
 
 enum { PREP_MAX_K = 256 };       /* most neighbours per point */
+enum { PREP_DEFAULT_K = 24 };    /* neighbours when none are asked for (the paper's k) */
 #define PREP_RADIUS_CAP 2.0f     /* computed radius <= this x the neighbours' median radius */
 #define PREP_SURFACE_VAR_MAX 0.10f /* above: the neighbourhood is no surface (step 4) */
 #define PREP_SCATTER_CAP 1.0f    /* there, radius <= this x the cloud's median eq. 20 radius */
 
 typedef struct prep_desc {
-    int k;                 /* default 24: neighbours per point, 1..256 (fewer when the cloud
+    int k;                 /* default PREP_DEFAULT_K: neighbours, 1..256 (fewer when the cloud
                               has no more than k points: then n - 1) */
     int threads;           /* default 0: every online core */
     prep_knn_method knn;   /* default PREP_KNN_GRID; PREP_KNN_FLANN: FLANN's kd-tree */

@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include "cache.h"
+#include "prep.h"
 #include "testutil.h"
 
 typedef struct fixture {
@@ -221,6 +222,39 @@ static void test_version_change(void **state)
     pc_prepared_free(&p);
 }
 
+/* cache_probe (the daemon's LIST flag) says yes exactly when cache_open_cloud would load: no
+ * cache, another k, a changed source, another version or a truncated file all say no. */
+static void test_probe(void **state)
+{
+    fixture *f = *state;
+    pc_prepared p;
+    cache_result r;
+    assert_int_equal(cache_probe(f->src, f->cdir, 0), 0); /* no cache yet */
+    assert_int_equal(open_cloud(f, 0, &p, &r), 0);        /* 0: the default k */
+    pc_prepared_free(&p);
+    assert_int_equal(cache_probe(f->src, f->cdir, 0), 1);
+    assert_int_equal(cache_probe(f->src, f->cdir, PREP_DEFAULT_K), 1);
+    assert_int_equal(cache_probe(f->src, f->cdir, 8), 0);
+    struct timespec ts[2] = {{.tv_sec = 1000000000, .tv_nsec = 0}, {.tv_sec = 1000000000, .tv_nsec = 0}};
+    assert_int_equal(utimensat(AT_FDCWD, f->src, ts, 0), 0);
+    assert_int_equal(cache_probe(f->src, f->cdir, 0), 0); /* the source changed */
+    assert_int_equal(open_cloud(f, 0, &p, &r), 0);
+    assert_int_equal(r.hit, 0);
+    pc_prepared_free(&p);
+    assert_int_equal(cache_probe(f->src, f->cdir, 0), 1);
+    assert_int_equal(cache__set_version(r.path, 999), 0);
+    assert_int_equal(cache_probe(f->src, f->cdir, 0), 0); /* another version */
+    assert_int_equal(open_cloud(f, 0, &p, &r), 0);
+    pc_prepared_free(&p);
+    struct stat st;
+    assert_int_equal(stat(r.path, &st), 0);
+    truncate_one(r.path, st.st_size);
+    assert_int_equal(cache_probe(f->src, f->cdir, 0), 0); /* truncated */
+    char missing[700];
+    snprintf(missing, sizeof missing, "%s/none.ply", f->dir);
+    assert_int_equal(cache_probe(missing, f->cdir, 0), 0);
+}
+
 static void test_unwritable_cache_dir(void **state)
 {
     fixture *f = *state;
@@ -258,6 +292,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_miss_then_hit, setup, teardown),
         cmocka_unit_test_setup_teardown(test_source_changes_rebuild, setup, teardown),
         cmocka_unit_test_setup_teardown(test_truncated_cache, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_probe, setup, teardown),
         cmocka_unit_test_setup_teardown(test_corrupted_cache, setup, teardown),
         cmocka_unit_test_setup_teardown(test_version_change, setup, teardown),
         cmocka_unit_test_setup_teardown(test_unwritable_cache_dir, setup, teardown),

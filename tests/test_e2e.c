@@ -883,6 +883,17 @@ static void test_max_clients(void **state)
     assert_non_null(strstr(err, "too many clients"));
     /* The two admitted clients are served, and a freed place is taken again. */
     raw_ping(&a);
+    /* This daemon has loaded nothing yet; both clouds were prepared into the shared cache by
+     * the first daemon (Guanyin preloaded, bunny opened by test_open_progress), so LIST says
+     * prepared, not loaded (cache_probe). */
+    raw_simple(&a, PROTO_MSG_LIST);
+    assert_int_equal(raw_recv(&a), PROTO_MSG_CLOUDS);
+    proto_clouds list;
+    assert_int_equal(proto_parse_clouds(a.pl, a.h.len, &list, NULL), 0);
+    assert_int_equal(list.count, 2);
+    for (uint32_t i = 0; i < list.count; i++)
+        assert_int_equal(list.items[i].flags, PROTO_CLOUD_PREPARED);
+    proto_clouds_free(&list);
     raw_close(&b);
     int admitted = 0;
     for (int i = 0; i < 100 && !admitted; i++) { /* the server notices b's close */
