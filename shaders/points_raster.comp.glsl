@@ -27,8 +27,8 @@ uniform samplerBuffer u_pos;     // R32F: x y z per point (lib_fetch.glsl)
 // never skip a needed one.
 uniform usamplerBuffer u_depth;  // R32UI over Depth
 layout(std430, binding = 5) restrict buffer Depth { uint depth[]; };
-#include "lib_fetch.glsl"
 layout(std430, binding = 6) restrict buffer Index { uint index[]; };
+#include "lib_fetch.glsl"
 // Visible ranges after culling: x = first point, y = position of that point in the sequence of
 // visible points (an exclusive prefix sum of the counts), as an RG32UI buffer texture.
 uniform usamplerBuffer u_ranges;
@@ -70,7 +70,8 @@ void main()
     uint per = u_per, index_bits = u_index_bits;
     int pass = u_pass;
     float log_near = u_log_near, log_scale = u_log_scale;
-    float dmax = float((1u << (32u - index_bits)) - 1u);
+    // packed: the largest depth level (index_bits is 0 in the exact passes, which need none)
+    float dmax = index_bits > 0u ? float((1u << (32u - index_bits)) - 1u) : 0.0;
 
     uint gid = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * u_stride;
     float h = 0.5 * point_size;
