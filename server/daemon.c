@@ -141,6 +141,8 @@ static void update_watch(srv *sv, sess *s, int want_write)
 {
     int mask = want_write ? EV_WRITE : 0;
     if (!s->paused && !s->close_after && s->in_off == s->in_len && !sv->stopping) mask |= EV_READ;
+    /* Not reading (an OPEN still loading, or unread input): still notice the client going. */
+    else if (!s->close_after) mask |= EV_HUP;
     if (ev_mask(sv->loop, s->fd) == mask) return;
     if (mask == 0) ev_unwatch(sv->loop, s->fd);
     else if (ev_watch(sv->loop, s->fd, mask, on_client, s, NULL) != 0) srv_close(sv, s, "event loop error");
@@ -205,6 +207,11 @@ static void on_client(ev_loop *l, int fd, int mask, void *data)
     sess *s = data;
     srv *sv = s->owner;
     if (s->dead) return;
+    if ((mask & EV_HUP) && !(mask & EV_READ)) {
+        /* A hang-up while its input is not being read: the answers have nobody to go to. */
+        srv_close(sv, s, "closed by the client while its requests waited");
+        return;
+    }
     if ((mask & EV_READ) && s->in_off == s->in_len) {
         ssize_t r = recv(s->fd, s->in, SESS_IN_CHUNK, 0);
         if (r == 0) {

@@ -12,10 +12,12 @@
 
 typedef struct ev_loop ev_loop;
 
-enum { EV_READ = 1, EV_WRITE = 2 };
+enum { EV_READ = 1, EV_WRITE = 2, EV_HUP = 4 };
 
 /* An fd callback: mask says which of EV_READ/EV_WRITE are ready (errors and hang-ups are
- * reported as EV_READ, so the read path sees the EOF or error). */
+ * reported as EV_READ, so the read path sees the EOF or error). EV_HUP, asked for without
+ * EV_READ, reports only that the peer hung up or the socket failed (EPOLLRDHUP, EPOLLHUP,
+ * EPOLLERR), for a connection that must not be read yet but should not outlive its peer. */
 typedef void (*ev_fd_cb)(ev_loop *l, int fd, int mask, void *data);
 
 /* ---- timers: the caller owns the ev_timer (embedded in its own struct); no allocation ---- */

@@ -79,6 +79,7 @@ int ev_watch(ev_loop *l, int fd, int mask, ev_fd_cb cb, void *data, sd_err *err)
     struct epoll_event ee = { .data.fd = fd };
     if (mask & EV_READ) ee.events |= EPOLLIN;
     if (mask & EV_WRITE) ee.events |= EPOLLOUT;
+    if (mask & EV_HUP) ee.events |= EPOLLRDHUP;
     int op = s->mask ? EPOLL_CTL_MOD : EPOLL_CTL_ADD;
     if (epoll_ctl(l->epfd, op, fd, &ee) < 0)
         return sd_errf(err, SD_EIO, "event loop: epoll_ctl(fd %d): %s", fd, strerror(errno));
@@ -181,6 +182,7 @@ int ev_run(ev_loop *l)
             int mask = 0;
             if (evs[i].events & (EPOLLIN | EPOLLERR | EPOLLHUP)) mask |= EV_READ;
             if (evs[i].events & (EPOLLOUT | EPOLLERR | EPOLLHUP)) mask |= EV_WRITE;
+            if (evs[i].events & (EPOLLRDHUP | EPOLLERR | EPOLLHUP)) mask |= EV_HUP;
             mask &= s->mask ? s->mask : 0;
             /* A callback earlier in this batch may have unwatched this fd: s->mask is 0 then. */
             if (mask && s->cb) s->cb(l, fd, mask, s->data);

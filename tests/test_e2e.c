@@ -917,6 +917,48 @@ static void test_max_clients(void **state)
     assert_int_equal(daemon_stop(d), 0);
 }
 
+/* ---- a client that hangs up while its OPEN is loading is dropped at once ---- */
+
+/* The daemon stops reading a client while its OPEN loads (later requests must wait for INFO),
+ * but still watches for the hang-up: the session is closed when the client goes, not when
+ * the load finishes. A fresh cache directory makes Guanyin.ply load from scratch (~0.4 s). */
+static void test_hangup_while_loading(void **state)
+{
+    e2e *t = *state;
+    char cache2[700];
+    snprintf(cache2, sizeof cache2, "%s/cache-hangup", t->root);
+    daemon_proc *d = &t->aux;
+    assert_int_equal(daemon_start(t, d, NULL, "--listen", "127.0.0.1:0", "--data", t->data,
+                                  "--cache", cache2, (char *)NULL), 0);
+    raw r;
+    assert_int_equal(raw_connect(&r, d->port), 0);
+    raw_hello(&r);
+    raw_open(&r, "Guanyin.ply");
+    raw_simple(&r, PROTO_MSG_LIST); /* buffered behind the OPEN */
+    usleep(50000);
+    raw_close(&r);
+    char *log = NULL;
+    const char *ready = "cloud Guanyin.ply ready";
+    for (int i = 0; i < 3000 && !(log && strstr(log, ready)); i++) {
+        free(log);
+        usleep(10000);
+        size_t ll;
+        log = (char *)tu_read_file(d->log, &ll);
+    }
+    assert_non_null(log);
+    const char *rdy = strstr(log, ready);
+    const char *gone = strstr(log, "closed by the client while its requests waited");
+    if (!rdy || !gone || gone > rdy)
+        fail_msg("expected the hang-up logged before the load finished; log:\n%s", log);
+    free(log);
+    /* The daemon serves on. */
+    assert_int_equal(raw_connect(&r, d->port), 0);
+    raw_hello(&r);
+    raw_ping(&r);
+    raw_close(&r);
+    assert_int_equal(daemon_stop(d), 0);
+}
+
 /* ---- isolation: a client that never reads its stream does not slow another ---- */
 
 /* rate_run: frames/s of n RENDER round trips on r. */
@@ -1233,6 +1275,7 @@ int main(void)
         cmocka_unit_test(test_jpeg_frame),
         cmocka_unit_test(test_auth),
         cmocka_unit_test(test_max_clients),
+        cmocka_unit_test(test_hangup_while_loading),
         cmocka_unit_test(test_isolation),
         cmocka_unit_test(test_stream),
         cmocka_unit_test(test_load),
