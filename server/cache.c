@@ -24,7 +24,7 @@
 #include "sd_hash.h"
 
 /* Bump when the layout of prepared.h or the meaning of any prepared value changes. */
-#define CACHE_VERSION 3u
+#define CACHE_VERSION 4u
 #define CACHE_MAGIC "SPLATDC\0"
 #define CACHE_BLOCK_OFFSET 4096u
 

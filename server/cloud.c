@@ -158,6 +158,8 @@ int pc_finalize(pc_raw *raw, pc_cloud *out, const char *path, sd_err *err)
     out->scalar = raw->scalar;
     memcpy(out->scalar_name, raw->scalar_name, sizeof out->scalar_name);
     memcpy(out->format, raw->format, sizeof out->format);
+    out->has_viewpoint = raw->has_viewpoint;
+    memcpy(out->viewpoint, raw->viewpoint, sizeof out->viewpoint);
     raw->rgba = NULL;
     raw->normal = NULL;
     raw->intensity = raw->radius = raw->scalar = NULL;

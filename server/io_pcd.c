@@ -57,6 +57,7 @@ typedef struct pcd_header {
     size_t n_size, n_type, n_count;
     int ln_version, ln_fields, ln_size, ln_type, ln_count, ln_width, ln_height, ln_points;
     int ln_data, ln_viewpoint;
+    double viewpoint[7];   /* tx ty tz qw qx qy qz, when ln_viewpoint */
     uint64_t width, height, points;
     char version[8];
     char data[24];
@@ -148,6 +149,26 @@ static int header_u64(const char *path, const char *kw, int line, const char *p,
     if (!next_tok(&p, end, &t) || tok_u64(&t, v) != 0 || count_toks(p, end) != 0)
         return sd_errf(err, SD_EFORMAT, "%s: %s at line %d needs one unsigned integer", path, kw,
                        line);
+    return 0;
+}
+
+/* Reads VIEWPOINT's seven finite numbers into h->viewpoint. */
+static int header_viewpoint(const char *path, pcd_header *h, int line, const char *p,
+                            const char *end, sd_err *err)
+{
+    int k = 0;
+    tok t;
+    while (next_tok(&p, end, &t)) {
+        double v;
+        if (k == 7 || pc__parse_num(t.s, t.s + t.n, &v) != t.s + t.n || !isfinite(v)) {
+            k = -1;
+            break;
+        }
+        h->viewpoint[k++] = v;
+    }
+    if (k != 7)
+        return sd_errf(err, SD_EFORMAT, "%s: VIEWPOINT at line %d needs 7 finite numbers "
+                       "(tx ty tz qw qx qy qz)", path, line);
     return 0;
 }
 
@@ -308,11 +329,10 @@ static int parse_header_lines(const char *path, const uint8_t *data, size_t size
             if (!(rc = seen(path, "POINTS", &h->ln_points, line, err)))
                 rc = header_u64(path, "POINTS", line, p, e, &h->points, err);
         } else if (tok_is(&kw, "VIEWPOINT")) {
-            /* The sensor pose; the cloud is kept in the file's frame, so it is only checked. */
-            if (!(rc = seen(path, "VIEWPOINT", &h->ln_viewpoint, line, err)) &&
-                count_toks(p, e) != 7)
-                rc = sd_errf(err, SD_EFORMAT, "%s: VIEWPOINT at line %d needs 7 numbers", path,
-                             line);
+            /* The sensor pose (translation, then a rotation quaternion); the cloud stays in
+             * the file's frame, and prep orients normals towards the translation. */
+            if (!(rc = seen(path, "VIEWPOINT", &h->ln_viewpoint, line, err)))
+                rc = header_viewpoint(path, h, line, p, e, err);
         } else if (tok_is(&kw, "DATA")) {
             if (!(rc = header_data(path, h, line, p, e, err))) {
                 h->ln_data = line;
@@ -791,6 +811,15 @@ int pc_read_pcd(const char *path, pc_raw *raw, sd_err *err)
     finish_colours(&rd, raw);
     snprintf(raw->format, sizeof raw->format, "PCD%s%s %s", h.version[0] ? " " : "", h.version,
              h.data);
+    /* PCL writes the identity pose when it knows no sensor (its default): only another pose
+     * says where the sensor was. */
+    static const double identity[7] = {0, 0, 0, 1, 0, 0, 0};
+    int posed = 0;
+    for (int k = 0; k < 7; k++) posed |= h.viewpoint[k] != identity[k];
+    if (h.ln_viewpoint && posed) {
+        raw->has_viewpoint = 1;
+        memcpy(raw->viewpoint, h.viewpoint, sizeof raw->viewpoint);
+    }
 out:
     free(rd.col16);
     header_free(&h);

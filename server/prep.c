@@ -73,13 +73,18 @@ typedef struct job {
     float scatter_cap;      /* radius limit of points whose neighbourhood is no surface */
     int need_normal, need_radius;
     double centroid[3];
+    int has_vp;             /* orient towards vp (the sensor, local coordinates) */
+    double vp[3];
     worker *w;
 } job;
 
-/* Orients the unit normal n of point p by the rule of prep.h. */
-static void orient(float n[3], const float p[3], const double c[3])
+/* Orients the unit normal n of point p by the rule of prep.h: towards the sensor at vp when
+ * has_vp, else away from the centroid c; where that direction says little (n within 10 degrees
+ * of perpendicular to it), up. */
+static void orient(float n[3], const float p[3], const double c[3], int has_vp, const double vp[3])
 {
-    double u[3] = {p[0] - c[0], p[1] - c[1], p[2] - c[2]};
+    double u[3];
+    for (int a = 0; a < 3; a++) u[a] = has_vp ? vp[a] - p[a] : p[a] - c[a];
     double d = n[0] * u[0] + n[1] * u[1] + n[2] * u[2];
     double ul = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
     int flip;
@@ -137,7 +142,7 @@ static int chunk_normals(void *ctx, size_t c, int tid, sd_err *err)
             float *n = jb->need_normal ? p->normal + 3 * pi : scratch;
             prep_pca_normal(p->pos, (uint32_t)pi, idx + i * (size_t)K, K, n,
                             jb->svar ? jb->svar + pi : NULL);
-            if (jb->need_normal) orient(n, p->pos + 3 * pi, jb->centroid);
+            if (jb->need_normal) orient(n, p->pos + 3 * pi, jb->centroid, jb->has_vp, jb->vp);
         }
         w->t_normal += now_s() - t1;
     }
@@ -323,6 +328,10 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
     double t0 = now_s();
     prep_progress_begin(&pr, d.progress, d.user, "reorder");
     rc = reorder(in, K, out, jb.centroid, err);
+    if (in->has_viewpoint) { /* into the cloud's local coordinates, as the positions */
+        jb.has_vp = 1;
+        for (int a = 0; a < 3; a++) jb.vp[a] = in->viewpoint[a] - in->offset[a];
+    }
     if (rc != 0) goto fail;
     prep_progress_end(&pr);
     out->stats.t_reorder = now_s() - t0;

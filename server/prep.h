@@ -8,9 +8,11 @@
  *  2. k nearest neighbours of every point (knn.h: the Morton-cell grid by default, FLANN's
  *     exact single kd-tree on request), on desc.threads threads, in chunks of 16384 queries.
  *  3. Normals, only when the file has none: PCA of the point and its k neighbours (eigenvector
- *     of the covariance's smallest eigenvalue, pca.h). Orientation rule: away from the cloud's
- *     centroid c, n . (p - c) >= 0; where that says little (n within 10 degrees of perpendicular
- *     to p - c, e.g. any plane through c) the normal faces up instead: n_z >= 0, or when
+ *     of the covariance's smallest eigenvalue, pca.h). Orientation rule: towards the sensor s
+ *     when the file gives its position (pc_cloud.has_viewpoint: a PCD VIEWPOINT other than
+ *     PCL's identity default), n . (s - p) >= 0; otherwise away from the cloud's centroid c,
+ *     n . (p - c) >= 0. Where that says little (n within 10 degrees of perpendicular to the
+ *     direction, e.g. any plane through c) the normal faces up instead: n_z >= 0, or when
  *     |n_z| < 0.1 (near-vertical surfaces) n_y >= 0, or when |n_y| < 0.1 too, n_x >= 0.
  *  4. Radius, only when the file has none: r = 2 R / sqrt(K), R = distance to the farthest of
  *     the K neighbours (Soft Transparency eq. 20 as DESIGN.md interprets it), then limited to

@@ -430,6 +430,41 @@ static void test_ascii_fields(void **state)
     pc_cloud_free(&c);
 }
 
+/* VIEWPOINT: a pose other than PCL's identity default gives the sensor's position (prep
+ * orients normals towards it); the identity says nothing; a malformed line is an error naming
+ * the keyword and the line. */
+static void test_viewpoint(void **state)
+{
+    (void)state;
+    const char *fmt = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
+                      "WIDTH 2\nHEIGHT 1\nVIEWPOINT %s\nPOINTS 2\nDATA ascii\n1 2 3\n4 5 6\n";
+    char text[512];
+    pc_cloud c;
+    snprintf(text, sizeof text, fmt, "1.5 -2 1e1 1 0 0 0");
+    load_text("vp.pcd", text, &c);
+    assert_int_equal(c.has_viewpoint, 1);
+    assert_true(c.viewpoint[0] == 1.5 && c.viewpoint[1] == -2 && c.viewpoint[2] == 10);
+    pc_cloud_free(&c);
+    snprintf(text, sizeof text, fmt, "0.0 0 0 1.0 0 0 0");
+    load_text("vp_identity.pcd", text, &c);
+    assert_int_equal(c.has_viewpoint, 0);
+    pc_cloud_free(&c);
+    /* The mug was captured by a camera at the origin, its pose rotated: known. */
+    char p[1024];
+    tu_load_ok(tu_data("table_scene_mug_stereo_textured.pcd", p, sizeof p), &c);
+    assert_int_equal(c.has_viewpoint, 1);
+    assert_true(c.viewpoint[0] == 0 && c.viewpoint[1] == 0 && c.viewpoint[2] == 0);
+    pc_cloud_free(&c);
+    const char *bad[] = {"0 0 0 1 0 0", "0 0 x 1 0 0 0", "0 0 nan 1 0 0 0", "0 0 0 1 0 0 0 0"};
+    for (int i = 0; i < 4; i++) {
+        snprintf(text, sizeof text, fmt, bad[i]);
+        expect_fail_bytes("vp_bad.pcd", text, strlen(text), SD_EFORMAT);
+        sd_err e = {0};
+        assert_int_equal(pc_load(tmp_path("vp_bad.pcd", p, sizeof p), &c, &e), SD_EFORMAT);
+        assert_non_null(strstr(e.msg, "VIEWPOINT at line 8"));
+    }
+}
+
 static void test_binary_types(void **state)
 {
     (void)state;
@@ -710,6 +745,7 @@ int main(void)
         cmocka_unit_test(test_rops_ascii),
         cmocka_unit_test(test_autzen_binary),
         cmocka_unit_test(test_ascii_fields),
+        cmocka_unit_test(test_viewpoint),
         cmocka_unit_test(test_binary_types),
         cmocka_unit_test(test_split_rgb_16bit),
         cmocka_unit_test(test_truncated_files),

@@ -512,6 +512,40 @@ static void test_radius_sigma_grid(void **state)
     pc_cloud_free(&c);
 }
 
+/* Normals face the sensor when the file gives its position: a plane z = 0 seen from below
+ * (sensor at z = -3, file coordinates, with an offset so the local frame differs) gets -z
+ * normals, from above +z; without a sensor the plane through the centroid takes the up rule
+ * (+z). */
+static void test_normals_face_sensor(void **state)
+{
+    (void)state;
+    const int side = 32;
+    const double off[3] = {1000, -500, 20};
+    for (int v = 0; v < 3; v++) {
+        pc_cloud c = make_cloud((size_t)side * side);
+        for (int i = 0; i < side; i++)
+            for (int j = 0; j < side; j++) {
+                float *q = c.pos + 3 * ((size_t)i * side + j);
+                q[0] = (float)(i * 0.5); q[1] = (float)(j * 0.5); q[2] = 0;
+            }
+        memcpy(c.offset, off, sizeof off);
+        if (v < 2) {
+            c.has_viewpoint = 1;
+            c.viewpoint[0] = off[0] + 8;
+            c.viewpoint[1] = off[1] + 8;
+            c.viewpoint[2] = off[2] + (v == 0 ? -3 : 3);
+        }
+        prep_desc d = {.k = 24, .threads = 2};
+        pc_prepared p;
+        sd_err err = {0};
+        assert_int_equal(prep_run(&c, &d, &p, &err), 0);
+        float want = v == 0 ? -1.0f : 1.0f;
+        for (size_t i = 0; i < p.n; i++) assert_true(fabsf(p.normal[3 * i + 2] - want) < 1e-5f);
+        pc_prepared_free(&p);
+        pc_cloud_free(&c);
+    }
+}
+
 /* The grid plane above plus one stray point 20 units above its middle. Eq. 20 alone would give
  * the stray point r = 2 R / sqrt(24) with R ~ 20 (a disc hiding the plane); the limit holds it
  * to PREP_RADIUS_CAP times its neighbours' median radius (the plane's r), while F, computed with
@@ -1072,6 +1106,7 @@ int main(void)
         cmocka_unit_test(test_normals_sphere),
         cmocka_unit_test(test_file_normals_kept),
         cmocka_unit_test(test_radius_sigma_grid),
+        cmocka_unit_test(test_normals_face_sensor),
         cmocka_unit_test(test_radius_outlier_limited),
         cmocka_unit_test(test_radius_scatter_limited),
         cmocka_unit_test(test_field_vegetation_vs_plane),
