@@ -77,16 +77,28 @@ else
         --size "$size" --default-frames 3
     [ -n "$radius" ] && set -- "$@" --radius "$radius"
     pv_load=$(loadavg)
-    if command -v xvfb-run > /dev/null 2>&1; then
-        pv_how="pvbatch under xvfb-run"
-        xvfb-run -a -s "-screen 0 1920x1080x24" pvbatch "$@" > "$tmp/pv.out" 2> "$tmp/pv.err" \
-            && pv_rc=0 || pv_rc=$?
-    else
-        pv_how="pvbatch --force-offscreen-rendering"
-        pvbatch --force-offscreen-rendering "$@" > "$tmp/pv.out" 2> "$tmp/pv.err" \
-            && pv_rc=0 || pv_rc=$?
-    fi
-    if [ "$pv_rc" -ne 0 ] || ! grep -q '^pv: ' "$tmp/pv.out"; then
+    # pvbatch under Xvfb occasionally aborts at start-up (seen once: exit 134); one retry, and
+    # the report says when it took one.
+    pv_tries=0
+    pv_rc=1
+    while [ "$pv_rc" -ne 0 ] && [ "$pv_tries" -lt 2 ]; do
+        pv_tries=$((pv_tries + 1))
+        if command -v xvfb-run > /dev/null 2>&1; then
+            pv_how="pvbatch under xvfb-run"
+            xvfb-run -a -s "-screen 0 1920x1080x24" pvbatch "$@" > "$tmp/pv.out" \
+                2> "$tmp/pv.err" && pv_rc=0 || pv_rc=$?
+        else
+            pv_how="pvbatch --force-offscreen-rendering"
+            pvbatch --force-offscreen-rendering "$@" > "$tmp/pv.out" 2> "$tmp/pv.err" \
+                && pv_rc=0 || pv_rc=$?
+        fi
+        grep -q '^pv: ' "$tmp/pv.out" || [ "$pv_rc" -ne 0 ] || pv_rc=1
+        if [ "$pv_rc" -ne 0 ] && [ "$pv_tries" -lt 2 ]; then
+            echo "bench_render: $pv_how failed (exit $pv_rc): $(grep -v '^ *$' "$tmp/pv.err" | tail -1); retrying once" >&2
+        fi
+    done
+    [ "$pv_tries" -gt 1 ] && pv_how="$pv_how, second try"
+    if [ "$pv_rc" -ne 0 ]; then
         pv_status="ParaView: failed ($pv_how, exit $pv_rc): $(grep -v '^ *$' "$tmp/pv.err" | tail -1)"
     fi
 fi
