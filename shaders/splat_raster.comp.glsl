@@ -67,6 +67,11 @@ uniform usamplerBuffer u_src;  // R32UI: rgba8 (u_color 0) or float bits of fiel
 struct Px { ACC r, g, b, w; ACCI nx, ny, nz; uint pad; };
 layout(std430, binding = 4) restrict buffer Frame { Px px[]; };
 layout(std430, binding = 0) restrict buffer Keys { uint keys[]; };
+// The same keys as a buffer texture for the reads, a gather on llvmpipe (storage-buffer reads
+// go lane by lane): pass 2 only reads them; pass 1 tests against them before its atomicMax, and
+// keys only grow during the pass, so a stale read costs a needless atomic, never a lost one.
+// ~5 % of a close-up frame.
+uniform usamplerBuffer u_keys;  // R32UI
 
 // The raster and big lists: dispatch arguments for their passes (groups[0] = min(work groups,
 // 65535)), the count and the point indices.
@@ -235,9 +240,9 @@ void put(Uni U, int x, int y, float z, float w, vec3 col, vec3 n, float r)
     uint idx = uint(y - U.stripe.x) * uint(U.size.x) + uint(x);
 #if PASS == 1
     uint key = ~floatBitsToUint(z);
-    if (key > keys[idx]) atomicMax(keys[idx], key);
+    if (key > texelFetch(u_keys, int(idx)).x) atomicMax(keys[idx], key);
 #else
-    float zv = uintBitsToFloat(~keys[idx]);
+    float zv = uintBitsToFloat(~texelFetch(u_keys, int(idx)).x);
     if (z > zv + U.eps * r) return;
 #if FLOAT_ATOMICS
     atomicAdd(px[idx].r, w * col.r);
