@@ -11,10 +11,10 @@
  *   gl       GL_POINTS with the depth test (points.vert + points.frag), one glMultiDrawArrays
  *            over the visible ranges. 3-6x slower than packed on llvmpipe (2 cores, 1M points).
  * SPLATD_POINTS_RASTER=auto|packed|exact|gl picks one when the pipeline is created; auto
- * (the default) takes packed, else exact, else gl when a per-pixel buffer of the frame or the
- * cloud's position buffer passes the largest storage block the driver allows, or the cloud
- * passes GL_MAX_TEXTURE_BUFFER_SIZE / 3 points (the raster pass reads positions through an
- * R32F buffer texture, lib_fetch.glsl: a gather on llvmpipe). All give the
+ * (the default) takes packed, else exact, else gl when a per-pixel buffer of the frame passes
+ * the largest storage block the driver allows, or the cloud passes
+ * GL_MAX_TEXTURE_BUFFER_SIZE / 3 points (both compute passes read the cloud through buffer
+ * textures, positions as R32F, lib_fetch.glsl: gathers on llvmpipe). All give the
  * same image up to pixel-edge rounding: a point covers the pixels whose centres lie in the
  * square of side point_size around its projection, the nearest point wins (packed: up to its
  * depth quantum), ties go to the lower index. */
@@ -41,6 +41,7 @@ typedef struct points_state {
     GLuint pos_tex;                   /* buffer texture over the positions (R32F) */
     GLuint depth_tex;                 /* buffer texture over depth_buf (R32UI) */
     GLuint range_tex;                 /* buffer texture over range_buf (RG32UI) */
+    GLuint index_tex, src_tex, nrm_tex; /* the resolve's: index_buf, colour source, normals */
     uint64_t pix_cap, range_cap;      /* elements the buffers hold */
     uint32_t *range_tmp;              /* CPU staging for the range table (uvec2 per range) */
     /* uniform locations */
@@ -48,6 +49,7 @@ typedef struct points_state {
     GLint r_viewproj, r_size, r_point_size, r_znear, r_zfar, r_total, r_nranges, r_first;
     GLint r_stride, r_threads, r_per, r_pass, r_index_bits, r_log_near, r_log_scale, r_pos, r_depth, r_ranges;
     GLint s_width, s_color, s_znear, s_zfar, s_index_bits, s_viewproj;
+    GLint s_tex[5];                   /* u_pos, u_nrm, u_src, u_depth, u_index */
 } points_state;
 
 static void points_destroy(const gl_api *gl, void *state)
@@ -61,6 +63,8 @@ static void points_destroy(const gl_api *gl, void *state)
     if (s->pos_tex) gl->DeleteTextures(1, &s->pos_tex);
     if (s->depth_tex) gl->DeleteTextures(1, &s->depth_tex);
     if (s->range_tex) gl->DeleteTextures(1, &s->range_tex);
+    GLuint tex[3] = {s->index_tex, s->src_tex, s->nrm_tex};
+    if (tex[0]) gl->DeleteTextures(3, tex);
     GLuint bufs[3] = {s->depth_buf, s->index_buf, s->range_buf};
     gl->DeleteBuffers(3, bufs);
     free(s->range_tmp);
@@ -136,6 +140,8 @@ static int points_create(const gl_api *gl, const rnd_shaders *sh, void **state, 
     s->s_color = gl_uniform(gl, s->prog_resolve, "u_color");
     s->s_znear = gl_uniform(gl, s->prog_resolve, "u_znear");
     s->s_zfar = gl_uniform(gl, s->prog_resolve, "u_zfar");
+    static const char *const stex[5] = {"u_pos", "u_nrm", "u_src", "u_depth", "u_index"};
+    for (int k = 0; k < 5; k++) s->s_tex[k] = gl_uniform(gl, s->prog_resolve, stex[k]);
     if (gl_check(gl, "creating the points pipeline", err) < 0) goto fail;
     *state = s;
     return 0;
@@ -233,11 +239,11 @@ static int render_compute(const gl_api *gl, points_state *s, const rnd_gpu_cloud
         return sd_errf(err, SD_ELIMIT, "a %dx%d frame needs a %llu-byte storage buffer, over the "
                        "driver's %lld; use SPLATD_POINTS_RASTER=gl", v->width, v->height,
                        (unsigned long long)(npix * 4), (long long)s->max_ssbo);
-    if (c->n * 3 > (uint64_t)s->max_texels || c->n * 12 > (uint64_t)s->max_ssbo)
+    if (c->n * 3 > (uint64_t)s->max_texels)
         return sd_errf(err, SD_ELIMIT, "%llu points are more than the compute rasteriser reads "
-                       "(%lld texels of 3 floats, %lld-byte storage blocks); use "
+                       "(buffer textures of %lld texels, 3 a point); use "
                        "SPLATD_POINTS_RASTER=gl", (unsigned long long)c->n,
-                       (long long)s->max_texels, (long long)s->max_ssbo);
+                       (long long)s->max_texels);
     if (npix > s->pix_cap) {
         uint64_t cap = s->pix_cap;
         ensure_buffer(gl, s->depth_buf, &cap, npix, 4);
@@ -274,9 +280,9 @@ static int render_compute(const gl_api *gl, points_state *s, const rnd_gpu_cloud
                                GL_UNSIGNED_INT, &ones);
     }
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
-    const GLuint bind[8] = {c->pos,       c->rgba,      c->normal,    c->field,
-                            c->intensity, s->depth_buf, s->index_buf, s->range_buf};
-    for (GLuint i = 0; i < 8; i++) gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, i, bind[i]);
+    /* The per-pixel buffers; everything else is read through buffer textures. */
+    gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 5, s->depth_buf);
+    gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, s->index_buf);
 
     uint32_t total = (uint32_t)v->points_visible;
     uint32_t gx, gy;
@@ -325,7 +331,27 @@ static int render_compute(const gl_api *gl, points_state *s, const rnd_gpu_cloud
             gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
         }
     }
+    /* The resolve reads through buffer textures (points_resolve.frag): units 0 (positions) and
+     * 1 (depth) as bound above, 3 index, 4 colour source, 5 normals. */
+    if (!s->index_tex) {
+        GLuint tex[3];
+        gl->GenTextures(3, tex);
+        s->index_tex = tex[0], s->src_tex = tex[1], s->nrm_tex = tex[2];
+    }
+    GLuint src = p->color == SP_COLOR_FIELD ? c->field
+               : p->color == SP_COLOR_INTENSITY ? c->intensity : c->rgba;
+    const struct { GLuint tex; GLenum fmt; GLuint buf; } rt[3] = {
+        {s->index_tex, GL_R32UI, s->index_buf}, {s->src_tex, GL_R32UI, src},
+        {s->nrm_tex, GL_R32F, c->normal}};
+    for (int k = 0; k < 3; k++) {
+        gl->ActiveTexture(GL_TEXTURE3 + (GLenum)k);
+        gl->BindTexture(GL_TEXTURE_BUFFER, rt[k].tex);
+        gl->TexBuffer(GL_TEXTURE_BUFFER, rt[k].fmt, rt[k].buf);
+    }
+    gl->ActiveTexture(GL_TEXTURE0);
     gl->UseProgram(s->prog_resolve);
+    static const GLint sunit[5] = {0, 5, 4, 1, 3};
+    for (int k = 0; k < 5; k++) gl->Uniform1i(s->s_tex[k], sunit[k]);
     gl->Uniform1i(s->s_width, v->width);
     gl->Uniform1ui(s->s_index_bits, ibits);
     gl->UniformMatrix4fv(s->s_viewproj, 1, GL_FALSE, v->viewproj);
@@ -338,8 +364,9 @@ static int render_compute(const gl_api *gl, points_state *s, const rnd_gpu_cloud
     gl->DrawArrays(GL_TRIANGLES, 0, 3);
     gl->BindVertexArray(0);
     gl->Disable(GL_SCISSOR_TEST);
-    for (GLuint i = 0; i < 8; i++) gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, i, 0);
-    for (int k = 2; k >= 0; k--) {
+    gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 5, 0);
+    gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, 0);
+    for (int k = 5; k >= 0; k--) {
         gl->ActiveTexture(GL_TEXTURE0 + (GLenum)k);
         gl->BindTexture(GL_TEXTURE_BUFFER, 0);
     }
@@ -358,8 +385,7 @@ static int points_render(const gl_api *gl, void *state, const rnd_gpu_cloud *c,
     uint32_t ibits = index_bits(c->n);
     int packs = 32 - ibits >= PACKED_MIN_DEPTH_BITS;
     if (mode == RASTER_AUTO) {
-        if (npix * 4 > (uint64_t)s->max_ssbo || c->n * 12 > (uint64_t)s->max_ssbo ||
-            c->n * 3 > (uint64_t)s->max_texels)
+        if (npix * 4 > (uint64_t)s->max_ssbo || c->n * 3 > (uint64_t)s->max_texels)
             mode = RASTER_GL;
         else
             mode = packs ? RASTER_PACKED : RASTER_EXACT;
