@@ -60,37 +60,6 @@ static int teardown(void **state)
     return 0;
 }
 
-/* A cloud of n points with rgb, in nb batches of equal size (bounds computed), positions
- * given in local coordinates by the caller after this returns; call finish_cloud then. */
-static void new_cloud(pc_prepared *pc, uint64_t n, uint64_t nb)
-{
-    memset(pc, 0, sizeof *pc);
-    pc->n = n;
-    pc->attrs = PC_ATTR_RGB | PC_ATTR_NORMAL | PC_ATTR_RADIUS | PC_ATTR_F | PC_ATTR_INTENSITY;
-    pc->nbatches = nb;
-    sd_err err = {0};
-    assert_int_equal(pc_prepared_alloc(pc, &err), 0);
-    for (uint64_t i = 0; i < n; i++) {
-        pc->normal[3 * i + 2] = 1;
-        pc->radius[i] = 0.01f;
-        for (int k = 0; k < 4; k++) pc->rgba[4 * i + k] = 255;
-    }
-}
-
-/* Batches of equal size and all bounds, from the positions. */
-static void finish_cloud(pc_prepared *pc)
-{
-    pc_prepared_make_batches(pc, (uint32_t)((pc->n + pc->nbatches - 1) / pc->nbatches));
-    for (int k = 0; k < 3; k++) {
-        pc->bmin[k] = INFINITY, pc->bmax[k] = -INFINITY;
-        for (uint64_t b = 0; b < pc->nbatches; b++) {
-            pc->bmin[k] = fmin(pc->bmin[k], pc->batches[b].bmin[k] + OFF[k]);
-            pc->bmax[k] = fmax(pc->bmax[k], pc->batches[b].bmax[k] + OFF[k]);
-        }
-    }
-    memcpy(pc->offset, OFF, sizeof OFF);
-}
-
 static void set_point(pc_prepared *pc, uint64_t i, float x, float y, float z, uint8_t r,
                       uint8_t g, uint8_t b)
 {
@@ -136,10 +105,10 @@ static void test_projection_and_depth(void **state)
     const float P[N][3] = {{0, 0, 0},       {0.731f, 0.2f, 1.3f},  {-1.1f, 0.83f, -0.7f},
                            {1.9f, -1.4f, -2.2f}, {-0.37f, -0.91f, 2.6f}, {0.05f, 1.5f, -4.0f}};
     pc_prepared pc;
-    new_cloud(&pc, N, 1);
+    tu_new_cloud(&pc, N, 1);
     for (int i = 0; i < N; i++)
         set_point(&pc, i, P[i][0], P[i][1], P[i][2], (uint8_t)(30 + 40 * i), 200, 10);
-    finish_cloud(&pc);
+    tu_finish_cloud(&pc, OFF);
     rnd_camera cam = cam_down(0, 0, 5, 60);
     sp_params p;
     sp_params_defaults(&p);
@@ -203,11 +172,11 @@ static void test_nearer_wins(void **state)
     fixture *fx = *state;
     for (int order = 0; order < 2; order++) {
         pc_prepared pc;
-        new_cloud(&pc, 2, 1);
+        tu_new_cloud(&pc, 2, 1);
         /* Both on the view axis at x = y = 0.3 / depth, so they hit one pixel. */
         set_point(&pc, order, 0.3f, 0.3f, 1.0f, 255, 0, 0);   /* near: depth 4 */
         set_point(&pc, 1 - order, 0.6f, 0.6f, -3.0f, 0, 0, 255); /* far: depth 8 */
-        finish_cloud(&pc);
+        tu_finish_cloud(&pc, OFF);
         rnd_camera cam = cam_down(0, 0, 5, 50);
         sp_params p;
         sp_params_defaults(&p);
@@ -237,12 +206,12 @@ static void test_nearer_wins(void **state)
 static void grid_cloud(pc_prepared *pc, int k, float s, uint64_t nb, uint8_t r, uint8_t g,
                        uint8_t b)
 {
-    new_cloud(pc, (uint64_t)k * k, nb);
+    tu_new_cloud(pc, (uint64_t)k * k, nb);
     for (int j = 0; j < k; j++)
         for (int i = 0; i < k; i++)
             set_point(pc, (uint64_t)j * k + i, (i - (k - 1) / 2.0f) * s, (j - (k - 1) / 2.0f) * s,
                       0, r, g, b);
-    finish_cloud(pc);
+    tu_finish_cloud(pc, OFF);
 }
 
 /* Culling: a cloud behind the camera or beside the frustum draws nothing; of two batches one
@@ -408,7 +377,7 @@ static void test_backends_agree(void **state)
     fixture *fx = *state;
     enum { N = 20000 };
     pc_prepared pc;
-    new_cloud(&pc, N, 5);
+    tu_new_cloud(&pc, N, 5);
     uint32_t s = 12345;
     for (uint64_t i = 0; i < N; i++) {
         float v[3];
@@ -418,7 +387,7 @@ static void test_backends_agree(void **state)
         }
         set_point(&pc, i, v[0], v[1], v[2], (uint8_t)(i * 7), (uint8_t)(i * 13), (uint8_t)(i >> 4));
     }
-    finish_cloud(&pc);
+    tu_finish_cloud(&pc, OFF);
     sp_params p;
     sp_params_defaults(&p);
     p.pipeline = SP_PIPE_POINTS;

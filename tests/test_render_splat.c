@@ -66,37 +66,6 @@ static int teardown(void **state)
     return 0;
 }
 
-/* An n-point cloud with every attribute, unit +z normals, white, radius 0.01, in batches of at
- * most PC_BATCH_POINTS; the caller sets positions (local coordinates) and calls finish_cloud. */
-static void new_cloud(pc_prepared *pc, uint64_t n)
-{
-    memset(pc, 0, sizeof *pc);
-    pc->n = n;
-    pc->attrs = PC_ATTR_RGB | PC_ATTR_NORMAL | PC_ATTR_RADIUS | PC_ATTR_F | PC_ATTR_INTENSITY;
-    pc->nbatches = (n + PC_BATCH_POINTS - 1) / PC_BATCH_POINTS;
-    sd_err err = {0};
-    assert_int_equal(pc_prepared_alloc(pc, &err), 0);
-    for (uint64_t i = 0; i < n; i++) {
-        pc->normal[3 * i + 2] = 1;
-        pc->radius[i] = 0.01f;
-        for (int k = 0; k < 4; k++) pc->rgba[4 * i + k] = 255;
-    }
-}
-
-/* Batches of consecutive points and all bounds, from the positions. */
-static void finish_cloud(pc_prepared *pc)
-{
-    pc_prepared_make_batches(pc, PC_BATCH_POINTS);
-    for (int k = 0; k < 3; k++) {
-        pc->bmin[k] = INFINITY, pc->bmax[k] = -INFINITY;
-        for (uint64_t b = 0; b < pc->nbatches; b++) {
-            pc->bmin[k] = fmin(pc->bmin[k], pc->batches[b].bmin[k] + OFF[k]);
-            pc->bmax[k] = fmax(pc->bmax[k], pc->batches[b].bmax[k] + OFF[k]);
-        }
-    }
-    memcpy(pc->offset, OFF, sizeof OFF);
-}
-
 /* Fills points [first, first + nx * ny) with a regular grid in the plane z = z0 centred on the
  * origin, spacing h, radius r, colour rgb (or a checkerboard of `cell` points with rgb and rgb2
  * when cell > 0). */
@@ -225,9 +194,9 @@ static void check_hole_filling(rnd_ctx *rc, int ewa)
     const double spacing_px[2] = {1.6, 5.0}, rfac[2] = {1.0, 1.2};
     for (int k = 0; k < 2; k++) {
         pc_prepared pc;
-        new_cloud(&pc, (uint64_t)N * N);
+        tu_new_cloud(&pc, (uint64_t)N * N, 0);
         grid(&pc, 0, N, N, h, 0, h * (float)rfac[k], white, white, 0);
-        finish_cloud(&pc);
+        tu_finish_cloud(&pc, OFF);
         uint32_t id = tu_upload(rc, &pc);
         pc_prepared_free(&pc);
         double dist = h * px_per_unit_at_1 / spacing_px[k];
@@ -284,14 +253,14 @@ static void check_constant_colour(rnd_ctx *r, const char *label, int ewa)
     const double spacing_px[3] = {1.3, 6.0, 20.0};
     for (int k = 0; k < 3; k++) {
         pc_prepared pc;
-        new_cloud(&pc, (uint64_t)N * N);
+        tu_new_cloud(&pc, (uint64_t)N * N, 0);
         grid(&pc, 0, N, N, h, 0, h * 1.3f, col, col, 0);
         uint64_t seed = 12345;
         for (uint64_t i = 0; i < pc.n; i++) {
             pc.pos[3 * i] += 0.3f * h * rng_unit(&seed);
             pc.pos[3 * i + 1] += 0.3f * h * rng_unit(&seed);
         }
-        finish_cloud(&pc);
+        tu_finish_cloud(&pc, OFF);
         uint32_t id = tu_upload(r, &pc);
         pc_prepared_free(&pc);
         rnd_camera cam = cam_at(0, 0, h * px_per_unit_at_1 / spacing_px[k], 0, 0, 0, 60, W, H);
@@ -336,10 +305,10 @@ static void check_two_planes(rnd_ctx *r, const char *label, int ewa)
     const float h = 0.01f;
     const uint8_t ca[3] = {220, 40, 40}, cb[3] = {40, 40, 220};
     pc_prepared pc;
-    new_cloud(&pc, (uint64_t)NA * NA + (uint64_t)NB * NB);
+    tu_new_cloud(&pc, (uint64_t)NA * NA + (uint64_t)NB * NB, 0);
     grid(&pc, 0, NB, NB, h, -0.3f, h * 1.3f, cb, cb, 0);
     grid(&pc, (uint64_t)NB * NB, NA, NA, h, 0, h * 1.3f, ca, ca, 0);
-    finish_cloud(&pc);
+    tu_finish_cloud(&pc, OFF);
     uint32_t id = tu_upload(r, &pc);
     pc_prepared_free(&pc);
     const double dist = 1.6;
@@ -425,7 +394,7 @@ static void test_stripes(void **state)
     enum { N = 100 };
     const float h = 0.01f;
     pc_prepared pc;
-    new_cloud(&pc, (uint64_t)N * N + 1);
+    tu_new_cloud(&pc, (uint64_t)N * N + 1, 0);
     const uint8_t a[3] = {200, 150, 50}, b[3] = {50, 100, 200};
     grid(&pc, 0, N, N, h, 0, h * 1.3f, a, b, 7);
     uint64_t seed = 777;
@@ -438,7 +407,7 @@ static void test_stripes(void **state)
     pc.pos[3 * big] = 0.1f, pc.pos[3 * big + 1] = 0.05f, pc.pos[3 * big + 2] = 0.2f;
     pc.normal[3 * big + 1] = 0.6f, pc.normal[3 * big + 2] = 0.8f;
     pc.radius[big] = 0.15f;
-    finish_cloud(&pc);
+    tu_finish_cloud(&pc, OFF);
     uint32_t id1 = tu_upload(fx->egl, &pc), id2 = tu_upload(rs, &pc);
     pc_prepared_free(&pc);
     const double dists[2] = {1.0, 0.35};
@@ -509,10 +478,10 @@ static void test_ewa_antialiasing(void **state)
     const float h = 0.01f;
     const uint8_t wh[3] = {240, 240, 240}, bk[3] = {20, 20, 20};
     pc_prepared pc;
-    new_cloud(&pc, (uint64_t)NX * NY);
+    tu_new_cloud(&pc, (uint64_t)NX * NY, 0);
     grid(&pc, 0, NX, NY, h, 0, h, wh, bk, 2);
     for (uint64_t i = 0; i < pc.n; i++) pc.pos[3 * i + 1] += 0.5f * NY * h; /* y in [0, 10] */
-    finish_cloud(&pc);
+    tu_finish_cloud(&pc, OFF);
     uint32_t id = tu_upload(fx->egl, &pc);
     pc_prepared_free(&pc);
     rnd_camera cam = cam_at(0, -0.5, 0.3, 0, 10, 0, 40, W, H);
@@ -564,10 +533,10 @@ static void test_inclined_footprint(void **state)
     for (int km = 0; km < 4; km++) {
         int k = km & 1, ewa = km < 2 ? SP_EWA_EXACT : SP_EWA_SPLIT;
         pc_prepared pc;
-        new_cloud(&pc, 1);
+        tu_new_cloud(&pc, 1, 0);
         pc.normal[0] = 0, pc.normal[1] = (float)sin(theta), pc.normal[2] = (float)cos(theta);
         pc.radius[0] = (float)(radius_px[k] / px_per_unit);
-        finish_cloud(&pc);
+        tu_finish_cloud(&pc, OFF);
         uint32_t id = tu_upload(fx->egl, &pc);
         pc_prepared_free(&pc);
         rnd_camera cam = cam_at(0, 0, dist, 0, 0, 0, 20, W, H);
@@ -617,7 +586,7 @@ static uint32_t weight_scene(rnd_ctx *r, rnd_camera *cam, rnd_view *v, float *r_
 {
     const double dist = 10, px_per_unit = H / (2 * dist * tan(10 * M_PI / 180));
     pc_prepared pc;
-    new_cloud(&pc, MOM_G * MOM_G + 1);
+    tu_new_cloud(&pc, MOM_G * MOM_G + 1, 0);
     pc.radius[0] = (float)(2000 / px_per_unit);
     pc.rgba[0] = 0, pc.rgba[2] = 0;
     *r_small = (float)(1.6 / px_per_unit);
@@ -629,7 +598,7 @@ static uint32_t weight_scene(rnd_ctx *r, rnd_camera *cam, rnd_view *v, float *r_
             pc.radius[k] = *r_small;
             pc.rgba[4 * k + 1] = 0, pc.rgba[4 * k + 2] = 0;
         }
-    finish_cloud(&pc);
+    tu_finish_cloud(&pc, OFF);
     *cam = cam_at(0, 0, dist, 0, 0, 0, 20, W, H);
     float lmin[3], lmax[3];
     for (int k = 0; k < 3; k++) lmin[k] = (float)(pc.bmin[k] - OFF[k]), lmax[k] = (float)(pc.bmax[k] - OFF[k]);
@@ -781,7 +750,7 @@ static void test_culled_ranges(void **state)
     pc_prepared both[2];
     for (int v = 0; v < 2; v++) {
         uint64_t nb = v == 0 ? 5 : 3, b = 0;
-        new_cloud(&both[v], nb * SIDE * SIDE);
+        tu_new_cloud(&both[v], nb * SIDE * SIDE, 0);
         for (int k = 0; k < 5; k++) {
             if (v == 1 && (k == 1 || k == 3)) continue;
             uint64_t first = b * SIDE * SIDE;
@@ -789,7 +758,7 @@ static void test_culled_ranges(void **state)
             for (uint64_t q = first; q < first + SIDE * SIDE; q++) both[v].pos[3 * q] += xs[k];
             b++;
         }
-        finish_cloud(&both[v]);
+        tu_finish_cloud(&both[v], OFF);
         assert_int_equal(both[v].nbatches, nb);
     }
     rnd_camera cam = cam_at(0, 0, 1.2, 0, 0, 0, 40, W, H);

@@ -7,6 +7,9 @@
 
 #include "rndtest.h"
 
+#include <math.h>
+#include <string.h>
+
 uint32_t tu_upload(rnd_ctx *r, const pc_prepared *pc)
 {
     sd_err err = {0};
@@ -21,4 +24,32 @@ void tu_render(rnd_ctx *r, uint32_t id, const rnd_camera *cam, const sp_params *
     sd_err err = {0};
     int rc = rnd_render(r, id, cam, p, want_float, f, &err);
     if (rc < 0) fail_msg("render: %s", err.msg);
+}
+
+void tu_new_cloud(pc_prepared *pc, uint64_t n, uint64_t nb)
+{
+    memset(pc, 0, sizeof *pc);
+    pc->n = n;
+    pc->attrs = PC_ATTR_RGB | PC_ATTR_NORMAL | PC_ATTR_RADIUS | PC_ATTR_F | PC_ATTR_INTENSITY;
+    pc->nbatches = nb ? nb : (n + PC_BATCH_POINTS - 1) / PC_BATCH_POINTS;
+    sd_err err = {0};
+    if (pc_prepared_alloc(pc, &err) != 0) fail_msg("pc_prepared_alloc: %s", err.msg);
+    for (uint64_t i = 0; i < n; i++) {
+        pc->normal[3 * i + 2] = 1;
+        pc->radius[i] = 0.01f;
+        for (int k = 0; k < 4; k++) pc->rgba[4 * i + k] = 255;
+    }
+}
+
+void tu_finish_cloud(pc_prepared *pc, const double off[3])
+{
+    pc_prepared_make_batches(pc, (uint32_t)((pc->n + pc->nbatches - 1) / pc->nbatches));
+    for (int k = 0; k < 3; k++) {
+        pc->bmin[k] = INFINITY, pc->bmax[k] = -INFINITY;
+        for (uint64_t b = 0; b < pc->nbatches; b++) {
+            pc->bmin[k] = fmin(pc->bmin[k], pc->batches[b].bmin[k] + off[k]);
+            pc->bmax[k] = fmax(pc->bmax[k], pc->batches[b].bmax[k] + off[k]);
+        }
+    }
+    memcpy(pc->offset, off, 3 * sizeof *off);
 }

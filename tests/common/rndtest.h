@@ -11,3 +11,12 @@ uint32_t tu_upload(rnd_ctx *r, const pc_prepared *pc);
 /* tu_render: rnd_render of cloud id; fails the test on an error. */
 void tu_render(rnd_ctx *r, uint32_t id, const rnd_camera *cam, const sp_params *p,
                int want_float, rnd_frame *f);
+
+/* tu_new_cloud: a prepared cloud of n points with every attribute (unit +z normals, white,
+ * radius 0.01) in nb batches (0: as many as PC_BATCH_POINTS needs); the caller sets the
+ * positions (local coordinates) and calls tu_finish_cloud. */
+void tu_new_cloud(pc_prepared *pc, uint64_t n, uint64_t nb);
+
+/* tu_finish_cloud: batches of consecutive points of equal size (the last may be shorter) with
+ * their bounds, the cloud's bounds in file coordinates, and its offset off. */
+void tu_finish_cloud(pc_prepared *pc, const double off[3]);
