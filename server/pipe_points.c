@@ -29,6 +29,10 @@
 enum { RASTER_AUTO = 0, RASTER_PACKED, RASTER_EXACT, RASTER_GL };
 enum { PACKED_MIN_DEPTH_BITS = 12 };
 enum { GROUP = 64, MAX_GROUPS_X = 65535 }; /* local_size_x of points_raster.comp */
+/* The buffer textures both compute-form passes read (texture unit = index): positions (R32F,
+ * lib_fetch.glsl), the per-pixel keys or depths (R32UI), the visible ranges (RG32UI), the
+ * per-pixel winners of the exact form (R32UI), the colour source (R32UI) and normals (R32F). */
+enum { T_POS, T_DEPTH, T_RANGES, T_INDEX, T_SRC, T_NRM, T_COUNT };
 
 typedef struct points_state {
     int mode;
@@ -38,18 +42,14 @@ typedef struct points_state {
     GLuint prog_gl, prog_raster, prog_resolve;
     GLuint vao;
     GLuint depth_buf, index_buf, range_buf;
-    GLuint pos_tex;                   /* buffer texture over the positions (R32F) */
-    GLuint depth_tex;                 /* buffer texture over depth_buf (R32UI) */
-    GLuint range_tex;                 /* buffer texture over range_buf (RG32UI) */
-    GLuint index_tex, src_tex, nrm_tex; /* the resolve's: index_buf, colour source, normals */
+    GLuint tex[T_COUNT];              /* buffer textures, on texture unit = their index */
     uint64_t pix_cap, range_cap;      /* elements the buffers hold */
     uint32_t *range_tmp;              /* CPU staging for the range table (uvec2 per range) */
     /* uniform locations */
     GLint g_viewproj, g_point_size, g_color, g_znear, g_zfar;
     GLint r_viewproj, r_size, r_point_size, r_znear, r_zfar, r_total, r_nranges, r_first;
-    GLint r_stride, r_threads, r_per, r_pass, r_index_bits, r_log_near, r_log_scale, r_pos, r_depth, r_ranges;
+    GLint r_stride, r_threads, r_per, r_pass, r_index_bits, r_log_near, r_log_scale;
     GLint s_width, s_color, s_znear, s_zfar, s_index_bits, s_viewproj;
-    GLint s_tex[5];                   /* u_pos, u_nrm, u_src, u_depth, u_index */
 } points_state;
 
 static void points_destroy(const gl_api *gl, void *state)
@@ -60,11 +60,7 @@ static void points_destroy(const gl_api *gl, void *state)
     if (s->prog_raster) gl->DeleteProgram(s->prog_raster);
     if (s->prog_resolve) gl->DeleteProgram(s->prog_resolve);
     if (s->vao) gl->DeleteVertexArrays(1, &s->vao);
-    if (s->pos_tex) gl->DeleteTextures(1, &s->pos_tex);
-    if (s->depth_tex) gl->DeleteTextures(1, &s->depth_tex);
-    if (s->range_tex) gl->DeleteTextures(1, &s->range_tex);
-    GLuint tex[3] = {s->index_tex, s->src_tex, s->nrm_tex};
-    if (tex[0]) gl->DeleteTextures(3, tex);
+    if (s->tex[0]) gl->DeleteTextures(T_COUNT, s->tex);
     GLuint bufs[3] = {s->depth_buf, s->index_buf, s->range_buf};
     gl->DeleteBuffers(3, bufs);
     free(s->range_tmp);
@@ -131,17 +127,26 @@ static int points_create(const gl_api *gl, const rnd_shaders *sh, void **state, 
     s->r_index_bits = gl_uniform(gl, s->prog_raster, "u_index_bits");
     s->r_log_near = gl_uniform(gl, s->prog_raster, "u_log_near");
     s->r_log_scale = gl_uniform(gl, s->prog_raster, "u_log_scale");
-    s->r_pos = gl_uniform(gl, s->prog_raster, "u_pos");
-    s->r_depth = gl_uniform(gl, s->prog_raster, "u_depth");
-    s->r_ranges = gl_uniform(gl, s->prog_raster, "u_ranges");
+
     s->s_index_bits = gl_uniform(gl, s->prog_resolve, "u_index_bits");
     s->s_viewproj = gl_uniform(gl, s->prog_resolve, "u_viewproj");
     s->s_width = gl_uniform(gl, s->prog_resolve, "u_width");
     s->s_color = gl_uniform(gl, s->prog_resolve, "u_color");
     s->s_znear = gl_uniform(gl, s->prog_resolve, "u_znear");
     s->s_zfar = gl_uniform(gl, s->prog_resolve, "u_zfar");
-    static const char *const stex[5] = {"u_pos", "u_nrm", "u_src", "u_depth", "u_index"};
-    for (int k = 0; k < 5; k++) s->s_tex[k] = gl_uniform(gl, s->prog_resolve, stex[k]);
+    /* Each program's samplers, on their units once and for all (a program keeps them). */
+    static const char *const tname[T_COUNT] = {"u_pos", "u_depth", "u_ranges", "u_index",
+                                               "u_src", "u_nrm"};
+    const GLuint progs[2] = {s->prog_raster, s->prog_resolve};
+    for (int i = 0; i < 2; i++) {
+        gl->UseProgram(progs[i]);
+        for (int k = 0; k < T_COUNT; k++) {
+            GLint loc = gl_uniform(gl, progs[i], tname[k]);
+            if (loc >= 0) gl->Uniform1i(loc, k);
+        }
+    }
+    gl->UseProgram(0);
+    gl->GenTextures(T_COUNT, s->tex);
     if (gl_check(gl, "creating the points pipeline", err) < 0) goto fail;
     *state = s;
     return 0;
@@ -288,23 +293,20 @@ static int render_compute(const gl_api *gl, points_state *s, const rnd_gpu_cloud
     uint32_t gx, gy;
     dispatch_size((total + s->per_invocation - 1) / s->per_invocation, &gx, &gy);
     uint32_t threads = gx * gy * GROUP;
-    if (!s->pos_tex) gl->GenTextures(1, &s->pos_tex);
-    gl->ActiveTexture(GL_TEXTURE0);
-    gl->BindTexture(GL_TEXTURE_BUFFER, s->pos_tex);
-    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32F, c->pos); /* lib_fetch.glsl */
-    if (!s->depth_tex) gl->GenTextures(1, &s->depth_tex);
-    gl->ActiveTexture(GL_TEXTURE1);
-    gl->BindTexture(GL_TEXTURE_BUFFER, s->depth_tex);
-    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, s->depth_buf);
-    if (!s->range_tex) gl->GenTextures(1, &s->range_tex);
-    gl->ActiveTexture(GL_TEXTURE2);
-    gl->BindTexture(GL_TEXTURE_BUFFER, s->range_tex);
-    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_RG32UI, s->range_buf);
+    /* Every buffer texture of both passes (lib_fetch.glsl: positions and normals as R32F). */
+    GLuint src = p->color == SP_COLOR_FIELD ? c->field
+               : p->color == SP_COLOR_INTENSITY ? c->intensity : c->rgba;
+    const struct { GLenum fmt; GLuint buf; } tb[T_COUNT] = {
+        [T_POS] = {GL_R32F, c->pos},          [T_DEPTH] = {GL_R32UI, s->depth_buf},
+        [T_RANGES] = {GL_RG32UI, s->range_buf}, [T_INDEX] = {GL_R32UI, s->index_buf},
+        [T_SRC] = {GL_R32UI, src},            [T_NRM] = {GL_R32F, c->normal}};
+    for (int k = 0; k < T_COUNT; k++) {
+        gl->ActiveTexture(GL_TEXTURE0 + (GLenum)k);
+        gl->BindTexture(GL_TEXTURE_BUFFER, s->tex[k]);
+        gl->TexBuffer(GL_TEXTURE_BUFFER, tb[k].fmt, tb[k].buf);
+    }
     gl->ActiveTexture(GL_TEXTURE0);
     gl->UseProgram(s->prog_raster);
-    gl->Uniform1i(s->r_pos, 0);
-    gl->Uniform1i(s->r_depth, 1);
-    gl->Uniform1i(s->r_ranges, 2);
     gl->UniformMatrix4fv(s->r_viewproj, 1, GL_FALSE, v->viewproj);
     gl->Uniform2i(s->r_size, v->width, v->height);
     gl->Uniform1f(s->r_point_size, p->point_size);
@@ -331,27 +333,7 @@ static int render_compute(const gl_api *gl, points_state *s, const rnd_gpu_cloud
             gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
         }
     }
-    /* The resolve reads through buffer textures (points_resolve.frag): units 0 (positions) and
-     * 1 (depth) as bound above, 3 index, 4 colour source, 5 normals. */
-    if (!s->index_tex) {
-        GLuint tex[3];
-        gl->GenTextures(3, tex);
-        s->index_tex = tex[0], s->src_tex = tex[1], s->nrm_tex = tex[2];
-    }
-    GLuint src = p->color == SP_COLOR_FIELD ? c->field
-               : p->color == SP_COLOR_INTENSITY ? c->intensity : c->rgba;
-    const struct { GLuint tex; GLenum fmt; GLuint buf; } rt[3] = {
-        {s->index_tex, GL_R32UI, s->index_buf}, {s->src_tex, GL_R32UI, src},
-        {s->nrm_tex, GL_R32F, c->normal}};
-    for (int k = 0; k < 3; k++) {
-        gl->ActiveTexture(GL_TEXTURE3 + (GLenum)k);
-        gl->BindTexture(GL_TEXTURE_BUFFER, rt[k].tex);
-        gl->TexBuffer(GL_TEXTURE_BUFFER, rt[k].fmt, rt[k].buf);
-    }
-    gl->ActiveTexture(GL_TEXTURE0);
     gl->UseProgram(s->prog_resolve);
-    static const GLint sunit[5] = {0, 5, 4, 1, 3};
-    for (int k = 0; k < 5; k++) gl->Uniform1i(s->s_tex[k], sunit[k]);
     gl->Uniform1i(s->s_width, v->width);
     gl->Uniform1ui(s->s_index_bits, ibits);
     gl->UniformMatrix4fv(s->s_viewproj, 1, GL_FALSE, v->viewproj);
@@ -366,7 +348,7 @@ static int render_compute(const gl_api *gl, points_state *s, const rnd_gpu_cloud
     gl->Disable(GL_SCISSOR_TEST);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 5, 0);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, 6, 0);
-    for (int k = 5; k >= 0; k--) {
+    for (int k = T_COUNT - 1; k >= 0; k--) {
         gl->ActiveTexture(GL_TEXTURE0 + (GLenum)k);
         gl->BindTexture(GL_TEXTURE_BUFFER, 0);
     }
