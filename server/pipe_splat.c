@@ -34,7 +34,7 @@
  * 2 px (2 sigma) deposit their weight in the one pixel holding their centre (area sampling: a box
  * of one pixel, so they never vanish), and the resolve applies a 3x3 Gaussian of variance
  * 0.75 lowpass (truncated) across neighbours within a depth tolerance, as the extended z-buffer
- * would. A minified splat then costs one fragment, and the frame ~3.4x `points` (`make
+ * would. A minified splat then costs one fragment, and the frame ~2-2.5x `points` (`make
  * bench`). lowpass = 0 turns all of it off: pure sampled discs, which alias and may vanish when
  * minified.
  *
@@ -54,11 +54,10 @@
  * (128 MiB on llvmpipe: 32 bytes a pixel, so a 3840x2160 frame) are rendered in horizontal
  * stripes, each with a halo row above and below for the 3x3 gather.
  *
- * Measured (`make bench`: 1M points, 1280x720, llvmpipe on 2 shared cores): split 126 ms,
- * 3.4x `points`; exact 785 ms, 21x (every minified splat ~13 fragments of 7 atomics). Of a
- * split frame, each of the two passes spends ~24 ms visiting the points (fetch, project,
- * classify), pass 1's atomicMax ~6 ms and pass 2's seven atomicAdds ~14 ms more; the resolve
- * ~10 ms, clearing the sums ~4 ms.
+ * Measured (`make bench`: 1M points, 1280x720, llvmpipe on 2 shared cores): split 63 ms,
+ * 2.0x `points`; exact 462 ms, 15x (every minified splat ~13 fragments of 7 atomics). A split
+ * frame's passes, timed with glFinish between them: clearing the sums ~3.5 ms, visibility
+ * ~19 ms, attributes ~27 ms, the listed raster and big splats ~3 ms, the resolve ~8 ms.
  *
  * Quality is not a clear win for exact either: at a grazing angle (test_ewa_antialiasing) the
  * low-pass fringes of nearer minified splats, whose depths are clamped to their centre's +- r,

@@ -2,8 +2,8 @@
 // points: a binary search over the ranges' first visible index. Each texel of `ranges` (RG32UI
 // buffer texture) is (first point, position of that point in the sequence of visible points).
 // Read through a texture, not a storage buffer: texelFetch gathers all SIMD lanes at once on
-// llvmpipe, where storage-buffer reads at varying addresses go lane by lane (a zoomed-in view of
-// 1M points, ~2000 ranges: the search cost more than the rest of the `points` frame).
+// llvmpipe, where storage-buffer reads at varying addresses go lane by lane (the close-up of
+// `make bench`, 1M points culled to many ranges: `points` 58.5 -> 52.2 ms).
 uint point_of(usamplerBuffer ranges, uint nranges, uint k)
 {
     uint lo = 0u, hi = nranges - 1u;
