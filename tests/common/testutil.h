@@ -26,3 +26,14 @@ const char *tu_env(const char *name, const char *def);
  * directory (a malloc'd path) in *state, removed even when the test fails. */
 int tu_tmpdir_setup(void **state);
 int tu_tmpdir_teardown(void **state);
+
+/* TU_SKIP: skips the current cmocka test, naming why the check is impossible on this machine.
+ * tests/run.sh counts skips and fails `make test` on a skip that names no reason, so every skip
+ * must go through this macro (the reason goes to stdout on a line of its own, which run.sh
+ * pairs with the test it belongs to). Needs <cmocka.h> included before use. */
+#define TU_SKIP(...)                                                   \
+    do {                                                               \
+        tu_skip_reason(__VA_ARGS__);                                   \
+        skip();                                                        \
+    } while (0)
+void tu_skip_reason(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
