@@ -5,8 +5,9 @@
 #   make asan       only the AddressSanitizer + UBSan test run
 #   make bench      measured numbers (see README.md)
 #   make run        start the daemon on a bundled scan and render an orbit into ./out/
+#                   (RUN_ARGS=--force renders frames that exist again)
 #   make fuzz       libFuzzer targets for the protocol and every parser (FUZZ_SECONDS=60 each)
-#   make install    PREFIX=/usr/local DESTDIR=
+#   make install    PREFIX=/usr/local DESTDIR= (runs ldconfig when installing as root)
 #
 # Every dependency comes through pkg-config; when a check fails, deploy/deps.sh installs the
 # Debian packages (so a fresh machine needs only make, gcc and git).
@@ -14,16 +15,20 @@
 CC      ?= cc
 PREFIX  ?= /usr/local
 BUILD   ?= build
-PKGS    := egl opengl osmesa libturbojpeg libpng liblz4 libcrypto cmocka
+.DEFAULT_GOAL := all
 
+# ---- dependencies: deploy/deps.sh lists each pkg-config module (or header/driver file) and the
+# Debian package that provides it. When one is missing, deps.sh installs the packages; if one is
+# still missing afterwards, the build stops naming it and its package (one failed module would
+# otherwise empty a whole `pkg-config --libs` line and surface later as an unrelated link error).
 ifeq ($(filter clean,$(MAKECMDGOALS)),)
-DEPS_OK := $(shell pkg-config --exists $(PKGS) 2>/dev/null && test -f /usr/include/flann/flann.h \
-             && test -f /usr/include/OpenEXR/openexr.h && echo yes)
-ifneq ($(DEPS_OK),yes)
-$(info splatd: a dependency is missing; running deploy/deps.sh)
-DEPS_RC := $(shell sh deploy/deps.sh 1>&2; echo $$?)
-ifneq ($(DEPS_RC),0)
-$(error deploy/deps.sh failed (exit $(DEPS_RC)); install the packages it lists and retry)
+DEPS_MISSING := $(shell CC=$(CC) sh deploy/deps.sh --check)
+ifneq ($(DEPS_MISSING),)
+$(info splatd: missing $(DEPS_MISSING); running deploy/deps.sh)
+DEPS_RC := $(shell CC=$(CC) sh deploy/deps.sh 1>&2; echo $$?)
+DEPS_MISSING := $(shell CC=$(CC) sh deploy/deps.sh --check | tr '\n' ';')
+ifneq ($(DEPS_MISSING),)
+$(error still missing after deploy/deps.sh (exit $(DEPS_RC)): $(DEPS_MISSING) install them and retry)
 endif
 endif
 endif
@@ -33,15 +38,20 @@ FLANN_LIBS := -lflann
 EXR_CFLAGS := -I/usr/include/OpenEXR
 EXR_LIBS   := -lOpenEXRCore
 
-PKG_CFLAGS := $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
-PKG_LIBS   := $(shell pkg-config --libs egl opengl osmesa libturbojpeg libpng liblz4 libcrypto 2>/dev/null)
-TEST_LIBS  := $(shell pkg-config --libs cmocka 2>/dev/null)
+PKG_CFLAGS := $(shell pkg-config --cflags egl opengl osmesa libturbojpeg libpng liblz4 libcrypto cmocka 2>/dev/null)
+# Link lines per binary: each gets only the libraries it uses.
+#   CLIENT_LIBS  libsplatclient and the `splat` command: HMAC, frame decoding (LZ4, JPEG)
+#   SERVER_LIBS  splatd and the tools built on libsplatd: GL back ends, kNN, encoders
+#   TEST_LIBS    the test and bench programs, which link both libraries
+CLIENT_LIBS := $(shell pkg-config --libs libcrypto liblz4 libturbojpeg 2>/dev/null) -lm
+SERVER_LIBS := $(shell pkg-config --libs egl opengl osmesa libturbojpeg libpng liblz4 libcrypto 2>/dev/null) \
+               $(FLANN_LIBS) $(EXR_LIBS) -lpthread -lm
+TEST_LIBS   := $(SERVER_LIBS) $(shell pkg-config --libs cmocka 2>/dev/null)
 
 WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes -Wno-unused-parameter
 CFLAGS  ?= -O2 -g
 ALL_CFLAGS = -std=c11 -D_GNU_SOURCE -fPIC $(WARN) $(CFLAGS) -Iprotocol -Iserver -Iclient -Itests/common -I$(BUILD)/gen \
              $(PKG_CFLAGS) $(EXR_CFLAGS) -MMD -MP
-LIBS    := $(PKG_LIBS) $(FLANN_LIBS) $(EXR_LIBS) -lpthread -lm
 
 PROTO_SRC  := $(wildcard protocol/*.c)
 SERVER_SRC := $(filter-out server/main.c,$(wildcard server/*.c))
@@ -105,23 +115,23 @@ endif
 
 $(1)/bin/splatd: $(1)/obj/server/main.o $(1)/libsplatd.a $(1)/libsplatproto.a
 	@mkdir -p $$(dir $$@)
-	$$(CC) $(2) -o $$@ $$^ $$(LIBS)
+	$$(CC) $(2) -o $$@ $$^ $$(SERVER_LIBS)
 
 $(1)/bin/splat: $(1)/obj/client/splat_main.o $(1)/libsplatclient.a
 	@mkdir -p $$(dir $$@)
-	$$(CC) $(2) -o $$@ $$^ $$(LIBS)
+	$$(CC) $(2) -o $$@ $$^ $$(CLIENT_LIBS)
 
 $(1)/tests/%: $(1)/obj/tests/%.o $(1)/libtestcommon.a $(1)/libsplatd.a $(1)/libsplatclient.a
 	@mkdir -p $$(dir $$@)
-	$$(CC) $(2) -o $$@ $$^ $$(LIBS) $$(TEST_LIBS)
+	$$(CC) $(2) -o $$@ $$^ $$(TEST_LIBS)
 
 $(1)/tools/%: $(1)/obj/tests/tools/%.o $(1)/libsplatd.a $(1)/libsplatproto.a
 	@mkdir -p $$(dir $$@)
-	$$(CC) $(2) -o $$@ $$^ $$(LIBS)
+	$$(CC) $(2) -o $$@ $$^ $$(SERVER_LIBS)
 
 $(1)/bench/%: $(1)/obj/tests/bench/%.o $(1)/libtestcommon.a $(1)/libsplatd.a $(1)/libsplatclient.a
 	@mkdir -p $$(dir $$@)
-	$$(CC) $(2) -o $$@ $$^ $$(LIBS)
+	$$(CC) $(2) -o $$@ $$^ $$(TEST_LIBS)
 endef
 
 ASAN_FLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
@@ -148,23 +158,27 @@ all: $(BUILD)/bin/splatd $(BUILD)/bin/splat $(BUILD)/libsplatclient.a $(BUILD)/l
 
 $(BUILD)/libsplatclient.so: $(call obj,$(BUILD),$(CLIENT_LIB_SRC) $(PROTO_SRC))
 	$(CC) -shared -Wl,-soname,libsplatclient.so.0 -Wl,--version-script=client/libsplatclient.map \
-	  -o $@ $^ $(shell pkg-config --libs libcrypto liblz4 libturbojpeg) -lm
+	  -o $@ $^ $(CLIENT_LIBS)
 
 # The tests find the binaries and data through these variables.
 TEST_ENV = SPLATD_BIN=$(abspath $(1)/bin/splatd) SPLAT_BIN=$(abspath $(1)/bin/splat) \
            SPLATD_TOOLS=$(abspath $(1)/tools) SPLATD_TESTDATA=$(abspath tests/data) \
            SPLATD_SHADERS=$(abspath shaders)
 
+ASAN_ENV = ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
+           LSAN_OPTIONS=suppressions=$(abspath tests/lsan.supp)
+
+# make test: the plain run, the sanitizer run, and one closing line counting the tests of both.
 test: all $(TESTS) $(ASAN_TESTS) $(BUILD)/asan/bin/splatd $(BUILD)/asan/bin/splat $(ASAN_TOOLS)
-	@$(call TEST_ENV,$(BUILD)) sh tests/run.sh "plain" $(TESTS)
-	@$(call TEST_ENV,$(BUILD)/asan) ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 \
-	  UBSAN_OPTIONS=print_stacktrace=1 LSAN_OPTIONS=suppressions=$(abspath tests/lsan.supp) \
+	@rm -f $(BUILD)/test-totals
+	@$(call TEST_ENV,$(BUILD)) TEST_TOTALS=$(abspath $(BUILD)/test-totals) sh tests/run.sh "plain" $(TESTS)
+	@$(call TEST_ENV,$(BUILD)/asan) $(ASAN_ENV) TEST_TOTALS=$(abspath $(BUILD)/test-totals) \
 	  sh tests/run.sh "asan" $(ASAN_TESTS)
+	@awk '{p += $$1; f += $$2; s += $$3} END {printf "total: %d passed, %d failed, %d skipped\n", p, f, s}' \
+	  $(BUILD)/test-totals
 
 asan: $(ASAN_TESTS) $(BUILD)/asan/bin/splatd $(BUILD)/asan/bin/splat $(ASAN_TOOLS)
-	@$(call TEST_ENV,$(BUILD)/asan) ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 \
-	  UBSAN_OPTIONS=print_stacktrace=1 LSAN_OPTIONS=suppressions=$(abspath tests/lsan.supp) \
-	  sh tests/run.sh "asan" $(ASAN_TESTS)
+	@$(call TEST_ENV,$(BUILD)/asan) $(ASAN_ENV) sh tests/run.sh "asan" $(ASAN_TESTS)
 
 bench: all $(BENCHES)
 	@$(call TEST_ENV,$(BUILD)) SPLATD_BENCH=$(abspath $(BUILD)/bench) sh tests/bench/bench.sh
@@ -172,8 +186,9 @@ bench: all $(BENCHES)
 fuzz:
 	@sh tests/fuzz/run.sh $(FUZZ_SECONDS)
 
+# make run RUN_ARGS=--force renders the demo's frames again (extra arguments go to `splat path`).
 run: all
-	@sh deploy/run-demo.sh $(BUILD)/bin/splatd $(BUILD)/bin/splat
+	@RUN_ARGS="$(RUN_ARGS)" sh deploy/run-demo.sh $(BUILD)/bin/splatd $(BUILD)/bin/splat
 
 install: all
 	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/lib/pkgconfig $(DESTDIR)$(PREFIX)/include
@@ -183,6 +198,12 @@ install: all
 	ln -sf libsplatclient.so.0 $(DESTDIR)$(PREFIX)/lib/libsplatclient.so
 	install -m 644 client/splat_client.h $(DESTDIR)$(PREFIX)/include/
 	sed 's|@PREFIX@|$(PREFIX)|g' client/splatclient.pc.in > $(DESTDIR)$(PREFIX)/lib/pkgconfig/splatclient.pc
+	@# The dynamic linker's cache must learn the new library, or programs linked against it fail
+	@# with "libsplatclient.so.0: cannot open shared object file". Staged installs skip it.
+	@if [ -z "$(DESTDIR)" ]; then \
+	   if [ "$$(id -u)" = 0 ]; then ldconfig; \
+	   else echo "make install: run ldconfig as root so the loader finds libsplatclient.so.0"; fi; \
+	 fi
 
 clean:
 	rm -rf $(BUILD) out

@@ -1,17 +1,67 @@
 #!/bin/sh
-# Installs the Debian packages splatd needs to build, test and run.
-# Idempotent: packages already present are left alone and apt-get is not called.
+# deps.sh — the Debian packages splatd needs to build, test and run (`make`, `make test`,
+# `make run`), and nothing else.
+#
+#   sh deploy/deps.sh           install what is missing (idempotent: apt-get is called only
+#                               when a package is absent)
+#   sh deploy/deps.sh --check   print "WHAT (Debian package PKG)" for each pkg-config module or
+#                               file the build needs that this machine lacks; exit 1 if any
+#
+# The Makefile runs --check before building, runs this script when something is missing, and
+# stops naming the module and its package when it is still missing afterwards.
 set -eu
 
-PKGS="make gcc pkg-config
-libegl-dev libgl-dev libegl-mesa0 libgl1-mesa-dri libosmesa6-dev
-libflann-dev libturbojpeg0-dev libopenexr-dev libpng-dev liblz4-dev
-libssl-dev libcmocka-dev"
+# Each entry: how the build finds it (pc:MODULE for pkg-config, file:PATH, or tool:NAME) and the
+# package that provides it.
+arch=$(${CC:-cc} -print-multiarch 2>/dev/null || dpkg-architecture -qDEB_HOST_MULTIARCH 2>/dev/null || echo x86_64-linux-gnu)
+NEEDS="
+tool:make=make
+tool:cc=gcc
+tool:pkg-config=pkg-config
+pc:egl=libegl-dev
+pc:opengl=libopengl-dev
+file:/usr/include/GL/glcorearb.h=libgl-dev
+file:/usr/share/glvnd/egl_vendor.d/50_mesa.json=libegl-mesa0
+file:/usr/lib/$arch/dri/swrast_dri.so=libgl1-mesa-dri
+pc:osmesa=libosmesa6-dev
+file:/usr/include/flann/flann.h=libflann-dev
+pc:libturbojpeg=libturbojpeg0-dev
+file:/usr/include/OpenEXR/openexr.h=libopenexr-dev
+pc:libpng=libpng-dev
+pc:liblz4=liblz4-dev
+pc:libcrypto=libssl-dev
+pc:cmocka=libcmocka-dev
+"
+
+# present ENTRY: 0 when the thing the entry names is on this machine.
+present() {
+    k=${1%%=*}
+    w=${k#*:}
+    case $k in
+        pc:*) command -v pkg-config >/dev/null 2>&1 && pkg-config --exists "$w" ;;
+        file:*) test -e "$w" ;;
+        tool:*) command -v "$w" >/dev/null 2>&1 ;;
+    esac
+}
+
+if [ "${1:-}" = "--check" ]; then
+    rc=0
+    for e in $NEEDS; do
+        if ! present "$e"; then
+            k=${e%%=*}
+            echo "${k#*:} (Debian package ${e#*=})"
+            rc=1
+        fi
+    done
+    exit $rc
+fi
 
 missing=""
-for p in $PKGS; do
-    if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
-        missing="$missing $p"
+for e in $NEEDS; do
+    p=${e#*=}
+    if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" ||
+       ! present "$e"; then
+        case " $missing " in *" $p "*) ;; *) missing="$missing $p" ;; esac
     fi
 done
 
