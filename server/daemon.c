@@ -39,7 +39,8 @@ static void usage(FILE *f)
             "  --shader-dir DIR     load shaders from DIR instead of the built-in copies\n"
             "  --token-file F       require clients to prove they know the token in F (HMAC-SHA256\n"
             "                       of a random challenge); F must not be accessible by group or others\n"
-            "  --preload NAME       prepare and upload cloud NAME at start-up (repeatable)\n"
+            "  --preload NAME ...   prepare and upload these clouds at start-up (names up to the next\n"
+            "                       option; --preload may also be repeated)\n"
             "  --max-clients N      connections served at once (default 64)\n"
             "  --handshake-timeout S  seconds a client has to authenticate (default 10)\n"
             "  --help               this text\n"
@@ -69,11 +70,28 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
     optind = 1;
     opterr = 0;
     int c;
-    while ((c = getopt_long(argc, argv, "h", lo, NULL)) != -1) {
+    int after_preload = 0; /* operands right after --preload are more names ("--preload A B") */
+    /* "-" first: operands come back in order as option 1 instead of being permuted to the end,
+     * so they can be told apart by what precedes them. */
+    while ((c = getopt_long(argc, argv, "-h", lo, NULL)) != -1) {
         sd_err err = {0};
         char *end;
         long v;
+        if (c != 1) after_preload = c == O_PRELOAD;
         switch (c) {
+        case 1:
+            if (!after_preload) {
+                fprintf(stderr, "splatd: unexpected argument '%s' (see splatd --help)\n", optarg);
+                return -1;
+            }
+            /* fall through - one more --preload name */
+        case O_PRELOAD:
+            if (o->npreload == SRV_MAX_PRELOAD) {
+                fprintf(stderr, "splatd: at most %d --preload names\n", SRV_MAX_PRELOAD);
+                return -1;
+            }
+            o->preload[o->npreload++] = optarg;
+            break;
         case O_LISTEN:
             if (net_parse_hostport(optarg, o->host, sizeof o->host, &o->port, &err) != 0) {
                 fprintf(stderr, "splatd: --listen: %s\n", err.msg);
@@ -93,13 +111,6 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
                 fprintf(stderr, "splatd: --backend '%s': expected auto, egl or osmesa\n", optarg);
                 return -1;
             }
-            break;
-        case O_PRELOAD:
-            if (o->npreload == SRV_MAX_PRELOAD) {
-                fprintf(stderr, "splatd: at most %d --preload options\n", SRV_MAX_PRELOAD);
-                return -1;
-            }
-            o->preload[o->npreload++] = optarg;
             break;
         case O_MAXC:
         case O_HS:
