@@ -241,6 +241,11 @@ out:
 
 int cache_probe(const char *src, const char *dir, int k)
 {
+    return cache_probe_points(src, dir, k, NULL);
+}
+
+int cache_probe_points(const char *src, const char *dir, int k, uint64_t *points)
+{
     if (k <= 0) k = PREP_DEFAULT_K;
     char cpath[4096], why[256];
     struct stat ss, cs;
@@ -253,6 +258,7 @@ int cache_probe(const char *src, const char *dir, int k)
     cache_header h;
     int ok = fstat(fd, &cs) == 0 && check_header(fd, &cs, &key, 0, k, &h, why, sizeof why) == 1;
     close(fd);
+    if (ok && points) *points = h.n;
     return ok;
 }
 

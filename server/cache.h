@@ -43,6 +43,9 @@ int cache_open_cloud(const char *src, const cache_desc *d, pc_prepared *out, cac
  * intact header and the right file size. Cheap (one header read, no hashing), for listings;
  * the load still checks the content hashes. 0 otherwise. */
 int cache_probe(const char *src, const char *dir, int k);
+/* cache_probe_points: cache_probe that also gives the prepared cloud's point count (from the
+ * header) in *points when it returns 1 (points may be NULL). */
+int cache_probe_points(const char *src, const char *dir, int k, uint64_t *points);
 
 /* cache_path_for: the cache file path for src under directory dir (NULL: the default). */
 int cache_path_for(const char *src, const char *dir, int k, char *buf, size_t len, sd_err *err);

@@ -311,7 +311,8 @@ static void on_list(srv *sv, sess *s, const proto_msg *m)
             if (c && c->state == SRV_CLOUD_READY) {
                 items[i].points = c->info.points;
                 items[i].flags = PROTO_CLOUD_LOADED | PROTO_CLOUD_PREPARED;
-            } else if (cache_probe(path, sv->o.cache_dir, 0)) { /* the daemon's k */
+            } else if (cache_probe_points(path, sv->o.cache_dir, 0, &items[i].points)) {
+                /* prepared (for the daemon's k), not loaded: the count is in the cache header */
                 items[i].flags = PROTO_CLOUD_PREPARED;
             }
         }
@@ -545,6 +546,24 @@ static void on_progress_ev(srv *sv, const rt_event *ev)
     }
 }
 
+/* client_message: msg with every occurrence of the cloud's real path replaced by its name, so
+ * an error sent to a client names the cloud it opened, never where the server keeps its files
+ * (the full message is logged). */
+static void client_message(const srv_cloud *c, const char *msg, char *out, size_t len)
+{
+    size_t pl = strlen(c->path), o = 0;
+    while (*msg && o + 1 < len) {
+        if (pl && !strncmp(msg, c->path, pl)) {
+            o += (size_t)snprintf(out + o, len - o, "%s", c->name);
+            if (o >= len) o = len - 1;
+            msg += pl;
+        } else {
+            out[o++] = *msg++;
+        }
+    }
+    out[o] = 0;
+}
+
 static void on_cloud_done(srv *sv, const rt_event *ev)
 {
     srv_cloud *c = cloud_by_job(sv, ev->job);
@@ -579,7 +598,9 @@ static void on_cloud_done(srv *sv, const rt_event *ev)
             s->cloud_id = cc->cloud_id;
             send_info(sv, s, cc, w[i].seq);
         } else {
-            send_error(sv, s, w[i].seq, PROTO_E_LOAD_FAILED, ev->err.msg);
+            char msg[sizeof ev->err.msg + 256];
+            client_message(&sv->clouds[idx], ev->err.msg, msg, sizeof msg);
+            send_error(sv, s, w[i].seq, PROTO_E_LOAD_FAILED, msg);
         }
         srv_session_input(sv, s); /* requests that waited behind the OPEN */
     }

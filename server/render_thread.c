@@ -133,12 +133,27 @@ static int has_work(rt_ctx *rt)
     return 0;
 }
 
-/* do_upload: uploads one prepared cloud (mu not held) and posts READY or FAILED. */
+/* prep_prog: where a cloud job's progress goes (the job's events), throttled per phase. */
+typedef struct prep_prog {
+    rt_ctx *rt;
+    uint32_t job;
+    char phase[32];
+    uint64_t last_us;
+} prep_prog;
+
+static void on_progress(void *user, const char *phase, double fraction);
+
+/* do_upload: uploads one prepared cloud (mu not held), reports the upload phase complete, and
+ * posts READY or FAILED. */
 static void do_upload(rt_ctx *rt, rnd_ctx *rnd, rt_prepjob *j)
 {
     rt_event *ev = calloc(1, sizeof *ev);
     sd_err err = {0};
     int64_t id = rnd_upload(rnd, j->prep, &err);
+    if (id > 0) {
+        prep_prog pp = {.rt = rt, .job = j->job};
+        on_progress(&pp, "upload", 1.0);
+    }
     pc_prepared_free(j->prep);
     free(j->prep);
     j->prep = NULL;
@@ -302,13 +317,6 @@ static void *enc_main(void *arg)
 }
 
 /* Progress of one prep job, throttled to one event per 100 ms per phase. */
-typedef struct prep_prog {
-    rt_ctx *rt;
-    uint32_t job;
-    char phase[32];
-    uint64_t last_us;
-} prep_prog;
-
 static void on_progress(void *user, const char *phase, double fraction)
 {
     prep_prog *p = user;
