@@ -50,9 +50,31 @@ static int parse_long(const char *s, long lo, long hi, long *out)
     return 0;
 }
 
+/* is_command: 1 for the names of splat's commands. */
+static int is_command(const char *s)
+{
+    return !strcmp(s, "list") || !strcmp(s, "info") || !strcmp(s, "render") || !strcmp(s, "path");
+}
+
+/* scan_help: --help/-h or --version anywhere before "--" answer before anything else is
+ * checked (so `splat render --help` works without a NAME or -o); the command named anywhere
+ * picks the help text. Returns 1 when one of them was found. */
+static int scan_help(int argc, char **argv, cli_args *a)
+{
+    for (int i = 1; i < argc && strcmp(argv[i], "--"); i++) {
+        if (!strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) a->help = 1;
+        else if (!strcmp(argv[i], "--version")) a->version = 1;
+        else if (!a->command && is_command(argv[i])) a->command = argv[i];
+    }
+    if (a->help || a->version) return 1;
+    a->command = NULL;
+    return 0;
+}
+
 int cli_parse(int argc, char **argv, cli_args *a, char *err, size_t errlen)
 {
     memset(a, 0, sizeof *a);
+    if (scan_help(argc, argv, a)) return 0;
     a->host = "127.0.0.1";
     a->port = 7878;
     a->timeout_s = 60;
@@ -74,10 +96,6 @@ int cli_parse(int argc, char **argv, cli_args *a, char *err, size_t errlen)
             if (npos == 4) goto too_many;
             pos[npos++] = arg;
             continue;
-        }
-        if (!strcmp(arg, "-h") || !strcmp(arg, "--help")) {
-            a->help = 1;
-            return 0;
         }
         if (!strcmp(arg, "--force")) { a->force = 1; continue; }
         if (!strcmp(arg, "-q") || !strcmp(arg, "--quiet")) { a->quiet = 1; continue; }
@@ -178,8 +196,7 @@ int cli_parse(int argc, char **argv, cli_args *a, char *err, size_t errlen)
     a->command = pos[0];
     int want; /* operands after the command */
     if (!strcmp(a->command, "list")) want = 0;
-    else if (!strcmp(a->command, "info") || !strcmp(a->command, "render") ||
-             !strcmp(a->command, "path")) want = 1;
+    else if (is_command(a->command)) want = 1;
     else {
         snprintf(err, errlen, "unknown command '%s' (list, info, render, path)", a->command);
         return -1;

@@ -18,7 +18,8 @@ typedef struct cli_args {
     int inflight;              /* --inflight K, default 2 */
     int force;                 /* --force */
     int quiet;                 /* -q: no progress */
-    int help;
+    int help;                  /* --help/-h: command is the command named, or NULL */
+    int version;               /* --version */
     const char *sets[CLI_MAX_SETS];
     int nsets;
     int have_eye, have_target, have_up, have_fov, have_size;
@@ -30,7 +31,8 @@ typedef struct cli_args {
 /* cli_parse: parses argv (argv[0] is the program) into a. Options may come before or after
  * the command; "--opt value" and "--opt=value" both work. Returns 0, or -1 with err naming
  * the argument (unknown option, missing value, bad number/vector/size, missing or extra
- * operands for the command). With --help, returns 0 and sets a->help without checking more. */
+ * operands for the command). With --help or --version anywhere, returns 0 with a->help or
+ * a->version set (and a->command the command named, if any) without checking more. */
 int cli_parse(int argc, char **argv, cli_args *a, char *err, size_t errlen);
 
 /* cli_parse_vec3: "x,y,z" into v. 0 or -1. */

@@ -11,42 +11,34 @@
 #include "campath.h"
 #include "cli.h"
 #include "params.h"
+#include "proto.h"
 #include "splat_client.h"
 
 enum { EXIT_FAIL = 1, EXIT_USAGE = 2 };
 
-static void usage(FILE *f)
+#ifndef SPLAT_VERSION
+#define SPLAT_VERSION "0.1.0"
+#endif
+
+static const char conn_opts[] =
+    "connection options:\n"
+    "  --host H          server host (default 127.0.0.1)\n"
+    "  --port P          server port (default 7878)\n"
+    "  --token-file F    shared token, mode 0600 (when the server requires one)\n"
+    "  --timeout S       seconds one request may take (default 60, 0 = none)\n"
+    "  -q, --quiet       no progress output\n"
+    "  -h, --help        this text\n";
+
+static const char camera_opts[] =
+    "camera (file coordinates; without --eye the view frames the cloud's bounding box):\n"
+    "  --eye x,y,z --target x,y,z --up x,y,z --fov DEG (default 45)\n"
+    "  --size WxH        frame size (default 1280x720)\n";
+
+/* params_help: the --set parameters, their ranges and defaults, from the parameter table. */
+static void params_help(FILE *f)
 {
-    fprintf(f,
-        "usage: splat [--host H] [--port P] [--token-file F] COMMAND ...\n"
-        "\n"
-        "commands:\n"
-        "  list                       the clouds in the server's data directory\n"
-        "  info NAME                  open a cloud (extension optional) and print its summary\n"
-        "  render NAME -o FILE        render one frame; the format follows FILE's extension:\n"
-        "                             .jpg .png .exr .raw (the server's bytes are written as sent)\n"
-        "  path NAME (--path FILE | --orbit N) -o 'dir/%%05d.jpg'\n"
-        "                             render a camera path; frames already written are skipped\n"
-        "\n"
-        "options (before or after the command):\n"
-        "  --host H          server host (default 127.0.0.1)\n"
-        "  --port P          server port (default 7878)\n"
-        "  --token-file F    shared token, mode 0600 (when the server requires one)\n"
-        "  --timeout S       seconds one request may take (default 60, 0 = none)\n"
-        "  -o FILE|PATTERN   output file (render) or pattern with one %%d/%%05d (path)\n"
-        "  --set key=value   a render parameter (repeatable; list below)\n"
-        "  --eye x,y,z --target x,y,z --up x,y,z --fov DEG --size WxH (default 1280x720)\n"
-        "                    camera (file coordinates); without --eye the view frames the cloud\n"
-        "  --path FILE       one camera per line: eye x y z, target x y z, up x y z, fov;\n"
-        "                    '#' comments; spaces and/or commas between numbers\n"
-        "  --orbit N         N cameras around the bounding-box centre, about --up (default:\n"
-        "                    the up axis the default camera guesses from the bounds)\n"
-        "  --inflight K      frames in flight in a path job (default 2, 1..64)\n"
-        "  --force           re-render frames that already exist\n"
-        "  -q, --quiet       no progress output\n"
-        "  -h, --help        this text\n"
-        "\n"
-        "parameters (--set; the output file's extension decides 'format'):\n");
+    fprintf(f, "parameters (--set key=value, repeatable; the output file's extension decides "
+               "'format'):\n");
     for (int i = 0; i < SP_PARAM_COUNT; i++) {
         const sp_param_info *p = &sp_param_table[i];
         char range[160];
@@ -56,6 +48,72 @@ static void usage(FILE *f)
                                                                                : "x,y,z each",
                       p->min, p->max);
         fprintf(f, "  %-14s %-40s default %s\n", p->name, range, p->def);
+    }
+}
+
+/* usage: the help of one command (cmd NULL: the overview). */
+static void usage(FILE *f, const char *cmd)
+{
+    if (!cmd) {
+        fprintf(f,
+            "splat " SPLAT_VERSION " — client of the splatd point-cloud rendering daemon\n"
+            "\n"
+            "usage: splat [--host H] [--port P] [--token-file F] [-q] COMMAND ...\n"
+            "\n"
+            "commands (splat COMMAND --help for each one's options):\n"
+            "  list                       the clouds in the server's data directory\n"
+            "  info NAME                  open a cloud (extension optional) and print its summary\n"
+            "  render NAME -o FILE        render one frame (.jpg .png .exr .raw)\n"
+            "  path NAME (--path FILE | --orbit N) -o 'dir/%%05d.jpg'\n"
+            "                             render a camera path; frames already written are skipped\n"
+            "  --version                  print the version and exit\n"
+            "\n");
+        fputs(conn_opts, f);
+    } else if (!strcmp(cmd, "list")) {
+        fprintf(f,
+            "usage: splat list [connection options]\n"
+            "\n"
+            "Lists the clouds in the server's data directory: NAME, file BYTES, POINTS (once\n"
+            "prepared) and STATE: 'loaded' (in the server's memory), 'prepared' (cached, loads\n"
+            "quickly) or '-' (the first OPEN prepares it).\n\n");
+        fputs(conn_opts, f);
+    } else if (!strcmp(cmd, "info")) {
+        fprintf(f,
+            "usage: splat info NAME [--set key=value ...] [connection options]\n"
+            "\n"
+            "Opens cloud NAME (preparing it on first use, with progress) and prints its summary:\n"
+            "points, bounds, offset, attributes, point spacing sigma, k, and the server's back end.\n\n");
+        fputs(conn_opts, f);
+    } else if (!strcmp(cmd, "render")) {
+        fprintf(f,
+            "usage: splat render NAME -o FILE [camera] [--set key=value ...] [connection options]\n"
+            "\n"
+            "Renders one frame of cloud NAME into FILE; the format follows FILE's extension: .jpg,\n"
+            ".png, .exr (half RGBA + float Z), .raw (the server's bytes as sent).\n\n");
+        fputs(camera_opts, f);
+        fputc('\n', f);
+        fputs(conn_opts, f);
+        fputc('\n', f);
+        params_help(f);
+    } else { /* path */
+        fprintf(f,
+            "usage: splat path NAME (--path FILE | --orbit N) -o PATTERN [options]\n"
+            "\n"
+            "Renders a camera path of cloud NAME into numbered files, several frames in flight.\n"
+            "Frames that exist already are skipped, so an interrupted job resumes.\n"
+            "\n"
+            "  -o PATTERN        output files with one %%d or %%05d, e.g. 'out/%%05d.jpg'\n"
+            "  --path FILE       one camera per line: eye x y z, target x y z, up x y z, fov;\n"
+            "                    '#' comments; spaces and/or commas between numbers\n"
+            "  --orbit N         N cameras around the bounding-box centre, about --up (default:\n"
+            "                    the up axis the default camera guesses from the bounds)\n"
+            "  --inflight K      frames in flight (default 2, 1..64)\n"
+            "  --force           re-render frames that already exist\n"
+            "  --size WxH, --fov DEG, --up x,y,z  as for render\n"
+            "\n");
+        fputs(conn_opts, f);
+        fputc('\n', f);
+        params_help(f);
     }
 }
 
@@ -350,8 +408,12 @@ int main(int argc, char **argv)
         fprintf(stderr, "splat: %s\n", err);
         return EXIT_USAGE;
     }
+    if (a.version) {
+        printf("splat %s (protocol version %u)\n", SPLAT_VERSION, (unsigned)PROTO_VERSION);
+        return 0;
+    }
     if (a.help) {
-        usage(stdout);
+        usage(stdout, a.command);
         return 0;
     }
     /* check --set locally before connecting: a typo fails fast with the range */

@@ -67,7 +67,7 @@ int cmd_prep(int argc, char **argv)
         }
     }
     if (!file) {
-        fprintf(stderr, "usage: splatd prep FILE [--k N] [--cache DIR] [--threads N] [--force]\n");
+        fprintf(stderr, "usage: splatd prep FILE [--k N] [--cache DIR] [--threads N] [--force] [--quiet]\n");
         return 2;
     }
 

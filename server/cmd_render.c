@@ -10,6 +10,7 @@
 #include "cache.h"
 #include "commands.h"
 #include "encode.h"
+#include "progress.h"
 #include "render.h"
 
 enum { MAX_SIDE = 8192 };
@@ -43,13 +44,6 @@ static void warn_stderr(void *user, const char *msg)
 {
     (void)user;
     fprintf(stderr, "splatd render: warning: %s\n", msg);
-}
-
-static void progress_stderr(void *user, const char *phase, double fraction)
-{
-    (void)user;
-    fprintf(stderr, "\rsplatd render: %-24s %5.1f %%%s", phase, fraction * 100,
-            fraction >= 1.0 ? "\n" : "");
 }
 
 /* Parses a finite number; prints the error and returns -1 when s is not one. */
@@ -249,7 +243,7 @@ int cmd_render(int argc, char **argv)
         return 1;
     }
     o.cache.warn = warn_stderr;
-    o.cache.progress = o.quiet ? NULL : progress_stderr;
+    o.cache.progress = o.quiet ? NULL : prep_progress_stderr; /* whole lines off a terminal */
 
     sd_err err = {0};
     pc_prepared pc;

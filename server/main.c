@@ -16,7 +16,7 @@ static void usage(FILE *f)
             "usage:\n"
             "  splatd [--listen HOST:PORT] --data DIR [--cache DIR] [--backend auto|egl|osmesa]\n"
             "         [--token-file F] [--preload NAME ...]     run the daemon (see splatd --help-daemon)\n"
-            "  splatd prep FILE [--k N] [--cache DIR] [--threads N] [--force]\n"
+            "  splatd prep FILE [--k N] [--cache DIR] [--threads N] [--force] [--quiet]\n"
             "                                                   preprocess and cache one file\n"
             "  splatd render FILE -o OUT.jpg|png|exr [options]  render one frame (splatd render --help)\n"
             "  splatd --version\n");
