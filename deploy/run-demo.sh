@@ -4,6 +4,8 @@
 # `splat path`, prints where the frames are, and stops the daemon with SIGTERM (exit 0 expected).
 #
 # usage: sh deploy/run-demo.sh SPLATD SPLAT [OUTDIR]   (OUTDIR default ./out)
+# $RUN_ARGS (make run RUN_ARGS=...) are passed to `splat path`, e.g. --force to render again the
+# frames a previous run left in OUTDIR (without it they are skipped).
 set -eu
 splatd=${1:?usage: run-demo.sh SPLATD SPLAT [OUTDIR]}
 splat=${2:?usage: run-demo.sh SPLATD SPLAT [OUTDIR]}
@@ -42,7 +44,8 @@ done
 port=$(cat "$tmp/port")
 echo "run-demo: splatd is listening on 127.0.0.1:$port"
 
-if ! "$splat" --port "$port" path Guanyin --orbit 36 --size 960x720 -o "$out/%05d.jpg"; then
+# shellcheck disable=SC2086
+if ! "$splat" --port "$port" path Guanyin --orbit 36 --size 960x720 -o "$out/%05d.jpg" ${RUN_ARGS:-}; then
     echo "run-demo: splat path failed; the daemon's log:" >&2
     cat "$tmp/splatd.log" >&2
     exit 1
