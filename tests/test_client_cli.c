@@ -69,8 +69,22 @@ static void test_cli_parse(void **state)
     assert_int_equal(a.force, 1);
     assert_string_equal(a.token_file, "/t");
 
+    /* --help anywhere answers before the rest is checked, and names the command for its help */
     assert_int_equal(parse(&a, err, "render", "--help", NULL), 0);
     assert_int_equal(a.help, 1);
+    assert_string_equal(a.command, "render");
+    assert_int_equal(parse(&a, err, "-h", "--bogus", "path", NULL), 0);
+    assert_int_equal(a.help, 1);
+    assert_string_equal(a.command, "path");
+    assert_int_equal(parse(&a, err, "--help", NULL), 0);
+    assert_null(a.command);
+    assert_int_equal(parse(&a, err, "--version", NULL), 0);
+    assert_int_equal(a.version, 1);
+    assert_int_equal(a.help, 0);
+    /* after "--" it is an operand, not an option */
+    assert_int_equal(parse(&a, err, "info", "--", "--help", NULL), 0);
+    assert_int_equal(a.help, 0);
+    assert_string_equal(a.name, "--help");
 
     struct { const char *args[10]; const char *needle; } bad[] = {
         {{NULL}, "no command"},

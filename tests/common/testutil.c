@@ -84,3 +84,13 @@ void tu_skip_reason(const char *fmt, ...)
     fflush(stdout);
     va_end(ap);
 }
+
+int tu_copy_file(const char *src, const char *dst)
+{
+    size_t len;
+    uint8_t *b = tu_read_file(src, &len);
+    if (!b) return -1;
+    int rc = tu_write_file(dst, b, len);
+    free(b);
+    return rc;
+}

@@ -10,6 +10,9 @@ const char *tu_data(const char *name, char *buf, size_t len);
 /* tu_read_file: whole file into a malloc'd buffer; *len set. NULL on failure. */
 uint8_t *tu_read_file(const char *path, size_t *len);
 
+/* tu_copy_file: copies the file src to dst; 0 on success. */
+int tu_copy_file(const char *src, const char *dst);
+
 /* tu_write_file: writes len bytes to path; 0 on success. */
 int tu_write_file(const char *path, const void *data, size_t len);
 
