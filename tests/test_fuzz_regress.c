@@ -18,6 +18,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "fuzz_targets.h"
 #include "testutil.h"
@@ -160,6 +161,11 @@ static void test_crashes(void **state)
     (void)state;
     char root[512], dir[600], path[1200];
     fuzz_dir(root, sizeof root);
+    /* The directory is part of the tree (its README says what goes there): when it is missing
+     * the replay would pass having replayed nothing, so that is a failure. A target's own
+     * subdirectory appears with its first saved crash. */
+    snprintf(dir, sizeof dir, "%s/crashes/README.md", root);
+    if (access(dir, R_OK) != 0) fail_msg("%s is missing: the crash replay would test nothing", dir);
     int total = 0;
     for (size_t t = 0; t < sizeof targets / sizeof targets[0]; t++) {
         snprintf(dir, sizeof dir, "%s/crashes/%s", root, targets[t]);
