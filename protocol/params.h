@@ -7,11 +7,13 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "pipelines.h"
+
 typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_type;
 
 /*      id            name            type        field         min   max       default   enum values */
 #define SP_PARAM_LIST(X)                                                                             \
-    X(PIPELINE,     "pipeline",     SP_T_ENUM,  pipeline,     0,    0,        "splat",  "points|splat") \
+    X(PIPELINE,     "pipeline",     SP_T_ENUM,  pipeline,     0,    0,        "splat",  SP_PIPELINE_VALUES) \
     X(SPLAT_SCALE,  "splat_scale",  SP_T_FLOAT, splat_scale,  0.01, 100,      "1",      NULL)     \
     X(LOWPASS,      "lowpass",      SP_T_FLOAT, lowpass,      0,    16,       "1",      NULL)     \
     X(EWA,          "ewa",          SP_T_ENUM,  ewa,          0,    0,        "auto",   "auto|exact|split") \
@@ -31,8 +33,7 @@ enum {
     SP_PARAM_COUNT
 };
 
-/* Enum values by index, matching the lists above. */
-enum { SP_PIPE_POINTS = 0, SP_PIPE_SPLAT = 1 };
+/* Enum values by index, matching the lists above (pipelines: SP_PIPE_* in pipelines.h). */
 /* ewa: the splat footprint filter. exact: J V_r J^T + lowpass I per splat, every splat
  * rasterised; split: lowpass/4 per splat, sub-pixel splats deposited in one pixel, the rest of
  * the low-pass in the resolve (pipe_splat.c); auto: exact on a GPU, split on a software

@@ -79,5 +79,7 @@ typedef struct rnd_pipeline {
                   const sp_params *p, const rnd_target *t, sd_err *err);
 } rnd_pipeline;
 
-extern const rnd_pipeline pipe_points;
-extern const rnd_pipeline pipe_splat;
+/* pipe_<name> for every row of protocol/pipelines.h. */
+#define RND_PIPE_EXTERN_(id, name) extern const rnd_pipeline pipe_##name;
+SP_PIPELINE_LIST(RND_PIPE_EXTERN_)
+#undef RND_PIPE_EXTERN_

@@ -16,9 +16,14 @@
 #include "pipe.h"
 #include "shaders.h"
 
-/* Pipelines by params->pipeline (protocol/params.h: points|splat). */
-static const rnd_pipeline *const pipelines[] = {&pipe_points, &pipe_splat};
-enum { NPIPES = sizeof pipelines / sizeof pipelines[0] };
+/* Pipelines by params->pipeline, from the one list (protocol/pipelines.h). */
+static const rnd_pipeline *const pipelines[] = {
+#define RND_PIPE_ROW_(id, name) [SP_PIPE_##id] = &pipe_##name,
+    SP_PIPELINE_LIST(RND_PIPE_ROW_)
+#undef RND_PIPE_ROW_
+};
+enum { NPIPES = SP_PIPE_COUNT };
+_Static_assert(sizeof pipelines / sizeof pipelines[0] == SP_PIPE_COUNT, "one row per pipeline");
 enum { MAX_SLOTS = 0xFFFF, ID_INDEX_BITS = 16 };
 enum { TARGET_8 = 0, TARGET_F = 1 };
 
@@ -169,6 +174,11 @@ void rnd_destroy(rnd_ctx *r)
 const char *rnd_renderer_string(const rnd_ctx *r)
 {
     return r->renderer;
+}
+
+const char *rnd_pipeline_name(int i)
+{
+    return i >= 0 && i < NPIPES ? pipelines[i]->name : NULL;
 }
 
 const char *rnd_backend_name(const rnd_ctx *r)

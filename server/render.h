@@ -52,6 +52,9 @@ void rnd_destroy(rnd_ctx *r);
 /* rnd_renderer_string: "egl: llvmpipe (LLVM 15.0.6, 256 bits)" and so on. */
 const char *rnd_renderer_string(const rnd_ctx *r);
 const char *rnd_backend_name(const rnd_ctx *r);
+/* rnd_pipeline_name: the name the implementation of pipeline i (SP_PIPE_*) gives itself, or
+ * NULL when i is not one (tests check it against the parameter's value names). */
+const char *rnd_pipeline_name(int i);
 
 /* rnd_upload: copies a prepared cloud to GPU buffers; returns a cloud id > 0, or a negative
  * SD_E* code. The prepared cloud may be freed afterwards: the renderer keeps its bounds. */

@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "params.h"
+#include "render.h"
 
 static void test_defaults_valid_and_round_trip(void **state)
 {
@@ -77,12 +78,39 @@ static void test_enum_names(void **state)
     assert_int_equal(sp_param_find("lowpass"), SP_LOWPASS);
 }
 
+/* The pipeline parameter, the C enum and the renderer's table come from one list
+ * (protocol/pipelines.h): every value name is the name its implementation gives itself, in
+ * the same order, and neither side has an extra entry. */
+static void test_pipeline_list_matches_table(void **state)
+{
+    (void)state;
+    char buf[64];
+    int n = 0;
+    for (int i = 0; sp_enum_name(SP_PIPELINE, i, buf, sizeof buf); i++, n++) {
+        const char *impl = rnd_pipeline_name(i);
+        assert_non_null(impl);
+        assert_string_equal(buf, impl);
+    }
+    assert_int_equal(n, SP_PIPE_COUNT);
+    assert_null(rnd_pipeline_name(SP_PIPE_COUNT));
+    assert_null(rnd_pipeline_name(-1));
+    assert_true(n >= 2);
+    sp_params p;
+    sp_params_defaults(&p);
+    char err[200];
+    for (int i = 0; i < n; i++) {
+        assert_int_equal(sp_param_set_text(&p, "pipeline", rnd_pipeline_name(i), err, sizeof err), 0);
+        assert_int_equal(p.pipeline, i);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_defaults_valid_and_round_trip),
         cmocka_unit_test(test_set_and_errors),
         cmocka_unit_test(test_enum_names),
+        cmocka_unit_test(test_pipeline_list_matches_table),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
