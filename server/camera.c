@@ -140,27 +140,32 @@ int rnd__aabb_in_frustum(const float m[16], const float bmin[3], const float bma
     return 1;
 }
 
-uint32_t rnd__cull(const rnd_view *v, const pc_batch *b, uint64_t nb, uint64_t budget,
-                   uint32_t *first, uint32_t *count, uint64_t *points)
+uint32_t rnd__cull(const rnd_view *v, const rnd_chunk *c, uint64_t nc, uint64_t budget,
+                   rnd_chunk *out, uint64_t *points)
 {
-    uint32_t nr = 0;
+    uint32_t n = 0;
     uint64_t total = 0;
-    for (uint64_t i = 0; i < nb; i++) {
+    for (uint64_t i = 0; i < nc; i++) {
         if (budget && total >= budget) break;
-        if (!b[i].count || !rnd__aabb_in_frustum(v->viewproj, b[i].bmin, b[i].bmax)) continue;
-        uint32_t c = b[i].count;
-        if (budget && total + c > budget) c = (uint32_t)(budget - total);
-        if (nr && first[nr - 1] + count[nr - 1] == b[i].first) {
-            count[nr - 1] += c;
+        if (!c[i].count || !rnd__aabb_in_frustum(v->viewproj, c[i].bmin, c[i].bmax)) continue;
+        uint32_t k = c[i].count;
+        if (budget && total + k > budget) k = (uint32_t)(budget - total);
+        rnd_chunk *last = n ? &out[n - 1] : NULL;
+        if (last && last->set == c[i].set && last->first + last->count == c[i].first) {
+            last->count += k;
+            for (int a = 0; a < 3; a++) {
+                last->bmin[a] = last->bmin[a] < c[i].bmin[a] ? last->bmin[a] : c[i].bmin[a];
+                last->bmax[a] = last->bmax[a] > c[i].bmax[a] ? last->bmax[a] : c[i].bmax[a];
+            }
         } else {
-            first[nr] = b[i].first;
-            count[nr] = c;
-            nr++;
+            out[n] = c[i];
+            out[n].count = k;
+            n++;
         }
-        total += c;
+        total += k;
     }
     *points = total;
-    return nr;
+    return n;
 }
 
 void rnd__screen_rect(const rnd_view *v, const float bmin[3], const float bmax[3], int margin,

@@ -17,12 +17,12 @@
 int rnd__view_setup(const rnd_camera *cam, const double offset[3], const float bmin[3],
                     const float bmax[3], rnd_view *v, sd_err *err);
 
-/* rnd__cull: writes into first/count (capacity nb each) the point ranges of the batches that
- * intersect v's frustum, in batch order, merging adjacent ranges, and truncated so that they
- * hold at most budget points (budget 0: no limit). Returns the number of ranges; *points gets
- * the number of points in them. */
-uint32_t rnd__cull(const rnd_view *v, const pc_batch *b, uint64_t nb, uint64_t budget,
-                   uint32_t *first, uint32_t *count, uint64_t *points);
+/* rnd__cull: writes into out (capacity nc) the chunks of c[0..nc) that intersect v's frustum,
+ * in their order, merging chunks adjacent in one buffer set, and truncated so that they hold
+ * at most budget points (budget 0: no limit). Returns the number written; *points gets the
+ * number of points in them. */
+uint32_t rnd__cull(const rnd_view *v, const rnd_chunk *c, uint64_t nc, uint64_t budget,
+                   rnd_chunk *out, uint64_t *points);
 
 /* rnd__screen_rect: the pixel rectangle [x0, x1) x [y0, y1) (GL window coordinates, clamped
  * to the frame) that holds the projection of the box [bmin, bmax], grown by margin pixels on

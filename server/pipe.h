@@ -1,6 +1,13 @@
 /* pipe.h — what a pipeline sees of the renderer (internal to server/; see render.h for the
- * public side). render.c owns the context, the uploaded clouds, the output target and the
- * read-back; each pipe_*.c implements one rnd_pipeline and draws into the target.
+ * public side). render.c owns the context, the clouds and their GPU residency, the output
+ * target and the read-back; pipe_kit.c holds what every pipeline shares; each pipe_NAME.c
+ * implements one rnd_pipeline, listed once in protocol/pipelines.h.
+ *
+ * A cloud reaches a pipeline as draw chunks: runs of points in buffer sets (GPU buffers, one
+ * per attribute). A cloud uploaded whole is split into as many sets as the driver's limits
+ * need (one for clouds under GL_MAX_TEXTURE_BUFFER_SIZE / 3 points), its batches are the
+ * chunks, and each frame's view lists the chunks that survived culling and the point budget.
+ * The level-of-detail octree supplies its nodes through the same interface.
  *
  * GL calls go through gl_api (gl_api.h), a function table loaded from the active back end
  * (eglGetProcAddress or OSMesaGetProcAddress): libOSMesa and libOpenGL both export gl*
@@ -8,27 +15,66 @@
 #pragma once
 #include <stdint.h>
 
+#include "bindings.h"
 #include "gl_api.h"
 #include "params.h"
+#include "pipelines.h"
 #include "prepared.h"
+#include "render.h"
 #include "sd_err.h"
 
-/* A cloud on the GPU. Buffers are SSBO-capable (usable as vertex buffers too).
- * Sizes are split so no single buffer passes llvmpipe's 128 MiB SSBO limit for 10M points. */
+/* The attributes a cloud has on the GPU, one buffer each, every component 4 bytes:
+ *   id, name, components, buffer texture format (lib_fetch.glsl reads 3-component ones as
+ *   three R32F texels) */
+#define RND_ATTR_LIST(X)                                                                      \
+    X(POS, "position", 3, GL_R32F)     /* local coordinates (file coordinates - offset) */    \
+    X(NORMAL, "normal", 3, GL_R32F)    /* unit */                                             \
+    X(RADIUS, "radius", 1, GL_R32F)    /* splat radius */                                     \
+    X(RGBA, "rgba", 1, GL_R32UI)       /* RGBA8 packed, r in the low byte; white if absent */ \
+    X(FIELD, "field", 1, GL_R32UI)     /* float bits of F in [0,1] */                         \
+    X(INTENSITY, "intensity", 1, GL_R32UI) /* float bits, normalised to [0,1]; 0 if absent */
+
+enum {
+#define RND_ATTR_ENUM_(id, name, comps, fmt) RND_ATTR_##id,
+    RND_ATTR_LIST(RND_ATTR_ENUM_)
+#undef RND_ATTR_ENUM_
+    RND_ATTR_COUNT
+};
+
+typedef struct rnd_attr_info {
+    const char *name;
+    int components;     /* 4-byte components per point */
+    GLenum texel;       /* buffer texture format */
+} rnd_attr_info;
+extern const rnd_attr_info rnd_attrs[RND_ATTR_COUNT];
+
+/* One buffer set: points [base, base + n) of a cloud, one buffer per attribute (indexed by
+ * RND_ATTR_*). Buffers are SSBO-capable (usable as vertex buffers too). */
+typedef struct rnd_bufset {
+    uint64_t base;             /* the cloud-wide index of the set's first point */
+    uint32_t n;
+    GLuint buf[RND_ATTR_COUNT];
+} rnd_bufset;
+
+/* A draw chunk: points [first, first + count) of buffer set `set`, and their bounds (local
+ * coordinates). */
+typedef struct rnd_chunk {
+    uint32_t set, first, count;
+    uint32_t level;            /* octree level; 0 for the batches of a cloud uploaded whole */
+    float bmin[3], bmax[3];
+} rnd_chunk;
+
+/* A resident cloud. */
 typedef struct rnd_gpu_cloud {
     uint64_t n;
-    GLuint pos;       /* 3 floats per point, tightly packed (read as float[] in SSBOs) */
-    GLuint normal;    /* 3 floats per point */
-    GLuint radius;    /* 1 float per point */
-    GLuint rgba;      /* 1 uint per point: RGBA8 packed (r in the low byte); white if absent */
-    GLuint field;     /* 1 float per point: F in [0,1] */
-    GLuint intensity; /* 1 float per point, normalised to [0,1]; 0 if absent */
-    uint32_t attrs;
+    uint32_t attrs;            /* PC_ATTR_* the file had (normals, radius, F always) */
     double offset[3];          /* file coordinates = local + offset */
     float bmin[3], bmax[3];    /* local bounds */
     float sigma, radius_median;
-    uint64_t nbatches;
-    pc_batch *batches;         /* CPU copy, for culling */
+    uint32_t nsets;
+    rnd_bufset *sets;
+    uint64_t nchunks;
+    rnd_chunk *chunks;         /* every chunk, in set order then point order (for culling) */
 } rnd_gpu_cloud;
 
 /* The view of one frame, in the cloud's local coordinates (camera eye - offset), column-major. */
@@ -37,9 +83,10 @@ typedef struct rnd_view {
     float eye[3];              /* local coordinates */
     float znear, zfar, fov_y;  /* radians */
     int width, height;
-    /* Visible point ranges after frustum culling of batches (merged when adjacent). */
-    uint32_t nranges;
-    const uint32_t *range_first, *range_count;
+    /* The chunks to draw after frustum culling and the point budget, in set order then point
+     * order, adjacent runs of one set merged. */
+    uint32_t nchunks;
+    const rnd_chunk *chunks;
     uint64_t points_visible;
 } rnd_view;
 
@@ -68,15 +115,84 @@ typedef struct rnd_shaders rnd_shaders; /* shader source lookup (embedded or --s
  * ".glsl" may be left out of the name); shaders.h has the lookup and the naming rules. */
 GLuint gl_program_from(const gl_api *gl, const rnd_shaders *sh, sd_err *err, ...);
 
+/* ---- the kit: what every pipeline shares (pipe_kit.c) --------------------------------- */
+
+typedef struct rnd_kit {
+    const gl_api *gl;
+    const rnd_shaders *sh;
+    rnd_pipe_opts opts;
+    int software;              /* GL_RENDERER names a software rasteriser (llvmpipe, ...) */
+    int float_atomics;         /* GL_NV_shader_atomic_float is there */
+    GLint64 max_ssbo;          /* GL_MAX_SHADER_STORAGE_BLOCK_SIZE */
+    GLint64 max_texels;        /* GL_MAX_TEXTURE_BUFFER_SIZE */
+    /* private to pipe_kit.c */
+    GLuint cloud_tex[4];       /* buffer textures on RND_T_POS, NRM, RAD, SRC */
+    GLuint range_buf, range_tex;
+    uint64_t range_bytes;
+    uint32_t *range_tmp;
+    uint32_t range_cap;
+} rnd_kit;
+
+/* rnd_kit_init: queries the driver (renderer string, extensions, limits) and makes the shared
+ * textures. Returns 0 or SD_EGL. rnd_kit_free releases them; safe on a zeroed kit. */
+int rnd_kit_init(rnd_kit *k, const gl_api *gl, const rnd_shaders *sh, const rnd_pipe_opts *o,
+                 sd_err *err);
+void rnd_kit_free(rnd_kit *k);
+
+/* rnd_kit_has_extension: whether the current context lists extension name. */
+int rnd_kit_has_extension(const gl_api *gl, const char *name);
+
+/* rnd_kit_program: gl_program_build (shaders.h) through the kit's shader lookup. */
+GLuint rnd_kit_program(const rnd_kit *k, const char *const *names, int n, const char *defines,
+                       sd_err *err);
+
+/* rnd_kit_ensure_ssbo: makes *buf (created when 0) hold at least bytes, growing it (contents
+ * lost) when *have is smaller; *have tracks its size. Returns 1 when it was (re)allocated. */
+int rnd_kit_ensure_ssbo(const gl_api *gl, GLuint *buf, uint64_t *have, uint64_t bytes);
+
+/* rnd_kit_color_source: the attribute the colour mode reads per point (RND_ATTR_RGBA, FIELD
+ * or INTENSITY; RGBA for the modes that read none). */
+int rnd_kit_color_source(int color);
+
+/* rnd_kit_bind_set: binds buffer set s's position, normal, radius and colour-source buffers
+ * as buffer textures on RND_T_POS, NRM, RAD and SRC. */
+void rnd_kit_bind_set(rnd_kit *k, const rnd_bufset *s, int color);
+
+/* rnd_kit_set_ranges: the chunks of v in buffer set `set` as the range table of
+ * lib_ranges.glsl, uploaded and bound on RND_T_RANGES: (first point, first visible index)
+ * per chunk, visible indices counted from 0 within the set. Sets *nranges and *first (the
+ * first point of the first range) and returns the set's visible points, 0 when it has none,
+ * or a negative SD_E* code. */
+int64_t rnd_kit_set_ranges(rnd_kit *k, const rnd_view *v, uint32_t set, uint32_t *nranges,
+                           uint32_t *first, sd_err *err);
+
+/* rnd_kit_unbind: unbinds every texture unit of bindings.h. */
+void rnd_kit_unbind(rnd_kit *k);
+
+/* ---- pipelines -------------------------------------------------------------------------- */
+
+/* What one frame asks of a pipeline. */
+typedef struct rnd_draw {
+    const rnd_gpu_cloud *cloud;
+    void *cloud_data;          /* what the pipeline's attach made for this cloud, or NULL */
+    const rnd_view *view;
+    const sp_params *params;
+    const rnd_target *target;  /* bound, cleared to the background (depth_eye to +inf) */
+} rnd_draw;
+
 typedef struct rnd_pipeline {
     const char *name;
+    uint32_t needs;            /* bits (1 << RND_ATTR_*) of the attributes it reads */
     /* create: compiles programs, allocates state; returns 0 or SD_E*. */
-    int (*create)(const gl_api *gl, const rnd_shaders *sh, void **state, sd_err *err);
-    void (*destroy)(const gl_api *gl, void *state);
-    /* render: draws cloud c seen through v with params p into t (already bound, cleared to the
-     * background, depth_eye to +inf when t has one). Returns 0 or SD_E*. */
-    int (*render)(const gl_api *gl, void *state, const rnd_gpu_cloud *c, const rnd_view *v,
-                  const sp_params *p, const rnd_target *t, sd_err *err);
+    int (*create)(rnd_kit *k, void **state, sd_err *err);
+    void (*destroy)(rnd_kit *k, void *state);
+    /* attach (may be NULL): derives per-cloud data when a cloud becomes resident, before its
+     * first frame with this pipeline; detach frees it when the cloud leaves the GPU. */
+    int (*attach)(rnd_kit *k, void *state, const rnd_gpu_cloud *c, void **cloud_data,
+                  sd_err *err);
+    void (*detach)(rnd_kit *k, void *state, void *cloud_data);
+    /* render: draws d into d->target. Returns 0 or SD_E*. */
+    int (*render)(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err);
 } rnd_pipeline;
 
 /* pipe_<name> for every row of protocol/pipelines.h. */

@@ -1,10 +1,12 @@
 /* render.c — the renderer (render.h): the GL back end, the function table, the shaders, the
- * uploaded clouds (ids = index + generation), the output target, and one frame's sequence:
- * view, culling, clear, pipeline, glFinish, read-back. */
+ * clouds (ids = index + generation) and their residency on the GPU under a byte budget, the
+ * output target, and one frame's sequence: view, culling, clear, pipeline, glFinish,
+ * read-back. */
 #include "render.h"
 
 #include <math.h>
 #include <stdio.h>
+#include <unistd.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -28,7 +30,15 @@ enum { MAX_SLOTS = 0xFFFF, ID_INDEX_BITS = 16 };
 enum { TARGET_8 = 0, TARGET_F = 1 };
 
 typedef struct cloud_slot {
-    rnd_gpu_cloud c;
+    rnd_gpu_cloud c;          /* bounds and chunks always; sets while resident */
+    pc_prepared *src;         /* adopted data, to upload again after an eviction; NULL for a
+                                 cloud that stays (rnd_upload) */
+    uint64_t bytes;           /* its buffers' size on the GPU */
+    uint64_t *set_base;       /* cloud-wide index of each buffer set's first point */
+    uint32_t nsets;
+    uint64_t last_used;       /* r->clock at its last frame (least recently used goes first) */
+    void *pdata[NPIPES];      /* each pipeline's attach data while resident */
+    uint8_t attached[NPIPES];
     uint16_t gen;  /* bumped on each upload into the slot; never 0 in a live id */
     int used;
 } cloud_slot;
@@ -40,10 +50,13 @@ struct rnd_ctx {
     rnd_shaders *sh;
     char renderer[320];
     int max_width, max_height;
+    rnd_kit kit;
     void *pstate[NPIPES];
     int pcreated[NPIPES];
     cloud_slot *slots;
     uint32_t nslots;
+    uint32_t max_set_points;
+    uint64_t budget, resident_bytes, clock, uploads, evictions;
     /* The two targets (pipe.h), each made on first use and remade when the size changes:
      * [TARGET_8] RGBA8 for 8-bit frames, read back as it is; [TARGET_F] RGBA16F + R32F depth
      * for float frames, blitted into [TARGET_8] for their RGBA8 copy (glReadPixels of RGBA16F
@@ -51,8 +64,8 @@ struct rnd_ctx {
      * Rendering 8-bit frames straight into RGBA8 saves the float clear and that blit: ~10 ms
      * of a 1280x720 frame on llvmpipe. */
     rnd_target target[2];
-    uint32_t *range_first, *range_count;
-    uint64_t range_cap;
+    rnd_chunk *visible;       /* one frame's chunks after culling */
+    uint64_t visible_cap;
 };
 
 static uint64_t now_us(void)
@@ -75,6 +88,30 @@ static int open_backend(rnd_ctx *r, const gl_backend_ops *ops, sd_err *err)
         r->ops = NULL;
     }
     return rc;
+}
+
+/* device_budget: the default cloud budget: 3/4 of the dedicated memory the driver reports
+ * (GL_NVX_gpu_memory_info, GL_ATI_meminfo); on a software renderer, whose "GPU memory" is
+ * system memory, a quarter of that; else 1 GiB. */
+static uint64_t device_budget(rnd_ctx *r)
+{
+    const gl_api *gl = &r->gl;
+    GLint kb[4] = {0, 0, 0, 0};
+    if (rnd_kit_has_extension(gl, "GL_NVX_gpu_memory_info")) {
+        gl->GetIntegerv(0x9047 /* GPU_MEMORY_INFO_DEDICATED_VIDMEM_NVX */, kb);
+        gl->GetError();
+        if (kb[0] > 0) return (uint64_t)kb[0] * 1024 / 4 * 3;
+    }
+    if (rnd_kit_has_extension(gl, "GL_ATI_meminfo")) {
+        gl->GetIntegerv(0x87FB /* VBO_FREE_MEMORY_ATI */, kb);
+        gl->GetError();
+        if (kb[0] > 0) return (uint64_t)kb[0] * 1024 / 4 * 3;
+    }
+    if (r->kit.software) {
+        long pages = sysconf(_SC_PHYS_PAGES), size = sysconf(_SC_PAGESIZE);
+        if (pages > 0 && size > 0) return (uint64_t)pages * (uint64_t)size / 4;
+    }
+    return (uint64_t)1 << 30;
 }
 
 rnd_ctx *rnd_create(const rnd_desc *desc, sd_err *err)
@@ -115,17 +152,23 @@ rnd_ctx *rnd_create(const rnd_desc *desc, sd_err *err)
              r->ops->describe(r->be));
     r->sh = rnd_shaders_create(d.shader_dir, err);
     if (!r->sh) goto fail;
+    if ((rc = rnd_kit_init(&r->kit, &r->gl, r->sh, &d.pipe, err)) < 0) goto fail;
+    r->budget = d.gpu_memory ? d.gpu_memory : device_budget(r);
+    uint64_t limit = (uint64_t)r->kit.max_texels / 3; /* positions: 3 R32F texels a point */
+    if (limit > INT32_MAX) limit = INT32_MAX;           /* GLint firsts and counts */
+    r->max_set_points = d.max_set_points && d.max_set_points < limit ? d.max_set_points
+                                                                       : (uint32_t)limit;
     /* Every pipeline is built now, so the first frame does not pay for shader compilation.
      * The baseline must build (broken shaders or a driver without compute shaders show at
      * start-up); another that fails is retried, and its error reported, when a frame asks
      * for it. */
-    rc = pipelines[SP_PIPE_POINTS]->create(&r->gl, r->sh, &r->pstate[SP_PIPE_POINTS], err);
+    rc = pipelines[SP_PIPE_POINTS]->create(&r->kit, &r->pstate[SP_PIPE_POINTS], err);
     if (rc < 0) goto fail;
     r->pcreated[SP_PIPE_POINTS] = 1;
     for (int i = 0; i < NPIPES; i++) {
         if (r->pcreated[i]) continue;
         sd_err ignored = {0};
-        r->pcreated[i] = pipelines[i]->create(&r->gl, r->sh, &r->pstate[i], &ignored) == 0;
+        r->pcreated[i] = pipelines[i]->create(&r->kit, &r->pstate[i], &ignored) == 0;
     }
     return r;
 fail:
@@ -142,12 +185,38 @@ static void target_free(const gl_api *gl, rnd_target *t)
     memset(t, 0, sizeof *t);
 }
 
-static void gpu_cloud_free(rnd_ctx *r, rnd_gpu_cloud *c)
+/* evict: takes slot's cloud off the GPU (its pipelines' data first); its bounds, chunks and
+ * adopted data stay, so it can come back. */
+static void evict(rnd_ctx *r, cloud_slot *slot)
 {
-    GLuint b[6] = {c->pos, c->normal, c->radius, c->rgba, c->field, c->intensity};
-    r->gl.DeleteBuffers(6, b);
-    free(c->batches);
-    memset(c, 0, sizeof *c);
+    rnd_gpu_cloud *c = &slot->c;
+    if (!c->sets) return;
+    for (int i = 0; i < NPIPES; i++) {
+        if (slot->attached[i] && pipelines[i]->detach)
+            pipelines[i]->detach(&r->kit, r->pstate[i], slot->pdata[i]);
+        slot->pdata[i] = NULL;
+        slot->attached[i] = 0;
+    }
+    for (uint32_t s = 0; s < c->nsets; s++) r->gl.DeleteBuffers(RND_ATTR_COUNT, c->sets[s].buf);
+    free(c->sets);
+    c->sets = NULL;
+    c->nsets = 0;
+    r->resident_bytes -= slot->bytes;
+}
+
+/* slot_clear: evicts and forgets everything of the slot's cloud. */
+static void slot_clear(rnd_ctx *r, cloud_slot *slot)
+{
+    evict(r, slot);
+    free(slot->c.chunks);
+    free(slot->set_base);
+    if (slot->src) {
+        pc_prepared_free(slot->src);
+        free(slot->src);
+    }
+    uint16_t gen = slot->gen;
+    memset(slot, 0, sizeof *slot);
+    slot->gen = gen;
 }
 
 void rnd_destroy(rnd_ctx *r)
@@ -155,18 +224,18 @@ void rnd_destroy(rnd_ctx *r)
     if (!r) return;
     if (r->be) {
         r->ops->make_current(r->be, NULL);
-        for (int i = 0; i < NPIPES; i++)
-            if (r->pcreated[i]) pipelines[i]->destroy(&r->gl, r->pstate[i]);
         for (uint32_t i = 0; i < r->nslots; i++)
-            if (r->slots[i].used) gpu_cloud_free(r, &r->slots[i].c);
+            if (r->slots[i].used) slot_clear(r, &r->slots[i]);
+        for (int i = 0; i < NPIPES; i++)
+            if (r->pcreated[i]) pipelines[i]->destroy(&r->kit, r->pstate[i]);
+        rnd_kit_free(&r->kit);
         target_free(&r->gl, &r->target[TARGET_8]);
         target_free(&r->gl, &r->target[TARGET_F]);
         r->ops->destroy(r->be);
     }
     rnd_shaders_destroy(r->sh);
     free(r->slots);
-    free(r->range_first);
-    free(r->range_count);
+    free(r->visible);
     memset(r, 0, sizeof *r);
     free(r);
 }
@@ -186,53 +255,184 @@ const char *rnd_backend_name(const rnd_ctx *r)
     return r->ops->name;
 }
 
-/* Creates buffer *b (left bound to GL_SHADER_STORAGE_BUFFER) holding len bytes from data, or
- * zeros when data is NULL. */
-static void make_buffer(const gl_api *gl, GLuint *b, uint64_t len, const void *data)
+/* upload_attr: buffer *b for attribute a of points [base, base + n) of pc. Missing colours are
+ * white, missing intensities 0; intensities are normalised by the cloud's range (lo, scale). */
+static int upload_attr(const gl_api *gl, GLuint *b, int a, const pc_prepared *pc, uint64_t base,
+                       uint32_t n, float lo, float scale, sd_err *err)
 {
+    uint64_t len = (uint64_t)n * 4 * (uint64_t)rnd_attrs[a].components;
+    const void *src = NULL;
+    switch (a) {
+    case RND_ATTR_POS: src = pc->pos + 3 * base; break;
+    case RND_ATTR_NORMAL: src = pc->normal ? pc->normal + 3 * base : NULL; break;
+    case RND_ATTR_RADIUS: src = pc->radius ? pc->radius + base : NULL; break;
+    case RND_ATTR_FIELD: src = pc->F ? pc->F + base : NULL; break;
+    case RND_ATTR_RGBA:
+        src = (pc->attrs & PC_ATTR_RGB) && pc->rgba ? pc->rgba + 4 * base : NULL;
+        break;
+    default: break; /* intensity: normalised below */
+    }
     gl->GenBuffers(1, b);
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, *b);
-    gl->BufferData(GL_SHADER_STORAGE_BUFFER, (GLsizeiptr)len, data, GL_STATIC_DRAW);
-    if (!data) {
-        const GLuint zero = 0;
+    gl->BufferData(GL_SHADER_STORAGE_BUFFER, (GLsizeiptr)len, src, GL_STATIC_DRAW);
+    if (!src) {
+        const GLuint fill = a == RND_ATTR_RGBA ? 0xFFFFFFFFu : 0;
         gl->ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT,
-                            &zero);
+                            &fill);
     }
-}
-
-/* Uploads intensity normalised to [0,1] by the cloud's minimum and maximum, in chunks. */
-static int upload_intensity(const gl_api *gl, GLuint b, const float *in, uint64_t n, sd_err *err)
-{
-    float lo = INFINITY, hi = -INFINITY;
-    for (uint64_t i = 0; i < n; i++) {
-        if (!isfinite(in[i])) continue;
-        lo = fminf(lo, in[i]);
-        hi = fmaxf(hi, in[i]);
-    }
-    float scale = hi > lo ? 1.0f / (hi - lo) : 0.0f; /* constant intensity: all 1 */
-    enum { CHUNK = 1 << 16 };
-    float *tmp = malloc(CHUNK * sizeof *tmp);
-    if (!tmp) return sd_errf(err, SD_ENOMEM, "out of memory uploading intensities");
-    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, b);
-    for (uint64_t i = 0; i < n; i += CHUNK) {
-        uint64_t m = n - i < CHUNK ? n - i : CHUNK;
-        for (uint64_t j = 0; j < m; j++) {
-            float x = in[i + j];
-            tmp[j] = isfinite(x) ? (scale > 0 ? (x - lo) * scale : 1.0f) : 0.0f;
+    if (a == RND_ATTR_INTENSITY && (pc->attrs & PC_ATTR_INTENSITY) && pc->intensity) {
+        enum { CHUNK = 1 << 16 };
+        float *tmp = malloc(CHUNK * sizeof *tmp);
+        if (!tmp) return sd_errf(err, SD_ENOMEM, "out of memory uploading intensities");
+        const float *in = pc->intensity + base;
+        for (uint64_t i = 0; i < n; i += CHUNK) {
+            uint64_t m = n - i < CHUNK ? n - i : CHUNK;
+            for (uint64_t j = 0; j < m; j++) {
+                float x = in[i + j];
+                tmp[j] = isfinite(x) ? (scale > 0 ? (x - lo) * scale : 1.0f) : 0.0f;
+            }
+            gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, (GLintptr)(i * 4), (GLsizeiptr)(m * 4),
+                              tmp);
         }
-        gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, (GLintptr)(i * 4), (GLsizeiptr)(m * 4), tmp);
+        free(tmp);
     }
-    free(tmp);
     return 0;
 }
 
-int64_t rnd_upload(rnd_ctx *r, const pc_prepared *pc, sd_err *err)
+/* cloud_bytes: the GPU bytes of a cloud of n points (every attribute, 4 bytes a component). */
+static uint64_t cloud_bytes(uint64_t n)
+{
+    uint64_t per = 0;
+    for (int a = 0; a < RND_ATTR_COUNT; a++) per += 4 * (uint64_t)rnd_attrs[a].components;
+    return n * per;
+}
+
+/* make_chunks: the slot's chunks from pc's batches (one batch covering everything when it has
+ * none), batches over max points cut into pieces, grouped into buffer sets of at most max
+ * points (slot->nsets and set_base; the sets themselves are made by make_resident). Returns 0
+ * or SD_ENOMEM. */
+static int make_chunks(cloud_slot *slot, const pc_prepared *pc, uint32_t max, sd_err *err)
+{
+    rnd_gpu_cloud *c = &slot->c;
+    pc_batch whole = {.first = 0, .count = 0};
+    const pc_batch *b = pc->batches;
+    uint64_t nb = pc->nbatches;
+    if (!nb) {
+        memcpy(whole.bmin, c->bmin, sizeof whole.bmin);
+        memcpy(whole.bmax, c->bmax, sizeof whole.bmax);
+        b = &whole;
+        nb = 1;
+    }
+    uint64_t nc = 0;
+    for (uint64_t i = 0; i < nb; i++) {
+        uint64_t cnt = nb == 1 && !pc->nbatches ? pc->n : b[i].count;
+        nc += cnt ? (cnt + max - 1) / max : 0;
+    }
+    c->chunks = malloc((nc ? nc : 1) * sizeof *c->chunks);
+    slot->set_base = malloc((nc ? nc : 1) * sizeof *slot->set_base); /* nsets <= nc */
+    if (!c->chunks || !slot->set_base)
+        return sd_errf(err, SD_ENOMEM, "out of memory for %llu chunks", (unsigned long long)nc);
+    uint64_t k = 0, set_base = 0;
+    uint32_t set = 0;
+    for (uint64_t i = 0; i < nb; i++) {
+        uint64_t first = b[i].first, cnt = nb == 1 && !pc->nbatches ? pc->n : b[i].count;
+        while (cnt) {
+            uint32_t piece = cnt < max ? (uint32_t)cnt : max;
+            if (k == 0) {
+                set_base = first;
+                slot->set_base[0] = first;
+            } else if (first + piece - set_base > max) { /* the set is full: the next one */
+                set++;
+                set_base = first;
+                slot->set_base[set] = first;
+            }
+            rnd_chunk *ch = &c->chunks[k++];
+            ch->set = set;
+            ch->first = (uint32_t)(first - set_base);
+            ch->count = piece;
+            ch->level = 0;
+            memcpy(ch->bmin, b[i].bmin, sizeof ch->bmin);
+            memcpy(ch->bmax, b[i].bmax, sizeof ch->bmax);
+            first += piece;
+            cnt -= piece;
+        }
+    }
+    c->nchunks = k;
+    slot->nsets = k ? set + 1 : 0;
+    return 0;
+}
+
+/* make_room: evicts the least recently rendered evictable clouds other than keep until need
+ * more bytes fit the budget. Returns 0, or SD_ELIMIT naming the sizes when they cannot. */
+static int make_room(rnd_ctx *r, const cloud_slot *keep, uint64_t need, sd_err *err)
+{
+    while (r->resident_bytes + need > r->budget) {
+        cloud_slot *lru = NULL;
+        for (uint32_t i = 0; i < r->nslots; i++) {
+            cloud_slot *s = &r->slots[i];
+            if (!s->used || s == keep || !s->c.sets || !s->src) continue;
+            if (!lru || s->last_used < lru->last_used) lru = s;
+        }
+        if (!lru)
+            return sd_errf(err, SD_ELIMIT, "a cloud of %llu MiB does not fit the GPU budget of "
+                           "%llu MiB beside the %llu MiB that must stay (--gpu-memory)",
+                           (unsigned long long)(need >> 20), (unsigned long long)(r->budget >> 20),
+                           (unsigned long long)(r->resident_bytes >> 20));
+        evict(r, lru);
+        r->evictions++;
+    }
+    return 0;
+}
+
+/* make_resident: uploads slot's cloud from pc (its buffer sets, from its chunks), making room
+ * first. Returns 0 or SD_E*. */
+static int make_resident(rnd_ctx *r, cloud_slot *slot, const pc_prepared *pc, sd_err *err)
+{
+    rnd_gpu_cloud *c = &slot->c;
+    if (c->sets) return 0;
+    int rc = make_room(r, slot, slot->bytes, err);
+    if (rc < 0) return rc;
+    uint32_t nsets = slot->nsets;
+    c->sets = calloc(nsets ? nsets : 1, sizeof *c->sets);
+    if (!c->sets) return sd_errf(err, SD_ENOMEM, "out of memory for %u buffer sets", nsets);
+    /* a set holds the points from its first chunk's to the end of its last chunk */
+    for (uint32_t s = 0; s < nsets; s++) c->sets[s].base = slot->set_base[s];
+    for (uint64_t k = 0; k < c->nchunks; k++) {
+        rnd_bufset *bs = &c->sets[c->chunks[k].set];
+        uint32_t end = c->chunks[k].first + c->chunks[k].count;
+        if (end > bs->n) bs->n = end;
+    }
+    float lo = INFINITY, hi = -INFINITY;
+    if ((pc->attrs & PC_ATTR_INTENSITY) && pc->intensity)
+        for (uint64_t i = 0; i < pc->n; i++) {
+            if (!isfinite(pc->intensity[i])) continue;
+            lo = fminf(lo, pc->intensity[i]);
+            hi = fmaxf(hi, pc->intensity[i]);
+        }
+    float scale = hi > lo ? 1.0f / (hi - lo) : 0.0f; /* constant intensity: all 1 */
+    const gl_api *gl = &r->gl;
+    c->nsets = nsets;
+    for (uint32_t s = 0; s < nsets && rc == 0; s++)
+        for (int a = 0; a < RND_ATTR_COUNT && rc == 0; a++)
+            rc = upload_attr(gl, &c->sets[s].buf[a], a, pc, c->sets[s].base, c->sets[s].n, lo,
+                             scale, err);
+    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+    if (rc == 0) rc = gl_check(gl, "uploading a cloud", err);
+    r->resident_bytes += slot->bytes;
+    if (rc < 0) {
+        evict(r, slot);
+        return rc;
+    }
+    r->uploads++;
+    return 0;
+}
+
+/* add_cloud: a new slot for pc (checked), with its chunks, resident. src: adopted data (the
+ * slot keeps it) or NULL (the cloud stays). Returns the id or SD_E*. */
+static int64_t add_cloud(rnd_ctx *r, const pc_prepared *pc, pc_prepared *src, sd_err *err)
 {
     if (!pc || !pc->pos || pc->n == 0)
         return sd_errf(err, SD_EEMPTY, "cannot upload a cloud without points");
-    if (pc->n >= ((uint64_t)1 << 31))
-        return sd_errf(err, SD_ELIMIT, "a cloud of %llu points is over the renderer's limit of "
-                       "2^31 - 1", (unsigned long long)pc->n);
     for (uint64_t i = 0; i < pc->nbatches; i++) {
         const pc_batch *b = &pc->batches[i];
         if ((uint64_t)b->first + b->count > pc->n)
@@ -254,64 +454,50 @@ int64_t rnd_upload(rnd_ctx *r, const pc_prepared *pc, sd_err *err)
     cloud_slot *slot = &r->slots[idx];
     rnd_gpu_cloud *c = &slot->c;
     memset(c, 0, sizeof *c);
-    uint64_t n = pc->n;
-    c->n = n;
+    c->n = pc->n;
     c->attrs = pc->attrs;
-    /* Batches: a cloud without them (made in memory) gets one covering everything. */
-    c->nbatches = pc->nbatches ? pc->nbatches : 1;
-    c->batches = malloc(c->nbatches * sizeof *c->batches);
-    if (!c->batches) return sd_errf(err, SD_ENOMEM, "out of memory for the batch table");
     for (int i = 0; i < 3; i++) {
         c->offset[i] = pc->offset[i];
         c->bmin[i] = (float)(pc->bmin[i] - pc->offset[i]);
         c->bmax[i] = (float)(pc->bmax[i] - pc->offset[i]);
     }
-    if (pc->nbatches) {
-        memcpy(c->batches, pc->batches, c->nbatches * sizeof *c->batches);
-    } else {
-        c->batches[0] = (pc_batch){.first = 0, .count = (uint32_t)n};
-        memcpy(c->batches[0].bmin, c->bmin, sizeof c->bmin);
-        memcpy(c->batches[0].bmax, c->bmax, sizeof c->bmax);
-    }
     c->sigma = pc->sigma;
     c->radius_median = pc->radius_median;
-
-    const gl_api *gl = &r->gl;
-    r->ops->make_current(r->be, NULL);
-    int rc = 0;
-    make_buffer(gl, &c->pos, n * 12, pc->pos);
-    make_buffer(gl, &c->normal, n * 12, pc->normal);
-    make_buffer(gl, &c->radius, n * 4, pc->radius);
-    make_buffer(gl, &c->field, n * 4, pc->F);
-    make_buffer(gl, &c->rgba, n * 4, (pc->attrs & PC_ATTR_RGB) ? pc->rgba : NULL);
-    if (!(pc->attrs & PC_ATTR_RGB) || !pc->rgba) {
-        const GLuint white = 0xFFFFFFFFu;
-        gl->ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT,
-                            &white);
+    slot->bytes = cloud_bytes(pc->n);
+    slot->last_used = ++r->clock;
+    int rc = make_chunks(slot, pc, r->max_set_points, err);
+    if (rc >= 0) rc = make_resident(r, slot, pc, err);
+    if (rc == 0 && c->nchunks > r->visible_cap) {
+        rnd_chunk *v = realloc(r->visible, c->nchunks * sizeof *v);
+        if (!v) rc = sd_errf(err, SD_ENOMEM, "out of memory for the chunk table");
+        else r->visible = v, r->visible_cap = c->nchunks;
     }
-    make_buffer(gl, &c->intensity, n * 4, NULL);
-    if ((pc->attrs & PC_ATTR_INTENSITY) && pc->intensity)
-        rc = upload_intensity(gl, c->intensity, pc->intensity, n, err);
-    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
-    if (rc == 0) rc = gl_check(gl, "uploading a cloud", err);
     if (rc < 0) {
-        gpu_cloud_free(r, c);
+        slot->src = NULL; /* the caller frees what it passed */
+        slot_clear(r, slot);
         return rc;
     }
-    if (c->nbatches > r->range_cap) {
-        uint32_t *f = realloc(r->range_first, c->nbatches * sizeof *f);
-        if (f) r->range_first = f;
-        uint32_t *k = realloc(r->range_count, c->nbatches * sizeof *k);
-        if (k) r->range_count = k;
-        if (!f || !k) {
-            gpu_cloud_free(r, c);
-            return sd_errf(err, SD_ENOMEM, "out of memory for the range table");
-        }
-        r->range_cap = c->nbatches;
-    }
+    slot->src = src;
     if (++slot->gen == 0) slot->gen = 1;
     slot->used = 1;
     return (int64_t)(((uint32_t)slot->gen << ID_INDEX_BITS) | (idx + 1));
+}
+
+int64_t rnd_upload(rnd_ctx *r, const pc_prepared *pc, sd_err *err)
+{
+    if ((int64_t)r->ops->make_current(r->be, err) < 0) return err->code;
+    return add_cloud(r, pc, NULL, err);
+}
+
+int64_t rnd_adopt(rnd_ctx *r, pc_prepared *pc, sd_err *err)
+{
+    int64_t id = r->ops->make_current(r->be, err);
+    if (id >= 0) id = add_cloud(r, pc, pc, err);
+    if (id < 0 && pc) {
+        pc_prepared_free(pc);
+        free(pc);
+    }
+    return id;
 }
 
 /* The slot of a live id, or NULL for 0, an unknown index or a stale generation. */
@@ -328,8 +514,27 @@ void rnd_release(rnd_ctx *r, uint32_t cloud_id)
     cloud_slot *s = lookup(r, cloud_id);
     if (!s) return;
     r->ops->make_current(r->be, NULL);
-    gpu_cloud_free(r, &s->c);
-    s->used = 0;
+    slot_clear(r, s);
+}
+
+void rnd_get_stats(const rnd_ctx *r, rnd_stats *st)
+{
+    memset(st, 0, sizeof *st);
+    st->budget = r->budget;
+    st->resident_bytes = r->resident_bytes;
+    st->uploads = r->uploads;
+    st->evictions = r->evictions;
+    for (uint32_t i = 0; i < r->nslots; i++) {
+        if (!r->slots[i].used) continue;
+        st->clouds++;
+        st->resident += r->slots[i].c.sets != NULL;
+    }
+}
+
+int rnd_cloud_resident(const rnd_ctx *r, uint32_t cloud_id)
+{
+    const cloud_slot *s = lookup((rnd_ctx *)r, cloud_id);
+    return s ? s->c.sets != NULL : -1;
 }
 
 static GLuint make_texture(const gl_api *gl, GLenum format, int w, int h)
@@ -434,17 +639,22 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     int rc = rnd__view_setup(cam, c->offset, c->bmin, c->bmax, &v, err);
     if (rc < 0) return rc;
     uint64_t budget = params->point_budget > 0 ? (uint64_t)params->point_budget : 0;
-    v.nranges = rnd__cull(&v, c->batches, c->nbatches, budget, r->range_first, r->range_count,
-                          &v.points_visible);
-    v.range_first = r->range_first;
-    v.range_count = r->range_count;
+    v.nchunks = rnd__cull(&v, c->chunks, c->nchunks, budget, r->visible, &v.points_visible);
+    v.chunks = r->visible;
 
     const gl_api *gl = &r->gl;
     if ((rc = r->ops->make_current(r->be, err)) < 0) return rc;
     if (!r->pcreated[pi]) {
-        rc = pipelines[pi]->create(gl, r->sh, &r->pstate[pi], err);
+        rc = pipelines[pi]->create(&r->kit, &r->pstate[pi], err);
         if (rc < 0) return rc;
         r->pcreated[pi] = 1;
+    }
+    slot->last_used = ++r->clock;
+    if (!c->sets && (rc = make_resident(r, slot, slot->src, err)) < 0) return rc;
+    if (pipelines[pi]->attach && !slot->attached[pi]) {
+        rc = pipelines[pi]->attach(&r->kit, r->pstate[pi], c, &slot->pdata[pi], err);
+        if (rc < 0) return rc;
+        slot->attached[pi] = 1;
     }
     /* Float frames render into TARGET_F and are copied into TARGET_8 for their RGBA8. */
     if ((rc = target_ensure(r, TARGET_8, cam->width, cam->height, err)) < 0) return rc;
@@ -466,7 +676,9 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     gl->ClearBufferfv(GL_COLOR, 0, bg);
     if (t->is_float) gl->ClearBufferfv(GL_COLOR, 1, inf);
     else gl->ColorMaski(0, GL_TRUE, GL_TRUE, GL_TRUE, GL_FALSE);
-    rc = pipelines[pi]->render(gl, r->pstate[pi], c, &v, params, t, err);
+    const rnd_draw draw = {.cloud = c, .cloud_data = slot->pdata[pi], .view = &v,
+                           .params = params, .target = t};
+    rc = pipelines[pi]->render(&r->kit, r->pstate[pi], &draw, err);
     /* The pipeline may have bound other framebuffers and state. */
     gl->ColorMaski(0, GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
     gl->Disable(GL_DEPTH_TEST);

@@ -12,11 +12,28 @@
 
 typedef enum { RND_BACKEND_AUTO = 0, RND_BACKEND_EGL, RND_BACKEND_OSMESA } rnd_backend_kind;
 
+/* Pipeline options that tests and benchmarks set (never read from the environment). */
+typedef struct rnd_pipe_opts {
+    int points_raster;        /* RND_RASTER_*: the points pipeline's form (default auto) */
+    int splat_fixed;          /* 1: fixed-point accumulation even with float atomics */
+    int splat_stripe_rows;    /* rows per accumulation stripe, 0 = as many as fit */
+} rnd_pipe_opts;
+
+enum { RND_RASTER_AUTO = 0, RND_RASTER_PACKED, RND_RASTER_EXACT, RND_RASTER_GL };
+
+enum { RND_DEFAULT_WIDTH = 1280, RND_DEFAULT_HEIGHT = 720 }; /* frames when none is asked */
+
 typedef struct rnd_desc {
     rnd_backend_kind backend; /* default AUTO: EGL, then OSMesa */
     const char *shader_dir;   /* default NULL: the shaders compiled into the binary */
     int max_width;            /* default 8192: largest frame accepted */
     int max_height;           /* default 8192 */
+    uint64_t gpu_memory;      /* bytes of cloud buffers kept on the GPU; default 0: sized to
+                                 the device (3/4 of its dedicated memory where the driver says,
+                                 a quarter of system memory on a software renderer, else 1 GiB) */
+    uint32_t max_set_points;  /* default 0: points per buffer set as the driver allows
+                                 (GL_MAX_TEXTURE_BUFFER_SIZE / 3); tests set less */
+    rnd_pipe_opts pipe;
 } rnd_desc;
 
 /* A camera in the cloud file's coordinates (doubles, so georeferenced eyes keep precision).
@@ -56,10 +73,35 @@ const char *rnd_backend_name(const rnd_ctx *r);
  * NULL when i is not one (tests check it against the parameter's value names). */
 const char *rnd_pipeline_name(int i);
 
-/* rnd_upload: copies a prepared cloud to GPU buffers; returns a cloud id > 0, or a negative
- * SD_E* code. The prepared cloud may be freed afterwards: the renderer keeps its bounds. */
+/* Residency. Cloud buffers on the GPU are held to a byte budget (rnd_desc.gpu_memory): a cloud
+ * the renderer owns the data of (rnd_adopt) may leave the GPU, least recently rendered first,
+ * when another needs the room, and comes back when it is rendered again; a cloud uploaded
+ * from data the caller keeps (rnd_upload) stays. */
+
+/* rnd_upload: copies a prepared cloud to GPU buffers, to stay there until rnd_release; returns
+ * a cloud id > 0, or a negative SD_E* code (SD_ELIMIT when it does not fit the budget beside
+ * the other clouds that must stay). The prepared cloud may be freed afterwards. */
 int64_t rnd_upload(rnd_ctx *r, const pc_prepared *pc, sd_err *err);
+
+/* rnd_adopt: takes a heap-allocated prepared cloud (freed by the renderer with
+ * pc_prepared_free and free, on release or on failure) and uploads it, making room by evicting
+ * the least recently rendered evictable clouds. Returns a cloud id > 0 or a negative SD_E*. */
+int64_t rnd_adopt(rnd_ctx *r, pc_prepared *pc, sd_err *err);
+
+/* rnd_release: removes a cloud (its GPU buffers, its pipelines' data, adopted data). */
 void rnd_release(rnd_ctx *r, uint32_t cloud_id);
+
+typedef struct rnd_stats {
+    uint64_t budget;          /* bytes */
+    uint64_t resident_bytes;  /* cloud buffers on the GPU now */
+    uint32_t clouds, resident;/* clouds known, and on the GPU */
+    uint64_t uploads, evictions; /* since rnd_create */
+} rnd_stats;
+
+/* rnd_get_stats: the residency counters. rnd_cloud_resident: 1 when cloud_id's buffers are on
+ * the GPU, 0 when not, -1 for an unknown id. */
+void rnd_get_stats(const rnd_ctx *r, rnd_stats *st);
+int rnd_cloud_resident(const rnd_ctx *r, uint32_t cloud_id);
 
 /* rnd_render: renders cloud_id through params->pipeline into frame (buffers allocated or
  * resized by the renderer; free with rnd_frame_free). want_float also fills rgba16f and depth.

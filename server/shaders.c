@@ -7,19 +7,48 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "bindings.h"
 #include "shaders_gen.h"
 
 enum { SHADER_MAX_BYTES = 1 << 20, PROGRAM_MAX_STAGES = 8 };
 
+#define BINDINGS_NAME "lib_bindings.glsl"
+
 struct rnd_shaders {
-    char *dir; /* NULL: embedded only */
+    char *dir;          /* NULL: embedded only */
+    char bindings[2048]; /* the generated lib_bindings.glsl */
 };
+
+int rnd_bindings_glsl(char *buf, size_t len)
+{
+    size_t n = 0;
+    int w = snprintf(buf, len, "// lib_bindings.glsl: generated from server/bindings.h\n");
+    if (w < 0 || (size_t)w >= len) return -1;
+    n = (size_t)w;
+#define BIND_LINE_(prefix, name, value)                                                       \
+    w = snprintf(buf + n, len - n, "#define " prefix "%s %d\n", #name, (int)(value));         \
+    if (w < 0 || (size_t)w >= len - n) return -1;                                            \
+    n += (size_t)w;
+#define BIND_B_(name) BIND_LINE_("B_", name, RND_B_##name)
+#define BIND_T_(name) BIND_LINE_("T_", name, RND_T_##name)
+    RND_STORAGE_BLOCKS(BIND_B_)
+    RND_TEXTURE_UNITS(BIND_T_)
+#undef BIND_B_
+#undef BIND_T_
+#undef BIND_LINE_
+    return (int)n;
+}
 
 rnd_shaders *rnd_shaders_create(const char *dir, sd_err *err)
 {
     rnd_shaders *sh = calloc(1, sizeof *sh);
     if (!sh) {
         sd_errf(err, SD_ENOMEM, "out of memory for the shader table");
+        return NULL;
+    }
+    if (rnd_bindings_glsl(sh->bindings, sizeof sh->bindings) < 0) {
+        free(sh);
+        sd_errf(err, SD_ELIMIT, "the binding table outgrew its text buffer");
         return NULL;
     }
     if (dir && *dir) {
@@ -84,6 +113,11 @@ static int lookup(const rnd_shaders *sh, const char *name, const char **text, ch
     *owned = NULL;
     if (!name || !*name || strchr(name, '/'))
         return sd_errf(err, SD_EINVAL, "bad shader name '%s'", name ? name : "(null)");
+    if (sh && !strcmp(name, BINDINGS_NAME)) {
+        *text = sh->bindings;
+        snprintf(origin, origin_len, "%s (generated from server/bindings.h)", BINDINGS_NAME);
+        return 0;
+    }
     const char *sfx[2] = {"", ends_with(name, ".glsl") ? NULL : ".glsl"};
     if (sh && sh->dir) {
         for (int i = 0; i < 2 && sfx[i]; i++) {
@@ -250,8 +284,31 @@ GLuint gl_shader_compile(const gl_api *gl, GLenum stage, const char *text, const
     return s;
 }
 
+/* with_defines: text with `defines` inserted after its #version line (malloc'd), or NULL. */
+static char *with_defines(const char *text, const char *defines)
+{
+    const char *nl = strchr(text, '\n');
+    size_t head = nl ? (size_t)(nl - text) + 1 : strlen(text);
+    size_t dl = strlen(defines), tl = strlen(text);
+    char *full = malloc(tl + dl + 2);
+    if (!full) return NULL;
+    memcpy(full, text, head);
+    size_t o = head;
+    if (!nl) full[o++] = '\n';
+    memcpy(full + o, defines, dl);
+    o += dl;
+    memcpy(full + o, text + head, tl - head + 1);
+    return full;
+}
+
 GLuint gl_program_from_list(const gl_api *gl, const rnd_shaders *sh, const char *const *names,
                             int n, sd_err *err)
+{
+    return gl_program_build(gl, sh, names, n, NULL, err);
+}
+
+GLuint gl_program_build(const gl_api *gl, const rnd_shaders *sh, const char *const *names, int n,
+                        const char *defines, sd_err *err)
 {
     GLuint shaders[PROGRAM_MAX_STAGES] = {0};
     char origins[256] = "";
@@ -272,7 +329,22 @@ GLuint gl_program_from_list(const gl_api *gl, const rnd_shaders *sh, const char 
             free(owned);
             goto fail;
         }
-        shaders[ns] = gl_shader_compile(gl, stage, text, origin, err);
+        char *full = NULL;
+        if (defines && *defines) {
+            full = with_defines(text, defines);
+            if (!full) {
+                free(owned);
+                sd_errf(err, SD_ENOMEM, "out of memory building shader %s", names[ns]);
+                goto fail;
+            }
+            /* the error names the variant: "splat_raster.comp [#define PASS 1 ...]" */
+            size_t ol = strlen(origin);
+            snprintf(origin + ol, sizeof origin - ol, " [%s]", defines);
+            for (char *q = origin + ol; *q; q++)
+                if (*q == '\n') *q = ' ';
+        }
+        shaders[ns] = gl_shader_compile(gl, stage, full ? full : text, origin, err);
+        free(full);
         free(owned);
         if (!shaders[ns]) goto fail;
         size_t ol = strlen(origins);

@@ -5,7 +5,8 @@
  * every shaders/NAME.glsl by base name). Code refers to them as "NAME.STAGE" or "NAME.STAGE.glsl".
  * A name without a STAGE extension is accepted when it ends in _vert/_vs, _frag/_fs,
  * _geom/_gs or _comp/_cs, or when its text declares a compute work group (local_size_x).
- * Sources are complete GLSL files with their own #version line; there is no #include. */
+ * Sources are complete GLSL files with their own #version line; `#include "lib_x.glsl"` lines
+ * are expanded (rnd_shaders_source), and "lib_bindings.glsl" is generated from bindings.h. */
 #pragma once
 #include <stddef.h>
 
@@ -37,6 +38,13 @@ GLuint gl_shader_compile(const gl_api *gl, GLenum stage, const char *text, const
 /* gl_program_from_list: gl_program_from with an array of n names. */
 GLuint gl_program_from_list(const gl_api *gl, const rnd_shaders *sh, const char *const *names,
                             int n, sd_err *err);
+
+/* gl_program_build: the program of the n shader files names, each compiled with `defines`
+ * (lines such as "#define PASS 1\n", may be NULL) inserted after its #version line; one
+ * source, several variants. Returns the program, or 0 with err naming the file, the variant
+ * and the GL log. */
+GLuint gl_program_build(const gl_api *gl, const rnd_shaders *sh, const char *const *names, int n,
+                        const char *defines, sd_err *err);
 
 /* gl_uniform: glGetUniformLocation; -1 when the uniform is absent or optimised out. */
 GLint gl_uniform(const gl_api *gl, GLuint prog, const char *name);

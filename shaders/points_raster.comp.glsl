@@ -19,19 +19,21 @@
 
 layout(local_size_x = 64) in;
 
+#include "lib_bindings.glsl"
+
 // Positions as a buffer texture: texelFetch gathers all SIMD lanes at once on llvmpipe, where
 // storage-buffer reads at varying addresses run lane by lane.
-uniform samplerBuffer u_pos;     // R32F: x y z per point (lib_fetch.glsl)
+layout(binding = T_POS) uniform samplerBuffer u_pos;     // R32F: x y z per point (lib_fetch.glsl)
 // depth[] again as a buffer texture, for the test before the atomic (the same gather).
 // Keys only ever decrease during the pass, so a stale read can cost a needless atomic but
 // never skip a needed one.
-uniform usamplerBuffer u_depth;  // R32UI over Depth
-layout(std430, binding = 5) restrict buffer Depth { uint depth[]; };
-layout(std430, binding = 6) restrict buffer Index { uint index[]; };
+layout(binding = T_POINTS_DEPTH) uniform usamplerBuffer u_depth;  // R32UI over Depth
+layout(std430, binding = B_POINTS_DEPTH) restrict buffer Depth { uint depth[]; };
+layout(std430, binding = B_POINTS_INDEX) restrict buffer Index { uint index[]; };
 #include "lib_fetch.glsl"
 // Visible ranges after culling: x = first point, y = position of that point in the sequence of
 // visible points (an exclusive prefix sum of the counts), as an RG32UI buffer texture.
-uniform usamplerBuffer u_ranges;
+layout(binding = T_RANGES) uniform usamplerBuffer u_ranges;
 #include "lib_ranges.glsl"
 
 uniform mat4 u_viewproj;
@@ -46,6 +48,7 @@ uniform uint u_threads;   // invocations in the dispatch
 uniform uint u_per;       // points per invocation
 uniform int u_pass;
 uniform uint u_index_bits;  // packed: bits of the point index
+uniform uint u_base;        // the cloud-wide index of this buffer set's first point
 uniform float u_log_near;   // packed: log2(near)
 uniform float u_log_scale;  // packed: (2^(32 - u_index_bits) - 1) / log2(far / near)
 
@@ -67,7 +70,7 @@ void main()
     ivec2 size = u_size;
     float point_size = u_point_size, znear = u_znear, zfar = u_zfar;
     uint total = u_total, nranges = u_nranges, first = u_first, threads = u_threads;
-    uint per = u_per, index_bits = u_index_bits;
+    uint per = u_per, index_bits = u_index_bits, base = u_base;
     int pass = u_pass;
     float log_near = u_log_near, log_scale = u_log_scale;
     // packed: the largest depth level (index_bits is 0 in the exact passes, which need none)
@@ -90,17 +93,17 @@ void main()
         uint key;
         if (pass == 2) {
             uint dq = uint(clamp((log2(d) - log_near) * log_scale, 0.0, dmax));
-            key = (dq << index_bits) | i;
+            key = (dq << index_bits) | (base + i);
         } else {
             key = floatBitsToUint(d);
         }
         if (point_size == 1.0) {
             // One pixel, without the loops (5 % faster on llvmpipe, and the common case).
             if (p0.x <= p1.x && p0.y <= p1.y)
-                touch(pass, uint(p0.y) * uint(size.x) + uint(p0.x), key, i);
+                touch(pass, uint(p0.y) * uint(size.x) + uint(p0.x), key, base + i);
             continue;
         }
         for (int y = p0.y; y <= p1.y; y++)
-            for (int x = p0.x; x <= p1.x; x++) touch(pass, uint(y) * uint(size.x) + uint(x), key, i);
+            for (int x = p0.x; x <= p1.x; x++) touch(pass, uint(y) * uint(size.x) + uint(x), key, base + i);
     }
 }

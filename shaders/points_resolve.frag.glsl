@@ -10,15 +10,19 @@
 // GL_MAX_TEXTURE_BUFFER_SIZE (3 texels a point) rather than by the storage-block size (12 bytes
 // a point: 11M points on llvmpipe).
 
-uniform samplerBuffer u_pos;     // R32F: x y z per point (lib_fetch.glsl)
-uniform samplerBuffer u_nrm;     // R32F: nx ny nz per point (u_color 2)
-uniform usamplerBuffer u_src;    // R32UI: rgba8 (u_color 0) or the float bits of the field
+#include "lib_bindings.glsl"
+
+layout(binding = T_POS) uniform samplerBuffer u_pos;     // R32F: x y z per point (lib_fetch.glsl)
+layout(binding = T_NRM) uniform samplerBuffer u_nrm;     // R32F: nx ny nz per point (u_color 2)
+layout(binding = T_SRC) uniform usamplerBuffer u_src;    // R32UI: rgba8 (u_color 0) or the float bits of the field
                                  // (1) or the intensity (4)
-uniform usamplerBuffer u_depth;  // R32UI: the raster pass's per-pixel key or depth bits
-uniform usamplerBuffer u_index;  // R32UI: exact mode's per-pixel winning point
+layout(binding = T_POINTS_DEPTH) uniform usamplerBuffer u_depth;  // R32UI: the raster pass's per-pixel key or depth bits
+layout(binding = T_POINTS_INDEX) uniform usamplerBuffer u_index;  // R32UI: exact mode's per-pixel winning point
 
 uniform int u_width;
 uniform uint u_index_bits;    // 0: exact mode (u_index holds the point); else packed keys
+uniform uint u_base, u_count; // this pass resolves the winners of points [u_base, +u_count):
+                              // one buffer set (a cloud may have several, resolved in turn)
 uniform mat4 u_viewproj;
 uniform int u_color;          // 0 rgb, 1 field, 2 normal, 3 depth, 4 intensity (params.h)
 uniform float u_znear, u_zfar;
@@ -40,11 +44,14 @@ void main()
     if (index_bits == 0u) {
         i = texelFetch(u_index, pi).x;
         if (i == 0xFFFFFFFFu) discard;
+        i -= u_base; // wraps for winners of an earlier set: discarded below
+        if (i >= u_count) discard;
         d = uintBitsToFloat(texelFetch(u_depth, pi).x);
     } else {
         uint key = texelFetch(u_depth, pi).x;
         if (key == 0xFFFFFFFFu) discard;
-        i = key & ((1u << index_bits) - 1u);
+        i = (key & ((1u << index_bits) - 1u)) - u_base;
+        if (i >= u_count) discard;
         // The exact depth of the winner (the key holds a quantised one), computed as the
         // raster pass did.
         d = (u_viewproj * vec4(fetch3(u_pos, i), 1.0)).w;

@@ -1,4 +1,5 @@
 #version 430
+#include "lib_bindings.glsl"
 // splat_raster.comp — EWA surface splatting, passes 1 (visibility) and 2 (attributes), as a
 // compute rasteriser (Schütz et al. 2021) instead of point sprites, which are 10-40x slower on
 // llvmpipe. pipe_splat.c compiles this file four times, inserting after the #version line:
@@ -54,10 +55,10 @@ layout(local_size_x = 64) in;
 
 // The cloud's buffers, read as buffer textures: texelFetch gathers all lanes at once on
 // llvmpipe, where storage-buffer reads at varying addresses run lane by lane.
-uniform samplerBuffer u_pos;   // R32F: x y z per point (lib_fetch.glsl)
-uniform samplerBuffer u_nrm;   // R32F: nx ny nz per point
-uniform samplerBuffer u_rad;   // R32F
-uniform usamplerBuffer u_src;  // R32UI: rgba8 (u_color 0) or float bits of field/intensity
+layout(binding = T_POS) uniform samplerBuffer u_pos;   // R32F: x y z per point (lib_fetch.glsl)
+layout(binding = T_NRM) uniform samplerBuffer u_nrm;   // R32F: nx ny nz per point
+layout(binding = T_RAD) uniform samplerBuffer u_rad;   // R32F
+layout(binding = T_SRC) uniform usamplerBuffer u_src;  // R32UI: rgba8 (u_color 0) or float bits of field/intensity
 #include "lib_fetch.glsl"
 
 // One pixel of the stripe: accumulated attributes (32 bytes, one cache-line half), and apart
@@ -65,26 +66,26 @@ uniform usamplerBuffer u_src;  // R32UI: rgba8 (u_color 0) or float bits of fiel
 // ~floatBitsToUint(depth). Positive floats order like their bits, so the nearest depth has the
 // largest key and 0 means empty: a zero fill (glClearBufferData, each frame) clears both.
 struct Px { ACC r, g, b, w; ACCI nx, ny, nz; uint pad; };
-layout(std430, binding = 4) restrict buffer Frame { Px px[]; };
-layout(std430, binding = 0) restrict buffer Keys { uint keys[]; };
+layout(std430, binding = B_SPLAT_SUMS) restrict buffer Frame { Px px[]; };
+layout(std430, binding = B_SPLAT_KEYS) restrict buffer Keys { uint keys[]; };
 // The same keys as a buffer texture for the reads, a gather on llvmpipe (storage-buffer reads
 // go lane by lane): pass 2 only reads them; pass 1 tests against them before its atomicMax, and
 // keys only grow during the pass, so a stale read costs a needless atomic, never a lost one.
 // ~5 % of a close-up frame.
-uniform usamplerBuffer u_keys;  // R32UI
+layout(binding = T_SPLAT_KEYS) uniform usamplerBuffer u_keys;  // R32UI
 
 // The raster and big lists: dispatch arguments for their passes (groups[0] = min(work groups,
 // 65535)), the count and the point indices.
-layout(std430, binding = 5) restrict buffer Big { uint big_groups[3]; uint big_count; uint big_list[]; };
-layout(std430, binding = 7) restrict buffer Ras { uint ras_groups[3]; uint ras_count; uint ras_list[]; };
+layout(std430, binding = B_SPLAT_BIG) restrict buffer Big { uint big_groups[3]; uint big_count; uint big_list[]; };
+layout(std430, binding = B_SPLAT_RAS) restrict buffer Ras { uint ras_groups[3]; uint ras_count; uint ras_list[]; };
 
 // Pass 1: the bounding box (x0, y0, x1, y1 inclusive, frame pixels) of every pixel any splat
 // touches in this stripe, reset to (big, big, -1, -1) per stripe; the resolve draws only it.
-layout(std430, binding = 8) restrict buffer Rect { ivec4 rect; };
+layout(std430, binding = B_SPLAT_RECT) restrict buffer Rect { ivec4 rect; };
 
 // Visible ranges after culling: (first point, first visible index) per range, RG32UI
 // (lib_ranges.glsl).
-uniform usamplerBuffer u_ranges;
+layout(binding = T_RANGES) uniform usamplerBuffer u_ranges;
 #include "lib_ranges.glsl"
 
 uniform mat4 u_view;      // local -> eye

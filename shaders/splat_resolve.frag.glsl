@@ -1,4 +1,5 @@
 #version 430
+#include "lib_bindings.glsl"
 // splat_resolve.frag — EWA splatting pass 3, a fragment pass over the rectangle of pixels pass 1
 // touched, grown by one pixel (splat_resolve.vert; the stripe's rows by the scissor): llvmpipe
 // shades whole pixel quads at once, where compute image stores go lane by lane. Per pixel:
@@ -18,16 +19,16 @@
 // pipe_splat.c inserts "#define FLOAT_ATOMICS 0|1" after the #version line (the number format
 // of the sums, see splat_raster.comp).
 #if FLOAT_ATOMICS
-uniform samplerBuffer u_acc;
+layout(binding = T_SPLAT_SUMS) uniform samplerBuffer u_acc;
 #define SUMS(t) (t)
 #define NSUM(t) (t).xyz
 #else
-uniform usamplerBuffer u_acc;
+layout(binding = T_SPLAT_SUMS) uniform usamplerBuffer u_acc;
 #define SUMS(t) vec4(vec3((t).xyz) / 255.0, float((t).w))
 #define NSUM(t) vec3(ivec3((t).xyz))
 #endif
 
-uniform usamplerBuffer u_keys; // R32UI: the visibility keys, one a pixel
+layout(binding = T_SPLAT_KEYS) uniform usamplerBuffer u_keys; // R32UI: the visibility keys, one a pixel
 
 layout(location = 0) out vec4 o_color;
 layout(location = 1) out float o_depth;

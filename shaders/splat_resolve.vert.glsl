@@ -1,10 +1,11 @@
 #version 430
+#include "lib_bindings.glsl"
 // splat_resolve.vert — two triangles covering the rectangle of pixels pass 1 touched in this
 // stripe (splat_raster.comp's Rect), grown by one pixel for the 3x3 gather and clipped to the
 // frame, for splat_resolve.frag.glsl: pixels outside it have no neighbour with weight and
 // would be discarded. An empty rectangle gives degenerate triangles.
 
-layout(std430, binding = 8) readonly restrict buffer Rect { ivec4 rect; };
+layout(std430, binding = B_SPLAT_RECT) readonly restrict buffer Rect { ivec4 rect; };
 
 uniform ivec2 u_size; // frame width, height
 

@@ -32,13 +32,13 @@ static int setup(void **state)
 {
     static const char *labels[NR] = {"egl/packed", "osmesa/packed", "egl/exact",
                                      "osmesa/exact", "egl/gl",    "osmesa/gl"};
-    static const char *modes[NR / 2] = {"packed", "exact", "gl"};
+    static const int modes[NR / 2] = {RND_RASTER_PACKED, RND_RASTER_EXACT, RND_RASTER_GL};
     fixture *fx = calloc(1, sizeof *fx);
     if (!fx) return -1;
     for (int i = 0; i < NR; i++) {
-        setenv("SPLATD_POINTS_RASTER", modes[i / 2], 1);
         rnd_desc d = {.backend = (i % 2) ? RND_BACKEND_OSMESA : RND_BACKEND_EGL,
-                      .shader_dir = getenv("SPLATD_SHADERS")};
+                      .shader_dir = getenv("SPLATD_SHADERS"),
+                      .pipe = {.points_raster = modes[i / 2]}};
         sd_err err = {0};
         fx->r[i] = rnd_create(&d, &err);
         if (!fx->r[i]) {
@@ -47,7 +47,6 @@ static int setup(void **state)
         }
         fx->label[i] = labels[i];
     }
-    unsetenv("SPLATD_POINTS_RASTER");
     *state = fx;
     return 0;
 }
@@ -599,6 +598,161 @@ static void test_cmd_render_file(void **state)
     tu_rm_rf(dir);
 }
 
+/* make_sphere: n points on a unit sphere around the local origin (deterministic, golden-angle
+ * spiral), colours varying with the index, splat radius fit for the density. */
+static void make_sphere(pc_prepared *pc, uint64_t n, uint64_t nb)
+{
+    tu_new_cloud(pc, n, nb);
+    for (uint64_t i = 0; i < n; i++) {
+        double z = 1.0 - 2.0 * (i + 0.5) / n, r = sqrt(1.0 - z * z), a = 2.39996323 * i;
+        set_point(pc, i, (float)(r * cos(a)), (float)(r * sin(a)), (float)z, (uint8_t)(i * 7),
+                  (uint8_t)(i * 13), (uint8_t)(i * 29));
+        for (int k = 0; k < 3; k++) pc->normal[3 * i + k] = pc->pos[3 * i + k];
+        pc->radius[i] = (float)(2.5 / sqrt((double)n));
+    }
+    tu_finish_cloud(pc, OFF);
+}
+
+/* A cloud split over several buffer sets (rnd_desc.max_set_points, as a cloud past the
+ * driver's buffer-texture limit is) renders what one set renders: every points form
+ * pixel for pixel (the raster passes key points by their cloud-wide index, so depth order and
+ * ties resolve across sets as within one), and splat within the float atomics' summation
+ * order (they run in another order anyway: 2/255 in any channel). Batches of 1024 points
+ * with sets of 1000 also cut every batch into two chunks. */
+static void test_buffer_sets(void **state)
+{
+    (void)state;
+    enum { N = 20000 };
+    pc_prepared pc;
+    make_sphere(&pc, N, N / 1024 + 1);
+    rnd_camera cam = {{OFF[0] + 0.4, OFF[1] - 2.6, OFF[2] + 0.9}, {OFF[0], OFF[1], OFF[2]},
+                      {0, 0, 1}, 50, 0, 0, W, H};
+    static const int forms[3] = {RND_RASTER_PACKED, RND_RASTER_EXACT, RND_RASTER_GL};
+    for (int fi = 0; fi < 3; fi++) {
+        rnd_frame f[2] = {{0}, {0}};
+        for (int split = 0; split < 2; split++) {
+            rnd_desc d = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS"),
+                          .max_set_points = split ? 1000 : 0, .pipe = {.points_raster = forms[fi]}};
+            sd_err err = {0};
+            rnd_ctx *r = rnd_create(&d, &err);
+            if (!r) fail_msg("rnd_create: %s", err.msg);
+            uint32_t id = tu_upload(r, &pc);
+            for (int pl = 0; pl < 2; pl++) {
+                sp_params p;
+                sp_params_defaults(&p);
+                p.pipeline = pl ? SP_PIPE_SPLAT : SP_PIPE_POINTS;
+                p.point_size = 2;
+                if (pl && fi) continue; /* splat once */
+                rnd_frame g = {0};
+                tu_render(r, id, &cam, &p, 0, pl ? &g : &f[split]);
+                assert_int_equal((pl ? g : f[split]).points_drawn, N / 2 + N / 2);
+                if (pl) {
+                    static uint8_t first[W * H * 4];
+                    if (!split) memcpy(first, g.rgba8, sizeof first);
+                    int worst = 0, covered = 0;
+                    for (int i = 0; i < W * H * 4; i++) {
+                        int dd = abs((int)g.rgba8[i] - first[i]);
+                        if (dd > worst) worst = dd;
+                        covered += (i % 4 == 0) && g.rgba8[i] + g.rgba8[i + 1] + g.rgba8[i + 2];
+                    }
+                    assert_true(covered > W * H / 4);
+                    if (split && worst > 2) fail_msg("splat over buffer sets differs by %d/255", worst);
+                }
+                rnd_frame_free(&g);
+            }
+            rnd_destroy(r);
+        }
+        int same = memcmp(f[0].rgba8, f[1].rgba8, (size_t)W * H * 4) == 0;
+        if (!same) fail_msg("points (form %d) over buffer sets is not the one-set image", forms[fi]);
+        rnd_frame_free(&f[0]);
+        rnd_frame_free(&f[1]);
+    }
+    pc_prepared_free(&pc);
+}
+
+/* Two clouds whose buffers together exceed the GPU budget (rnd_desc.gpu_memory, splatd
+ * --gpu-memory): adopting the second evicts the first (least recently used), rendering the first
+ * brings it back and evicts the second, and each image equals the image of that cloud rendered
+ * alone, in a renderer with room for both. */
+static void test_residency_budget(void **state)
+{
+    (void)state;
+    enum { N = 30000 };
+    const uint64_t bytes = (uint64_t)N * 40; /* 10 floats a point (pipe.h RND_ATTR_LIST) */
+    rnd_camera cam = {{OFF[0] + 0.4, OFF[1] - 2.6, OFF[2] + 0.9}, {OFF[0], OFF[1], OFF[2]},
+                      {0, 0, 1}, 50, 0, 0, W, H};
+    sp_params p;
+    sp_params_defaults(&p);
+    p.pipeline = SP_PIPE_SPLAT;
+    rnd_frame ref[2] = {{0}, {0}};
+    rnd_desc roomy = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS")};
+    rnd_desc tight = roomy;
+    tight.gpu_memory = bytes + bytes / 2; /* one fits, two do not */
+    sd_err err = {0};
+    rnd_ctx *r = rnd_create(&roomy, &err);
+    if (!r) fail_msg("rnd_create: %s", err.msg);
+    for (int k = 0; k < 2; k++) {
+        pc_prepared pc;
+        make_sphere(&pc, N - 7000 * k, 0); /* two different clouds */
+        uint32_t id = tu_upload(r, &pc);
+        tu_render(r, id, &cam, &p, 0, &ref[k]);
+        pc_prepared_free(&pc);
+    }
+    rnd_destroy(r);
+
+    r = rnd_create(&tight, &err);
+    if (!r) fail_msg("rnd_create: %s", err.msg);
+    uint32_t id[2];
+    for (int k = 0; k < 2; k++) {
+        pc_prepared *pc = calloc(1, sizeof *pc);
+        make_sphere(pc, N - 7000 * k, 0);
+        int64_t got = rnd_adopt(r, pc, &err);
+        if (got <= 0) fail_msg("rnd_adopt: %s", err.msg);
+        id[k] = (uint32_t)got;
+    }
+    rnd_stats st;
+    rnd_get_stats(r, &st);
+    assert_int_equal(st.clouds, 2);
+    assert_int_equal(st.resident, 1);
+    assert_int_equal(rnd_cloud_resident(r, id[0]), 0); /* the second pushed the first out */
+    assert_int_equal(rnd_cloud_resident(r, id[1]), 1);
+    assert_true(st.resident_bytes <= tight.gpu_memory);
+    const int order[3] = {1, 0, 1};
+    for (int i = 0; i < 3; i++) {
+        int k = order[i];
+        rnd_frame f = {0};
+        tu_render(r, id[k], &cam, &p, 0, &f);
+        assert_int_equal(rnd_cloud_resident(r, id[k]), 1);
+        assert_int_equal(rnd_cloud_resident(r, id[1 - k]), 0);
+        int worst = 0;
+        for (size_t j = 0; j < (size_t)W * H * 4; j++) {
+            int dd = abs((int)f.rgba8[j] - ref[k].rgba8[j]);
+            if (dd > worst) worst = dd;
+        }
+        if (worst > 2) fail_msg("cloud %d after %d evictions differs by %d/255", k, i, worst);
+        rnd_frame_free(&f);
+    }
+    rnd_get_stats(r, &st);
+    assert_int_equal(st.evictions, 3);   /* at the second adopt, then at each switch */
+    assert_int_equal(st.uploads, 4);
+    /* A cloud bigger than the whole budget is refused by name, and the others stay usable. */
+    pc_prepared *big = calloc(1, sizeof *big);
+    make_sphere(big, 2 * N, 0);
+    assert_true(rnd_adopt(r, big, &err) < 0);
+    assert_non_null(strstr(err.msg, "GPU budget"));
+    rnd_frame f = {0};
+    tu_render(r, id[0], &cam, &p, 0, &f);
+    rnd_frame_free(&f);
+    rnd_release(r, id[0]);
+    rnd_release(r, id[1]);
+    rnd_get_stats(r, &st);
+    assert_int_equal(st.clouds, 0);
+    assert_int_equal(st.resident_bytes, 0);
+    rnd_destroy(r);
+    rnd_frame_free(&ref[0]);
+    rnd_frame_free(&ref[1]);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -614,6 +768,8 @@ int main(void)
         cmocka_unit_test(test_auto_backend_and_shader_errors),
         cmocka_unit_test(test_cmd_render_errors),
         cmocka_unit_test(test_cmd_render_file),
+        cmocka_unit_test(test_buffer_sets),
+        cmocka_unit_test(test_residency_budget),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }

@@ -1,0 +1,51 @@
+/* bindings.h — every binding point the shaders use, declared once.
+ *
+ * Storage blocks get RND_B_<NAME> and texture units RND_T_<NAME>, numbered in list order, so no
+ * two share a number. The shaders see the same names without the RND_ prefix (B_<NAME>,
+ * T_<NAME>) through the include "lib_bindings.glsl", which shaders.c generates from these lists
+ * (it is not a file in shaders/): `layout(std430, binding = B_SPLAT_KEYS) buffer ...` and
+ * `layout(binding = T_POS) uniform samplerBuffer u_pos;`. A binding is added here, and only
+ * here. The cloud's units (POS, NRM, RAD, SRC, RANGES) are bound by pipe_kit.c for every
+ * pipeline; the others belong to one pipeline each. */
+#pragma once
+
+#define RND_STORAGE_BLOCKS(X)                                                                 \
+    X(SPLAT_KEYS)    /* splat: uint per pixel, the visibility keys (~depth bits, atomicMax) */ \
+    X(SPLAT_SUMS)    /* splat: struct Px per pixel, the weighted sums (atomicAdd) */           \
+    X(SPLAT_BIG)     /* splat: dispatch header + splats with a big pixel box */                \
+    X(SPLAT_RAS)     /* splat: dispatch header + sampled (not deposited) splats */             \
+    X(SPLAT_RECT)    /* splat: ivec4, the pixels pass 1 touched */                             \
+    X(POINTS_DEPTH)  /* points: uint per pixel, the packed key or the depth bits */            \
+    X(POINTS_INDEX)  /* points: uint per pixel, the exact form's winning point */
+
+#define RND_TEXTURE_UNITS(X)                                                                  \
+    X(POS)           /* R32F: x y z per point (lib_fetch.glsl) */                              \
+    X(NRM)           /* R32F: nx ny nz per point */                                            \
+    X(RAD)           /* R32F: splat radius per point */                                        \
+    X(SRC)           /* R32UI: rgba8, or the float bits of the field or intensity */           \
+    X(RANGES)        /* RG32UI: (first point, first visible index) per range (lib_ranges) */   \
+    X(SPLAT_SUMS)    /* splat: the sums as RGBA32F or RGBA32UI texels, 2 a pixel */            \
+    X(SPLAT_KEYS)    /* splat: the keys as R32UI */                                            \
+    X(POINTS_DEPTH)  /* points: POINTS_DEPTH as R32UI */                                       \
+    X(POINTS_INDEX)  /* points: POINTS_INDEX as R32UI */
+
+enum {
+#define RND_B_ENUM_(name) RND_B_##name,
+    RND_STORAGE_BLOCKS(RND_B_ENUM_)
+#undef RND_B_ENUM_
+    RND_B_COUNT
+};
+
+enum {
+#define RND_T_ENUM_(name) RND_T_##name,
+    RND_TEXTURE_UNITS(RND_T_ENUM_)
+#undef RND_T_ENUM_
+    RND_T_COUNT
+};
+
+#include <stddef.h>
+
+/* rnd_bindings_glsl: writes the text of "lib_bindings.glsl" (one "#define B_<NAME> n" or
+ * "#define T_<NAME> n" line per binding) into buf. Returns its length, or -1 when len is too
+ * small. */
+int rnd_bindings_glsl(char *buf, size_t len);
