@@ -43,9 +43,31 @@ static void usage(FILE *f)
             "                       option; --preload may also be repeated)\n"
             "  --max-clients N      connections served at once (default 64)\n"
             "  --handshake-timeout S  seconds a client has to authenticate (default 10)\n"
+            "  --gpu-memory SIZE    bytes of cloud buffers kept on the GPU (suffix K, M or G; default:\n"
+            "                       3/4 of the device's memory, a quarter of RAM on a software\n"
+            "                       renderer). Clouds no client has rendered for longest leave first\n"
+            "                       and come back when rendered again.\n"
             "  --help               this text\n"
             "\n"
             "SIGTERM or SIGINT stops accepting, finishes the frames in flight (at most 5 s) and exits 0.\n");
+}
+
+/* parse_size: "N", "NK", "NM", "NG" (powers of 1024) into bytes, at least 1 MiB. 0 or -1. */
+static int parse_size(const char *s, uint64_t *out)
+{
+    char *end;
+    errno = 0;
+    unsigned long long v = strtoull(s, &end, 10);
+    if (end == s || errno || s[0] == '-') return -1;
+    int shift = 0;
+    if (*end == 'K' || *end == 'k') shift = 10, end++;
+    else if (*end == 'M' || *end == 'm') shift = 20, end++;
+    else if (*end == 'G' || *end == 'g') shift = 30, end++;
+    if (*end || v > (UINT64_MAX >> shift)) return -1;
+    v <<= shift;
+    if (v < (1u << 20)) return -1;
+    *out = v;
+    return 0;
 }
 
 /* parse_opts: fills o from argv. Returns 0, 1 for --help (exit 0), or -1 after printing the
@@ -53,13 +75,14 @@ static void usage(FILE *f)
 static int parse_opts(int argc, char **argv, srv_opts *o)
 {
     enum { O_LISTEN = 1000, O_DATA, O_CACHE, O_BACKEND, O_TOKEN, O_PRELOAD, O_SHADERS, O_MAXC,
-           O_PORTFILE, O_HS, O_HELP };
+           O_PORTFILE, O_HS, O_GPUMEM, O_HELP };
     static const struct option lo[] = {
         {"listen", required_argument, 0, O_LISTEN},   {"data", required_argument, 0, O_DATA},
         {"cache", required_argument, 0, O_CACHE},     {"backend", required_argument, 0, O_BACKEND},
         {"token-file", required_argument, 0, O_TOKEN}, {"preload", required_argument, 0, O_PRELOAD},
         {"shader-dir", required_argument, 0, O_SHADERS}, {"max-clients", required_argument, 0, O_MAXC},
         {"port-file", required_argument, 0, O_PORTFILE}, {"handshake-timeout", required_argument, 0, O_HS},
+        {"gpu-memory", required_argument, 0, O_GPUMEM},
         {"help", no_argument, 0, O_HELP},             {0, 0, 0, 0},
     };
     snprintf(o->host, sizeof o->host, "127.0.0.1");
@@ -109,6 +132,13 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
             else if (!strcmp(optarg, "osmesa")) o->backend = RND_BACKEND_OSMESA;
             else {
                 fprintf(stderr, "splatd: --backend '%s': expected auto, egl or osmesa\n", optarg);
+                return -1;
+            }
+            break;
+        case O_GPUMEM:
+            if (parse_size(optarg, &o->gpu_memory) != 0) {
+                fprintf(stderr, "splatd: --gpu-memory '%s': expected a size such as 512M or 4G "
+                        "(at least 1M)\n", optarg);
                 return -1;
             }
             break;
@@ -428,7 +458,7 @@ static int start(srv *sv)
     sv->max_w = sv->max_h = 8192;
     rt_desc rd = {
         .rnd = {.backend = sv->o.backend, .shader_dir = sv->o.shader_dir,
-                .max_width = sv->max_w, .max_height = sv->max_h},
+                .max_width = sv->max_w, .max_height = sv->max_h, .gpu_memory = sv->o.gpu_memory},
         .max_clients = sv->o.max_clients, .cache_dir = sv->o.cache_dir,
         .pack = srv_pack_frame, .pack_user = sv,
     };
@@ -437,7 +467,9 @@ static int start(srv *sv)
         fprintf(stderr, "splatd: cannot start the renderer: %s\n", err.msg);
         return 1;
     }
-    srv_log(sv, NULL, "renderer: %s (%s)", rt_renderer_string(sv->rt), rt_backend_name(sv->rt));
+    srv_log(sv, NULL, "renderer: %s (%s); cloud buffers held to %llu MiB of GPU memory",
+            rt_renderer_string(sv->rt), rt_backend_name(sv->rt),
+            (unsigned long long)(rt_gpu_budget(sv->rt) >> 20));
     for (int i = 0; i < sv->o.npreload; i++) {
         if (srv_preload(sv, sv->o.preload[i], &err) != 0) {
             fprintf(stderr, "splatd: --preload %s: %s\n", sv->o.preload[i], err.msg);

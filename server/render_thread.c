@@ -61,6 +61,7 @@ struct rt_ctx {
     int init_state;                      /* 0 pending, 1 ok, -1 failed */
     sd_err init_err;
     char renderer[256], backend[32];
+    uint64_t gpu_budget;        /* the renderer's cloud budget, bytes */
     pthread_t th_render, th_enc, th_prep;
     int started_render, started_enc, started_prep;
 };
@@ -149,14 +150,12 @@ static void do_upload(rt_ctx *rt, rnd_ctx *rnd, rt_prepjob *j)
 {
     rt_event *ev = calloc(1, sizeof *ev);
     sd_err err = {0};
-    int64_t id = rnd_upload(rnd, j->prep, &err);
+    int64_t id = rnd_adopt(rnd, j->prep, &err); /* the renderer owns it now, even on failure */
+    j->prep = NULL;
     if (id > 0) {
         prep_prog pp = {.rt = rt, .job = j->job};
         on_progress(&pp, "upload", 1.0);
     }
-    pc_prepared_free(j->prep);
-    free(j->prep);
-    j->prep = NULL;
     pthread_mutex_lock(&rt->mu);
     if (ev) {
         ev->job = j->job;
@@ -192,6 +191,9 @@ static void *render_main(void *arg)
     }
     snprintf(rt->renderer, sizeof rt->renderer, "%s", rnd_renderer_string(rnd));
     snprintf(rt->backend, sizeof rt->backend, "%s", rnd_backend_name(rnd));
+    rnd_stats st;
+    rnd_get_stats(rnd, &st);
+    rt->gpu_budget = st.budget;
     rt->init_state = 1;
     pthread_cond_broadcast(&rt->cv_init);
     for (;;) {
@@ -505,6 +507,7 @@ void rt_destroy(rt_ctx *rt)
 
 const char *rt_renderer_string(const rt_ctx *rt) { return rt->renderer; }
 const char *rt_backend_name(const rt_ctx *rt) { return rt->backend; }
+uint64_t rt_gpu_budget(const rt_ctx *rt) { return rt->gpu_budget; }
 
 int rt_client_open(rt_ctx *rt, uint32_t id)
 {

@@ -109,6 +109,8 @@ int rt_stop_for_exit(rt_ctx *rt);
 
 const char *rt_renderer_string(const rt_ctx *rt);
 const char *rt_backend_name(const rt_ctx *rt);
+/* rt_gpu_budget: the bytes of cloud buffers the renderer keeps on the GPU (rnd_desc.gpu_memory). */
+uint64_t rt_gpu_budget(const rt_ctx *rt);
 
 /* rt_client_open: claims the slot of client id (index = id & 0xffff < max_clients). Returns 0
  * or SD_ELIMIT. rt_client_close: drops its requests; frames already in flight are still

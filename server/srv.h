@@ -26,6 +26,7 @@ typedef struct srv_opts {
     int max_clients;             /* default 64 */
     int handshake_ms;            /* default 10000 */
     int shutdown_ms;             /* default 5000: how long SIGTERM waits for frames in flight */
+    uint64_t gpu_memory;         /* --gpu-memory; default 0: the renderer sizes it */
 } srv_opts;
 
 typedef struct srv_waiter {

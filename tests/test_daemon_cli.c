@@ -317,6 +317,67 @@ static void test_thin_client_links(void **state)
     }
 }
 
+/* render_raw: one 96x72 `points` frame of the client's cloud from its default camera, as raw
+ * RGBA (malloc'd, *len bytes). */
+static uint8_t *render_raw(spc_client *c, const spc_info *info, size_t *len)
+{
+    const char *kv[2] = {"pipeline=points", "format=raw"};
+    assert_int_equal(spc_set_params(c, kv, 2), 0);
+    spc_camera cam;
+    spc_camera_frame(info, 96, 72, &cam);
+    assert_int_equal(spc_set_camera(c, &cam, NULL), 0);
+    spc_frame f;
+    if (spc_render(c, &f, 0) < 0) fail_msg("render: %s", spc_errmsg(c));
+    uint8_t *copy = malloc(f.data_len);
+    assert_non_null(copy);
+    memcpy(copy, f.data, f.data_len);
+    *len = f.data_len;
+    return copy;
+}
+
+/* --gpu-memory holds the daemon's cloud buffers to a budget: with room for one bunny (40256
+ * points x 40 bytes = 1.6 MB; 2 MiB given), two clients rendering two clouds in turn each get
+ * their frames, and a cloud pushed off the GPU and brought back renders the same frame. */
+static void test_gpu_memory_budget(void **state)
+{
+    fx *f = *state;
+    add_bunny(f, "a.ply");
+    add_bunny(f, "b.ply");
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
+                          "--gpu-memory", "2M", NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    spc_client *ca = connect_to(f), *cb = connect_to(f);
+    spc_info ia, ib;
+    assert_int_equal(spc_open(ca, "a", &ia, NULL, NULL), 0);
+    assert_int_equal(spc_open(cb, "b", &ib, NULL, NULL), 0); /* pushes a off the GPU */
+    size_t la, lb, la2;
+    uint8_t *fa = render_raw(ca, &ia, &la);                  /* a back, b off */
+    uint8_t *fb = render_raw(cb, &ib, &lb);                  /* and the other way */
+    uint8_t *fa2 = render_raw(ca, &ia, &la2);
+    assert_int_equal(la, la2);
+    assert_memory_equal(fa, fa2, la);
+    assert_int_equal(la, lb);
+    assert_memory_equal(fa, fb, la); /* the same file, the same camera */
+    int lit = 0;
+    for (size_t i = 0; i + 3 < la; i += 4) lit += fa[i] || fa[i + 1] || fa[i + 2];
+    assert_true(lit > 200);
+    free(fa);
+    free(fb);
+    free(fa2);
+    spc_close(ca);
+    spc_close(cb);
+    size_t ll;
+    char *log = (char *)tu_read_file(f->d.log, &ll);
+    assert_non_null(log);
+    if (!strstr(log, "held to 2 MiB of GPU memory")) fail_msg("no budget in the log: %s", log);
+    free(log);
+
+    char out[4096];
+    int rc = run(out, sizeof out, "'%s' --data '%s' --gpu-memory 12Q 2>&1", tu_splatd_bin(), f->data);
+    assert_int_equal(rc, 2);
+    assert_non_null(strstr(out, "--gpu-memory '12Q'"));
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -326,6 +387,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_help_and_version, setup, teardown),
         cmocka_unit_test_setup_teardown(test_progress_lines_off_terminal, setup, teardown),
         cmocka_unit_test_setup_teardown(test_thin_client_links, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_gpu_memory_budget, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
