@@ -170,9 +170,7 @@ int spc__wait(spc_client *c, uint32_t seq, unsigned type, proto_msg *m, spc_prog
             proto_error e = {0};
             if (proto_parse_progress(m->payload, m->len, &p, &e) < 0)
                 return spc__fail(c, -e.code, "bad PROGRESS from the server: %s", e.msg);
-            static const char *phases[PROTO_PHASE_COUNT] = {
-                "load", "knn", "normals", "radius", "field", "reorder", "cache", "upload"};
-            if (progress) progress(user, phases[p.phase], p.fraction, p.text);
+            if (progress) progress(user, proto_phase_name(p.phase), p.fraction, p.text);
             deadline = spc__deadline(c);
             continue;
         }

@@ -1,7 +1,14 @@
 /* splat_client.c — libsplatclient's requests: list, open, camera, parameters, frames,
  * streaming, ping (see splat_client.h; the connection layer is spc_conn.c). */
 #include "spc_internal.h"
+#include "attrs.h"
 #include "framing.h"
+
+/* The public header repeats the protocol's attribute bits (it is installed alone). */
+#define SPC_ATTR_SAME_(id, bit, name) \
+    _Static_assert((int)SPC_ATTR_##id == (int)SP_ATTR_##id, "SPC_ATTR_" #id " differs from protocol/attrs.h");
+SP_ATTR_LIST(SPC_ATTR_SAME_)
+#undef SPC_ATTR_SAME_
 
 #include <math.h>
 #include <stdio.h>

@@ -8,6 +8,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "attrs.h"
 #include "campath.h"
 #include "cli.h"
 #include "params.h"
@@ -193,13 +194,8 @@ static int cmd_info(spc_client *c, const cli_args *a)
     spc_info in;
     int rc = open_cloud(c, a, NULL, &in);
     if (rc) return rc;
-    static const char *attr[7] = {"rgb", "normal", "intensity", "class", "radius", "scalar", "F"};
-    char attrs[128] = "";
-    for (int i = 0; i < 7; i++)
-        if (in.attrs & (1u << i)) {
-            strcat(attrs, attrs[0] ? " " : "");
-            strcat(attrs, attr[i]);
-        }
+    char attrs[160];
+    sp_attr_names(in.attrs, attrs, sizeof attrs);
     printf("name        %s\n", in.name);
     printf("format      %s\n", in.format);
     printf("points      %llu (%llu dropped)\n", (unsigned long long)in.points,

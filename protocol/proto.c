@@ -1192,3 +1192,13 @@ int proto_parse_error(const uint8_t *pl, uint32_t len, proto_errmsg *m, proto_er
         return proto_errorf(e, PROTO_E_MALFORMED, "ERROR code 0 is not an error");
     return 0;
 }
+
+const char *proto_phase_name(int phase)
+{
+    static const char *const names[PROTO_PHASE_COUNT] = {
+#define PROTO_PHASE_NAME_(id, name) [PROTO_PHASE_##id] = name,
+        PROTO_PHASE_LIST(PROTO_PHASE_NAME_)
+#undef PROTO_PHASE_NAME_
+    };
+    return phase >= 0 && phase < PROTO_PHASE_COUNT ? names[phase] : "?";
+}

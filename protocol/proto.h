@@ -275,9 +275,21 @@ typedef struct proto_info {           /* INFO, server -> client */
     char format[PROTO_MAX_NAME + 1];    /* "PLY binary_little_endian 1.0" */
 } proto_info;
 
-enum { PROTO_PHASE_LOAD = 0, PROTO_PHASE_KNN, PROTO_PHASE_NORMALS, PROTO_PHASE_RADIUS,
-       PROTO_PHASE_FIELD, PROTO_PHASE_REORDER, PROTO_PHASE_CACHE, PROTO_PHASE_UPLOAD,
-       PROTO_PHASE_COUNT };
+/* The phases of a first OPEN, in wire order (append only): id, name. The daemon's preprocessing
+ * reports them by these ids, never by text. */
+#define PROTO_PHASE_LIST(X) \
+    X(LOAD, "load") X(KNN, "knn") X(NORMALS, "normals") X(RADIUS, "radius") X(FIELD, "field") \
+    X(REORDER, "reorder") X(CACHE, "cache") X(UPLOAD, "upload")
+
+enum {
+#define PROTO_PHASE_ENUM_(id, name) PROTO_PHASE_##id,
+    PROTO_PHASE_LIST(PROTO_PHASE_ENUM_)
+#undef PROTO_PHASE_ENUM_
+    PROTO_PHASE_COUNT
+};
+
+/* proto_phase_name: "knn" for PROTO_PHASE_KNN, ...; "?" for an unknown phase. */
+const char *proto_phase_name(int phase);
 
 typedef struct proto_progress {       /* PROGRESS, server -> client */
     uint8_t phase;                      /* PROTO_PHASE_* (< PROTO_PHASE_COUNT) */

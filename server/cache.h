@@ -9,6 +9,7 @@
 #include <stdint.h>
 
 #include "prepared.h"
+#include "progress.h"
 #include "sd_err.h"
 
 typedef struct cache_desc {
@@ -17,7 +18,7 @@ typedef struct cache_desc {
     int k;             /* default PREP_DEFAULT_K (24): neighbours for prep (part of the key) */
     int threads;       /* default 0: every core */
     int force;         /* rebuild even when a valid cache exists */
-    void (*progress)(void *user, const char *phase, double fraction); /* default: none */
+    prep_progress_fn progress; /* default: none (progress.h) */
     void (*warn)(void *user, const char *msg);                        /* default: none */
     void *user;
 } cache_desc;

@@ -8,25 +8,6 @@
 #include <string.h>
 #include <strings.h>
 
-void pc_attr_names(uint32_t attrs, char *buf, size_t len)
-{
-    static const struct { uint32_t bit; const char *name; } names[] = {
-        {PC_ATTR_RGB, "rgb"}, {PC_ATTR_NORMAL, "normal"}, {PC_ATTR_INTENSITY, "intensity"},
-        {PC_ATTR_CLASS, "classification"}, {PC_ATTR_RADIUS, "radius"},
-        {PC_ATTR_SCALAR, "scalar"}, {PC_ATTR_F, "F"},
-    };
-    size_t used = 0;
-    if (len == 0) return;
-    buf[0] = 0;
-    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
-        if (!(attrs & names[i].bit)) continue;
-        int w = snprintf(buf + used, len - used, "%s%s", used ? " " : "", names[i].name);
-        if (w < 0 || (size_t)w >= len - used) break;
-        used += (size_t)w;
-    }
-    if (used == 0) snprintf(buf, len, "none");
-}
-
 static int grow(void **p, size_t cap, size_t elem)
 {
     if (cap > SIZE_MAX / elem) return -1;

@@ -10,20 +10,19 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "attrs.h"
 #include "sd_err.h"
 
+/* The attribute bits are the protocol's (protocol/attrs.h), under the cloud module's prefix. */
 enum pc_attr {
-    PC_ATTR_RGB       = 1u << 0, /* rgba: 4 x uint8 per point (alpha 255) */
-    PC_ATTR_NORMAL    = 1u << 1, /* normal: 3 x float per point, unit length */
-    PC_ATTR_INTENSITY = 1u << 2, /* intensity: float per point, the file's units */
-    PC_ATTR_CLASS     = 1u << 3, /* classification: uint8 per point (LAS classes) */
-    PC_ATTR_RADIUS    = 1u << 4, /* radius: float per point (file or prep eq. 20) */
-    PC_ATTR_SCALAR    = 1u << 5, /* scalar: float per point (quality/confidence/scalar_*) */
-    PC_ATTR_F         = 1u << 6, /* F: uncertainty in [0,1] (prep eq. 21) */
+    PC_ATTR_RGB = SP_ATTR_RGB,
+    PC_ATTR_NORMAL = SP_ATTR_NORMAL,
+    PC_ATTR_INTENSITY = SP_ATTR_INTENSITY,
+    PC_ATTR_CLASS = SP_ATTR_CLASS,
+    PC_ATTR_RADIUS = SP_ATTR_RADIUS,
+    PC_ATTR_SCALAR = SP_ATTR_SCALAR,
+    PC_ATTR_F = SP_ATTR_F,
 };
-
-/* pc_attr_names: writes the names of the set bits of attrs ("rgb normal intensity") to buf. */
-void pc_attr_names(uint32_t attrs, char *buf, size_t len);
 
 /* A cloud as read from a file, coordinates still in double precision. Readers fill it with
  * pc_raw_reserve + writes at index n; non-finite points may be written, pc_finalize drops them. */

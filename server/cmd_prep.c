@@ -79,7 +79,7 @@ int cmd_prep(int argc, char **argv)
         return 1;
     }
     char attrs[128];
-    pc_attr_names(p.attrs, attrs, sizeof attrs);
+    sp_attr_names(p.attrs, attrs, sizeof attrs);
     printf("file        %s (%llu bytes)\n", file, (unsigned long long)r.file_size);
     printf("format      %s\n", p.format);
     printf("points      %llu kept, %llu dropped (non-finite)\n", (unsigned long long)p.n,

@@ -511,31 +511,16 @@ void srv_session_input(srv *sv, sess *s)
 
 /* ---- worker events ---- */
 
-static int phase_of(const char *name)
-{
-    static const struct { const char *key; int phase; } map[] = {
-        {"upload", PROTO_PHASE_UPLOAD}, {"knn", PROTO_PHASE_KNN}, {"neigh", PROTO_PHASE_KNN},
-        {"normal", PROTO_PHASE_NORMALS}, {"radi", PROTO_PHASE_RADIUS}, {"field", PROTO_PHASE_FIELD},
-        {"uncert", PROTO_PHASE_FIELD}, {"order", PROTO_PHASE_REORDER}, {"morton", PROTO_PHASE_REORDER},
-        {"batch", PROTO_PHASE_REORDER}, {"cache", PROTO_PHASE_CACHE}, {"writ", PROTO_PHASE_CACHE},
-    };
-    char low[32];
-    size_t i = 0;
-    for (; name[i] && i < sizeof low - 1; i++) low[i] = (char)((name[i] >= 'A' && name[i] <= 'Z') ? name[i] + 32 : name[i]);
-    low[i] = 0;
-    for (size_t k = 0; k < sizeof map / sizeof map[0]; k++)
-        if (strstr(low, map[k].key)) return map[k].phase;
-    return PROTO_PHASE_LOAD;
-}
-
 static void on_progress_ev(srv *sv, const rt_event *ev)
 {
     srv_cloud *c = cloud_by_job(sv, ev->job);
     if (!c) return;
     proto_progress p = {0};
-    p.phase = (uint8_t)phase_of(ev->phase_name);
+    p.phase = (uint8_t)(ev->phase >= 0 && ev->phase < PROTO_PHASE_COUNT ? ev->phase
+                                                                         : PROTO_PHASE_LOAD);
     p.fraction = (float)(ev->fraction < 0 ? 0 : ev->fraction > 1 ? 1 : ev->fraction);
-    snprintf(p.text, sizeof p.text, "%s %d%%", ev->phase_name, (int)(p.fraction * 100 + 0.5f));
+    snprintf(p.text, sizeof p.text, "%s %d%%", proto_phase_name(p.phase),
+             (int)(p.fraction * 100 + 0.5f));
     for (int i = 0; i < c->nwait; i++) {
         sess *s = srv_lookup(sv, c->waiters[i].sess);
         if (!s || s->opening != (int)(c - sv->clouds)) continue;

@@ -1,19 +1,10 @@
 /* enc_lz4.c — the lossless frame formats: SPL4 (LZ4 block of top-down RGBA8 behind a 16-byte
- * header; the layout is defined once, in client/frame_decode.h) and raw top-down RGBA8. */
+ * header; the layout is defined once, in protocol/frame_lz4.h) and raw top-down RGBA8. */
 #include <lz4.h>
 #include <string.h>
 
 #include "enc_internal.h"
-#include "frame_decode.h"
-
-/* put_u32le: stores v at p in little-endian byte order, whatever the host's order. */
-static void put_u32le(uint8_t *p, uint32_t v)
-{
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-    p[2] = (uint8_t)(v >> 16);
-    p[3] = (uint8_t)(v >> 24);
-}
+#include "frame_lz4.h"
 
 int enc__lz4(enc_ctx *e, const rnd_frame *f, const uint8_t **out, size_t *len, sd_err *err)
 {
@@ -23,19 +14,16 @@ int enc__lz4(enc_ctx *e, const rnd_frame *f, const uint8_t **out, size_t *len, s
                        "limit of %d bytes", f->width, f->height, raw, LZ4_MAX_INPUT_SIZE);
     size_t bound = (size_t)LZ4_compressBound((int)raw);
     if (enc__reserve(&e->scratch, &e->scratch_cap, raw) ||
-        enc__reserve(&e->buf, &e->buf_cap, FD_LZ4_HEADER_SIZE + bound))
+        enc__reserve(&e->buf, &e->buf_cap, SP_LZ4_HEADER_SIZE + bound))
         return sd_errf(err, SD_ENOMEM, "encoder: out of memory for a %zu-byte LZ4 frame", raw);
     enc__flip_rows(e->scratch, f->rgba8, row, f->height);
-    memcpy(e->buf, FD_LZ4_MAGIC, 4);
-    put_u32le(e->buf + 4, (uint32_t)f->width);
-    put_u32le(e->buf + 8, (uint32_t)f->height);
-    put_u32le(e->buf + 12, (uint32_t)raw);
-    int n = LZ4_compress_default((const char *)e->scratch, (char *)e->buf + FD_LZ4_HEADER_SIZE,
+    sp_lz4_header_put(e->buf, (uint32_t)f->width, (uint32_t)f->height);
+    int n = LZ4_compress_default((const char *)e->scratch, (char *)e->buf + SP_LZ4_HEADER_SIZE,
                                  (int)raw, (int)bound);
     if (n <= 0)
         return sd_errf(err, SD_EIO, "encoder: LZ4 failed to compress a %dx%d frame", f->width,
                        f->height);
-    e->buf_len = FD_LZ4_HEADER_SIZE + (size_t)n;
+    e->buf_len = SP_LZ4_HEADER_SIZE + (size_t)n;
     *out = e->buf;
     *len = e->buf_len;
     return 0;

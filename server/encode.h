@@ -23,11 +23,12 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "frame_lz4.h"
 #include "params.h"
 #include "render.h"
 #include "sd_err.h"
 
-#define ENC_MAX_DIM 16384 /* largest width or height accepted (render.h's default limit is 8192) */
+#define ENC_MAX_DIM SP_FRAME_MAX_DIM /* largest width or height accepted (render.h's default limit is 8192) */
 
 typedef struct enc_ctx enc_ctx;
 

@@ -326,7 +326,7 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
     double wall, tq, tn, tr, tf, sum;
 
     double t0 = now_s();
-    prep_progress_begin(&pr, d.progress, d.user, "reorder");
+    prep_progress_begin(&pr, d.progress, d.user, PROTO_PHASE_REORDER);
     rc = reorder(in, K, out, jb.centroid, err);
     if (in->has_viewpoint) { /* into the cloud's local coordinates, as the positions */
         jb.has_vp = 1;
@@ -341,7 +341,7 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
     }
 
     t0 = now_s();
-    prep_progress_begin(&pr, d.progress, d.user, "knn-build");
+    prep_progress_begin(&pr, d.progress, d.user, PROTO_PHASE_KNN);
     prep_knn_opts ko = {.method = d.knn, .leaf_size = d.knn_leaf, .flann_cores = 1};
     rc = prep_knn_build(out->pos, n, &ko, &kn, err);
     if (rc != 0) goto fail;
@@ -368,7 +368,7 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
     }
 
     t0 = now_s();
-    prep_progress_begin(&pr, d.progress, d.user, "normals");
+    prep_progress_begin(&pr, d.progress, d.user, PROTO_PHASE_NORMALS);
     rc = prep_par_for(threads, nchunks, chunk_normals, &jb, &pr, err);
     if (rc != 0) goto fail;
     wall = now_s() - t0;
@@ -388,7 +388,7 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
         jb.scatter_cap = PREP_SCATTER_CAP * prep_percentile(tmp, n, 0.5);
     }
     t0 = now_s();
-    prep_progress_begin(&pr, d.progress, d.user, "field");
+    prep_progress_begin(&pr, d.progress, d.user, PROTO_PHASE_FIELD);
     rc = prep_par_for(threads, nchunks, chunk_field, &jb, &pr, err);
     if (rc != 0) goto fail;
     if (jb.rcap) { /* after F, which uses the radius of eq. 20 itself */

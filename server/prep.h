@@ -60,9 +60,9 @@ typedef struct prep_desc {
     int knn_leaf;          /* default 0: the method's default leaf size (knn.h) */
     size_t max_nbr_bytes;  /* default 0: 1 GiB. Neighbour lists above this are recomputed for F
                               instead of kept */
-    void (*progress)(void *user, const char *phase, double fraction); /* default none; called
-                              on the calling thread, phases "reorder", "knn-build", "normals",
-                              "field", increasing multiples of 1/20 from 0 to 1 (progress.h) */
+    prep_progress_fn progress; /* default none; called on the calling thread with the phases
+                              PROTO_PHASE_REORDER, KNN, NORMALS, FIELD, increasing multiples
+                              of 1/20 from 0 to 1 (progress.h) */
     void *user;
 } prep_desc;
 

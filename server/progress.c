@@ -8,9 +8,10 @@
 #include <string.h>
 #include <unistd.h>
 
-void prep_progress_stderr(void *user, const char *phase, double fraction)
+void prep_progress_stderr(void *user, int phase_id, double fraction)
 {
     (void)user;
+    const char *phase = proto_phase_name(phase_id);
     if (!(fraction >= 0)) fraction = 0;
     if (fraction > 1) fraction = 1;
     int pct = (int)floor(fraction * 100 + 0.5);
@@ -29,7 +30,7 @@ void prep_progress_stderr(void *user, const char *phase, double fraction)
     if (fabs(t - floor(t + 0.5)) < 1e-9) fprintf(stderr, "%s: %d%%\n", phase, pct);
 }
 
-void prep_progress_begin(prep_progress *p, prep_progress_fn fn, void *user, const char *phase)
+void prep_progress_begin(prep_progress *p, prep_progress_fn fn, void *user, int phase)
 {
     p->fn = fn;
     p->user = user;

@@ -8,25 +8,27 @@
 #pragma once
 #include <stddef.h>
 
+#include "proto.h"
 #include "sd_err.h"
 
-typedef void (*prep_progress_fn)(void *user, const char *phase, double fraction);
+/* phase: PROTO_PHASE_* (protocol/proto.h), whose names proto_phase_name gives. */
+typedef void (*prep_progress_fn)(void *user, int phase, double fraction);
 
 /* prep_progress_stderr: a prep_progress_fn that draws "phase [#####     ]  50%" with \r on
  * stderr when stderr is a terminal, and otherwise prints one plain line per 10 %. user is
  * unused (NULL is fine). */
-void prep_progress_stderr(void *user, const char *phase, double fraction);
+void prep_progress_stderr(void *user, int phase, double fraction);
 
 /* A progress reporter for one phase: calls fn when the done fraction crosses the next 5 %. */
 typedef struct prep_progress {
     prep_progress_fn fn;
     void *user;
-    const char *phase;
+    int phase;               /* PROTO_PHASE_* */
     int step;                /* last reported twentieth, -1 before the first report */
 } prep_progress;
 
 /* prep_progress_begin: starts a phase (reports 0 when fn is set). */
-void prep_progress_begin(prep_progress *p, prep_progress_fn fn, void *user, const char *phase);
+void prep_progress_begin(prep_progress *p, prep_progress_fn fn, void *user, int phase);
 
 /* prep_progress_update: reports every twentieth that done/total crossed since the last call
  * (main thread). */

@@ -138,11 +138,11 @@ static int has_work(rt_ctx *rt)
 typedef struct prep_prog {
     rt_ctx *rt;
     uint32_t job;
-    char phase[32];
+    int phase;                  /* the last phase reported (-1: none) */
     uint64_t last_us;
 } prep_prog;
 
-static void on_progress(void *user, const char *phase, double fraction);
+static void on_progress(void *user, int phase, double fraction);
 
 /* do_upload: uploads one prepared cloud (mu not held), reports the upload phase complete, and
  * posts READY or FAILED. */
@@ -153,8 +153,8 @@ static void do_upload(rt_ctx *rt, rnd_ctx *rnd, rt_prepjob *j)
     int64_t id = rnd_adopt(rnd, j->prep, &err); /* the renderer owns it now, even on failure */
     j->prep = NULL;
     if (id > 0) {
-        prep_prog pp = {.rt = rt, .job = j->job};
-        on_progress(&pp, "upload", 1.0);
+        prep_prog pp = {.rt = rt, .job = j->job, .phase = -1};
+        on_progress(&pp, PROTO_PHASE_UPLOAD, 1.0);
     }
     pthread_mutex_lock(&rt->mu);
     if (ev) {
@@ -319,19 +319,19 @@ static void *enc_main(void *arg)
 }
 
 /* Progress of one prep job, throttled to one event per 100 ms per phase. */
-static void on_progress(void *user, const char *phase, double fraction)
+static void on_progress(void *user, int phase, double fraction)
 {
     prep_prog *p = user;
     uint64_t t = now_us();
-    int same = strncmp(p->phase, phase, sizeof p->phase - 1) == 0;
+    int same = p->phase == phase;
     if (same && t - p->last_us < 100000 && fraction < 1.0) return;
-    snprintf(p->phase, sizeof p->phase, "%s", phase);
+    p->phase = phase;
     p->last_us = t;
     rt_event *ev = calloc(1, sizeof *ev);
     if (!ev) return;
     ev->kind = RT_EV_PROGRESS;
     ev->job = p->job;
-    snprintf(ev->phase_name, sizeof ev->phase_name, "%s", phase);
+    ev->phase = phase;
     ev->fraction = fraction;
     pthread_mutex_lock(&p->rt->mu);
     post(p->rt, ev);
@@ -352,7 +352,7 @@ static void *prep_main(void *arg)
         rt->prepping = 1;
         pthread_mutex_unlock(&rt->mu);
 
-        prep_prog pp = {.rt = rt, .job = j->job};
+        prep_prog pp = {.rt = rt, .job = j->job, .phase = -1};
         cache_desc cd = {.dir = rt->d.cache_dir, .threads = rt->d.prep_threads,
                          .progress = on_progress, .user = &pp};
         cache_result res;
@@ -373,7 +373,7 @@ static void *prep_main(void *arg)
             snprintf(in->format, sizeof in->format, "%s", p->format);
             in->cache_hit = res.hit;
             j->prep = p;
-            on_progress(&pp, "upload", 0.0);
+            on_progress(&pp, PROTO_PHASE_UPLOAD, 0.0);
         } else {
             free(p);
         }

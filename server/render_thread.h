@@ -82,8 +82,7 @@ typedef struct rt_event {
     uint8_t *msg;           /* RT_EV_FRAME: owned by the event until rt_event_free */
     size_t msglen;
     uint32_t job;           /* prep events: the job id rt_prepare returned */
-    int phase;              /* RT_EV_PROGRESS: PROTO_PHASE_*-like index (see render_thread.c) */
-    char phase_name[32];
+    int phase;                  /* PROGRESS: PROTO_PHASE_* */
     double fraction;
     uint32_t cloud_id;
     rt_cloud_info info;

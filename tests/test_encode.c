@@ -365,23 +365,23 @@ static void test_lz4_rejects_damage(void **state)
 #define DEC(n, ew, eh) fd_decode(d, SP_FMT_LZ4, b, (n), (ew), (eh), &rgba, &w, &h, msg, sizeof msg)
 
     RESET();
-    assert_int_equal(DEC(10, 0, 0), SD_ETRUNC);                /* shorter than the header */
+    assert_int_equal(DEC(10, 0, 0), FD_ETRUNC);                /* shorter than the header */
     assert_non_null(strstr(msg, "shorter than the 16-byte header"));
-    assert_int_equal(DEC(0, 0, 0), SD_ETRUNC);
+    assert_int_equal(DEC(0, 0, 0), FD_ETRUNC);
     b[0] = 'X';
-    assert_int_equal(DEC(len, 0, 0), SD_EFORMAT);              /* magic */
+    assert_int_equal(DEC(len, 0, 0), FD_EFORMAT);              /* magic */
     assert_non_null(strstr(msg, "magic"));
     RESET();
     put32(b + 4, 0);
-    assert_int_equal(DEC(len, 0, 0), SD_ELIMIT);               /* width 0 */
+    assert_int_equal(DEC(len, 0, 0), FD_ELIMIT);               /* width 0 */
     RESET();
     put32(b + 4, 100000);
     put32(b + 12, 100000u * 171 * 4);
-    assert_int_equal(DEC(len, 0, 0), SD_ELIMIT);               /* width over the limit */
+    assert_int_equal(DEC(len, 0, 0), FD_ELIMIT);               /* width over the limit */
     assert_non_null(strstr(msg, "100000x171"));
     RESET();
     put32(b + 12, 333u * 171 * 4 + 4);
-    assert_int_equal(DEC(len, 0, 0), SD_EFORMAT);              /* raw size != w*h*4 */
+    assert_int_equal(DEC(len, 0, 0), FD_EFORMAT);              /* raw size != w*h*4 */
     assert_non_null(strstr(msg, "byte 12"));
     /* An oversized but consistent header (16384x16384 = 1 GiB) on a small payload is refused
      * before anything is allocated for it. */
@@ -389,25 +389,25 @@ static void test_lz4_rejects_damage(void **state)
     put32(b + 4, 16384);
     put32(b + 8, 16384);
     put32(b + 12, 16384u * 16384u * 4u);
-    assert_int_equal(DEC(len, 0, 0), SD_EFORMAT);
+    assert_int_equal(DEC(len, 0, 0), FD_EFORMAT);
     assert_non_null(strstr(msg, "cannot come out of"));
     /* The header disagrees with the size the FRAME message announced. */
     RESET();
-    assert_int_equal(DEC(len, 334, 171), SD_EFORMAT);
+    assert_int_equal(DEC(len, 334, 171), FD_EFORMAT);
     assert_non_null(strstr(msg, "announced 334x171"));
     /* One more row than the data holds: decompression stops short. */
     RESET();
     put32(b + 8, 172);
     put32(b + 12, 333u * 172 * 4);
-    assert_int_equal(DEC(len, 0, 0), SD_ETRUNC);
+    assert_int_equal(DEC(len, 0, 0), FD_ETRUNC);
     /* Truncated block. */
     RESET();
     int rc = DEC(len - 50, 0, 0);
-    assert_true(rc == SD_EFORMAT || rc == SD_ETRUNC);
+    assert_true(rc == FD_EFORMAT || rc == FD_ETRUNC);
     /* Garbage token bytes: literal lengths that run past the end of the block. */
     RESET();
     memset(b + 16, 0xff, 64);
-    assert_int_equal(DEC(len, 0, 0), SD_EFORMAT);
+    assert_int_equal(DEC(len, 0, 0), FD_EFORMAT);
     assert_non_null(strstr(msg, "corrupt"));
     /* The intact frame still decodes with the same buffers. */
     RESET();
@@ -418,27 +418,27 @@ static void test_lz4_rejects_damage(void **state)
 
     /* Other formats. */
     assert_int_equal(fd_decode(d, SP_FMT_PNG, out, len, 0, 0, &rgba, NULL, NULL, msg, sizeof msg),
-                     SD_EUNSUP);
+                     FD_EUNSUP);
     assert_non_null(strstr(msg, "png"));
     assert_int_equal(fd_decode(d, 42, out, len, 0, 0, &rgba, NULL, NULL, msg, sizeof msg),
-                     SD_EUNSUP);
+                     FD_EUNSUP);
     uint8_t junk[64];
     memset(junk, 0x5a, sizeof junk);
     assert_int_equal(fd_decode(d, SP_FMT_JPEG, junk, sizeof junk, 0, 0, &rgba, NULL, NULL, msg,
-                               sizeof msg), SD_EFORMAT);
+                               sizeof msg), FD_EFORMAT);
     /* A JPEG cut in half is an error, not a half-grey image. */
     p.format = SP_FMT_JPEG;
     assert_int_equal(enc_encode(e, &f, &p, &out, &len, &err), 0);
     assert_int_equal(fd_decode(d, SP_FMT_JPEG, out, len / 2, 0, 0, &rgba, NULL, NULL, msg,
-                               sizeof msg), SD_EFORMAT);
+                               sizeof msg), FD_EFORMAT);
     /* Raw: the length must be exactly w*h*4. */
     p.format = SP_FMT_RAW;
     assert_int_equal(enc_encode(e, &f, &p, &out, &len, &err), 0);
     assert_int_equal(len, 333u * 171 * 4);
     assert_int_equal(fd_decode(d, SP_FMT_RAW, out, len - 1, 333, 171, &rgba, NULL, NULL, msg,
-                               sizeof msg), SD_ETRUNC);
+                               sizeof msg), FD_ETRUNC);
     assert_int_equal(fd_decode(d, SP_FMT_RAW, out, len, 0, 0, &rgba, NULL, NULL, msg,
-                               sizeof msg), SD_EINVAL);
+                               sizeof msg), FD_EINVAL);
     assert_int_equal(fd_decode(d, SP_FMT_RAW, out, len, 333, 171, &rgba, &w, &h, msg,
                                sizeof msg), 0);
     expect_rgba8_top_down(rgba, &f);

@@ -960,13 +960,14 @@ typedef struct prog_rec {
     double last[4];
 } prog_rec;
 
-static void record_progress(void *user, const char *phase, double f)
+static void record_progress(void *user, int phase, double f)
 {
     prog_rec *r = user;
-    static const char *names[4] = {"reorder", "knn-build", "normals", "field"};
+    static const int phases[4] = {PROTO_PHASE_REORDER, PROTO_PHASE_KNN, PROTO_PHASE_NORMALS,
+                                  PROTO_PHASE_FIELD};
     if (!pthread_equal(pthread_self(), r->main)) r->bad_thread++;
     for (int i = 0; i < 4; i++)
-        if (!strcmp(phase, names[i])) {
+        if (phase == phases[i]) {
             /* multiples of 1/20, increasing, starting at 0 */
             if (fabs(f * 20 - floor(f * 20 + 0.5)) > 1e-9) r->bad_order++;
             if (r->calls[i] == 0 ? f != 0 : f <= r->last[i]) r->bad_order++;
