@@ -38,9 +38,11 @@ typedef struct fixture {
     rnd_ctx *egl;
 } fixture;
 
-static rnd_ctx *make_ctx(rnd_backend_kind kind)
+/* make_ctx: a renderer on back end kind with the pipeline options o (NULL: defaults). */
+static rnd_ctx *make_ctx(rnd_backend_kind kind, const rnd_pipe_opts *o)
 {
     rnd_desc d = {.backend = kind, .shader_dir = getenv("SPLATD_SHADERS")};
+    if (o) d.pipe = *o;
     sd_err err = {0};
     rnd_ctx *r = rnd_create(&d, &err);
     if (!r) fprintf(stderr, "rnd_create: %s\n", err.msg);
@@ -51,7 +53,7 @@ static int setup(void **state)
 {
     fixture *fx = calloc(1, sizeof *fx);
     if (!fx) return -1;
-    fx->egl = make_ctx(RND_BACKEND_EGL);
+    fx->egl = make_ctx(RND_BACKEND_EGL, NULL);
     if (!fx->egl) {
         free(fx);
         return -1;
@@ -369,21 +371,41 @@ static void test_two_planes(void **state)
 static void test_fixed_point_and_osmesa(void **state)
 {
     (void)state;
-    /* The pipeline reads the variable when it is created, at its first frame. */
-    setenv("SPLATD_SPLAT_FIXED", "1", 1);
-    rnd_ctx *r = make_ctx(RND_BACKEND_EGL);
+    const rnd_pipe_opts fixed = {.splat_fixed = 1};
+    rnd_ctx *r = make_ctx(RND_BACKEND_EGL, &fixed);
     assert_non_null(r);
     check_constant_colour(r, "egl, fixed point", SP_EWA_AUTO);
-    unsetenv("SPLATD_SPLAT_FIXED");
     check_two_planes(r, "egl, fixed point", SP_EWA_AUTO);
+    /* The option takes effect: weights quantised to 1/255 give another image than the float
+     * sums of the same jittered scene (with them ignored, the two would be equal). */
+    rnd_ctx *rf = make_ctx(RND_BACKEND_EGL, NULL);
+    assert_non_null(rf);
+    enum { N = 60 };
+    pc_prepared pc;
+    tu_new_cloud(&pc, (uint64_t)N * N, 0);
+    const uint8_t ca[3] = {200, 150, 50}, cb[3] = {50, 100, 200};
+    grid(&pc, 0, N, N, 0.01f, 0, 0.013f, ca, cb, 7);
+    tu_finish_cloud(&pc, OFF);
+    uint32_t i1 = tu_upload(r, &pc), i2 = tu_upload(rf, &pc);
+    pc_prepared_free(&pc);
+    rnd_camera cam = cam_at(0.02, -0.01, 0.6, 0, 0, 0, 60, W, H);
+    sp_params p;
+    sp_params_defaults(&p);
+    rnd_frame f1 = {0}, f2 = {0};
+    tu_render(r, i1, &cam, &p, 0, &f1);
+    tu_render(rf, i2, &cam, &p, 0, &f2);
+    assert_true(memcmp(f1.rgba8, f2.rgba8, (size_t)W * H * 4) != 0);
+    rnd_frame_free(&f1);
+    rnd_frame_free(&f2);
+    rnd_destroy(rf);
     rnd_destroy(r);
-    r = make_ctx(RND_BACKEND_OSMESA);
+    r = make_ctx(RND_BACKEND_OSMESA, NULL);
     assert_non_null(r);
     check_two_planes(r, "osmesa", SP_EWA_AUTO);
     rnd_destroy(r);
 }
 
-/* Stripes: with SPLATD_SPLAT_STRIPE_ROWS=37 the frame is rendered 37 rows at a time (as frames
+/* Stripes: with rnd_pipe_opts.splat_stripe_rows = 37 the frame is rendered 37 rows at a time (as frames
  * over the storage-block limit are, e.g. 4K on llvmpipe), each with a halo row for the 3x3
  * low-pass (split) or none (exact); the image must equal the one-stripe render: every channel within 1 (float atomics
  * add in a different order) and depth within 1e-6 relative. Jittered plane in both regimes and
@@ -391,8 +413,8 @@ static void test_fixed_point_and_osmesa(void **state)
 static void test_stripes(void **state)
 {
     fixture *fx = *state;
-    setenv("SPLATD_SPLAT_STRIPE_ROWS", "37", 1); /* read when the pipeline is created */
-    rnd_ctx *rs = make_ctx(RND_BACKEND_EGL);
+    const rnd_pipe_opts stripes = {.splat_stripe_rows = 37};
+    rnd_ctx *rs = make_ctx(RND_BACKEND_EGL, &stripes);
     assert_non_null(rs);
     enum { N = 100 };
     const float h = 0.01f;
@@ -423,7 +445,6 @@ static void test_stripes(void **state)
         rnd_frame f1 = {0}, f2 = {0};
         tu_render(fx->egl, id1, &cam, &p, 1, &f1);
         tu_render(rs, id2, &cam, &p, 1, &f2);
-        unsetenv("SPLATD_SPLAT_STRIPE_ROWS");
         int maxd = 0, covered = 0;
         for (size_t i = 0; i < (size_t)W * H; i++) {
             covered += !is_bg(f1.rgba8 + 4 * i);
@@ -805,7 +826,7 @@ static void mom_final(const moments *m, double ctr[2], double cov[3])
  * relative each (a ratio to ~1e-3 per pixel, averaging out over a footprint), the reference
  * weight is predicted to far better than its 0.5 % deviation from 1, the central differences
  * are exact to 1e-7. Measured: covariance within 0.013 %, centroid within 0.0002 px, sum within
- * 0.06 %, no coverage mismatch (through the fixed-point sums, SPLATD_SPLAT_FIXED=1, whose
+ * 0.06 %, no coverage mismatch (through the fixed-point sums, rnd_pipe_opts.splat_fixed, whose
  * weights are quantised to 1/255: 0.12 %, 0.003 px). The affine Jacobian (the perspective term
  * dropped) predicts footprints 23-205 % off the perspective ones here (printed as "affine gap";
  * asserted >= 10 % for every splat, ten times the tolerance). Mutations of the shaders, each
@@ -1128,7 +1149,7 @@ static double psnr_covered(const uint8_t *a, const uint8_t *g, size_t npx, size_
  *   identical to 0.01 dB in 5 separate processes, with LP_NUM_THREADS 1 to 16, with
  *   LP_NATIVE_VECTOR_WIDTH=128 (other LLVM code) and in the ASan build: the float atomics'
  *   order changed nothing here, the spread is the 8-bit vs float path's 1/255 rounding;
- *   the fixed-point sums (SPLATD_SPLAT_FIXED=1, weights quantised to 1/255, a much coarser
+ *   the fixed-point sums (rnd_pipe_opts.splat_fixed, weights quantised to 1/255, a much coarser
  *   arithmetic than any driver's rounding): >= 66.04 dB.
  * 67.17 dB means 1.25 % of the covered channel values off by one (PSNR = 48.13 dB -
  * 10 log10(fraction off by one)); 60 dB allows 6.5 %, five times that, and lies 6 dB under
