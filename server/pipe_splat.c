@@ -81,6 +81,7 @@
 #include "pipe.h"
 #include "shaders.h"
 #include "splat_math.h"
+#include "splat_passes.h"
 
 enum {
     SPLAT_PX_BYTES = 32,       /* struct Px in the shaders */
@@ -299,15 +300,15 @@ static GLuint groups_for(const splat_state *s, int64_t total)
     return groups64 > s->groups_cap ? s->groups_cap : (GLuint)groups64;
 }
 
-/* render: the three passes, per stripe of rows; see the file comment. */
-static int splat_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
+int splat__frame_begin(rnd_kit *k, void *state, const rnd_draw *d, splat_frame *f, sd_err *err)
 {
     splat_state *s = state;
     const gl_api *gl = k->gl;
     const rnd_gpu_cloud *c = d->cloud;
     const rnd_view *v = d->view;
     const sp_params *p = d->params;
-    const rnd_target *t = d->target;
+    memset(f, 0, sizeof *f);
+    f->d = d;
     if (v->nchunks == 0 || v->points_visible == 0) return 0;
     if (v->width <= 0 || v->height <= 0) return sd_errf(err, SD_EINVAL, "bad frame size");
     /* The largest set's visible points size the splat lists. */
@@ -367,65 +368,101 @@ static int splat_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     gl->ActiveTexture(GL_TEXTURE0);
 
     /* One buffer set (the usual case) is bound once for every stripe and pass. */
-    int one_set = c->nsets == 1;
-    int64_t total = 0;
-    if (one_set && (total = set_points(k, s, d, 0, err)) <= 0) {
-        rnd_kit_unbind(k);
-        return (int)total;
+    f->one_set = c->nsets == 1;
+    if (f->one_set) {
+        int64_t total = set_points(k, s, d, 0, err);
+        if (total < 0) return (int)total;
+        f->total = total;
+        if (total == 0) return 0;
     }
-    for (int y0 = 0; y0 < v->height; y0 += rows) {
-        int n = v->height - y0 < rows ? v->height - y0 : rows;
-        int yb = y0 > 0 ? y0 - 1 : 0;                                   /* halo rows */
-        int nb = (y0 + n < v->height ? y0 + n + 1 : y0 + n) - yb;
-        zero_buffer(gl, s->frame_buf);
-        zero_buffer(gl, s->key_buf);
-        const GLint rect0[4] = {INT32_MAX, INT32_MAX, -1, -1};
-        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->rect_buf);
-        gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, sizeof rect0, rect0);
-        for (int p_ = 0; p_ < P_COUNT; p_++) {
-            gl->UseProgram(s->prog[p_]);
-            if (s->loc[p_][U_STRIPE] >= 0) gl->Uniform2i(s->loc[p_][U_STRIPE], yb, nb);
-        }
-        if (one_set) {
-            GLuint groups = groups_for(s, total);
-            reset_lists(gl, s);
-            for (int p_ = P_VIS; p_ <= P_ACC_BIG; p_++) run_pass(gl, s, p_, groups);
-        } else {
-            /* pass 1 (visibility) over every set, then pass 2 (attributes) over every set,
-             * each after its set's pass 1 again, to rebuild that set's splat lists */
-            for (int pass = 0; pass < 2; pass++) {
-                for (uint32_t set = 0; set < c->nsets; set++) {
-                    int64_t tot = set_points(k, s, d, set, err);
-                    if (tot < 0) {
-                        rnd_kit_unbind(k);
-                        return (int)tot;
-                    }
-                    if (tot == 0) continue;
-                    GLuint groups = groups_for(s, tot);
-                    reset_lists(gl, s);
-                    for (int p_ = P_VIS; p_ <= P_VIS_BIG; p_++) run_pass(gl, s, p_, groups);
-                    if (pass == 1)
-                        for (int p_ = P_ACC; p_ <= P_ACC_BIG; p_++) run_pass(gl, s, p_, groups);
-                }
-            }
-        }
-        /* Two triangles over the rectangle pass 1 touched (grown by the gather's pixel; the
-         * vertex shader reads it from rect_buf, no read-back) into the target (bound by the
-         * renderer, both draw buffers), limited to this stripe's rows by the scissor. */
-        gl->UseProgram(s->prog[P_RESOLVE]);
-        gl->Disable(GL_DEPTH_TEST);
-        gl->Disable(GL_BLEND);
-        gl->Enable(GL_SCISSOR_TEST);
-        gl->Scissor(0, y0, v->width, n);
-        gl->BindFramebuffer(GL_FRAMEBUFFER, t->fbo);
-        gl->Viewport(0, 0, v->width, v->height);
-        gl->BindVertexArray(s->vao);
-        gl->DrawArrays(GL_TRIANGLES, 0, 6);
-        gl->BindVertexArray(0);
-        gl->Disable(GL_SCISSOR_TEST);
-        gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_COMMAND_BARRIER_BIT |
-                          GL_TEXTURE_FETCH_BARRIER_BIT);
+    f->rows = rows;
+    f->nstripes = (v->height + rows - 1) / rows;
+    return f->nstripes;
+}
+
+void splat__stripe_begin(rnd_kit *k, void *state, splat_frame *f, int i)
+{
+    splat_state *s = state;
+    const gl_api *gl = k->gl;
+    int height = f->d->view->height;
+    f->y0 = i * f->rows;
+    f->n = height - f->y0 < f->rows ? height - f->y0 : f->rows;
+    int yb = f->y0 > 0 ? f->y0 - 1 : 0; /* halo rows */
+    int nb = (f->y0 + f->n < height ? f->y0 + f->n + 1 : f->y0 + f->n) - yb;
+    zero_buffer(gl, s->frame_buf);
+    zero_buffer(gl, s->key_buf);
+    const GLint rect0[4] = {INT32_MAX, INT32_MAX, -1, -1};
+    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->rect_buf);
+    gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, sizeof rect0, rect0);
+    for (int p_ = 0; p_ < P_COUNT; p_++) {
+        gl->UseProgram(s->prog[p_]);
+        if (s->loc[p_][U_STRIPE] >= 0) gl->Uniform2i(s->loc[p_][U_STRIPE], yb, nb);
     }
+}
+
+/* each_set: runs pass 1 (and, when acc, pass 2) of the stripe over every buffer set. */
+static int each_set(rnd_kit *k, splat_state *s, splat_frame *f, int acc, sd_err *err)
+{
+    const gl_api *gl = k->gl;
+    if (f->one_set) {
+        GLuint groups = groups_for(s, f->total);
+        if (!acc) reset_lists(gl, s); /* pass 2 replays the lists pass 1 made */
+        for (int p_ = acc ? P_ACC : P_VIS; p_ <= (acc ? P_ACC_BIG : P_VIS_BIG); p_++)
+            run_pass(gl, s, p_, groups);
+        return 0;
+    }
+    for (uint32_t set = 0; set < f->d->cloud->nsets; set++) {
+        int64_t tot = set_points(k, s, f->d, set, err);
+        if (tot < 0) return (int)tot;
+        if (tot == 0) continue;
+        GLuint groups = groups_for(s, tot);
+        reset_lists(gl, s);
+        /* pass 2 of a set follows its pass 1 again, to rebuild that set's splat lists (the
+         * keys and the rectangle take the same values again) */
+        for (int p_ = P_VIS; p_ <= P_VIS_BIG; p_++) run_pass(gl, s, p_, groups);
+        if (acc)
+            for (int p_ = P_ACC; p_ <= P_ACC_BIG; p_++) run_pass(gl, s, p_, groups);
+    }
+    return 0;
+}
+
+int splat__visibility(rnd_kit *k, void *state, splat_frame *f, sd_err *err)
+{
+    return each_set(k, state, f, 0, err);
+}
+
+int splat__attributes(rnd_kit *k, void *state, splat_frame *f, sd_err *err)
+{
+    return each_set(k, state, f, 1, err);
+}
+
+void splat__resolve(rnd_kit *k, void *state, splat_frame *f)
+{
+    splat_state *s = state;
+    const gl_api *gl = k->gl;
+    const rnd_view *v = f->d->view;
+    /* Two triangles over the rectangle pass 1 touched (grown by the gather's pixel; the vertex
+     * shader reads it from rect_buf, no read-back) into the target (bound by the renderer, both
+     * draw buffers), limited to this stripe's rows by the scissor. */
+    gl->UseProgram(s->prog[P_RESOLVE]);
+    gl->Disable(GL_DEPTH_TEST);
+    gl->Disable(GL_BLEND);
+    gl->Enable(GL_SCISSOR_TEST);
+    gl->Scissor(0, f->y0, v->width, f->n);
+    gl->BindFramebuffer(GL_FRAMEBUFFER, f->d->target->fbo);
+    gl->Viewport(0, 0, v->width, v->height);
+    gl->BindVertexArray(s->vao);
+    gl->DrawArrays(GL_TRIANGLES, 0, 6);
+    gl->BindVertexArray(0);
+    gl->Disable(GL_SCISSOR_TEST);
+    gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_COMMAND_BARRIER_BIT |
+                      GL_TEXTURE_FETCH_BARRIER_BIT);
+}
+
+int splat__frame_end(rnd_kit *k, void *state, sd_err *err)
+{
+    (void)state;
+    const gl_api *gl = k->gl;
     rnd_kit_unbind(k);
     gl->MemoryBarrier(GL_SHADER_IMAGE_ACCESS_BARRIER_BIT | GL_FRAMEBUFFER_BARRIER_BIT |
                       GL_TEXTURE_FETCH_BARRIER_BIT | GL_TEXTURE_UPDATE_BARRIER_BIT |
@@ -433,6 +470,37 @@ static int splat_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     gl->UseProgram(0);
     gl->BindBuffer(GL_DISPATCH_INDIRECT_BUFFER, 0);
     return GL_CHECK_PASS(gl, "the splat passes", err);
+}
+
+GLuint splat__keys_texture(const void *state)
+{
+    return ((const splat_state *)state)->key_tex;
+}
+
+/* render: the three passes, per stripe of rows; see the file comment. */
+static int splat_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
+{
+    splat_frame f;
+    int nstripes = splat__frame_begin(k, state, d, &f, err);
+    int rc = nstripes < 0 ? nstripes : 0;
+    for (int i = 0; i < nstripes && rc == 0; i++) {
+        splat__stripe_begin(k, state, &f, i);
+        if ((rc = splat__visibility(k, state, &f, err)) == 0 &&
+            (rc = splat__attributes(k, state, &f, err)) == 0)
+            splat__resolve(k, state, &f);
+    }
+    int end = splat__frame_end(k, state, err);
+    return rc < 0 ? rc : end;
+}
+
+int splat__create(rnd_kit *k, void **state, sd_err *err)
+{
+    return splat_create(k, state, err);
+}
+
+void splat__destroy(rnd_kit *k, void *state)
+{
+    splat_destroy(k, state);
 }
 
 const rnd_pipeline pipe_splat = {
