@@ -176,57 +176,33 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
 
 /* ---- sessions ---- */
 
-static void on_client(ev_loop *l, int fd, int mask, void *data);
-
-static void update_watch(srv *sv, sess *s, int want_write)
+/* on_sess_close: a session closed (sess_close): the log line, the render thread forgets its
+ * requests and frames, and it joins the list freed before the loop sleeps. */
+static void on_sess_close(void *owner, sess *s, const char *reason)
 {
-    int mask = want_write ? EV_WRITE : 0;
-    if (!s->paused && !s->close_after && s->in_off == s->in_len && !sv->stopping) mask |= EV_READ;
-    /* Not reading (an OPEN still loading, or unread input): still notice the client going. */
-    else if (!s->close_after) mask |= EV_HUP;
-    if (ev_mask(sv->loop, s->fd) == mask) return;
-    if (mask == 0) ev_unwatch(sv->loop, s->fd);
-    else if (ev_watch(sv->loop, s->fd, mask, on_client, s, NULL) != 0) srv_close(sv, s, "event loop error");
-}
-
-void srv_kick(srv *sv, sess *s)
-{
-    if (s->dead) return;
-    int rc = sess_flush(s, srv_release_frame, sv);
-    if (rc < 0) {
-        char r[96];
-        snprintf(r, sizeof r, "write failed: %s", strerror(-rc));
-        srv_close(sv, s, r);
-        return;
-    }
-    if (s->close_after && !sess_has_output(s)) {
-        srv_close(sv, s, s->close_reason[0] ? s->close_reason : "closing");
-        return;
-    }
-    int blocked = s->stream_frame != NULL;
-    if (blocked != s->stream_blocked) {
-        s->stream_blocked = blocked;
-        rt_set_stream_blocked(sv->rt, s->id, blocked);
-    }
-    update_watch(sv, s, rc == 0);
-}
-
-void srv_close(srv *sv, sess *s, const char *reason)
-{
-    if (s->dead) return;
-    s->dead = 1;
+    srv *sv = owner;
     srv_log(sv, s, "closed: %s (%llu frames sent, %llu dropped, %llu bytes, %.1f s)", reason,
             (unsigned long long)s->frames_sent, (unsigned long long)s->frames_dropped,
             (unsigned long long)s->bytes_out, (double)(ev_now_ms() - s->t_connect_ms) / 1000.0);
-    ev_unwatch(sv->loop, s->fd);
-    close(s->fd);
-    s->fd = -1;
-    ev_timer_stop(sv->loop, &s->hs_timer);
-    ev_timer_stop(sv->loop, &s->fps_timer);
     if (sv->rt) rt_client_close(sv->rt, s->id);
     s->next_dead = sv->dead;
     sv->dead = s;
 }
+
+static void on_stream_blocked(void *owner, sess *s, int blocked)
+{
+    srv *sv = owner;
+    rt_set_stream_blocked(sv->rt, s->id, blocked);
+}
+
+/* The daemon's side of its sessions: dispatch.c handles their messages. */
+static const sess_ops daemon_sess_ops = {
+    .on_message = srv_handle,
+    .on_decode_error = srv_decode_error,
+    .on_close = on_sess_close,
+    .release = srv_release_frame,
+    .stream_blocked = on_stream_blocked,
+};
 
 static void free_dead(srv *sv)
 {
@@ -242,39 +218,6 @@ static void free_dead(srv *sv)
     }
 }
 
-static void on_client(ev_loop *l, int fd, int mask, void *data)
-{
-    (void)l; (void)fd;
-    sess *s = data;
-    srv *sv = s->owner;
-    if (s->dead) return;
-    if ((mask & EV_HUP) && !(mask & EV_READ)) {
-        /* A hang-up while its input is not being read: the answers have nobody to go to. */
-        srv_close(sv, s, "closed by the client while its requests waited");
-        return;
-    }
-    if ((mask & EV_READ) && s->in_off == s->in_len) {
-        ssize_t r = recv(s->fd, s->in, SESS_IN_CHUNK, 0);
-        if (r == 0) {
-            srv_close(sv, s, s->authed ? "closed by the client" : "closed by the client before the handshake");
-            return;
-        }
-        if (r < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
-            char why[96];
-            snprintf(why, sizeof why, "read failed: %s", strerror(errno));
-            srv_close(sv, s, why);
-            return;
-        }
-        if (r > 0) {
-            s->in_off = 0;
-            s->in_len = (size_t)r;
-            srv_session_input(sv, s);
-            return;
-        }
-    }
-    srv_kick(sv, s);
-}
-
 static void on_handshake_timeout(ev_loop *l, ev_timer *t, void *data)
 {
     (void)l; (void)t;
@@ -287,7 +230,7 @@ static void on_handshake_timeout(ev_loop *l, ev_timer *t, void *data)
     if (proto_enc_error(&b, 0, PROTO_E_AUTH_REQUIRED, msg) == 0 && sess_push(s, &b) == 0)
         sess_flush(s, NULL, NULL);
     proto_buf_free(&b);
-    srv_close(sv, s, msg);
+    sess_close(s, msg);
 }
 
 /* refuse: a best-effort ERROR on a connection the daemon will not serve, then close. */
@@ -324,7 +267,7 @@ static void on_accept(ev_loop *l, int fd, int mask, void *data)
         }
         if (++sv->gens[idx] == 0) sv->gens[idx] = 1;
         uint32_t id = ((uint32_t)sv->gens[idx] << 16) | (uint32_t)idx;
-        sess *s = sess_new(id, c, addr);
+        sess *s = sess_new(id, c, addr, sv->loop, &daemon_sess_ops, sv);
         sd_err err = {0};
         if (!s || auth_challenge(s->challenge, &err) != 0 || rt_client_open(sv->rt, id) != 0) {
             srv_log(sv, NULL, "%s refused: %s", addr, s ? err.msg : "out of memory");
@@ -332,13 +275,12 @@ static void on_accept(ev_loop *l, int fd, int mask, void *data)
             refuse(c, PROTO_E_INTERNAL, "the server cannot take a connection now");
             continue;
         }
-        s->owner = sv;
         s->version = PROTO_VERSION;
         sv->sessions[idx] = s;
         sv->nsess++;
         srv_log(sv, s, "connected");
         ev_timer_start(sv->loop, &s->hs_timer, (uint64_t)sv->o.handshake_ms, on_handshake_timeout, s);
-        update_watch(sv, s, 0);
+        sess_kick(s);
     }
 }
 
@@ -370,7 +312,7 @@ static void begin_shutdown(srv *sv, const char *why)
         ev_timer_stop(sv->loop, &s->fps_timer);
         s->close_after = 1;
         snprintf(s->close_reason, sizeof s->close_reason, "server shutting down");
-        srv_kick(sv, s);
+        sess_kick(s);
     }
     ev_timer_start(sv->loop, &sv->stop_timer, (uint64_t)sv->o.shutdown_ms, on_stop_deadline, sv);
 }
@@ -506,7 +448,7 @@ static int start(srv *sv)
 static int teardown(srv *sv)
 {
     for (int i = 0; sv->sessions && i < sv->o.max_clients; i++)
-        if (sv->sessions[i] && !sv->sessions[i]->dead) srv_close(sv, sv->sessions[i], "server stopped");
+        if (sv->sessions[i] && !sv->sessions[i]->dead) sess_close(sv->sessions[i], "server stopped");
     if (sv->sessions) free_dead(sv);
     if (rt_stop_for_exit(sv->rt)) {
         srv_log(sv, NULL, "a cloud is still being prepared; exiting without waiting for it");

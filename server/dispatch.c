@@ -49,18 +49,6 @@ void srv_release_frame(void *user, uint32_t id)
     rt_frame_released(sv->rt, id);
 }
 
-/* push: queues an encoded message b on s; an output over the limit closes the client. */
-static void push(srv *sv, sess *s, proto_buf *b)
-{
-    int rc = sess_push(s, b);
-    if (rc == SD_ELIMIT) {
-        s->close_after = 0;
-        srv_close(sv, s, "its output went over the limit (the client does not read)");
-    } else if (rc != 0) {
-        srv_close(sv, s, "out of memory queueing output");
-    }
-}
-
 /* send_error: queues ERROR code for request seq; a fatal code (PROTOCOL.md 6) stops reading and
  * closes the connection once the output is flushed. Logs one line. */
 static void send_error(srv *sv, sess *s, uint32_t seq, int code, const char *msg)
@@ -69,7 +57,7 @@ static void send_error(srv *sv, sess *s, uint32_t seq, int code, const char *msg
     char text[PROTO_MAX_ERRTEXT + 1];
     snprintf(text, sizeof text, "%s", msg);
     srv_log(sv, s, "error %s (seq %u): %s", proto_err_name(code), seq, text);
-    if (proto_enc_error(&b, seq, (uint32_t)code, text) == 0) push(sv, s, &b);
+    if (proto_enc_error(&b, seq, (uint32_t)code, text) == 0) sess_send(s, &b);
     else proto_buf_free(&b);
     if (proto_err_fatal(code) && !s->dead) {
         s->close_after = 1;
@@ -176,7 +164,7 @@ static void send_info(srv *sv, sess *s, const srv_cloud *c, uint32_t seq)
     in.k = c->info.k;
     snprintf(in.format, sizeof in.format, "%s", c->info.format);
     proto_buf b = {.version = s->version};
-    if (proto_enc_info(&b, seq, &in) == 0) push(sv, s, &b);
+    if (proto_enc_info(&b, seq, &in) == 0) sess_send(s, &b);
     else proto_buf_free(&b);
 }
 
@@ -246,7 +234,7 @@ static void send_welcome(srv *sv, sess *s, uint32_t seq)
     snprintf(w.backend, sizeof w.backend, "%s", rt_backend_name(sv->rt));
     snprintf(w.renderer, sizeof w.renderer, "%s", rt_renderer_string(sv->rt));
     proto_buf b = {.version = s->version};
-    if (proto_enc_welcome(&b, seq, &w) == 0) push(sv, s, &b);
+    if (proto_enc_welcome(&b, seq, &w) == 0) sess_send(s, &b);
     else proto_buf_free(&b);
 }
 
@@ -318,7 +306,7 @@ static void on_list(srv *sv, sess *s, const proto_msg *m)
         }
     }
     proto_buf b = {.version = s->version};
-    if (proto_enc_clouds(&b, m->h.seq, items, (uint32_t)n) == 0) push(sv, s, &b);
+    if (proto_enc_clouds(&b, m->h.seq, items, (uint32_t)n) == 0) sess_send(s, &b);
     else { proto_buf_free(&b); send_error(sv, s, m->h.seq, PROTO_E_INTERNAL, "cloud list too long"); }
     free(items);
     free(v);
@@ -404,7 +392,7 @@ static void on_camera(srv *sv, sess *s, const proto_msg *m)
 static void send_ok(srv *sv, sess *s, uint32_t seq)
 {
     proto_buf b = {.version = s->version};
-    if (proto_enc_empty(&b, PROTO_MSG_OK, seq) == 0) push(sv, s, &b);
+    if (proto_enc_empty(&b, PROTO_MSG_OK, seq) == 0) sess_send(s, &b);
     else proto_buf_free(&b);
 }
 
@@ -437,7 +425,7 @@ static void on_render(srv *sv, sess *s, const proto_msg *m)
         send_error(sv, s, m->h.seq, PROTO_E_BUSY, t);
         return;
     }
-    if (sess_push_frame_slot(s, m->h.seq) != 0) srv_close(sv, s, "out of memory");
+    if (sess_push_frame_slot(s, m->h.seq) != 0) sess_close(s, "out of memory");
 }
 
 static void on_stream(srv *sv, sess *s, const proto_msg *m)
@@ -464,13 +452,13 @@ static void on_ping(srv *sv, sess *s, const proto_msg *m)
     clock_gettime(CLOCK_MONOTONIC, &ts);
     proto_pong pg = {p.token, (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u};
     proto_buf b = {.version = s->version};
-    if (proto_enc_pong(&b, m->h.seq, &pg) == 0) push(sv, s, &b);
+    if (proto_enc_pong(&b, m->h.seq, &pg) == 0) sess_send(s, &b);
     else proto_buf_free(&b);
 }
 
-/* handle: one decoded message. */
-static void handle(srv *sv, sess *s, const proto_msg *m)
+void srv_handle(void *owner, sess *s, const proto_msg *m)
 {
+    srv *sv = owner;
     switch (m->h.type) {
     case PROTO_MSG_HELLO: on_hello(sv, s, m); break;
     case PROTO_MSG_LIST: on_list(sv, s, m); break;
@@ -490,23 +478,9 @@ static void handle(srv *sv, sess *s, const proto_msg *m)
     }
 }
 
-void srv_session_input(srv *sv, sess *s)
+void srv_decode_error(void *owner, sess *s, int code, const char *text)
 {
-    while (!s->dead && !s->close_after && !s->paused && s->in_off < s->in_len) {
-        size_t used = 0;
-        proto_msg m;
-        proto_error pe = {0};
-        int rc = proto_decode(&s->dec, s->in + s->in_off, s->in_len - s->in_off, &used, &m, &pe);
-        s->in_off += used;
-        if (rc < 0) {
-            /* Framing is lost: answer with the code and close (PROTOCOL.md 2). */
-            send_error(sv, s, 0, -rc, pe.msg);
-            break;
-        }
-        if (rc == PROTO_ONE_MSG) handle(sv, s, &m);
-    }
-    if (s->in_off == s->in_len) s->in_off = s->in_len = 0;
-    srv_kick(sv, s);
+    send_error(owner, s, 0, code, text);
 }
 
 /* ---- worker events ---- */
@@ -525,9 +499,9 @@ static void on_progress_ev(srv *sv, const rt_event *ev)
         sess *s = srv_lookup(sv, c->waiters[i].sess);
         if (!s || s->opening != (int)(c - sv->clouds)) continue;
         proto_buf b = {.version = s->version};
-        if (proto_enc_progress(&b, c->waiters[i].seq, &p) == 0) push(sv, s, &b);
+        if (proto_enc_progress(&b, c->waiters[i].seq, &p) == 0) sess_send(s, &b);
         else proto_buf_free(&b);
-        srv_kick(sv, s);
+        sess_kick(s);
     }
 }
 
@@ -587,7 +561,7 @@ static void on_cloud_done(srv *sv, const rt_event *ev)
             client_message(&sv->clouds[idx], ev->err.msg, msg, sizeof msg);
             send_error(sv, s, w[i].seq, PROTO_E_LOAD_FAILED, msg);
         }
-        srv_session_input(sv, s); /* requests that waited behind the OPEN */
+        sess_input(s); /* requests that waited behind the OPEN */
     }
     free(w);
 }
@@ -619,7 +593,7 @@ static void on_frame_ev(srv *sv, rt_event *ev)
             }
         }
         srv_log(sv, s, "error RENDER_FAILED (seq %u): %s", ev->meta.req_seq, ev->err.msg);
-        srv_kick(sv, s);
+        sess_kick(s);
         return;
     }
     if (ev->meta.stream) {
@@ -629,7 +603,7 @@ static void on_frame_ev(srv *sv, rt_event *ev)
         return; /* no placeholder (cannot happen): ev keeps msg, freed by the caller */
     }
     ev->msg = NULL;
-    srv_kick(sv, s);
+    sess_kick(s);
 }
 
 void srv_on_worker_events(srv *sv)

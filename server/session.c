@@ -2,11 +2,14 @@
 #include "session.h"
 
 #include <errno.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/socket.h>
+#include <unistd.h>
 
-sess *sess_new(uint32_t id, int fd, const char *addr)
+sess *sess_new(uint32_t id, int fd, const char *addr, ev_loop *loop, const sess_ops *ops,
+               void *owner)
 {
     sess *s = calloc(1, sizeof *s);
     if (!s) return NULL;
@@ -14,6 +17,9 @@ sess *sess_new(uint32_t id, int fd, const char *addr)
     if (!s->in) { free(s); return NULL; }
     s->id = id;
     s->fd = fd;
+    s->loop = loop;
+    s->ops = ops;
+    s->owner = owner;
     strncpy(s->addr, addr, sizeof s->addr - 1);
     proto_decoder_init(&s->dec, PROTO_C2S);
     s->dec.preauth = 1;
@@ -191,4 +197,129 @@ int sess_flush(sess *s, void (*release)(void *user, uint32_t id), void *user)
     }
     int ready = s->cur || (s->head && s->head->filled) || s->stream_frame;
     return ready ? 0 : 1;
+}
+
+/* ---- the connection: reading, decoding, interest, closing ---- */
+
+static void on_io(ev_loop *l, int fd, int mask, void *data);
+
+/* update_watch: EV_READ while the input is drained and the session takes requests, EV_WRITE
+ * when output waits, EV_HUP alone while requests wait unread (to notice the client going). */
+static void update_watch(sess *s, int want_write)
+{
+    int mask = want_write ? EV_WRITE : 0;
+    if (!s->paused && !s->close_after && s->in_off == s->in_len) mask |= EV_READ;
+    else if (!s->close_after) mask |= EV_HUP;
+    if (ev_mask(s->loop, s->fd) == mask) return;
+    if (mask == 0) ev_unwatch(s->loop, s->fd);
+    else if (ev_watch(s->loop, s->fd, mask, on_io, s, NULL) != 0) sess_close(s, "event loop error");
+}
+
+static void release_cb(void *user, uint32_t id)
+{
+    sess *s = user;
+    if (s->ops->release) s->ops->release(s->owner, id);
+}
+
+void sess_kick(sess *s)
+{
+    if (s->dead) return;
+    int rc = sess_flush(s, release_cb, s);
+    if (rc < 0) {
+        char r[96];
+        snprintf(r, sizeof r, "write failed: %s", strerror(-rc));
+        sess_close(s, r);
+        return;
+    }
+    if (s->close_after && !sess_has_output(s)) {
+        sess_close(s, s->close_reason[0] ? s->close_reason : "closing");
+        return;
+    }
+    int blocked = s->stream_frame != NULL;
+    if (blocked != s->stream_blocked) {
+        s->stream_blocked = blocked;
+        if (s->ops->stream_blocked) s->ops->stream_blocked(s->owner, s, blocked);
+    }
+    update_watch(s, rc == 0);
+}
+
+void sess_send(sess *s, proto_buf *b)
+{
+    if (s->dead) {
+        proto_buf_free(b);
+        return;
+    }
+    int rc = sess_push(s, b);
+    if (rc == SD_ELIMIT) {
+        s->close_after = 0;
+        sess_close(s, "its output went over the limit (the client does not read)");
+    } else if (rc != 0) {
+        sess_close(s, "out of memory queueing output");
+    }
+}
+
+void sess_close(sess *s, const char *reason)
+{
+    if (s->dead) return;
+    s->dead = 1;
+    ev_unwatch(s->loop, s->fd);
+    close(s->fd);
+    s->fd = -1;
+    ev_timer_stop(s->loop, &s->hs_timer);
+    ev_timer_stop(s->loop, &s->fps_timer);
+    s->ops->on_close(s->owner, s, reason);
+}
+
+void sess_input(sess *s)
+{
+    while (!s->dead && !s->close_after && !s->paused && s->in_off < s->in_len) {
+        size_t used = 0;
+        proto_msg m;
+        proto_error pe = {0};
+        int rc = proto_decode(&s->dec, s->in + s->in_off, s->in_len - s->in_off, &used, &m, &pe);
+        s->in_off += used;
+        if (rc < 0) {
+            /* Framing is lost: the owner answers with the code, and the session closes once
+             * that is written (PROTOCOL.md 2). */
+            s->ops->on_decode_error(s->owner, s, -rc, pe.msg);
+            break;
+        }
+        if (rc == PROTO_ONE_MSG) s->ops->on_message(s->owner, s, &m);
+    }
+    if (s->in_off == s->in_len) s->in_off = s->in_len = 0;
+    sess_kick(s);
+}
+
+static void on_io(ev_loop *l, int fd, int mask, void *data)
+{
+    (void)l;
+    (void)fd;
+    sess *s = data;
+    if (s->dead) return;
+    if ((mask & EV_HUP) && !(mask & EV_READ)) {
+        /* A hang-up while its input is not being read: the answers have nobody to go to. */
+        sess_close(s, "closed by the client while its requests waited");
+        return;
+    }
+    if ((mask & EV_READ) && s->in_off == s->in_len) {
+        ssize_t r = recv(s->fd, s->in, SESS_IN_CHUNK, 0);
+        if (r == 0) {
+            sess_close(s, s->authed ? "closed by the client"
+                                    : "closed by the client before the handshake");
+            return;
+        }
+        if (r < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
+            char why[96];
+            snprintf(why, sizeof why, "read failed: %s", strerror(errno));
+            sess_close(s, why);
+            return;
+        }
+        if (r > 0) {
+            s->in_off = 0;
+            s->in_len = (size_t)r;
+            sess_input(s);
+            return;
+        }
+    }
+    sess_kick(s);
 }

@@ -1,5 +1,9 @@
-/* session.h — one client connection of the daemon: its decoder, render state, auth state and
- * ordered output queue. Lives on the event-loop thread only.
+/* session.h — one client connection of the daemon, as one object that owns its I/O: reading
+ * (at most SESS_IN_CHUNK bytes a wakeup), decoding, the ordered output queue, writing, its
+ * event-loop interest, and closing (redis's connection object; STYLE.md 23). What the
+ * messages mean is the owner's business: the session hands each decoded message to
+ * ops->on_message (dispatch.c) and reports its close through ops->on_close (daemon.c). It also
+ * carries the per-client render and auth state the dispatcher keeps. Event-loop thread only.
  *
  * Output: the protocol answers requests in order, so the output is a FIFO of items: bytes
  * (whole messages) or a frame placeholder that a RENDER puts in at once and the encoder fills
@@ -35,10 +39,31 @@ typedef struct sess_item {
     struct sess_item *next;
 } sess_item;
 
-typedef struct sess {
+typedef struct sess sess;
+
+/* What the owner does for its sessions; every callback gets the owner pointer given to
+ * sess_new. */
+typedef struct sess_ops {
+    /* on_message: one decoded message; may queue answers (sess_send), pause input, close. */
+    void (*on_message)(void *owner, sess *s, const proto_msg *m);
+    /* on_decode_error: the input stream is malformed (code PROTO_E_*, text): framing is lost,
+     * so the owner answers and the session closes after flushing. */
+    void (*on_decode_error)(void *owner, sess *s, int code, const char *text);
+    /* on_close: the session closed (socket already closed, reason for the log); the owner
+     * frees it later, at a safe point, with sess_free. */
+    void (*on_close)(void *owner, sess *s, const char *reason);
+    /* release: a frame the render thread counts as outstanding for s left the waiting state. */
+    void (*release)(void *owner, uint32_t id);
+    /* stream_blocked: whether a streamed frame waits to be written (latest-wins backpressure). */
+    void (*stream_blocked)(void *owner, sess *s, int blocked);
+} sess_ops;
+
+struct sess {
     uint32_t id;                /* (generation << 16) | index; never 0 */
     int fd;
-    void *owner;                /* the daemon context (for timer callbacks) */
+    void *owner;                /* the daemon context, passed to every ops callback */
+    const sess_ops *ops;
+    ev_loop *loop;
     char addr[NET_ADDR_LEN];
     char client_name[PROTO_MAX_CLIENT + 1];
     uint64_t t_connect_ms;
@@ -88,10 +113,26 @@ typedef struct sess {
     /* statistics for the close log line */
     uint64_t frames_sent, frames_dropped, bytes_out;
     struct sess *next_dead;
-} sess;
+};
 
-/* sess_new: a session for the accepted socket fd. Returns NULL when out of memory. */
-sess *sess_new(uint32_t id, int fd, const char *addr);
+/* sess_new: a session for the accepted socket fd, served on loop for owner through ops.
+ * Returns NULL when out of memory. Start it with sess_kick. */
+sess *sess_new(uint32_t id, int fd, const char *addr, ev_loop *loop, const sess_ops *ops,
+               void *owner);
+
+/* sess_input: decodes and hands over the buffered input until it runs out, the session
+ * pauses (paused = 1, e.g. an OPEN waiting for its cloud) or closes; then sess_kick. Call it
+ * again after unpausing. */
+void sess_input(sess *s);
+/* sess_kick: writes what can be written now and updates the loop interest; closes the session
+ * on a write error, or once a close-after-flush session has written everything. */
+void sess_kick(sess *s);
+/* sess_send: queues one encoded message (b's bytes taken over); an output over SESS_OUT_MAX
+ * closes the session (a client that does not read). Does not write: sess_kick does. */
+void sess_send(sess *s, proto_buf *b);
+/* sess_close: closes the socket, stops the session's timers and tells the owner; safe to call
+ * twice. The session stays allocated until the owner's sess_free. */
+void sess_close(sess *s, const char *reason);
 /* sess_free: frees s and everything queued in it (the socket must already be closed). Calls
  * release(user, id) for each frame still counted as outstanding by the render thread. */
 void sess_free(sess *s, void (*release)(void *user, uint32_t id), void *user);

@@ -69,22 +69,18 @@ typedef struct srv {
 /* srv_log: one line on stderr, "splatd: ADDR message", ADDR from s when not NULL. */
 void srv_log(const srv *sv, const sess *s, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 
-/* srv_session_input: decodes and handles the session's buffered input until it runs out, the
- * session pauses (OPEN waiting for a cloud) or closes. */
-void srv_session_input(srv *sv, sess *s);
-/* srv_kick: writes what the session can write now and updates its EV_WRITE interest; closes it
- * on a write error or once a close-after-flush session is empty. */
-void srv_kick(srv *sv, sess *s);
-/* srv_close: logs the close with reason, unwatches and closes the socket, and queues s to be
- * freed at the next safe point. Safe to call twice. */
-void srv_close(srv *sv, sess *s, const char *reason);
+/* srv_handle: sess_ops.on_message: one decoded message of s (owner = the srv). */
+void srv_handle(void *owner, sess *s, const proto_msg *m);
+/* srv_decode_error: sess_ops.on_decode_error: answers the malformed input with its ERROR,
+ * fatal codes closing the session once flushed. */
+void srv_decode_error(void *owner, sess *s, int code, const char *text);
 /* srv_lookup: the live session with id, or NULL (stale ids give NULL). */
 sess *srv_lookup(srv *sv, uint32_t id);
 /* srv_on_worker_events: handles every event the workers posted (frames, progress, clouds). */
 void srv_on_worker_events(srv *sv);
 /* srv_preload: resolves and starts preparing cloud name. Returns 0 or SD_E* with err. */
 int srv_preload(srv *sv, const char *name, sd_err *err);
-/* srv_release_frame: the release callback for sess_flush/sess_free (user = srv). */
+/* srv_release_frame: sess_ops.release (user = srv): the render thread's count of s's frames. */
 void srv_release_frame(void *user, uint32_t id);
 /* srv_pack_frame: rt_pack_fn: builds a FRAME message (header + payload). Encoder thread. */
 int srv_pack_frame(void *user, const rt_frame_meta *m, const uint8_t *data, size_t len,
