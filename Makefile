@@ -50,11 +50,34 @@ TEST_LIBS   := $(SERVER_LIBS) $(shell pkg-config --libs cmocka 2>/dev/null)
 
 WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes -Wno-unused-parameter
 CFLAGS  ?= -O2 -g
-ALL_CFLAGS = -std=c11 -D_GNU_SOURCE -fPIC $(WARN) $(CFLAGS) -Iprotocol -Iserver -Iclient -Itests/common -I$(BUILD)/gen \
-             $(PKG_CFLAGS) $(EXR_CFLAGS) -MMD -MP
+BASE_CFLAGS = -std=c11 -D_GNU_SOURCE -fPIC $(WARN) $(CFLAGS) $(PKG_CFLAGS) $(EXR_CFLAGS) -MMD -MP
+
+# ---- include paths per directory: the boundaries the build enforces ----
+# Data flows one way: file -> cloud (io) -> prepared cloud (prep) -> GPU (render, pipelines)
+# -> frame (enc) -> socket (net, daemon). A folder sees its own headers, those of the folders
+# before it, util and protocol; nothing later. The client sees protocol and itself, never the
+# server; protocol sees only itself. Tests and tools see everything.
+SERVER_DIRS    := util io prep render pipelines enc net daemon cmd
+DEPS_util      := util
+DEPS_io        := util io
+DEPS_prep      := util io prep
+DEPS_render    := util io prep render
+DEPS_pipelines := util io prep render pipelines
+DEPS_enc       := util io prep render enc
+DEPS_net       := util io prep render net
+DEPS_daemon    := $(SERVER_DIRS)
+DEPS_cmd       := $(SERVER_DIRS)
+$(foreach d,$(SERVER_DIRS),$(eval INC_server/$(d) := -Iprotocol $(addprefix -Iserver/,$(DEPS_$(d)))))
+INC_render_gen := -I$(BUILD)/gen
+INC_server/render += $(INC_render_gen)
+INC_protocol   := -Iprotocol
+INC_client     := -Iprotocol -Iclient
+INC_ALL        := -Iprotocol $(addprefix -Iserver/,$(SERVER_DIRS)) -Iclient -Itests -Itests/common $(INC_render_gen)
+# inc_of SRC: the include flags of the directory SRC is in (tests/, tools/: all of them).
+inc_of = $(or $(INC_$(patsubst %/,%,$(dir $(1)))),$(INC_ALL))
 
 PROTO_SRC  := $(wildcard protocol/*.c)
-SERVER_SRC := $(filter-out server/main.c,$(wildcard server/*.c))
+SERVER_SRC := $(filter-out server/cmd/main.c,$(wildcard server/*/*.c))
 CLIENT_LIB_SRC := $(filter-out client/splat_main.c,$(wildcard client/*.c))
 SHADERS    := $(sort $(wildcard shaders/*.glsl))
 TEST_SRC   := $(wildcard tests/test_*.c)
@@ -81,11 +104,11 @@ FORCE:
 define FLAVOUR
 $(1)/obj/%.o: %.c $(BUILD)/gen/shaders_gen.h
 	@mkdir -p $$(dir $$@)
-	$$(CC) $$(ALL_CFLAGS) $(2) -c $$< -o $$@
+	$$(CC) $$(BASE_CFLAGS) $$(call inc_of,$$<) $(2) -c $$< -o $$@
 
 $(1)/obj/gen/shaders_gen.o: $(BUILD)/gen/shaders_gen.c
 	@mkdir -p $$(dir $$@)
-	$$(CC) $$(ALL_CFLAGS) $(2) -c $$< -o $$@
+	$$(CC) $$(BASE_CFLAGS) $(INC_render_gen) $(2) -c $$< -o $$@
 
 ifeq ($(STRICT),1)
 $(1)/libsplatd.a: $(call obj,$(1),$(SERVER_SRC)) $(1)/obj/gen/shaders_gen.o
@@ -101,19 +124,19 @@ $(1)/libtestcommon.a: $(call obj,$(1),$(TEST_COMMON_SRC))
 	@rm -f $$@; ar rcs $$@ $$^
 else
 $(1)/libsplatd.a: FORCE $(BUILD)/gen/shaders_gen.c
-	@sh tools/dev_archive.sh "$$(CC) $$(ALL_CFLAGS) $(2)" $(1) $$@ $(SERVER_SRC) $(BUILD)/gen/shaders_gen.c
+	@sh tools/dev_archive.sh "$$(CC) $$(BASE_CFLAGS) $$(INC_ALL) $(2)" $(1) $$@ $(SERVER_SRC) $(BUILD)/gen/shaders_gen.c
 
 $(1)/libsplatproto.a: FORCE
-	@sh tools/dev_archive.sh "$$(CC) $$(ALL_CFLAGS) $(2)" $(1) $$@ $(PROTO_SRC)
+	@sh tools/dev_archive.sh "$$(CC) $$(BASE_CFLAGS) $$(INC_ALL) $(2)" $(1) $$@ $(PROTO_SRC)
 
 $(1)/libsplatclient.a: FORCE
-	@sh tools/dev_archive.sh "$$(CC) $$(ALL_CFLAGS) $(2)" $(1) $$@ $(CLIENT_LIB_SRC) $(PROTO_SRC)
+	@sh tools/dev_archive.sh "$$(CC) $$(BASE_CFLAGS) $$(INC_ALL) $(2)" $(1) $$@ $(CLIENT_LIB_SRC) $(PROTO_SRC)
 
 $(1)/libtestcommon.a: FORCE
-	@sh tools/dev_archive.sh "$$(CC) $$(ALL_CFLAGS) $(2)" $(1) $$@ $(TEST_COMMON_SRC)
+	@sh tools/dev_archive.sh "$$(CC) $$(BASE_CFLAGS) $$(INC_ALL) $(2)" $(1) $$@ $(TEST_COMMON_SRC)
 endif
 
-$(1)/bin/splatd: $(1)/obj/server/main.o $(1)/libsplatd.a $(1)/libsplatproto.a
+$(1)/bin/splatd: $(1)/obj/server/cmd/main.o $(1)/libsplatd.a $(1)/libsplatproto.a
 	@mkdir -p $$(dir $$@)
 	$$(CC) $(2) -o $$@ $$^ $$(SERVER_LIBS)
 

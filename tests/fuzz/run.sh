@@ -30,9 +30,9 @@ fi
 # ---- build: every source once into objects, then one link per target ----
 CFLAGS="-std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer -Wall -Wextra -Wno-unused-parameter
         -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=undefined
-        -Iprotocol -Iserver -Itests/common -I/usr/include/OpenEXR"
-SRCS="$(ls protocol/*.c) server/io_text.c server/io_ply.c server/io_pcd.c server/io_las.c
-      server/io_xyz.c server/cloud.c server/lzf.c server/sd_err.c tests/common/fuzz_targets.c"
+        -Iprotocol $(for d in util io prep render pipelines enc net daemon cmd; do printf -- "-Iserver/%s " $d; done)-Iclient -Itests -Itests/common -I/usr/include/OpenEXR"
+SRCS="$(ls protocol/*.c) server/io/io_text.c server/io/io_ply.c server/io/io_pcd.c server/io/io_las.c
+      server/io/io_xyz.c server/io/cloud.c server/io/lzf.c server/util/sd_err.c server/util/sd_hash.c tests/common/fuzz_targets.c"
 mkdir -p "$out/obj"
 objs=""
 for s in $SRCS; do
