@@ -1,6 +1,8 @@
 /* cli.c — argument parsing of the `splat` command (see cli.h). */
 #include "cli.h"
 
+#include "framing.h"
+
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
@@ -79,8 +81,8 @@ int cli_parse(int argc, char **argv, cli_args *a, char *err, size_t errlen)
     a->port = 7878;
     a->timeout_s = 60;
     a->inflight = 2;
-    a->width = 1280;
-    a->height = 720;
+    a->width = SP_DEFAULT_WIDTH;
+    a->height = SP_DEFAULT_HEIGHT;
     const char *pos[4];
     int npos = 0;
     for (int i = 1; i < argc; i++) {

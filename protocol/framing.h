@@ -3,6 +3,10 @@
  * All coordinates are the cloud file's (doubles). */
 #pragma once
 
+/* The frame size used when none is asked for (splat's --size, a daemon frame before any
+ * CAMERA, splatd render). */
+enum { SP_DEFAULT_WIDTH = 1280, SP_DEFAULT_HEIGHT = 720 };
+
 /* sp_default_up: the up axis guessed from the bounding box: +y when the box is flat in z (an
  * airborne scan or terrain, seen from above with north up) or tallest along y (the y-up
  * convention of most graphics and photogrammetry exports); +z otherwise. */

@@ -32,7 +32,7 @@ static int parse_int(const char *opt, const char *s, int lo, int hi, int *out)
 int cmd_prep(int argc, char **argv)
 {
     const char *file = NULL;
-    cache_desc d = {.k = 24, .warn = warn_stderr, .progress = prep_progress_stderr};
+    cache_desc d = {.k = PREP_DEFAULT_K, .warn = warn_stderr, .progress = prep_progress_stderr};
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         if (!strcmp(a, "--k")) {

@@ -10,6 +10,7 @@
 #include "cache.h"
 #include "commands.h"
 #include "encode.h"
+#include "prep.h"
 #include "progress.h"
 #include "render.h"
 
@@ -224,7 +225,8 @@ static void make_camera(const render_opts *o, const pc_prepared *pc, rnd_camera 
 
 int cmd_render(int argc, char **argv)
 {
-    render_opts o = {.width = 1280, .height = 720, .cache = {.k = 24}};
+    render_opts o = {.width = RND_DEFAULT_WIDTH, .height = RND_DEFAULT_HEIGHT,
+                     .cache = {.k = PREP_DEFAULT_K}};
     sp_params p;
     sp_params_defaults(&p);
     int rc = parse_args(argc, argv, &o, &p);

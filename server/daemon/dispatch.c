@@ -152,17 +152,8 @@ int srv_preload(srv *sv, const char *name, sd_err *err)
 /* send_info: queues INFO about cloud c answering request seq. */
 static void send_info(srv *sv, sess *s, const srv_cloud *c, uint32_t seq)
 {
-    proto_info in = {0};
+    proto_info in = c->info.summary;
     snprintf(in.name, sizeof in.name, "%s", c->name);
-    in.points = c->info.points;
-    in.dropped = c->info.dropped;
-    memcpy(in.bmin, c->info.bmin, sizeof in.bmin);
-    memcpy(in.bmax, c->info.bmax, sizeof in.bmax);
-    memcpy(in.offset, c->info.offset, sizeof in.offset);
-    in.attrs = c->info.attrs;
-    in.sigma = c->info.sigma;
-    in.k = c->info.k;
-    snprintf(in.format, sizeof in.format, "%s", c->info.format);
     proto_buf b = {.version = s->version};
     if (proto_enc_info(&b, seq, &in) == 0) sess_send(s, &b);
     else proto_buf_free(&b);
@@ -182,7 +173,8 @@ static void make_request(srv *sv, sess *s, rt_request *rq, uint32_t req_seq)
         rq->camera_seq = s->camera_seq;
     } else {
         const srv_cloud *c = &sv->clouds[s->cloud];
-        rnd_camera_frame(c->info.bmin, c->info.bmax, 1280, 720, &rq->cam);
+        rnd_camera_frame(c->info.summary.bmin, c->info.summary.bmax, RND_DEFAULT_WIDTH,
+                         RND_DEFAULT_HEIGHT, &rq->cam);
         rq->camera_seq = 0;
     }
 }
@@ -297,7 +289,7 @@ static void on_list(srv *sv, sess *s, const proto_msg *m)
         if (dd_resolve(sv->o.data_dir, v[i].name, path, sizeof path, NULL, NULL) == 0) {
             const srv_cloud *c = cloud_by_path(sv, path);
             if (c && c->state == SRV_CLOUD_READY) {
-                items[i].points = c->info.points;
+                items[i].points = c->info.summary.points;
                 items[i].flags = PROTO_CLOUD_LOADED | PROTO_CLOUD_PREPARED;
             } else if (cache_probe_points(path, sv->o.cache_dir, 0, &items[i].points)) {
                 /* prepared (for the daemon's k), not loaded: the count is in the cache header */
@@ -534,7 +526,7 @@ static void on_cloud_done(srv *sv, const rt_event *ev)
         c->cloud_id = ev->cloud_id;
         c->info = ev->info;
         srv_log(sv, NULL, "cloud %s ready: %llu points, %s in %.2f s", c->name,
-                (unsigned long long)c->info.points, c->info.cache_hit ? "from the cache" : "prepared",
+                (unsigned long long)c->info.summary.points, c->info.cache_hit ? "from the cache" : "prepared",
                 (double)(ev_now_ms() - c->t_start_ms) / 1000.0);
     } else {
         srv_log(sv, NULL, "cloud %s failed: %s", c->name, ev->err.msg);

@@ -361,7 +361,7 @@ static void *prep_main(void *arg)
         int rc = p ? cache_open_cloud(j->path, &cd, p, &res, &err)
                    : sd_errf(&err, SD_ENOMEM, "out of memory");
         if (rc == 0) {
-            rt_cloud_info *in = &j->info;
+            proto_info *in = &j->info.summary;
             in->points = p->n;
             in->dropped = p->n_dropped;
             memcpy(in->bmin, p->bmin, sizeof in->bmin);
@@ -371,7 +371,7 @@ static void *prep_main(void *arg)
             in->k = p->k;
             in->sigma = p->sigma;
             snprintf(in->format, sizeof in->format, "%s", p->format);
-            in->cache_hit = res.hit;
+            j->info.cache_hit = res.hit;
             j->prep = p;
             on_progress(&pp, PROTO_PHASE_UPLOAD, 0.0);
         } else {

@@ -18,6 +18,7 @@
 #include <stdint.h>
 
 #include "cache.h"
+#include "proto.h"
 #include "render.h"
 #include "sd_err.h"
 
@@ -67,12 +68,10 @@ typedef enum {
 } rt_event_kind;
 
 /* The summary of a prepared cloud the loop keeps to answer OPEN (INFO). */
+/* A loaded cloud's summary: the protocol's INFO (filled once, from the prepared cloud, and
+ * passed along as it is; the daemon sets the name) and whether the cache had it. */
 typedef struct rt_cloud_info {
-    uint64_t points, dropped;
-    double bmin[3], bmax[3], offset[3];
-    uint32_t attrs, k;
-    float sigma;
-    char format[64];
+    proto_info summary;
     int cache_hit;
 } rt_cloud_info;
 

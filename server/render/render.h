@@ -6,6 +6,7 @@
 #pragma once
 #include <stdint.h>
 
+#include "framing.h"
 #include "params.h"
 #include "prepared.h"
 #include "sd_err.h"
@@ -21,7 +22,7 @@ typedef struct rnd_pipe_opts {
 
 enum { RND_RASTER_AUTO = 0, RND_RASTER_PACKED, RND_RASTER_EXACT, RND_RASTER_GL };
 
-enum { RND_DEFAULT_WIDTH = 1280, RND_DEFAULT_HEIGHT = 720 }; /* frames when none is asked */
+enum { RND_DEFAULT_WIDTH = SP_DEFAULT_WIDTH, RND_DEFAULT_HEIGHT = SP_DEFAULT_HEIGHT };
 
 typedef struct rnd_desc {
     rnd_backend_kind backend; /* default AUTO: EGL, then OSMesa */
