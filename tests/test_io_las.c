@@ -5,7 +5,12 @@
  * point records written in this file, and the counts of tests/data/SOURCES.md (independent
  * readers: @loaders.gl/las for 1.2, laspy for 1.4). Hand-made files cover the point formats
  * the real ones do not; broken files must give the right code and a message naming the file
- * and the byte offset. */
+ * and the byte offset.
+ *
+ * Point by point: every point of both real files against X * scale + offset computed here
+ * from the records read at the offset to point data; and every point format 0-10 written here
+ * (iotest.h's byte writers) with non-zero offsets and distinct scales on all three axes and
+ * coordinates that need double precision. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -20,6 +25,8 @@
 #include "cloud.h"
 #include "common/testutil.h"
 #include "cloudtest.h"
+#include "iotest.h"
+#include "rng.h"
 
 static char g_tmp[512];
 
@@ -442,6 +449,298 @@ static void test_header_errors(void **state)
     free(orig);
 }
 
+/* ---- every point format with non-zero offsets and distinct scales, point by point ---- */
+
+/* The synthetic LAS files here are written field by field with iotest.h's little-endian
+ * writers, from the ASPRS LAS 1.4 specification's tables (R15, sections 2.4 and 2.6-2.16):
+ * the public header (227 bytes in 1.0-1.2, 235 in 1.3, 375 in 1.4), one variable length record
+ * before the points (so the offset to point data is not the header size), and point records
+ * whose fields the reader does not use are random bytes, so a field read at the wrong place
+ * shows. Expected coordinates are X * scale + offset computed here in double. */
+
+/* Record length and RGB position (0: none) of each point format, from the specification. */
+static const struct { unsigned len, rgb; } spec_formats[11] = {
+    {20, 0}, {28, 0}, {26, 20}, {34, 28}, {57, 0}, {63, 28},
+    {30, 0}, {36, 30}, {38, 30}, {59, 0}, {67, 30},
+};
+
+typedef struct las_pt {
+    int32_t X[3];
+    uint16_t intensity;
+    uint8_t cls;       /* 0-31 for formats 0-5, 0-255 for 6-10 */
+    uint16_t rgb[3];
+} las_pt;
+
+typedef struct las_spec {
+    unsigned minor, fmt, extra; /* version 1.minor, point format, extra bytes per record */
+    double scale[3], offset[3];
+} las_spec;
+
+/* Puts the low size bytes of v at t, least significant first (LAS is little-endian). */
+static void le_at(uint8_t *t, uint64_t v, unsigned size)
+{
+    for (unsigned i = 0; i < size; i++) t[i] = (uint8_t)(v >> (8 * i));
+}
+
+/* Writes the file of spec s with the n points p to g_tmp/name; returns the path in path. */
+static const char *las_write(const char *name, const las_spec *s, const las_pt *p, size_t n,
+                             rng *r, char *path, size_t len)
+{
+    io_buf b = {0};
+    unsigned hsize = s->minor == 4 ? 375 : s->minor == 3 ? 235 : 227;
+    unsigned vlr_payload = 10, rec = spec_formats[s->fmt].len + s->extra;
+    unsigned data_off = hsize + 54 + vlr_payload;
+    double lo[3], hi[3];
+    for (int k = 0; k < 3; k++) {
+        lo[k] = INFINITY;
+        hi[k] = -INFINITY;
+        for (size_t i = 0; i < n; i++) {
+            double v = p[i].X[k] * s->scale[k] + s->offset[k];
+            lo[k] = fmin(lo[k], v);
+            hi[k] = fmax(hi[k], v);
+        }
+    }
+    io_put(&b, "LASF", 4);
+    io_put_uint(&b, 7, 2, 0);                         /* 4: file source id */
+    io_put_uint(&b, 0, 2, 0);                         /* 6: global encoding */
+    io_put(&b, "0123456789abcdef", 16);               /* 8: project GUID */
+    io_put_uint(&b, 1, 1, 0);                         /* 24: version major */
+    io_put_uint(&b, s->minor, 1, 0);                  /* 25: version minor */
+    io_put(&b, "splatd test_io_las system id....", 32);   /* 26: system identifier */
+    io_put(&b, "test_io_las.c las_write.........", 32);   /* 58: generating software */
+    io_put_uint(&b, 42, 2, 0);                        /* 90: creation day */
+    io_put_uint(&b, 2024, 2, 0);                      /* 92: creation year */
+    io_put_uint(&b, hsize, 2, 0);                     /* 94: header size */
+    io_put_uint(&b, data_off, 4, 0);                  /* 96: offset to point data */
+    io_put_uint(&b, 1, 4, 0);                         /* 100: number of VLRs */
+    io_put_uint(&b, s->fmt, 1, 0);                    /* 104: point data format */
+    io_put_uint(&b, rec, 2, 0);                       /* 105: point record length */
+    io_put_uint(&b, s->fmt >= 6 ? 0 : n, 4, 0);       /* 107: legacy point count */
+    for (int k = 0; k < 5; k++) io_put_uint(&b, 0, 4, 0); /* 111: legacy count by return */
+    for (int k = 0; k < 3; k++) io_put_f64(&b, s->scale[k], 0);  /* 131 */
+    for (int k = 0; k < 3; k++) io_put_f64(&b, s->offset[k], 0); /* 155 */
+    for (int k = 0; k < 3; k++) {                     /* 179: max x, min x, ... */
+        io_put_f64(&b, hi[k], 0);
+        io_put_f64(&b, lo[k], 0);
+    }
+    assert_int_equal(b.n, 227);
+    if (s->minor >= 3) io_put_uint(&b, 0, 8, 0);      /* 227: start of waveform data */
+    if (s->minor == 4) {
+        io_put_uint(&b, 0, 8, 0);                     /* 235: start of first EVLR */
+        io_put_uint(&b, 0, 4, 0);                     /* 243: number of EVLRs */
+        io_put_uint(&b, n, 8, 0);                     /* 247: number of point records */
+        for (int k = 0; k < 15; k++) io_put_uint(&b, 0, 8, 0); /* 255: by return */
+    }
+    assert_int_equal(b.n, hsize);
+    io_put_uint(&b, 0, 2, 0);                         /* VLR: reserved */
+    io_put(&b, "splatd_test\0\0\0\0\0", 16);          /* user id */
+    io_put_uint(&b, 1234, 2, 0);                      /* record id */
+    io_put_uint(&b, vlr_payload, 2, 0);               /* record length after header */
+    io_put(&b, "payload that no reader needs....", 32); /* description */
+    io_put(&b, "\xde\xad\xbe\xef\x01\x02\x03\x04\x05\x06", vlr_payload);
+    assert_int_equal(b.n, data_off);
+    for (size_t i = 0; i < n; i++) {
+        uint8_t t[80];
+        assert_true(rec <= sizeof t);
+        for (unsigned k = 0; k < rec; k++) t[k] = (uint8_t)next64(r); /* unused fields */
+        for (int k = 0; k < 3; k++) le_at(t + 4 * k, (uint32_t)p[i].X[k], 4);
+        le_at(t + 12, p[i].intensity, 2);
+        if (s->fmt <= 5) {
+            t[15] = (uint8_t)((t[15] & 0xE0) | p[i].cls); /* synthetic/key-point/withheld */
+        } else {
+            t[16] = p[i].cls;
+        }
+        for (int k = 0; spec_formats[s->fmt].rgb && k < 3; k++)
+            le_at(t + spec_formats[s->fmt].rgb + 2 * k, p[i].rgb[k], 2);
+        io_put(&b, t, rec);
+    }
+    io_save(&b, g_tmp, name, path, len);
+    io_free(&b);
+    return path;
+}
+
+/* The version each format is written in: the oldest that has it, except format 3, written as
+ * LAS 1.4 (legacy formats stay valid there, with both the 32- and the 64-bit count set). */
+static const unsigned las_minor_of[11] = {0, 1, 2, 4, 3, 3, 4, 4, 4, 4, 4};
+
+/* Scales and offsets: different on every axis, none a power of two, every offset non-zero and
+ * large enough that the coordinates need double precision (a float keeps 7 digits). */
+static const struct { double scale[3], offset[3]; } las_frames[3] = {
+    {{0.001, 0.0025, 0.0001}, {637012.125, 4512345.75, -123.5}},
+    {{0.01, 0.003, 0.0005}, {-2445000.5, 603000.25, 1500.75}},
+    {{1e-7, 2e-7, 0.001}, {-122.5, 44.25, 100.5}}, /* geographic degrees */
+};
+
+/* Checks one synthetic file: raw coordinates against X * scale + offset in double (within a
+ * thousandth of the scale: far below the file's half-step precision, far above double
+ * rounding), intensity, class and colour of every point; after pc_load, pos + offset within
+ * float rounding (wide) or, for the compact files, within half the scale as well. */
+static void las_check(const char *path, const las_spec *s, const las_pt *p, size_t n, int compact)
+{
+    double *want = malloc(3 * n * sizeof *want);
+    assert_non_null(want);
+    double smin = INFINITY;
+    for (int k = 0; k < 3; k++) smin = fmin(smin, s->scale[k]);
+    for (size_t i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++) want[3 * i + k] = p[i].X[k] * s->scale[k] + s->offset[k];
+    pc_raw raw;
+    io_read_ok(pc_read_las, path, &raw);
+    char fmt[32];
+    snprintf(fmt, sizeof fmt, "LAS 1.%u format %u", s->minor, s->fmt);
+    assert_string_equal(raw.format, fmt);
+    int has_rgb = spec_formats[s->fmt].rgb != 0;
+    assert_int_equal(raw.attrs, PC_ATTR_INTENSITY | PC_ATTR_CLASS | (has_rgb ? PC_ATTR_RGB : 0));
+    assert_int_equal(raw.n, n);
+    for (size_t i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++) {
+            double got = raw.xyz[3 * i + k], w = want[3 * i + k];
+            if (!(fabs(got - w) <= 1e-3 * s->scale[k]))
+                fail_msg("%s: point %zu axis %c: read %.17g, X * scale + offset = %d * %g + %.17g "
+                         "= %.17g", path, i, "xyz"[k], got, p[i].X[k], s->scale[k], s->offset[k],
+                         w);
+        }
+    unsigned cmax = 0;
+    for (size_t i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++) cmax = p[i].rgb[k] > cmax ? p[i].rgb[k] : cmax;
+    for (size_t i = 0; i < n; i++) {
+        if (raw.intensity[i] != (float)p[i].intensity)
+            fail_msg("%s: point %zu intensity %g, written %u", path, i, raw.intensity[i],
+                     p[i].intensity);
+        if (raw.cls[i] != p[i].cls)
+            fail_msg("%s: point %zu class %u, written %u", path, i, raw.cls[i], p[i].cls);
+        for (int k = 0; has_rgb && k < 3; k++) {
+            int w = cmax > 255 ? (int)floor(p[i].rgb[k] / 257.0 + 0.5) : p[i].rgb[k];
+            if (raw.rgba[4 * i + k] != w)
+                fail_msg("%s: point %zu channel %d: %d, want %d (written %u)", path, i, k,
+                         raw.rgba[4 * i + k], w, p[i].rgb[k]);
+        }
+    }
+    pc_raw_free(&raw);
+    pc_cloud c;
+    tu_load_ok(path, &c);
+    if (compact) {
+        /* Float rounding of pos here stays below half the scale, so the bound below is the
+         * file's own precision or better. */
+        for (int k = 0; k < 3; k++)
+            assert_true((c.bmax[k] - c.bmin[k]) * 0x1p-24 < 0.25 * s->scale[k]);
+    }
+    io_check_cloud_xyz(&c, want, n, 0, path);
+    pc_cloud_free(&c);
+    free(want);
+}
+
+#define LAS_N 64
+
+/* Every point format 0-10, each with non-zero offsets and distinct non-trivial scales on all
+ * three axes, a VLR before the points and extra bytes after some records, in two files:
+ * "wide" with raw integers over the whole int32 range (coordinates of millions of units whose
+ * low digits a float, or an X converted to float, loses) and 16-bit colours, and "compact"
+ * with integers within +-200,000 and 8-bit colours, checked after pc_load to half the scale.
+ * A dropped or swapped offset or scale on any axis, float arithmetic anywhere in the
+ * coordinates, the class or colour taken from the wrong byte, or the 64-bit count of LAS 1.4
+ * ignored, fails here with the point named. */
+static void test_all_formats_offsets_scales(void **state)
+{
+    (void)state;
+    for (unsigned fmt = 0; fmt <= 10; fmt++)
+        for (int compact = 0; compact < 2; compact++) {
+            rng r = {0x1a5u * (fmt + 1) + (unsigned)compact};
+            las_spec s = {las_minor_of[fmt], fmt, (fmt % 3) * 3, {0}, {0}};
+            const int fr = (int)((fmt + (unsigned)compact) % 3);
+            memcpy(s.scale, las_frames[fr].scale, sizeof s.scale);
+            memcpy(s.offset, las_frames[fr].offset, sizeof s.offset);
+            las_pt p[LAS_N];
+            for (size_t i = 0; i < LAS_N; i++) {
+                for (int k = 0; k < 3; k++) {
+                    int64_t x;
+                    if (compact) x = (int64_t)(next64(&r) % 400001) - 200000;
+                    else if (i < 2) x = i == 0 ? INT32_MAX : INT32_MIN + 1; /* the extremes */
+                    else x = (int32_t)(uint32_t)next64(&r);
+                    p[i].X[k] = (int32_t)x;
+                }
+                p[i].intensity = (uint16_t)next64(&r);
+                p[i].cls = (uint8_t)(next64(&r) % (fmt <= 5 ? 32 : 256));
+                for (int k = 0; k < 3; k++)
+                    p[i].rgb[k] = (uint16_t)(compact ? next64(&r) % 256 : next64(&r));
+            }
+            char name[64], path[1024];
+            snprintf(name, sizeof name, "f%u_%s.las", fmt, compact ? "compact" : "wide");
+            las_write(name, &s, p, LAS_N, &r, path, sizeof path);
+            las_check(path, &s, p, LAS_N, compact);
+        }
+}
+
+/* ---- real files, every point ---- */
+
+/* Reads every record of a real LAS file directly (header fields at their specification
+ * offsets, records at offset-to-point-data with the record length) and compares every point:
+ * coordinates X * scale + offset (raw: within a thousandth of the scale; after pc_load:
+ * within float rounding, which for these files is below half the scale), intensity, class
+ * (low 5 bits of byte 15 in formats 0-5, byte 16 in 6-10) and, for format 3, the colours. */
+static void check_real_las(const char *file, size_t want_n)
+{
+    char p[1024];
+    tu_data(file, p, sizeof p);
+    size_t len;
+    uint8_t *b = tu_read_data(file, &len);
+    unsigned minor = b[25], fmt = b[104];
+    size_t off = io_get_uint(b + 96, 4, 0), rl = io_get_uint(b + 105, 2, 0);
+    size_t n = io_get_uint(b + 107, 4, 0);
+    if (n == 0 && minor == 4) n = io_get_uint(b + 247, 8, 0);
+    assert_int_equal(n, want_n);
+    assert_true(off + n * rl <= len);
+    double scale[3], offset[3];
+    for (int k = 0; k < 3; k++) {
+        scale[k] = io_get_f64(b + 131 + 8 * k, 0);
+        offset[k] = io_get_f64(b + 155 + 8 * k, 0);
+    }
+    double *want = malloc(3 * n * sizeof *want);
+    assert_non_null(want);
+    pc_raw raw;
+    io_read_ok(pc_read_las, p, &raw);
+    assert_int_equal(raw.n, n);
+    for (size_t i = 0; i < n; i++) {
+        const uint8_t *r = b + off + i * rl;
+        for (int k = 0; k < 3; k++) {
+            want[3 * i + k] = (double)io_get_int(r + 4 * k, 4, 0) * scale[k] + offset[k];
+            if (!(fabs(raw.xyz[3 * i + k] - want[3 * i + k]) <= 1e-3 * scale[k]))
+                fail_msg("%s: point %zu axis %c: read %.17g, file %.17g", file, i, "xyz"[k],
+                         raw.xyz[3 * i + k], want[3 * i + k]);
+        }
+        if (raw.intensity[i] != (float)io_get_uint(r + 12, 2, 0))
+            fail_msg("%s: point %zu intensity differs", file, i);
+        unsigned cls = fmt <= 5 ? (r[15] & 31u) : r[16];
+        if (raw.cls[i] != cls)
+            fail_msg("%s: point %zu class %u, file %u", file, i, raw.cls[i], cls);
+        if (fmt == 3)
+            for (int k = 0; k < 3; k++) /* autzen_trim's colours all fit in 8 bits: kept */
+                assert_int_equal(raw.rgba[4 * i + k], io_get_uint(r + 28 + 2 * k, 2, 0));
+    }
+    pc_raw_free(&raw);
+    pc_cloud c;
+    tu_load_ok(p, &c);
+    for (int k = 0; k < 3; k++) assert_true((c.bmax[k] - c.bmin[k]) * 0x1p-24 < 0.25 * scale[k]);
+    io_check_cloud_xyz(&c, want, n, 0, file);
+    pc_cloud_free(&c);
+    free(want);
+    free(b);
+}
+
+/* autzen_trim.las (LAS 1.2 format 3, scale 0.01): all 110,000 points. */
+static void test_autzen_every_point(void **state)
+{
+    (void)state;
+    check_real_las("autzen_trim.las", 110000);
+}
+
+/* file_with_both_wkt_and_geotiff_vlrs.las (LAS 1.4 format 6, offsets 2,445,000 / 603,000):
+ * all 25,408 points. */
+static void test_las14_every_point(void **state)
+{
+    (void)state;
+    check_real_las("file_with_both_wkt_and_geotiff_vlrs.las", 25408);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -451,6 +750,9 @@ int main(void)
         cmocka_unit_test(test_legacy_formats),
         cmocka_unit_test(test_truncated),
         cmocka_unit_test(test_header_errors),
+        cmocka_unit_test(test_all_formats_offsets_scales),
+        cmocka_unit_test(test_autzen_every_point),
+        cmocka_unit_test(test_las14_every_point),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }

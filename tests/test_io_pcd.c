@@ -5,7 +5,11 @@
  * the ascii and binary files, and for the binary_compressed files values found once with a
  * throwaway Python LZF decoder (see the comments at each). Broken files are written to a
  * temporary directory: each must give the right code and a message naming the file and the
- * line or byte offset. */
+ * line or byte offset.
+ *
+ * Point by point: every point of the four real files against a decoding written here (strtod
+ * for ascii, the record layout for binary, an LZF decoder of this file for binary_compressed),
+ * and every TYPE/SIZE in every DATA kind in files written here with iotest.h's byte writers. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -22,6 +26,8 @@
 #include "lzf.h"
 #include "common/testutil.h"
 #include "cloudtest.h"
+#include "iotest.h"
+#include "rng.h"
 
 static char g_tmp[512];
 
@@ -733,6 +739,525 @@ static void test_garbage_headers(void **state)
     free(g);
 }
 
+/* ---- every TYPE/SIZE in every DATA kind, checked point by point ---- */
+
+/* The files here are written by this test: header text, then the values one by one through
+ * iotest.h's little-endian writers (ascii: printf tokens; binary: one record per point;
+ * binary_compressed: each field's values for all points together, LZF-coded as literal runs
+ * by pcd_lzf_literal below). Expected values are the written values themselves, or for ascii
+ * the number the written token denotes at the field's type (F4: strtod rounded to float). */
+
+enum { K_ASCII, K_BINARY, K_COMPRESSED };
+static const char *const kind_name[3] = {"ascii", "binary", "binary_compressed"};
+
+typedef struct pcd_fdef {
+    const char *name;
+    char type;       /* 'I', 'U' or 'F' */
+    unsigned size, count;
+    int packed;      /* a packed colour: u holds the 32 bits whatever the TYPE */
+} pcd_fdef;
+
+/* One value: the two's-complement bits of an integer (or a packed colour), or a float value. */
+typedef struct pv {
+    uint64_t u;
+    double f;
+} pv;
+
+#define PF_MAX 16
+
+/* The ascii token for value v of field f: integers in decimal, F4 with 9 and F8 with 17
+ * significant digits, packed colours as PCL writes them (their 32 bits as an integer, signed
+ * for TYPE I). */
+static void pcd_token(char *buf, size_t len, const pcd_fdef *f, const pv *v)
+{
+    if (f->packed && f->type == 'I') snprintf(buf, len, "%d", (int32_t)(uint32_t)v->u);
+    else if (f->packed) snprintf(buf, len, "%u", (uint32_t)v->u);
+    else if (f->type == 'F') snprintf(buf, len, f->size == 4 ? "%.9g" : "%.17g", v->f);
+    else if (f->type == 'U') snprintf(buf, len, "%llu", (unsigned long long)v->u);
+    else snprintf(buf, len, "%lld", (long long)(int64_t)v->u);
+}
+
+/* The number a correct reader makes of value v of field f in DATA kind. */
+static double pcd_expect(const pcd_fdef *f, const pv *v, int kind)
+{
+    if (kind == K_ASCII) {
+        char tok[64];
+        pcd_token(tok, sizeof tok, f, v);
+        double d = strtod(tok, NULL);
+        return f->type == 'F' && f->size == 4 ? (double)(float)d : d;
+    }
+    if (f->type == 'F') return v->f;
+    if (f->type == 'U') return (double)v->u;
+    return (double)(int64_t)v->u;
+}
+
+static void pcd_bytes(io_buf *b, const pcd_fdef *f, const pv *v)
+{
+    if (f->packed || f->type != 'F') io_put_uint(b, v->u, f->size, 0);
+    else if (f->size == 4) io_put_f32(b, (float)v->f, 0);
+    else io_put_f64(b, v->f, 0);
+}
+
+/* LZF as literal runs only (control byte len - 1, then up to 32 bytes): a valid LZF stream
+ * that needs no compressor. */
+static void pcd_lzf_literal(io_buf *out, const uint8_t *d, size_t n)
+{
+    for (size_t i = 0; i < n; i += 32) {
+        size_t m = n - i < 32 ? n - i : 32;
+        uint8_t c = (uint8_t)(m - 1);
+        io_put(out, &c, 1);
+        io_put(out, d + i, m);
+    }
+}
+
+/* Writes a PCD of n points with the nf fields f in DATA kind to g_tmp/name; v[(i * nf + k) *
+ * 4 + j] is value j of field k of point i (COUNT up to 4). Returns the path in path. */
+static const char *pcd_write(const char *name, int kind, const pcd_fdef *f, size_t nf, size_t n,
+                             const pv *v, char *path, size_t len)
+{
+    io_buf b = {0};
+    io_printf(&b, "# .PCD v0.7 - written by test_io_pcd\nVERSION 0.7\nFIELDS");
+    for (size_t k = 0; k < nf; k++) io_printf(&b, " %s", f[k].name);
+    io_printf(&b, "\nSIZE");
+    for (size_t k = 0; k < nf; k++) io_printf(&b, " %u", f[k].size);
+    io_printf(&b, "\nTYPE");
+    for (size_t k = 0; k < nf; k++) io_printf(&b, " %c", f[k].type);
+    io_printf(&b, "\nCOUNT");
+    for (size_t k = 0; k < nf; k++) io_printf(&b, " %u", f[k].count);
+    io_printf(&b, "\nWIDTH %zu\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS %zu\nDATA %s\n", n, n,
+              kind_name[kind]);
+    if (kind == K_ASCII) {
+        for (size_t i = 0; i < n; i++) {
+            for (size_t k = 0; k < nf; k++)
+                for (unsigned j = 0; j < f[k].count; j++) {
+                    char tok[64];
+                    pcd_token(tok, sizeof tok, &f[k], &v[(i * nf + k) * 4 + j]);
+                    io_printf(&b, "%s%s", k == 0 && j == 0 ? "" : " ", tok);
+                }
+            io_printf(&b, "\n");
+        }
+    } else if (kind == K_BINARY) {
+        for (size_t i = 0; i < n; i++)
+            for (size_t k = 0; k < nf; k++)
+                for (unsigned j = 0; j < f[k].count; j++)
+                    pcd_bytes(&b, &f[k], &v[(i * nf + k) * 4 + j]);
+    } else {
+        io_buf soa = {0}, z = {0};
+        for (size_t k = 0; k < nf; k++)
+            for (size_t i = 0; i < n; i++)
+                for (unsigned j = 0; j < f[k].count; j++)
+                    pcd_bytes(&soa, &f[k], &v[(i * nf + k) * 4 + j]);
+        pcd_lzf_literal(&z, soa.d, soa.n);
+        io_put_uint(&b, z.n, 4, 0);
+        io_put_uint(&b, soa.n, 4, 0);
+        io_put(&b, z.d, z.n);
+        io_free(&soa);
+        io_free(&z);
+    }
+    io_save(&b, g_tmp, name, path, len);
+    io_free(&b);
+    return path;
+}
+
+typedef struct pcd_type {
+    char type;
+    unsigned size;
+} pcd_type;
+
+static const pcd_type pcd_types[] = {{'I', 1}, {'U', 1}, {'I', 2}, {'U', 2}, {'I', 4},
+                                     {'U', 4}, {'I', 8}, {'U', 8}, {'F', 4}, {'F', 8}};
+
+/* An integer value of type t clipped to the type's range. */
+static pv pcd_int_value(const pcd_type *t, int64_t x)
+{
+    pv v = {0, 0};
+    if (t->type == 'F') {
+        v.f = (double)x;
+        return v;
+    }
+    unsigned bits = 8 * t->size;
+    int64_t lo = t->type == 'U' ? 0 : bits == 64 ? INT64_MIN : -((int64_t)1 << (bits - 1));
+    int64_t hi = bits == 64 ? INT64_MAX
+                 : t->type == 'U' ? (int64_t)((1ull << bits) - 1) : ((int64_t)1 << (bits - 1)) - 1;
+    if (x < lo) x = lo;
+    if (x > hi) x = hi;
+    v.u = (uint64_t)x;
+    return v;
+}
+
+/* A random value over the whole range of type t: integers of every width (64-bit ones too),
+ * floats of random sign with magnitudes 1e-3..1e5 (F4, rounded to float) or 1e-3..1e7 with all
+ * 53 bits (F8, so reading one as F4 or through float changes it). */
+static pv pcd_any(rng *r, const pcd_type *t)
+{
+    pv v = {0, 0};
+    if (t->type == 'F') {
+        double x = (2 * uni(r) - 1) * pow(10, (int)(next64(r) % (t->size == 4 ? 9 : 11)) - 3);
+        v.f = t->size == 4 ? (double)(float)x : x;
+        return v;
+    }
+    unsigned bits = 8 * t->size;
+    uint64_t m = next64(r);
+    if (bits < 64) m &= (1ull << bits) - 1;
+    if (t->type == 'I' && bits < 64 && (m >> (bits - 1)) & 1) m |= ~0ull << bits; /* sign */
+    v.u = m;
+    return v;
+}
+
+enum { PR_PAD, PR_X, PR_Y, PR_Z, PR_NX, PR_NY, PR_NZ, PR_I, PR_CLS, PR_R, PR_G, PR_B, PR_TAIL,
+       PR_N };
+
+/* The matrix cloud of type t: the used fields all of type t between two skipped fields of
+ * COUNT 3 and 2, so that every used field sits at an offset no single-field layout has. */
+static void pcd_matrix_fields(const pcd_type *t, pcd_fdef f[PR_N])
+{
+    static const char *const names[PR_N] = {"pad", "x", "y", "z", "normal_x", "normal_y",
+                                            "normal_z", "intensity", "classification", "red",
+                                            "green", "blue", "tail"};
+    for (int k = 0; k < PR_N; k++) {
+        f[k] = (pcd_fdef){names[k], t->type, t->size, 1, 0};
+    }
+    f[PR_PAD] = (pcd_fdef){"pad", 'U', 2, 3, 0};
+    f[PR_TAIL] = (pcd_fdef){"tail", 'F', 8, 2, 0};
+}
+
+#define PM_N 40
+
+/* Checks the colours of the split red/green/blue fields: each value clamped to 0..65535; when
+ * one exceeds 255, all scaled by 255/65535 to nearest. */
+static void pcd_check_split_colours(const char *path, const pc_raw *raw, double want[][3],
+                                    size_t n)
+{
+    double c16[PM_N * 3], mx = 0;
+    assert_true(n <= PM_N);
+    for (size_t i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++) {
+            double x = want[i][k];
+            x = !(x > 0) ? 0 : x >= 65535 ? 65535 : floor(x + 0.5);
+            c16[3 * i + k] = x;
+            if (x > mx) mx = x;
+        }
+    for (size_t i = 0; i < n; i++) {
+        for (int k = 0; k < 3; k++) {
+            double x = c16[3 * i + k];
+            int w = mx > 255 ? (int)floor(x / 257.0 + 0.5) : (int)x;
+            if (raw->rgba[4 * i + k] != w)
+                fail_msg("%s: point %zu channel %d: read %d, want %d (written %.17g)", path, i, k,
+                         raw->rgba[4 * i + k], w, want[i][k]);
+        }
+        assert_int_equal(raw->rgba[4 * i + 3], 255);
+    }
+}
+
+/* Every TYPE/SIZE the reader accepts (I1 U1 I2 U2 I4 U4 I8 U8 F4 F8) in ascii, binary and
+ * binary_compressed, for x y z, the normals, intensity, classification and split red green
+ * blue, with skipped fields of COUNT > 1 around them. Point by point: positions exactly (raw
+ * doubles; pos + offset after pc_load within float rounding), normals as the unit vector of
+ * what was written, intensity exactly as float, classification clamped to 0..255, colours
+ * (8-bit kept, wider scaled). An F8 read as F4, a field read at another size or signedness, a
+ * wrong record or structure-of-arrays offset, or a value put in the wrong array fails here. */
+static void test_type_matrix(void **state)
+{
+    (void)state;
+    for (int kind = K_ASCII; kind <= K_COMPRESSED; kind++)
+        for (size_t ti = 0; ti < sizeof pcd_types / sizeof pcd_types[0]; ti++) {
+            const pcd_type *t = &pcd_types[ti];
+            rng r = {0x9cd00 + 31u * ti + (unsigned)kind};
+            pcd_fdef f[PR_N];
+            pcd_matrix_fields(t, f);
+            static pv v[PM_N * PR_N * 4];
+            /* 8-bit colours stay 8-bit; for wider types half the files hold only 0..255 in
+             * them (kept as they are), the other half up to 70000 (scaled). */
+            int narrow = t->size == 1 || (ti + (size_t)kind) % 2;
+            for (size_t i = 0; i < PM_N; i++)
+                for (int k = 0; k < PR_N; k++)
+                    for (unsigned j = 0; j < f[k].count; j++) {
+                        pv *x = &v[(i * PR_N + k) * 4 + j];
+                        pcd_type ft = {f[k].type, f[k].size};
+                        if (k == PR_CLS) *x = pcd_int_value(t, (int64_t)(next64(&r) % 301) - 20);
+                        else if (k >= PR_R && k <= PR_B)
+                            *x = pcd_int_value(t, narrow ? (int64_t)(next64(&r) % 256)
+                                                         : (int64_t)(next64(&r) % 70101) - 100);
+                        else *x = pcd_any(&r, &ft);
+                    }
+            char name[64], path[1024];
+            snprintf(name, sizeof name, "mx_%s_%c%u.pcd", kind_name[kind], t->type, t->size);
+            pcd_write(name, kind, f, PR_N, PM_N, v, path, sizeof path);
+
+            double xyz[3 * PM_N], col[PM_N][3];
+            pc_raw raw;
+            io_read_ok(pc_read_pcd, path, &raw);
+            assert_int_equal(raw.attrs, PC_ATTR_RGB | PC_ATTR_NORMAL | PC_ATTR_INTENSITY |
+                                            PC_ATTR_CLASS);
+            for (size_t i = 0; i < PM_N; i++) {
+                double e[PR_N];
+                for (int k = 0; k < PR_N; k++)
+                    e[k] = pcd_expect(&f[k], &v[(i * PR_N + k) * 4], kind);
+                for (int k = 0; k < 3; k++) {
+                    xyz[3 * i + k] = e[PR_X + k];
+                    col[i][k] = e[PR_R + k];
+                }
+                double l = sqrt(e[PR_NX] * e[PR_NX] + e[PR_NY] * e[PR_NY] + e[PR_NZ] * e[PR_NZ]);
+                for (int k = 0; k < 3; k++) {
+                    double w = l > 0 ? e[PR_NX + k] / l : 0;
+                    if (!(fabs(raw.normal[3 * i + k] - w) <= 2e-6))
+                        fail_msg("%s: point %zu normal %d: read %.9g, want %.9g", path, i, k,
+                                 raw.normal[3 * i + k], w);
+                }
+                if (raw.intensity[i] != (float)e[PR_I])
+                    fail_msg("%s: point %zu intensity: read %.9g, want %.9g", path, i,
+                             raw.intensity[i], (float)e[PR_I]);
+                int wc = !(e[PR_CLS] > 0) ? 0 : e[PR_CLS] >= 255 ? 255 : (int)e[PR_CLS];
+                if (raw.cls[i] != wc)
+                    fail_msg("%s: point %zu class: read %d, want %d", path, i, raw.cls[i], wc);
+            }
+            io_check_raw_xyz(&raw, xyz, PM_N, 0, path);
+            pcd_check_split_colours(path, &raw, col, PM_N);
+            pc_raw_free(&raw);
+            pc_cloud c;
+            tu_load_ok(path, &c);
+            io_check_cloud_xyz(&c, xyz, PM_N, 0, path);
+            pc_cloud_free(&c);
+        }
+}
+
+/* Packed colours (rgb/rgba, SIZE 4, TYPE F, U or I: PCL's B G R A from the low byte) in every
+ * DATA kind, with F8 positions, next to a skipped field: every point's R G B are bytes 2, 1, 0
+ * of the 32 bits written, alpha 255. */
+static void test_packed_colour_matrix(void **state)
+{
+    (void)state;
+    static const pcd_fdef packed[3] = {{"rgb", 'F', 4, 1, 1}, {"rgba", 'U', 4, 1, 1},
+                                       {"rgb", 'I', 4, 1, 1}};
+    for (int kind = K_ASCII; kind <= K_COMPRESSED; kind++)
+        for (int p = 0; p < 3; p++) {
+            const pcd_fdef f[5] = {{"x", 'F', 8, 1, 0}, {"y", 'F', 8, 1, 0}, packed[p],
+                                   {"skip", 'I', 2, 3, 0}, {"z", 'F', 8, 1, 0}};
+            rng r = {0x7ac4 + 3u * (unsigned)kind + (unsigned)p};
+            pv v[PM_N * 5 * 4];
+            const pcd_type f8 = {'F', 8}, i2 = {'I', 2};
+            for (size_t i = 0; i < PM_N; i++)
+                for (int k = 0; k < 5; k++)
+                    for (unsigned j = 0; j < f[k].count; j++) {
+                        pv *x = &v[(i * 5 + k) * 4 + j];
+                        if (k == 2) {
+                            x->u = (uint32_t)next64(&r);
+                            /* Keep F bit patterns away from NaN so that the ascii integer
+                             * spelling is what PCL itself would print. */
+                            if (f[k].type == 'F') x->u &= 0x7f7fffffu;
+                        } else {
+                            *x = pcd_any(&r, k == 3 ? &i2 : &f8);
+                        }
+                    }
+            char name[64], path[1024];
+            snprintf(name, sizeof name, "packed_%s_%c.pcd", kind_name[kind], f[2].type);
+            pcd_write(name, kind, f, 5, PM_N, v, path, sizeof path);
+            pc_raw raw;
+            io_read_ok(pc_read_pcd, path, &raw);
+            assert_int_equal(raw.attrs, PC_ATTR_RGB);
+            double xyz[3 * PM_N];
+            for (size_t i = 0; i < PM_N; i++) {
+                const int at[3] = {0, 1, 4};
+                for (int k = 0; k < 3; k++)
+                    xyz[3 * i + k] = pcd_expect(&f[at[k]], &v[(i * 5 + at[k]) * 4], kind);
+                uint32_t bits = (uint32_t)v[(i * 5 + 2) * 4].u;
+                const int w[4] = {(int)(bits >> 16) & 255, (int)(bits >> 8) & 255,
+                                  (int)bits & 255, 255};
+                for (int k = 0; k < 4; k++)
+                    if (raw.rgba[4 * i + k] != w[k])
+                        fail_msg("%s: point %zu channel %d: read %d, want %d (bits 0x%08x)",
+                                 path, i, k, raw.rgba[4 * i + k], w[k], bits);
+            }
+            io_check_raw_xyz(&raw, xyz, PM_N, 0, path);
+            pc_raw_free(&raw);
+        }
+}
+
+/* ---- real files, every point ---- */
+
+/* An LZF decoder written for this test from the format's description (control byte < 32: a
+ * literal run of c + 1 bytes; else a back reference of length c >> 5 (7: plus the next byte)
+ * + 2 at distance ((c & 31) << 8 | next byte) + 1). Returns the bytes written. */
+static size_t ref_lzf(const uint8_t *in, size_t n, uint8_t *out, size_t cap)
+{
+    size_t i = 0, o = 0;
+    while (i < n) {
+        unsigned c = in[i++];
+        if (c < 32) {
+            size_t m = c + 1;
+            assert_true(i + m <= n && o + m <= cap);
+            memcpy(out + o, in + i, m);
+            i += m;
+            o += m;
+            continue;
+        }
+        size_t m = c >> 5;
+        if (m == 7) {
+            assert_true(i < n);
+            m += in[i++];
+        }
+        assert_true(i < n);
+        size_t back = ((size_t)(c & 31) << 8 | in[i++]) + 1;
+        m += 2;
+        assert_true(back <= o && o + m <= cap);
+        for (size_t k = 0; k < m; k++, o++) out[o] = out[o - back];
+    }
+    return o;
+}
+
+/* Decodes the binary_compressed body of a real file whose fields are all 4 bytes and COUNT 1
+ * (the mug: x y z rgba; samp11: x y z) with ref_lzf; returns the n * nf * 4 bytes, field by
+ * field. */
+static uint8_t *ref_compressed(const uint8_t *b, size_t len, size_t n, size_t nf)
+{
+    size_t d0 = data_offset(b, len);
+    uint32_t csize = (uint32_t)io_get_uint(b + d0, 4, 0);
+    uint32_t usize = (uint32_t)io_get_uint(b + d0 + 4, 4, 0);
+    assert_int_equal(usize, n * nf * 4);
+    assert_true(d0 + 8 + csize <= len);
+    uint8_t *u = malloc(usize);
+    assert_non_null(u);
+    assert_int_equal(ref_lzf(b + d0 + 8, csize, u, usize), usize);
+    return u;
+}
+
+/* Compares raw with n reference points (NaN where the file has NaN) and pc_load's cloud with
+ * the finite ones, in order. */
+static void check_real_xyz(const char *path, const pc_raw *raw, const double *want, size_t n)
+{
+    assert_int_equal(raw->n, n);
+    double *fin = malloc(3 * n * sizeof *fin);
+    assert_non_null(fin);
+    size_t m = 0;
+    for (size_t i = 0; i < n; i++) {
+        int finite = 1;
+        for (int k = 0; k < 3; k++) {
+            double w = want[3 * i + k], g = raw->xyz[3 * i + k];
+            if (isnan(w) ? !isnan(g) : g != w)
+                fail_msg("%s: point %zu axis %c: read %.17g, file %.17g", path, i, "xyz"[k], g, w);
+            finite &= isfinite(w);
+        }
+        if (finite) memcpy(fin + 3 * m++, want + 3 * i, 3 * sizeof *fin);
+    }
+    pc_cloud c;
+    tu_load_ok(path, &c);
+    assert_int_equal(c.n_dropped, n - m);
+    io_check_cloud_xyz(&c, fin, m, 0, path);
+    pc_cloud_free(&c);
+    free(fin);
+}
+
+/* The mug: all 307,200 points decoded here (ref_lzf, then x, y, z and rgba blocks of float32 /
+ * uint32 one after another): positions exactly, NaN where the file has NaN, and the colour
+ * bytes of every point. */
+static void test_mug_every_point(void **state)
+{
+    (void)state;
+    char p[1024];
+    tu_data("table_scene_mug_stereo_textured.pcd", p, sizeof p);
+    size_t len, n = 307200;
+    uint8_t *b = tu_read_data("table_scene_mug_stereo_textured.pcd", &len);
+    assert_non_null(strstr((char *)b, "\nFIELDS x y z rgba\nSIZE 4 4 4 4\nTYPE F F F U\n"));
+    uint8_t *u = ref_compressed(b, len, n, 4);
+    double *want = malloc(3 * n * sizeof *want);
+    assert_non_null(want);
+    for (size_t i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++) want[3 * i + k] = io_get_f32(u + 4 * ((size_t)k * n + i), 0);
+    pc_raw raw;
+    io_read_ok(pc_read_pcd, p, &raw);
+    for (size_t i = 0; i < n; i++) {
+        const uint8_t *c = u + 4 * (3 * n + i);
+        const uint8_t w[4] = {c[2], c[1], c[0], 255};
+        if (memcmp(raw.rgba + 4 * i, w, 4) != 0) fail_msg("mug: point %zu colour differs", i);
+    }
+    check_real_xyz(p, &raw, want, n);
+    pc_raw_free(&raw);
+    free(want);
+    free(u);
+    free(b);
+}
+
+/* samp11-utm.pcd: all 38,010 points decoded here (float32 x, y, z blocks), exactly. */
+static void test_samp11_every_point(void **state)
+{
+    (void)state;
+    char p[1024];
+    tu_data("samp11-utm.pcd", p, sizeof p);
+    size_t len, n = 38010;
+    uint8_t *b = tu_read_data("samp11-utm.pcd", &len);
+    assert_non_null(strstr((char *)b, "\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\n"));
+    uint8_t *u = ref_compressed(b, len, n, 3);
+    double *want = malloc(3 * n * sizeof *want);
+    assert_non_null(want);
+    for (size_t i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++) want[3 * i + k] = io_get_f32(u + 4 * ((size_t)k * n + i), 0);
+    pc_raw raw;
+    io_read_ok(pc_read_pcd, p, &raw);
+    check_real_xyz(p, &raw, want, n);
+    pc_raw_free(&raw);
+    free(want);
+    free(u);
+    free(b);
+}
+
+/* rops_cloud.pcd: all 32,087 lines parsed here with strtod; the fields are F4, so each value
+ * must be strtod's number rounded to float, exactly. */
+static void test_rops_every_point(void **state)
+{
+    (void)state;
+    char p[1024];
+    tu_data("rops_cloud.pcd", p, sizeof p);
+    size_t len, n = 32087;
+    uint8_t *b = tu_read_data("rops_cloud.pcd", &len);
+    assert_non_null(strstr((char *)b, "\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\n"));
+    char *s = (char *)b + data_offset(b, len);
+    double *want = malloc(3 * n * sizeof *want);
+    assert_non_null(want);
+    for (size_t i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++) {
+            char *e;
+            want[3 * i + k] = (float)strtod(s, &e);
+            assert_true(e > s);
+            s = e;
+        }
+    while (*s == ' ' || *s == '\n' || *s == '\r') s++;
+    assert_int_equal(*s, 0); /* nothing after the last point */
+    pc_raw raw;
+    io_read_ok(pc_read_pcd, p, &raw);
+    check_real_xyz(p, &raw, want, n);
+    pc_raw_free(&raw);
+    free(want);
+    free(b);
+}
+
+/* autzen-utm.pcd: all 1,065 records of 52 bytes decoded here: X Y Z float64 exactly,
+ * Intensity u16 exactly, Classification u8 exactly, per point. */
+static void test_autzen_every_point(void **state)
+{
+    (void)state;
+    char p[1024];
+    tu_data("autzen-utm.pcd", p, sizeof p);
+    size_t len, n = 1065;
+    uint8_t *b = tu_read_data("autzen-utm.pcd", &len);
+    assert_non_null(strstr((char *)b, "\nSIZE 8 8 8 2 1 1 1 1 1 4 1 2 8 2 2 2\n"));
+    size_t d0 = data_offset(b, len);
+    assert_int_equal(d0 + 52 * n, len);
+    double *want = malloc(3 * n * sizeof *want);
+    assert_non_null(want);
+    pc_raw raw;
+    io_read_ok(pc_read_pcd, p, &raw);
+    for (size_t i = 0; i < n; i++) {
+        const uint8_t *r = b + d0 + 52 * i;
+        for (int k = 0; k < 3; k++) want[3 * i + k] = io_get_f64(r + 8 * k, 0);
+        assert_true(raw.intensity[i] == (float)io_get_uint(r + 24, 2, 0));
+        assert_int_equal(raw.cls[i], r[30]);
+    }
+    check_real_xyz(p, &raw, want, n);
+    pc_raw_free(&raw);
+    free(want);
+    free(b);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -751,6 +1276,12 @@ int main(void)
         cmocka_unit_test(test_truncated_files),
         cmocka_unit_test(test_header_errors),
         cmocka_unit_test(test_garbage_headers),
+        cmocka_unit_test(test_type_matrix),
+        cmocka_unit_test(test_packed_colour_matrix),
+        cmocka_unit_test(test_mug_every_point),
+        cmocka_unit_test(test_samp11_every_point),
+        cmocka_unit_test(test_rops_every_point),
+        cmocka_unit_test(test_autzen_every_point),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }

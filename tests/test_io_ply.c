@@ -1,6 +1,8 @@
 /* test_io_ply.c — the PLY reader on real scans (Guanyin.ply binary, bun000.ply ascii with a
  * range_grid list element), on the same synthetic cloud written in every encoding and property
- * layout, and on broken files (truncated, lying counts, bad header, garbage).
+ * layout, and on broken files (truncated, lying counts, bad header, garbage). Every type name
+ * in every encoding, and both real files, are checked point by point (type_matrix,
+ * mixed_types, guanyin_every_point, bun000_every_point).
  *
  * Expected values come from independent scans of the files written here (memcpy of the float
  * triples at the known layout; sscanf of the text lines) or from the generator of the synthetic
@@ -20,6 +22,8 @@
 #include "cloud.h"
 #include "common/testutil.h"
 #include "cloudtest.h"
+#include "iotest.h"
+#include "rng.h"
 
 /* ------------------------------------------------------------------ helpers */
 
@@ -871,6 +875,347 @@ static void million(void **state)
     printf("# 1M-point binary PLY pc_read_ply: best of 3 %.1f ms\n", best);
 }
 
+/* ------------------------------------------------------------------ every type and byte order */
+
+/* The type matrix: one file per (encoding, type name, record shape) in which every vertex
+ * property the reader uses -- x y z, red green blue alpha, nx ny nz, quality (the scalar),
+ * intensity and radius -- has that one type. The values are random over the type's whole range
+ * (so every byte of a multi-byte value matters and a missing or wrong byte swap changes it),
+ * written byte by byte by iotest.h's writers, and every point is compared with what was
+ * written. The record shapes are fixed-size records (the reader's column decoder) and records
+ * with a list property in the vertex element (its record-by-record decoder). */
+
+#define MX_N 48
+
+typedef struct mx_type {
+    const char *name; /* as written in the header */
+    unsigned size;
+    int flt;          /* a float type */
+    int sgn;          /* a signed integer type */
+} mx_type;
+
+static const mx_type mx_types[] = {
+    {"char", 1, 0, 1},  {"int8", 1, 0, 1},   {"uchar", 1, 0, 0},  {"uint8", 1, 0, 0},
+    {"short", 2, 0, 1}, {"int16", 2, 0, 1},  {"ushort", 2, 0, 0}, {"uint16", 2, 0, 0},
+    {"int", 4, 0, 1},   {"int32", 4, 0, 1},  {"uint", 4, 0, 0},   {"uint32", 4, 0, 0},
+    {"float", 4, 1, 0}, {"float32", 4, 1, 0}, {"double", 8, 1, 0}, {"float64", 8, 1, 0},
+};
+#define MX_NTYPES (sizeof mx_types / sizeof mx_types[0])
+
+enum { MP_X, MP_Y, MP_Z, MP_R, MP_G, MP_B, MP_A, MP_NX, MP_NY, MP_NZ, MP_Q, MP_I, MP_RAD, MP_N };
+static const char *const mx_prop[MP_N] = {"x",  "y",  "z",  "red",     "green",     "blue",
+                                          "alpha", "nx", "ny", "nz", "quality", "intensity",
+                                          "radius"};
+
+/* A random value of type t: integers over their whole range; floats of random sign with
+ * magnitudes from 1e-3 to 1e5 (float, rounded to float) or 1e-3 to 1e7 (double, all 53 bits,
+ * so a double read as float or through float loses digits). */
+static double mx_any(rng *r, const mx_type *t)
+{
+    if (t->flt) {
+        double v = (2 * uni(r) - 1) * pow(10, (int)(next64(r) % (t->size == 4 ? 9 : 11)) - 3);
+        return t->size == 4 ? (double)(float)v : v;
+    }
+    unsigned bits = 8 * t->size;
+    uint64_t m = next64(r) & ((1ull << bits) - 1);
+    return t->sgn ? (double)((int64_t)m - (int64_t)(1ull << (bits - 1))) : (double)m;
+}
+
+/* A colour channel of type t. 8- and 16-bit integers: any value. 32-bit integers: 1..254, so
+ * that a value read with the wrong byte order or width (a multiple of 2^8) clamps to 0 or 255
+ * and differs. Floats: -0.2..1.2, which covers both clamps. */
+static double mx_colour(rng *r, const mx_type *t)
+{
+    if (t->flt) {
+        double v = 1.4 * uni(r) - 0.2;
+        return t->size == 4 ? (double)(float)v : v;
+    }
+    if (t->size == 4) return (double)(1 + next64(r) % 254);
+    return mx_any(r, t);
+}
+
+/* A normal component of type t: integers over their range, floats in -3..3 (not unit length,
+ * so the reader must normalise). */
+static double mx_normal(rng *r, const mx_type *t)
+{
+    if (!t->flt) return mx_any(r, t);
+    double v = 6 * uni(r) - 3;
+    return t->size == 4 ? (double)(float)v : v;
+}
+
+/* The colour PLY promises for channel value v of type t: 16-bit integers scale by 255/65535,
+ * floats by 255, other integers are taken as 0..255; then clamp and round to nearest. The
+ * 16-bit quotient is never within 1/514 of a half, so the two ways of dividing agree. */
+static int mx_col8(double v, const mx_type *t)
+{
+    double x = t->flt ? v * 255.0 : t->size == 2 ? v / 257.0 : v;
+    if (!(x > 0)) return 0;
+    if (x >= 255) return 255;
+    return (int)floor(x + 0.5);
+}
+
+/* Appends value v of type t in encoding fmt and returns what a correct reader must make of it:
+ * v itself in binary, the correctly rounded double of the written token in ascii. */
+static double mx_put(io_buf *b, int fmt, const mx_type *t, double v)
+{
+    if (fmt == ASC) {
+        char tok[48];
+        if (t->flt) snprintf(tok, sizeof tok, t->size == 4 ? "%.9g" : "%.17g", v);
+        else snprintf(tok, sizeof tok, "%lld", (long long)v);
+        io_printf(b, " %s", tok);
+        return strtod(tok, NULL);
+    }
+    if (t->flt && t->size == 4) io_put_f32(b, (float)v, fmt == BE);
+    else if (t->flt) io_put_f64(b, v, fmt == BE);
+    else io_put_uint(b, (uint64_t)(int64_t)v, t->size, fmt == BE);
+    return v;
+}
+
+/* Writes the matrix file for (fmt, t, list) into dir; want[MX_N][MP_N] gets what each
+ * property of each point must read as. */
+static const char *mx_write(const char *dir, int fmt, const mx_type *t, int list,
+                            double want[MX_N][MP_N], char *path, size_t len)
+{
+    static const char *fmts[] = {"ascii", "binary_little_endian", "binary_big_endian"};
+    io_buf b = {0};
+    rng r = {0x5eed0000u + 97u * (unsigned)fmt + 7u * t->size + (unsigned)list + 1000u * t->flt};
+    io_printf(&b, "ply\nformat %s 1.0\ncomment type matrix %s\nelement vertex %d\n"
+                  "property uchar flags\n", fmts[fmt], t->name, MX_N);
+    for (int p = 0; p < MP_N; p++) {
+        io_printf(&b, "property %s %s\n", t->name, mx_prop[p]);
+        if (p == MP_Z && list) io_printf(&b, "property list uchar %s idx\n", t->name);
+    }
+    io_printf(&b, "property double trailer\nend_header\n");
+    const mx_type *uchar = &mx_types[2], *dbl = &mx_types[14];
+    for (int i = 0; i < MX_N; i++) {
+        mx_put(&b, fmt, uchar, (double)(next64(&r) % 256));
+        for (int p = 0; p < MP_N; p++) {
+            double v = p >= MP_R && p <= MP_A     ? mx_colour(&r, t)
+                       : p >= MP_NX && p <= MP_NZ ? mx_normal(&r, t)
+                                                  : mx_any(&r, t);
+            want[i][p] = mx_put(&b, fmt, t, v);
+            if (p == MP_Z && list) {
+                int m = i % 4;
+                mx_put(&b, fmt, uchar, m);
+                for (int j = 0; j < m; j++) mx_put(&b, fmt, t, mx_any(&r, t));
+            }
+        }
+        mx_put(&b, fmt, dbl, mx_any(&r, dbl));
+        if (fmt == ASC) io_printf(&b, "\n");
+    }
+    char name[96];
+    snprintf(name, sizeof name, "mx_%s_%s%s.ply", fmts[fmt], t->name, list ? "_list" : "");
+    io_save(&b, dir, name, path, len);
+    io_free(&b);
+    return path;
+}
+
+/* Checks the reader's output for one matrix file against want, point by point: positions
+ * exactly (raw doubles, and pos + offset after pc_load within float rounding), colours and
+ * alpha exactly, normals as the unit vector of what was written (within float rounding),
+ * quality/intensity/radius exactly as float. */
+static void mx_check(const char *path, const mx_type *t, double want[MX_N][MP_N])
+{
+    double xyz[3 * MX_N];
+    for (int i = 0; i < MX_N; i++)
+        for (int k = 0; k < 3; k++) xyz[3 * i + k] = want[i][MP_X + k];
+    pc_raw raw;
+    io_read_ok(pc_read_ply, path, &raw);
+    assert_int_equal(raw.attrs, PC_ATTR_RGB | PC_ATTR_NORMAL | PC_ATTR_SCALAR |
+                                    PC_ATTR_INTENSITY | PC_ATTR_RADIUS);
+    assert_string_equal(raw.scalar_name, "quality");
+    io_check_raw_xyz(&raw, xyz, MX_N, 0, path);
+    for (int i = 0; i < MX_N; i++) {
+        for (int k = 0; k < 4; k++) {
+            int w = mx_col8(want[i][MP_R + k], t);
+            if (raw.rgba[4 * i + k] != w)
+                fail_msg("%s: point %d channel %d: read %d, want %d (written %.17g)", path, i, k,
+                         raw.rgba[4 * i + k], w, want[i][MP_R + k]);
+        }
+        double l = 0;
+        for (int k = 0; k < 3; k++) l += want[i][MP_NX + k] * want[i][MP_NX + k];
+        l = sqrt(l);
+        for (int k = 0; k < 3; k++) {
+            double w = l > 0 ? want[i][MP_NX + k] / l : 0;
+            if (!(fabs(raw.normal[3 * i + k] - w) <= 2e-6))
+                fail_msg("%s: point %d normal %d: read %.9g, want %.9g", path, i, k,
+                         raw.normal[3 * i + k], w);
+        }
+        const float sc[3] = {raw.scalar[i], raw.intensity[i], raw.radius[i]};
+        for (int k = 0; k < 3; k++)
+            if (sc[k] != (float)want[i][MP_Q + k])
+                fail_msg("%s: point %d %s: read %.9g, want %.9g", path, i, mx_prop[MP_Q + k],
+                         sc[k], (float)want[i][MP_Q + k]);
+    }
+    pc_raw_free(&raw);
+    pc_cloud c;
+    tu_load_ok(path, &c);
+    io_check_cloud_xyz(&c, xyz, MX_N, 0, path);
+    pc_cloud_free(&c);
+}
+
+/* Every type name the reader accepts (int8..float64 and the aliases char..double), in ascii,
+ * binary_little_endian and binary_big_endian, with fixed-size and list-bearing records, for
+ * positions, colours, normals and the scalar properties. A byte swap missing or applied to
+ * the wrong type, a type read at the wrong width or signedness, a colour scaled for the wrong
+ * type or a property decoded into the wrong array fails here, naming file, point and field. */
+static void type_matrix(void **state)
+{
+    const char *tmp = *state;
+    char path[1024];
+    static double want[MX_N][MP_N];
+    for (int fmt = ASC; fmt <= BE; fmt++)
+        for (size_t ti = 0; ti < MX_NTYPES; ti++)
+            for (int list = 0; list < 2; list++) {
+                mx_write(tmp, fmt, &mx_types[ti], list, want, path, sizeof path);
+                mx_check(path, &mx_types[ti], want);
+            }
+}
+
+/* The same cloud as one file mixing every type, in each byte order: positions in int16, int32
+ * and double, colours in uchar/ushort/float, normals in char/short/int: the per-slot offsets
+ * within a record of mixed widths are right and each slot uses its own type. */
+static void mixed_types(void **state)
+{
+    const char *tmp = *state;
+    char path[1024];
+    const char *types[MP_N] = {"int16", "int32", "double", "uchar", "ushort", "float",
+                               "uint16", "char",  "short", "int",   "uint",   "float64",
+                               "int8"};
+    for (int fmt = ASC; fmt <= BE; fmt++) {
+        io_buf b = {0};
+        rng r = {0xabcdefu + (unsigned)fmt};
+        static const char *fmts[] = {"ascii", "binary_little_endian", "binary_big_endian"};
+        io_printf(&b, "ply\nformat %s 1.0\nelement vertex %d\n", fmts[fmt], MX_N);
+        const mx_type *t[MP_N];
+        for (int p = 0; p < MP_N; p++) {
+            t[p] = NULL;
+            for (size_t k = 0; k < MX_NTYPES; k++)
+                if (!strcmp(mx_types[k].name, types[p])) t[p] = &mx_types[k];
+            assert_non_null(t[p]);
+            io_printf(&b, "property %s %s\n", types[p], mx_prop[p]);
+        }
+        io_printf(&b, "end_header\n");
+        double want[MX_N][MP_N], xyz[3 * MX_N];
+        for (int i = 0; i < MX_N; i++) {
+            for (int p = 0; p < MP_N; p++) {
+                double v = p >= MP_R && p <= MP_A     ? mx_colour(&r, t[p])
+                           : p >= MP_NX && p <= MP_NZ ? mx_normal(&r, t[p])
+                                                      : mx_any(&r, t[p]);
+                want[i][p] = mx_put(&b, fmt, t[p], v);
+            }
+            if (fmt == ASC) io_printf(&b, "\n");
+            for (int k = 0; k < 3; k++) xyz[3 * i + k] = want[i][k];
+        }
+        char name[64];
+        snprintf(name, sizeof name, "mixed_%d.ply", fmt);
+        io_save(&b, tmp, name, path, sizeof path);
+        io_free(&b);
+        pc_raw raw;
+        io_read_ok(pc_read_ply, path, &raw);
+        io_check_raw_xyz(&raw, xyz, MX_N, 0, path);
+        for (int i = 0; i < MX_N; i++) {
+            for (int k = 0; k < 4; k++)
+                if (raw.rgba[4 * i + k] != mx_col8(want[i][MP_R + k], t[MP_R + k]))
+                    fail_msg("%s: point %d channel %d: read %d, want %d", path, i, k,
+                             raw.rgba[4 * i + k], mx_col8(want[i][MP_R + k], t[MP_R + k]));
+            double l = sqrt(want[i][MP_NX] * want[i][MP_NX] + want[i][MP_NY] * want[i][MP_NY] +
+                            want[i][MP_NZ] * want[i][MP_NZ]);
+            for (int k = 0; k < 3; k++)
+                assert_true(fabs(raw.normal[3 * i + k] - (l > 0 ? want[i][MP_NX + k] / l : 0)) <=
+                            2e-6);
+            assert_true(raw.scalar[i] == (float)want[i][MP_Q]);
+            assert_true(raw.intensity[i] == (float)want[i][MP_I]);
+            assert_true(raw.radius[i] == (float)want[i][MP_RAD]);
+        }
+        pc_raw_free(&raw);
+    }
+}
+
+/* ------------------------------------------------------------------ real files, every point */
+
+/* Guanyin.ply, all 238,154 records decoded here from the bytes (float x y z, uchar r g b,
+ * 15 bytes a record, little-endian, per its header): the raw doubles must equal the floats
+ * exactly, the colours the bytes, and after pc_load pos + offset must be within float rounding
+ * of each point. */
+static void guanyin_every_point(void **state)
+{
+    (void)state;
+    char path[1024];
+    tu_data("Guanyin.ply", path, sizeof path);
+    size_t len;
+    uint8_t *d = tu_read_file(path, &len);
+    assert_non_null(d);
+    size_t h = header_len(d, len);
+    static const char layout[] = "format binary_little_endian 1.0\nelement vertex 238154\n"
+                                 "property float x\nproperty float y\nproperty float z\n"
+                                 "property uchar red\nproperty uchar green\n"
+                                 "property uchar blue\nend_header\n";
+    assert_non_null(memmem(d, h, layout, sizeof layout - 1));
+    const size_t n = 238154;
+    assert_int_equal(h + 15 * n, len);
+    double *want = malloc(3 * n * sizeof *want);
+    assert_non_null(want);
+    for (size_t i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++) want[3 * i + k] = io_get_f32(d + h + 15 * i + 4 * k, 0);
+    pc_raw raw;
+    io_read_ok(pc_read_ply, path, &raw);
+    io_check_raw_xyz(&raw, want, n, 0, "Guanyin.ply");
+    for (size_t i = 0; i < n; i++)
+        if (memcmp(raw.rgba + 4 * i, d + h + 15 * i + 12, 3) != 0 || raw.rgba[4 * i + 3] != 255)
+            fail_msg("Guanyin.ply: point %zu colour differs", i);
+    pc_raw_free(&raw);
+    pc_cloud c;
+    tu_load_ok(path, &c);
+    io_check_cloud_xyz(&c, want, n, 0, "Guanyin.ply");
+    pc_cloud_free(&c);
+    free(want);
+    free(d);
+}
+
+/* bun000.ply, all 40,256 vertex lines parsed here with strtod (float properties in ascii: the
+ * reader keeps the double of the text, correctly rounded as io_text.h promises): the raw
+ * doubles must be strtod's exactly and pos + offset within float rounding of them. */
+static void bun000_every_point(void **state)
+{
+    (void)state;
+    char path[1024];
+    tu_data("bun000.ply", path, sizeof path);
+    size_t len;
+    uint8_t *d = tu_read_file(path, &len);
+    assert_non_null(d);
+    size_t h = header_len(d, len);
+    assert_non_null(memmem(d, h, "\nformat ascii 1.0\n", 18));
+    static const char layout[] = "element vertex 40256\nproperty float x\nproperty float y\n"
+                                 "property float z\nelement range_grid";
+    assert_non_null(memmem(d, h, layout, sizeof layout - 1));
+    const size_t n = 40256;
+    double *want = malloc(3 * n * sizeof *want);
+    assert_non_null(want);
+    char *s = (char *)d + h;
+    for (size_t i = 0; i < n; i++) {
+        for (int k = 0; k < 3; k++) {
+            char *e;
+            want[3 * i + k] = strtod(s, &e);
+            assert_true(e > s);
+            s = e;
+        }
+        while (*s == ' ') s++; /* the file ends each vertex line with a space */
+        assert_true(*s == '\n');
+        s++;
+    }
+    pc_raw raw;
+    io_read_ok(pc_read_ply, path, &raw);
+    io_check_raw_xyz(&raw, want, n, 0, "bun000.ply");
+    pc_raw_free(&raw);
+    pc_cloud c;
+    tu_load_ok(path, &c);
+    io_check_cloud_xyz(&c, want, n, 0, "bun000.ply");
+    pc_cloud_free(&c);
+    free(want);
+    free(d);
+}
+
 int main(void)
 {
 #define TMP_TEST(f) cmocka_unit_test_setup_teardown(f, tu_tmpdir_setup, tu_tmpdir_teardown)
@@ -888,6 +1233,10 @@ int main(void)
         TMP_TEST(vertex_with_list),
         TMP_TEST(empty_and_nan),
         TMP_TEST(million),
+        TMP_TEST(type_matrix),
+        TMP_TEST(mixed_types),
+        cmocka_unit_test(guanyin_every_point),
+        cmocka_unit_test(bun000_every_point),
     };
 #undef TMP_TEST
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -1,6 +1,8 @@
 /* test_io_xyz.c — the XYZ/PTS text reader on real files (bunnyData.pts with a count line and
  * CRLF; points_agisoft.xyz, georeferenced x y z r g b), on synthetic layouts (separators,
- * comments, intensity, 16-bit and float colours) and on broken files.
+ * comments, intensity, 16-bit and float colours) and on broken files. Both real files and
+ * every layout, separator and colour mode are checked row by row (real_every_point,
+ * layout_matrix).
  *
  * Expected values come from a separate sscanf scan of each file or from the text the test
  * writes, never from the reader under test. */
@@ -19,6 +21,8 @@
 #include "cloud.h"
 #include "common/testutil.h"
 #include "cloudtest.h"
+#include "iotest.h"
+#include "rng.h"
 
 /* ------------------------------------------------------------------ helpers */
 
@@ -420,6 +424,171 @@ static void growth(void **state)
     pc_cloud_free(&c);
 }
 
+/* ------------------------------------------------------------------ every point, every layout */
+
+/* Parses every data row of a real text file here with strtod (a row of one value is the PTS
+ * count), returning the rows' values (ncol per row) and the row count. */
+static double *ref_rows(const char *path, int ncol, size_t *rows, long *count)
+{
+    size_t len;
+    uint8_t *d = tu_read_file(path, &len);
+    assert_non_null(d);
+    size_t cap = 1024, n = 0;
+    double *v = malloc(cap * ncol * sizeof *v);
+    assert_non_null(v);
+    *count = -1;
+    char *s = (char *)d, *end = s + len;
+    while (s < end) {
+        char *nl = memchr(s, '\n', (size_t)(end - s));
+        char *le = nl ? nl : end;
+        double row[8];
+        int k = 0;
+        char *p = s;
+        while (k < 8) {
+            char *e;
+            double x = strtod(p, &e);
+            if (e == p || e > le) break;
+            row[k++] = x;
+            p = e;
+        }
+        if (k == 1 && n == 0 && *count < 0) {
+            *count = (long)row[0];
+        } else if (k > 0) {
+            assert_int_equal(k, ncol);
+            if (n == cap) {
+                cap *= 2;
+                v = realloc(v, cap * ncol * sizeof *v);
+                assert_non_null(v);
+            }
+            memcpy(v + n * ncol, row, ncol * sizeof *v);
+            n++;
+        }
+        s = le + 1;
+    }
+    free(d);
+    *rows = n;
+    return v;
+}
+
+/* bunnyData.pts (count line, CRLF) and points_agisoft.xyz (georeferenced x y z r g b): every
+ * row parsed here with strtod. The reader promises correctly rounded numbers, so every raw
+ * coordinate must be strtod's double exactly; after pc_load pos + offset must be within float
+ * rounding of it; agisoft's colours must be the integers written. */
+static void real_every_point(void **state)
+{
+    (void)state;
+    const struct { const char *name; int ncol; long count; size_t n; } files[2] = {
+        {"bunnyData.pts", 3, 30571, 30571}, {"points_agisoft.xyz", 6, -1, 100}};
+    for (int f = 0; f < 2; f++) {
+        char path[1024];
+        tu_data(files[f].name, path, sizeof path);
+        size_t n;
+        long count;
+        double *v = ref_rows(path, files[f].ncol, &n, &count);
+        assert_int_equal(n, files[f].n);
+        assert_int_equal(count, files[f].count);
+        double *want = malloc(3 * n * sizeof *want);
+        assert_non_null(want);
+        for (size_t i = 0; i < n; i++)
+            for (int k = 0; k < 3; k++) want[3 * i + k] = v[i * files[f].ncol + k];
+        pc_raw raw;
+        io_read_ok(pc_read_xyz, path, &raw);
+        io_check_raw_xyz(&raw, want, n, 0, files[f].name);
+        for (size_t i = 0; files[f].ncol == 6 && i < n; i++)
+            for (int k = 0; k < 3; k++)
+                if (raw.rgba[4 * i + k] != v[i * 6 + 3 + k])
+                    fail_msg("%s: row %zu colour %d: %d, file %g", files[f].name, i, k,
+                             raw.rgba[4 * i + k], v[i * 6 + 3 + k]);
+        pc_raw_free(&raw);
+        pc_cloud c;
+        tu_load_ok(path, &c);
+        io_check_cloud_xyz(&c, want, n, 0, files[f].name);
+        pc_cloud_free(&c);
+        free(want);
+        free(v);
+    }
+}
+
+/* The layouts x y z, x y z i, x y z r g b and x y z i r g b, each colour layout with 8-bit,
+ * 16-bit and 0..1 float colours, written with every separator (space, tab, comma, semicolon,
+ * comma and space), LF or CRLF, with and without a PTS count line, from georeferenced values
+ * printed with 17 significant digits (which a float, or a parser that is not correctly
+ * rounded, changes). Every row is checked: coordinates exactly strtod's double of the token
+ * written, intensity that as float, colours by the rule of the mode (8-bit kept, 16-bit scaled
+ * by 255/65535, 0..1 scaled by 255, all rounded to nearest). */
+static void layout_matrix(void **state)
+{
+    const char *tmp = *state;
+    static const char *const seps[] = {" ", "\t", ",", ";", ", "};
+    const int layouts[4] = {3, 4, 6, 7};
+    int file = 0;
+    for (int li = 0; li < 4; li++)
+        for (int mode = 0; mode < (layouts[li] >= 6 ? 3 : 1); mode++, file++) {
+            enum { N = 50 };
+            int ncol = layouts[li], inten = ncol == 4 || ncol == 7;
+            const char *sep = seps[file % 5], *eol = file % 2 ? "\r\n" : "\n";
+            int pts = file % 3 == 1;
+            rng r = {0x7e57u + 131u * (unsigned)file};
+            char buf[256];
+            io_buf b = {0};
+            if (pts) io_printf(&b, "%d%s", N, eol);
+            else io_printf(&b, "# written by test_io_xyz layout_matrix%s", eol);
+            double want[3 * N], it[N], col[N][3];
+            for (int i = 0; i < N; i++) {
+                const double base[3] = {665171.0, 5648340.0, 233.0};
+                for (int k = 0; k < 3; k++) {
+                    snprintf(buf, sizeof buf, "%.17g", base[k] + 40 * uni(&r));
+                    want[3 * i + k] = strtod(buf, NULL);
+                    io_printf(&b, "%s%s", k ? sep : "", buf);
+                }
+                if (inten) {
+                    snprintf(buf, sizeof buf, "%.9g", (uni(&r) - 0.3) * 3000);
+                    it[i] = strtod(buf, NULL);
+                    io_printf(&b, "%s%s", sep, buf);
+                }
+                for (int k = 0; ncol >= 6 && k < 3; k++) {
+                    if (mode == 0) snprintf(buf, sizeof buf, "%d", (int)(next64(&r) % 256));
+                    else if (mode == 1) snprintf(buf, sizeof buf, "%d", (int)(next64(&r) % 65536));
+                    else if (i == 0 && k == 0) snprintf(buf, sizeof buf, "1"); /* the top */
+                    else snprintf(buf, sizeof buf, "%.6f", uni(&r));
+                    col[i][k] = strtod(buf, NULL);
+                    io_printf(&b, "%s%s", sep, buf);
+                }
+                io_printf(&b, "%s", eol);
+            }
+            char name[64], path[1024];
+            snprintf(name, sizeof name, "layout%d.%s", file,
+                     pts ? "pts" : file % 2 ? "txt" : "xyz");
+            io_save(&b, tmp, name, path, sizeof path);
+            io_free(&b);
+
+            pc_raw raw;
+            io_read_ok(pc_read_xyz, path, &raw);
+            assert_int_equal(raw.attrs, (inten ? PC_ATTR_INTENSITY : 0u) |
+                                            (ncol >= 6 ? PC_ATTR_RGB : 0u));
+            io_check_raw_xyz(&raw, want, N, 0, path);
+            for (int i = 0; i < N; i++) {
+                if (inten && raw.intensity[i] != (float)it[i])
+                    fail_msg("%s: row %d intensity %.9g, written %.9g", path, i, raw.intensity[i],
+                             it[i]);
+                for (int k = 0; ncol >= 6 && k < 3; k++) {
+                    double x = mode == 0 ? col[i][k]
+                               : mode == 1 ? col[i][k] / 257.0
+                                           : (double)(float)col[i][k] * 255.0;
+                    int w = !(x > 0) ? 0 : x >= 255 ? 255 : (int)floor(x + 0.5);
+                    if (raw.rgba[4 * i + k] != w)
+                        fail_msg("%s: row %d channel %d: %d, want %d (written %g)", path, i, k,
+                                 raw.rgba[4 * i + k], w, col[i][k]);
+                }
+            }
+            pc_raw_free(&raw);
+            pc_cloud c;
+            tu_load_ok(path, &c);
+            io_check_cloud_xyz(&c, want, N, 0, path);
+            pc_cloud_free(&c);
+        }
+}
+
 int main(void)
 {
 #define TMP_TEST(f) cmocka_unit_test_setup_teardown(f, tu_tmpdir_setup, tu_tmpdir_teardown)
@@ -434,6 +603,8 @@ int main(void)
         TMP_TEST(precise_numbers),
         TMP_TEST(broken),
         TMP_TEST(growth),
+        cmocka_unit_test(real_every_point),
+        TMP_TEST(layout_matrix),
     };
 #undef TMP_TEST
     return cmocka_run_group_tests(tests, NULL, NULL);
