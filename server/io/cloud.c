@@ -17,16 +17,20 @@ static int grow(void **p, size_t cap, size_t elem)
     return 0;
 }
 
+const pc_attr_info pc_attr_table[PC_ATTR_NFIELDS] = {
+#define PC_ATTR_INFO_(id, fld, type, k) {PC_ATTR_##id, #fld, sizeof(type), k},
+    PC_ATTR_FIELDS(PC_ATTR_INFO_)
+#undef PC_ATTR_INFO_
+};
+
 int pc_raw_reserve(pc_raw *raw, size_t cap, sd_err *err)
 {
     if (cap <= raw->cap) return 0;
     int bad = grow((void **)&raw->xyz, cap, 3 * sizeof(double));
-    if (raw->attrs & PC_ATTR_RGB) bad |= grow((void **)&raw->rgba, cap, 4);
-    if (raw->attrs & PC_ATTR_NORMAL) bad |= grow((void **)&raw->normal, cap, 3 * sizeof(float));
-    if (raw->attrs & PC_ATTR_INTENSITY) bad |= grow((void **)&raw->intensity, cap, sizeof(float));
-    if (raw->attrs & PC_ATTR_CLASS) bad |= grow((void **)&raw->cls, cap, 1);
-    if (raw->attrs & PC_ATTR_RADIUS) bad |= grow((void **)&raw->radius, cap, sizeof(float));
-    if (raw->attrs & PC_ATTR_SCALAR) bad |= grow((void **)&raw->scalar, cap, sizeof(float));
+#define PC_GROW_(id, fld, type, k) \
+    if (raw->attrs & PC_ATTR_##id) bad |= grow((void **)&raw->fld, cap, (k) * sizeof(type));
+    PC_ATTR_FIELDS(PC_GROW_)
+#undef PC_GROW_
     if (bad) return sd_errf(err, SD_ENOMEM, "out of memory for %zu points", cap);
     raw->cap = cap;
     return 0;
@@ -35,24 +39,18 @@ int pc_raw_reserve(pc_raw *raw, size_t cap, sd_err *err)
 void pc_raw_free(pc_raw *raw)
 {
     free(raw->xyz);
-    free(raw->rgba);
-    free(raw->normal);
-    free(raw->intensity);
-    free(raw->cls);
-    free(raw->radius);
-    free(raw->scalar);
+#define PC_FREE_(id, fld, type, k) free(raw->fld);
+    PC_ATTR_FIELDS(PC_FREE_)
+#undef PC_FREE_
     memset(raw, 0, sizeof *raw);
 }
 
 void pc_cloud_free(pc_cloud *c)
 {
     free(c->pos);
-    free(c->rgba);
-    free(c->normal);
-    free(c->intensity);
-    free(c->cls);
-    free(c->radius);
-    free(c->scalar);
+#define PC_FREE_(id, fld, type, k) free(c->fld);
+    PC_ATTR_FIELDS(PC_FREE_)
+#undef PC_FREE_
     memset(c, 0, sizeof *c);
 }
 
@@ -119,32 +117,22 @@ int pc_finalize(pc_raw *raw, pc_cloud *out, const char *path, sd_err *err)
         j++;
     }
     if (kept != n) {
-        compact(raw->rgba, 4, keep, n);
-        compact(raw->normal, 3 * sizeof(float), keep, n);
-        compact(raw->intensity, sizeof(float), keep, n);
-        compact(raw->cls, 1, keep, n);
-        compact(raw->radius, sizeof(float), keep, n);
-        compact(raw->scalar, sizeof(float), keep, n);
+#define PC_COMPACT_(id, fld, type, k) compact(raw->fld, (k) * sizeof(type), keep, n);
+        PC_ATTR_FIELDS(PC_COMPACT_)
+#undef PC_COMPACT_
     }
     free(keep);
 
     out->n = kept;
     out->n_dropped = n - kept;
     out->attrs = raw->attrs;
-    out->rgba = raw->rgba;
-    out->normal = raw->normal;
-    out->intensity = raw->intensity;
-    out->cls = raw->cls;
-    out->radius = raw->radius;
-    out->scalar = raw->scalar;
+#define PC_MOVE_(id, fld, type, k) out->fld = raw->fld, raw->fld = NULL;
+    PC_ATTR_FIELDS(PC_MOVE_)
+#undef PC_MOVE_
     memcpy(out->scalar_name, raw->scalar_name, sizeof out->scalar_name);
     memcpy(out->format, raw->format, sizeof out->format);
     out->has_viewpoint = raw->has_viewpoint;
     memcpy(out->viewpoint, raw->viewpoint, sizeof out->viewpoint);
-    raw->rgba = NULL;
-    raw->normal = NULL;
-    raw->intensity = raw->radius = raw->scalar = NULL;
-    raw->cls = NULL;
     pc_raw_free(raw);
     return 0;
 }

@@ -24,18 +24,46 @@ enum pc_attr {
     PC_ATTR_F = SP_ATTR_F,
 };
 
+/* The per-point attributes besides the position, one row each, in one table that every
+ * structure below takes its fields from and the generic code (reserve, free, compaction, the
+ * hand-over to the finalized cloud, the prepared cloud's sections) loops over:
+ *   id (PC_ATTR_<id>), field name, element type, elements per point.
+ * The prepared cloud adds F (prep's uncertainty) and always has normal and radius. */
+#define PC_ATTR_FIELDS(X)                  \
+    X(RGB, rgba, uint8_t, 4)               \
+    X(NORMAL, normal, float, 3)            \
+    X(INTENSITY, intensity, float, 1)      \
+    X(CLASS, cls, uint8_t, 1)              \
+    X(RADIUS, radius, float, 1)            \
+    X(SCALAR, scalar, float, 1)
+
+typedef struct pc_attr_info {
+    uint32_t bit;            /* PC_ATTR_* */
+    const char *field;       /* the field's name in the structures */
+    size_t elem;             /* bytes per element */
+    int per_point;           /* elements per point */
+} pc_attr_info;
+
+enum {
+#define PC_ATTR_COUNT_(id, field, type, k) PC_ATTR_ROW_##id,
+    PC_ATTR_FIELDS(PC_ATTR_COUNT_)
+#undef PC_ATTR_COUNT_
+    PC_ATTR_NFIELDS
+};
+extern const pc_attr_info pc_attr_table[PC_ATTR_NFIELDS];
+
+/* The attribute arrays of the table as fields (pc_raw, pc_cloud, pc_prepared). */
+#define PC_ATTR_ARRAYS                                  \
+    PC_ATTR_FIELDS(PC_ATTR_ARRAY_)
+#define PC_ATTR_ARRAY_(id, field, type, k) type *field; /* k per point when PC_ATTR_##id */
+
 /* A cloud as read from a file, coordinates still in double precision. Readers fill it with
  * pc_raw_reserve + writes at index n; non-finite points may be written, pc_finalize drops them. */
 typedef struct pc_raw {
     size_t n, cap;
     uint32_t attrs;          /* set before the first pc_raw_reserve */
     double *xyz;             /* 3 * cap */
-    uint8_t *rgba;           /* 4 * cap */
-    float *normal;           /* 3 * cap */
-    float *intensity;        /* cap */
-    uint8_t *cls;            /* cap */
-    float *radius;           /* cap */
-    float *scalar;           /* cap */
+    PC_ATTR_ARRAYS           /* rgba, normal, intensity, cls, radius, scalar: cap points */
     char scalar_name[32];    /* which file property scalar holds */
     char format[64];         /* "PLY binary_little_endian 1.0", "LAS 1.2 format 3", ... */
     int has_viewpoint;       /* the file gives the sensor's position (PCD VIEWPOINT) */
@@ -53,12 +81,7 @@ typedef struct pc_cloud {
     size_t n;
     uint32_t attrs;
     float *pos;              /* 3 * n, file coordinates minus offset */
-    uint8_t *rgba;           /* 4 * n */
-    float *normal;           /* 3 * n */
-    float *intensity;        /* n */
-    uint8_t *cls;            /* n */
-    float *radius;           /* n */
-    float *scalar;           /* n */
+    PC_ATTR_ARRAYS           /* rgba, normal, intensity, cls, radius, scalar: n points */
     double offset[3];        /* add to pos to get the file's coordinates */
     double bmin[3], bmax[3]; /* bounding box in the file's coordinates */
     uint64_t n_dropped;      /* non-finite points removed */

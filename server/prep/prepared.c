@@ -20,14 +20,17 @@ static uint64_t layout(pc_prepared *p, uint64_t n, uint32_t attrs, uint64_t nb, 
             p->field = NULL;                                                 \
         }                                                                    \
     } while (0)
+    /* The order is the cache file's: positions, the attributes prep always makes (normal,
+     * radius, F), the file's optional ones in table order (cloud.h), the batches. */
     SECTION(pos, float, 3 * n, 1);
     SECTION(normal, float, 3 * n, 1);
     SECTION(radius, float, n, 1);
     SECTION(F, float, n, 1);
-    SECTION(rgba, uint8_t, 4 * n, attrs & PC_ATTR_RGB);
-    SECTION(intensity, float, n, attrs & PC_ATTR_INTENSITY);
-    SECTION(cls, uint8_t, n, attrs & PC_ATTR_CLASS);
-    SECTION(scalar, float, n, attrs & PC_ATTR_SCALAR);
+#define OPTIONAL_(id, fld, type, k) \
+    if (PC_ATTR_##id != PC_ATTR_NORMAL && PC_ATTR_##id != PC_ATTR_RADIUS) \
+        SECTION(fld, type, (k) * n, attrs & PC_ATTR_##id);
+    PC_ATTR_FIELDS(OPTIONAL_)
+#undef OPTIONAL_
     SECTION(batches, pc_batch, nb, 1);
 #undef SECTION
     return off;

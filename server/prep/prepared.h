@@ -25,15 +25,12 @@ typedef struct pc_prepared {
     uint64_t n;
     uint32_t attrs;          /* PC_ATTR_*: always NORMAL | RADIUS | F, plus what the file had */
     uint32_t k;              /* neighbours used */
-    /* sections, in block order (NULL when absent) */
+    /* sections (NULL when absent); their order in the block is prepared.c's */
     float *pos;              /* 3n, local coordinates (file coordinates - offset) */
-    float *normal;           /* 3n, unit */
-    float *radius;           /* n, splat radius, eq. 20 as DESIGN.md interprets it */
+    PC_ATTR_ARRAYS           /* cloud.h's table: normal (3n, unit) and radius (n, eq. 20 as
+                                DESIGN.md interprets it) always; rgba (4n), intensity, cls,
+                                scalar (n) when attrs says so */
     float *F;                /* n, uncertainty eq. 21 normalised to [0,1] */
-    uint8_t *rgba;           /* 4n */
-    float *intensity;        /* n */
-    uint8_t *cls;            /* n */
-    float *scalar;           /* n */
     pc_batch *batches;       /* nbatches */
     uint64_t nbatches;
     /* summary */
