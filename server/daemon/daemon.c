@@ -41,8 +41,22 @@ static void usage(FILE *f)
             "                       of a random challenge); F must not be accessible by group or others\n"
             "  --preload NAME ...   prepare and upload these clouds at start-up (names up to the next\n"
             "                       option; --preload may also be repeated)\n"
-            "  --max-clients N      connections served at once (default 64)\n"
+            "  --max-clients N      authenticated connections served at once (default 64)\n"
+            "  --max-unauth N       connections not yet authenticated, counted apart from\n"
+            "                       --max-clients (default 64); when full, a new connection replaces\n"
+            "                       the oldest of them\n"
+            "  --max-per-addr N     connections from one client address (default 32)\n"
             "  --handshake-timeout S  seconds a client has to authenticate (default 10)\n"
+            "  --idle-timeout S     close an authenticated client silent this long with nothing of\n"
+            "                       its own in progress (default 300; 0: never)\n"
+            "  --read-timeout S     seconds a message may take to arrive once its first byte has\n"
+            "                       (default 30; 0: no limit)\n"
+            "  --write-timeout S    close a client whose output could not move for S seconds because\n"
+            "                       it does not read (default 30; 0: no limit)\n"
+            "  --auth-fail-delay MS  delay before a failed authentication is answered, doubling with\n"
+            "                       each failure from the same address up to 64x (default 250 for\n"
+            "                       non-loopback clients; given explicitly, loopback clients too;\n"
+            "                       0: none)\n"
             "  --gpu-memory SIZE    bytes of cloud buffers kept on the GPU (suffix K, M or G; default:\n"
             "                       3/4 of the device's memory, a quarter of RAM on a software\n"
             "                       renderer). Clouds no client has rendered for longest leave first\n"
@@ -75,7 +89,8 @@ static int parse_size(const char *s, uint64_t *out)
 static int parse_opts(int argc, char **argv, srv_opts *o)
 {
     enum { O_LISTEN = 1000, O_DATA, O_CACHE, O_BACKEND, O_TOKEN, O_PRELOAD, O_SHADERS, O_MAXC,
-           O_PORTFILE, O_HS, O_GPUMEM, O_HELP };
+           O_PORTFILE, O_HS, O_GPUMEM, O_IDLE, O_RDTO, O_WRTO, O_UNAUTH, O_PERADDR, O_AUTHDELAY,
+           O_HELP };
     static const struct option lo[] = {
         {"listen", required_argument, 0, O_LISTEN},   {"data", required_argument, 0, O_DATA},
         {"cache", required_argument, 0, O_CACHE},     {"backend", required_argument, 0, O_BACKEND},
@@ -83,12 +98,22 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
         {"shader-dir", required_argument, 0, O_SHADERS}, {"max-clients", required_argument, 0, O_MAXC},
         {"port-file", required_argument, 0, O_PORTFILE}, {"handshake-timeout", required_argument, 0, O_HS},
         {"gpu-memory", required_argument, 0, O_GPUMEM},
+        {"idle-timeout", required_argument, 0, O_IDLE}, {"read-timeout", required_argument, 0, O_RDTO},
+        {"write-timeout", required_argument, 0, O_WRTO}, {"max-unauth", required_argument, 0, O_UNAUTH},
+        {"max-per-addr", required_argument, 0, O_PERADDR},
+        {"auth-fail-delay", required_argument, 0, O_AUTHDELAY},
         {"help", no_argument, 0, O_HELP},             {0, 0, 0, 0},
     };
     snprintf(o->host, sizeof o->host, "127.0.0.1");
     o->port = PROTO_DEFAULT_PORT;
     o->max_clients = 64;
     o->handshake_ms = 10000;
+    o->idle_ms = 300000;
+    o->read_ms = 30000;
+    o->write_ms = 30000;
+    o->max_unauth = 64;
+    o->max_per_addr = 32;
+    o->auth_delay_ms = 250;
     o->shutdown_ms = 5000;
     optind = 1;
     opterr = 0;
@@ -144,17 +169,38 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
             break;
         case O_MAXC:
         case O_HS:
+        case O_IDLE:
+        case O_RDTO:
+        case O_WRTO:
+        case O_UNAUTH:
+        case O_PERADDR:
+        case O_AUTHDELAY: {
+            /* One table of the numeric options: name, range, and where the value goes (seconds
+             * become milliseconds). */
+            const char *name = "max-clients";
+            long vmin = 1, hi = 4096, scale = 1;
+            int *dst = &o->max_clients;
+            switch (c) {
+            case O_HS: name = "handshake-timeout"; dst = &o->handshake_ms; hi = 3600; scale = 1000; break;
+            case O_IDLE: name = "idle-timeout"; dst = &o->idle_ms; vmin = 0; hi = 86400; scale = 1000; break;
+            case O_RDTO: name = "read-timeout"; dst = &o->read_ms; vmin = 0; hi = 3600; scale = 1000; break;
+            case O_WRTO: name = "write-timeout"; dst = &o->write_ms; vmin = 0; hi = 3600; scale = 1000; break;
+            case O_UNAUTH: name = "max-unauth"; dst = &o->max_unauth; break;
+            case O_PERADDR: name = "max-per-addr"; dst = &o->max_per_addr; hi = 8192; break;
+            case O_AUTHDELAY: name = "auth-fail-delay"; dst = &o->auth_delay_ms; vmin = 0; hi = 60000; break;
+            default: break;
+            }
             errno = 0;
             v = strtol(optarg, &end, 10);
-            if (*end || errno || v < 1 || v > (c == O_MAXC ? 4096 : 3600)) {
-                fprintf(stderr, "splatd: --%s '%s': expected a number in 1..%d\n",
-                        c == O_MAXC ? "max-clients" : "handshake-timeout", optarg,
-                        c == O_MAXC ? 4096 : 3600);
+            if (*end || end == optarg || errno || v < vmin || v > hi) {
+                fprintf(stderr, "splatd: --%s '%s': expected a number in %ld..%ld\n", name,
+                        optarg, vmin, hi);
                 return -1;
             }
-            if (c == O_MAXC) o->max_clients = (int)v;
-            else o->handshake_ms = (int)v * 1000;
+            *dst = (int)(v * scale);
+            if (c == O_AUTHDELAY) o->auth_delay_local = 1;
             break;
+        }
         case 'h':
         case O_HELP: usage(stdout); return 1;
         default:
@@ -245,23 +291,184 @@ static void refuse(int fd, int code, const char *text)
     close(fd);
 }
 
+/* addr_host: the address of "HOST:PORT" or "[V6]:PORT" without its port (and brackets), for
+ * per-address counting: a client's reconnections differ only in the port. */
+static void addr_host(const char *addr, char *out, size_t len)
+{
+    const char *colon = strrchr(addr, ':');
+    size_t n = colon ? (size_t)(colon - addr) : strlen(addr);
+    if (n >= 2 && addr[0] == '[' && addr[n - 1] == ']') {
+        addr++;
+        n -= 2;
+    }
+    if (n >= len) n = len - 1;
+    memcpy(out, addr, n);
+    out[n] = 0;
+}
+
+static int same_host(const sess *s, const char *host)
+{
+    char h[NET_ADDR_LEN];
+    addr_host(s->addr, h, sizeof h);
+    return strcmp(h, host) == 0;
+}
+
+/* srv_census: what the session table holds, for admitting a connection from host. */
+typedef struct srv_census {
+    int authed, unauth;   /* live sessions past / before authentication */
+    int from_host;        /* live sessions from host */
+    sess *oldest_unauth;  /* the unauthenticated session connected first, or NULL */
+    sess *oldest_unauth_host; /* the same among those from host */
+} srv_census;
+
+/* older: whether a connected before b (ids break ties of the millisecond clock). */
+static int older(const sess *a, const sess *b)
+{
+    return !b || a->t_connect_ms < b->t_connect_ms ||
+           (a->t_connect_ms == b->t_connect_ms && a->id < b->id);
+}
+
+/* census: one pass over the table (O(slots) per accepted connection, bounded by
+ * --max-clients + --max-unauth; simpler than keeping counts in step with every state change). */
+static void census(const srv *sv, const char *host, srv_census *c)
+{
+    memset(c, 0, sizeof *c);
+    for (int i = 0; i < sv->nslots; i++) {
+        sess *s = sv->sessions[i];
+        if (!s || s->dead) continue;
+        if (s->authed) {
+            c->authed++;
+        } else {
+            c->unauth++;
+            if (older(s, c->oldest_unauth)) c->oldest_unauth = s;
+        }
+        if (host && same_host(s, host)) {
+            c->from_host++;
+            if (!s->authed && older(s, c->oldest_unauth_host)) c->oldest_unauth_host = s;
+        }
+    }
+}
+
+/* answer_and_close: queues ERROR code (request seq) on s and closes it once written. */
+static void answer_and_close(srv *sv, sess *s, uint32_t seq, int code, const char *text)
+{
+    srv_log(sv, s, "error %s (seq %u): %s", proto_err_name(code), seq, text);
+    proto_buf b = {.version = s->version};
+    if (proto_enc_error(&b, seq, (uint32_t)code, text) == 0) sess_send(s, &b);
+    else proto_buf_free(&b);
+    if (s->dead) return;
+    s->close_after = 1;
+    snprintf(s->close_reason, sizeof s->close_reason, "after error %s", proto_err_name(code));
+    sess_kick(s);
+}
+
+int srv_admit(srv *sv, sess *s, uint32_t seq)
+{
+    srv_census c;
+    census(sv, NULL, &c);
+    if (c.authed >= sv->o.max_clients) {
+        srv_log(sv, s, "refused: %d clients already connected (--max-clients)", c.authed);
+        answer_and_close(sv, s, seq, PROTO_E_BUSY, "too many clients; retry later");
+        return 0;
+    }
+    sess_set_authed(s);
+    return 1;
+}
+
+/* authfail_entry: the failure record of host, made (replacing the stalest) when missing. */
+static srv_authfail *authfail_entry(srv *sv, const char *host, uint64_t now)
+{
+    srv_authfail *stalest = &sv->authfail[0];
+    for (int i = 0; i < SRV_AUTHFAIL_SLOTS; i++) {
+        srv_authfail *a = &sv->authfail[i];
+        if (a->fails && !strcmp(a->host, host)) {
+            if (now - a->last_ms > SRV_AUTHFAIL_FORGET_MS) a->fails = 0;
+            return a;
+        }
+        if (!a->fails || a->last_ms < stalest->last_ms) stalest = a;
+        if (!stalest->fails) break;
+    }
+    memset(stalest, 0, sizeof *stalest);
+    snprintf(stalest->host, sizeof stalest->host, "%s", host);
+    return stalest;
+}
+
+static void on_auth_fail_due(ev_loop *l, ev_timer *t, void *data)
+{
+    (void)l; (void)t;
+    sess *s = data;
+    answer_and_close(s->owner, s, s->fail_seq, PROTO_E_AUTH_FAILED,
+                     s->fail_noproof ? "no authentication proof; the server needs one"
+                                     : "wrong authentication proof");
+}
+
+void srv_auth_failed(srv *sv, sess *s, uint32_t seq, int noproof)
+{
+    char host[NET_ADDR_LEN];
+    addr_host(s->addr, host, sizeof host);
+    uint64_t now = ev_now_ms();
+    srv_authfail *a = authfail_entry(sv, host, now);
+    a->fails++;
+    a->last_ms = now;
+    uint32_t shift = a->fails - 1 < SRV_AUTHFAIL_MAX_SHIFT ? a->fails - 1 : SRV_AUTHFAIL_MAX_SHIFT;
+    uint64_t delay = (uint64_t)sv->o.auth_delay_ms << shift;
+    /* The delay slows down guessing a token over the network. By default it spares loopback
+     * clients, which local tools and test suites use to try many proofs in a row; an explicit
+     * --auth-fail-delay covers them as well. */
+    if (!sv->o.auth_delay_local && net_host_is_loopback(host)) delay = 0;
+    srv_log(sv, s, "authentication failed (%u from this address in a row); answering in %llu ms",
+            a->fails, (unsigned long long)delay);
+    /* Nothing more is read from this client; the connection keeps its unauthenticated slot
+     * (and its place in --max-per-addr) until the answer, so an address cannot guess faster
+     * than its connections allow. The handshake timer becomes the delay. */
+    s->fail_seq = seq;
+    s->fail_noproof = noproof;
+    s->paused = 1;
+    ev_timer_start(sv->loop, &s->hs_timer, delay, on_auth_fail_due, s);
+}
+
 static void on_accept(ev_loop *l, int fd, int mask, void *data)
 {
     (void)l; (void)mask;
     srv *sv = data;
     for (int n = 0; n < 16 && !sv->stopping; n++) {
-        char addr[NET_ADDR_LEN];
+        char addr[NET_ADDR_LEN], host[NET_ADDR_LEN];
         int c = net_accept(fd, addr, sizeof addr);
         if (c == -EAGAIN) return;
         if (c < 0) {
             srv_log(sv, NULL, "accept failed: %s", strerror(-c));
             return;
         }
+        addr_host(addr, host, sizeof host);
+        srv_census cs;
+        census(sv, host, &cs);
+        if (cs.from_host >= sv->o.max_per_addr) {
+            srv_log(sv, NULL, "%s refused: %d connections from %s already (--max-per-addr)", addr,
+                    cs.from_host, host);
+            refuse(c, PROTO_E_BUSY, "too many connections from your address; retry later");
+            continue;
+        }
+        if (cs.authed >= sv->o.max_clients) {
+            srv_log(sv, NULL, "%s refused: %d clients already connected (--max-clients)", addr, cs.authed);
+            refuse(c, PROTO_E_BUSY, "too many clients; retry later");
+            continue;
+        }
+        if (cs.unauth >= sv->o.max_unauth && cs.oldest_unauth) {
+            /* The unauthenticated pool is full: one of it makes room (refusing the newcomer, as
+             * a plain cap would, lets a flood of idle sockets lock everyone out). An address
+             * competes with itself first: its own oldest unauthenticated connection goes, so a
+             * reconnecting flood from one address churns through its own sockets and never
+             * evicts another client mid-handshake; a newcomer from an address with none takes
+             * the oldest of the pool. Its slot is freed at once for the newcomer. */
+            sess *victim = cs.oldest_unauth_host ? cs.oldest_unauth_host : cs.oldest_unauth;
+            sess_close(victim, "unauthenticated, dropped for a newer connection (--max-unauth)");
+            free_dead(sv);
+        }
         int idx = -1;
-        for (int i = 0; i < sv->o.max_clients; i++)
+        for (int i = 0; i < sv->nslots; i++)
             if (!sv->sessions[i]) { idx = i; break; }
         if (idx < 0) {
-            srv_log(sv, NULL, "%s refused: %d clients already connected (--max-clients)", addr, sv->nsess);
+            srv_log(sv, NULL, "%s refused: no free connection slot", addr);
             refuse(c, PROTO_E_BUSY, "too many clients; retry later");
             continue;
         }
@@ -276,6 +483,7 @@ static void on_accept(ev_loop *l, int fd, int mask, void *data)
             continue;
         }
         s->version = PROTO_VERSION;
+        s->lim = &sv->lim;
         sv->sessions[idx] = s;
         sv->nsess++;
         srv_log(sv, s, "connected");
@@ -305,7 +513,7 @@ static void begin_shutdown(srv *sv, const char *why)
         sv->lfd = -1;
     }
     rt_drop_requests(sv->rt);
-    for (int i = 0; i < sv->o.max_clients; i++) {
+    for (int i = 0; i < sv->nslots; i++) {
         sess *s = sv->sessions[i];
         if (!s || s->dead) continue;
         s->stream = 0;
@@ -391,8 +599,13 @@ static int start(srv *sv)
     if (getrlimit(RLIMIT_NOFILE, &rl) == 0 && rl.rlim_cur != RLIM_INFINITY && rl.rlim_cur < 65536)
         max_fds = (int)rl.rlim_cur > max_fds ? (int)rl.rlim_cur : max_fds;
     sv->loop = ev_create(max_fds, &err);
-    sv->sessions = calloc((size_t)sv->o.max_clients, sizeof *sv->sessions);
-    sv->gens = calloc((size_t)sv->o.max_clients, sizeof *sv->gens);
+    /* Authenticated and unauthenticated connections have separate caps, so the table holds
+     * both; ids keep the slot in 16 bits (8192 at most here). */
+    sv->nslots = sv->o.max_clients + sv->o.max_unauth;
+    sv->lim = (sess_limits){.idle_ms = (uint32_t)sv->o.idle_ms, .read_ms = (uint32_t)sv->o.read_ms,
+                            .write_ms = (uint32_t)sv->o.write_ms};
+    sv->sessions = calloc((size_t)sv->nslots, sizeof *sv->sessions);
+    sv->gens = calloc((size_t)sv->nslots, sizeof *sv->gens);
     if (!sv->loop || !sv->sessions || !sv->gens) {
         fprintf(stderr, "splatd: %s\n", sv->loop ? "out of memory" : err.msg);
         return 1;
@@ -401,7 +614,7 @@ static int start(srv *sv)
     rt_desc rd = {
         .rnd = {.backend = sv->o.backend, .shader_dir = sv->o.shader_dir,
                 .max_width = sv->max_w, .max_height = sv->max_h, .gpu_memory = sv->o.gpu_memory},
-        .max_clients = sv->o.max_clients, .cache_dir = sv->o.cache_dir,
+        .max_clients = sv->nslots, .cache_dir = sv->o.cache_dir,
         .pack = srv_pack_frame, .pack_user = sv,
     };
     sv->rt = rt_create(&rd, sv->loop, &err);
@@ -447,7 +660,7 @@ static int start(srv *sv)
  * are, and the process exits without waiting for it. */
 static int teardown(srv *sv)
 {
-    for (int i = 0; sv->sessions && i < sv->o.max_clients; i++)
+    for (int i = 0; sv->sessions && i < sv->nslots; i++)
         if (sv->sessions[i] && !sv->sessions[i]->dead) sess_close(sv->sessions[i], "server stopped");
     if (sv->sessions) free_dead(sv);
     if (rt_stop_for_exit(sv->rt)) {

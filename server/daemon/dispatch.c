@@ -38,7 +38,7 @@ void srv_log(const srv *sv, const sess *s, const char *fmt, ...)
 sess *srv_lookup(srv *sv, uint32_t id)
 {
     uint32_t i = id & 0xffffu;
-    if (i >= (uint32_t)sv->o.max_clients) return NULL;
+    if (i >= (uint32_t)sv->nslots) return NULL;
     sess *s = sv->sessions[i];
     return (s && s->id == id && !s->dead) ? s : NULL;
 }
@@ -243,24 +243,18 @@ static void on_hello(srv *sv, sess *s, const proto_msg *m)
     if (!s->hello_seen) {
         s->hello_seen = 1;
         s->version = (uint16_t)v;
-        if (sv->token.len == 0) {
-            s->authed = 1;
-        } else {
+        if (sv->token.len != 0) {
             /* The first HELLO only learns the challenge (PROTOCOL.md 4): answer unauthenticated. */
             send_welcome(sv, s, m->h.seq);
             return;
         }
     } else if (h.proof_len != PROTO_AUTH_LEN ||
                !auth_verify(&sv->token, s->challenge, h.proof, h.proof_len)) {
-        send_error(sv, s, m->h.seq, PROTO_E_AUTH_FAILED,
-                   h.proof_len ? "wrong authentication proof" : "no authentication proof; the server needs one");
+        /* Answered after a delay growing per address (daemon.c), not at once. */
+        srv_auth_failed(sv, s, m->h.seq, h.proof_len == 0);
         return;
-    } else {
-        s->authed = 1;
     }
-    s->dec.preauth = 0;
-    s->dec.version = s->version;
-    ev_timer_stop(sv->loop, &s->hs_timer);
+    if (!srv_admit(sv, s, m->h.seq)) return;
     srv_log(sv, s, "hello from '%s', protocol %u%s", s->client_name, s->version,
             sv->token.len ? ", authenticated" : "");
     send_welcome(sv, s, m->h.seq);

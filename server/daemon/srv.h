@@ -25,6 +25,13 @@ typedef struct srv_opts {
     int npreload;
     int max_clients;             /* default 64 */
     int handshake_ms;            /* default 10000 */
+    int idle_ms;                 /* --idle-timeout; default 300000; 0: none */
+    int read_ms;                 /* --read-timeout; default 30000; 0: none */
+    int write_ms;                /* --write-timeout; default 30000; 0: none */
+    int max_unauth;              /* --max-unauth: connections not yet authenticated; default 64 */
+    int max_per_addr;            /* --max-per-addr: connections from one address; default 32 */
+    int auth_delay_ms;           /* --auth-fail-delay: first failure's delay; default 250 */
+    int auth_delay_local;        /* --auth-fail-delay given: loopback clients are delayed too */
     int shutdown_ms;             /* default 5000: how long SIGTERM waits for frames in flight */
     uint64_t gpu_memory;         /* --gpu-memory; default 0: the renderer sizes it */
 } srv_opts;
@@ -47,6 +54,21 @@ typedef struct srv_cloud {
 
 enum { SRV_CLOUD_FREE = 0, SRV_CLOUD_LOADING, SRV_CLOUD_READY };
 
+/* Authentication failures of one client address (the address without its port), for the
+ * growing delay before an AUTH_FAILED answer. A fixed table: when full, the entry whose last
+ * failure is oldest is reused, so memory stays bounded whatever the number of addresses. */
+typedef struct srv_authfail {
+    char host[NET_ADDR_LEN];
+    uint32_t fails;
+    uint64_t last_ms;
+} srv_authfail;
+
+enum {
+    SRV_AUTHFAIL_SLOTS = 256,
+    SRV_AUTHFAIL_FORGET_MS = 10 * 60 * 1000, /* failures forgotten after 10 quiet minutes */
+    SRV_AUTHFAIL_MAX_SHIFT = 6,              /* the delay doubles up to 64x the first one */
+};
+
 typedef struct srv {
     srv_opts o;
     ev_loop *loop;
@@ -54,7 +76,10 @@ typedef struct srv {
     auth_token token;
     int lfd, sigfd;
     int bound_port;
-    sess **sessions;             /* max_clients slots */
+    sess **sessions;             /* max_clients + max_unauth slots */
+    int nslots;
+    sess_limits lim;             /* the deadlines every session gets (from o) */
+    srv_authfail authfail[SRV_AUTHFAIL_SLOTS];
     uint16_t *gens;
     int nsess;
     sess *dead;                  /* closed sessions, freed before the loop sleeps */
@@ -68,6 +93,14 @@ typedef struct srv {
 
 /* srv_log: one line on stderr, "splatd: ADDR message", ADDR from s when not NULL. */
 void srv_log(const srv *sv, const sess *s, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+
+/* srv_admit: s has just authenticated (a HELLO without a token, or with the right proof):
+ * admits it under --max-clients (sess_set_authed) and returns 1; or answers BUSY to request
+ * seq, closes it once that is written and returns 0. */
+int srv_admit(srv *sv, sess *s, uint32_t seq);
+/* srv_auth_failed: s sent a wrong proof (or none) in HELLO seq: stops reading it and answers
+ * AUTH_FAILED (then closes) after a delay that doubles with each failure from its address. */
+void srv_auth_failed(srv *sv, sess *s, uint32_t seq, int noproof);
 
 /* srv_handle: sess_ops.on_message: one decoded message of s (owner = the srv). */
 void srv_handle(void *owner, sess *s, const proto_msg *m);

@@ -28,7 +28,11 @@ sess *sess_new(uint32_t id, int fd, const char *addr, ev_loop *loop, const sess_
     sp_params_defaults(&s->params);
     ev_timer_init(&s->hs_timer);
     ev_timer_init(&s->fps_timer);
+    ev_timer_init(&s->idle_timer);
+    ev_timer_init(&s->rd_timer);
+    ev_timer_init(&s->wr_timer);
     s->t_connect_ms = ev_now_ms();
+    s->last_io_ms = s->t_connect_ms;
     return s;
 }
 
@@ -199,7 +203,75 @@ int sess_flush(sess *s, void (*release)(void *user, uint32_t id), void *user)
     return ready ? 0 : 1;
 }
 
-/* ---- the connection: reading, decoding, interest, closing ---- */
+/* ---- the connection: reading, decoding, interest, deadlines, closing ---- */
+
+int sess_busy(const sess *s)
+{
+    return s->opening >= 0 || s->frames_queued > 0 || sess_has_output(s);
+}
+
+static void on_idle(ev_loop *l, ev_timer *t, void *data)
+{
+    (void)t;
+    sess *s = data;
+    uint64_t now = ev_now_ms(), quiet = now - s->last_io_ms, lim = s->lim->idle_ms;
+    if (sess_busy(s)) quiet = 0; /* waiting on the server is not the client's silence */
+    if (quiet < lim) {
+        /* Re-armed lazily here rather than on every byte: one heap operation per idle period
+         * instead of one per read. */
+        ev_timer_start(l, &s->idle_timer, lim - quiet, on_idle, s);
+        return;
+    }
+    char why[96];
+    snprintf(why, sizeof why, "idle for %u s (--idle-timeout)", (unsigned)(lim / 1000));
+    sess_close(s, why);
+}
+
+static void on_read_deadline(ev_loop *l, ev_timer *t, void *data)
+{
+    (void)l; (void)t;
+    sess *s = data;
+    char why[128];
+    snprintf(why, sizeof why, "a message still incomplete %u s after its first byte (--read-timeout)",
+             (unsigned)(s->lim->read_ms / 1000));
+    sess_close(s, why);
+}
+
+static void on_write_deadline(ev_loop *l, ev_timer *t, void *data)
+{
+    (void)l; (void)t;
+    sess *s = data;
+    char why[128];
+    snprintf(why, sizeof why, "no output could be written for %u s: the client does not read "
+             "(--write-timeout)", (unsigned)(s->lim->write_ms / 1000));
+    sess_close(s, why);
+}
+
+/* read_deadline: arms the message deadline when a message has begun (the decoder holds part of
+ * a header or payload) and the session is reading, and disarms it otherwise. The deadline runs
+ * from the message's first byte, not between reads, so one byte a second cannot keep it
+ * alive. */
+static void read_deadline(sess *s)
+{
+    if (!s->lim || !s->lim->read_ms || s->dead) return;
+    /* hdr_have is the decoder's count of header bytes of the message in progress: 0 exactly at
+     * a message boundary (proto_decode resets it when a message completes). */
+    int mid = s->dec.hdr_have > 0 && !s->paused && !s->close_after;
+    if (!mid) ev_timer_stop(s->loop, &s->rd_timer);
+    else if (!ev_timer_armed(&s->rd_timer))
+        ev_timer_start(s->loop, &s->rd_timer, s->lim->read_ms, on_read_deadline, s);
+}
+
+void sess_set_authed(sess *s)
+{
+    s->authed = 1;
+    s->dec.preauth = 0;
+    s->dec.version = s->version;
+    ev_timer_stop(s->loop, &s->hs_timer);
+    s->last_io_ms = ev_now_ms();
+    if (s->lim && s->lim->idle_ms)
+        ev_timer_start(s->loop, &s->idle_timer, s->lim->idle_ms, on_idle, s);
+}
 
 static void on_io(ev_loop *l, int fd, int mask, void *data);
 
@@ -224,7 +296,10 @@ static void release_cb(void *user, uint32_t id)
 void sess_kick(sess *s)
 {
     if (s->dead) return;
+    uint64_t before = s->bytes_out;
     int rc = sess_flush(s, release_cb, s);
+    int progress = s->bytes_out != before;
+    if (progress) s->last_io_ms = ev_now_ms();
     if (rc < 0) {
         char r[96];
         snprintf(r, sizeof r, "write failed: %s", strerror(-rc));
@@ -234,6 +309,13 @@ void sess_kick(sess *s)
     if (s->close_after && !sess_has_output(s)) {
         sess_close(s, s->close_reason[0] ? s->close_reason : "closing");
         return;
+    }
+    /* The write deadline runs while output waits on a full socket and restarts whenever some
+     * of it leaves (nginx send_timeout: between two successive writes). */
+    if (s->lim && s->lim->write_ms) {
+        if (rc == 1) ev_timer_stop(s->loop, &s->wr_timer);
+        else if (progress || !ev_timer_armed(&s->wr_timer))
+            ev_timer_start(s->loop, &s->wr_timer, s->lim->write_ms, on_write_deadline, s);
     }
     int blocked = s->stream_frame != NULL;
     if (blocked != s->stream_blocked) {
@@ -267,6 +349,9 @@ void sess_close(sess *s, const char *reason)
     s->fd = -1;
     ev_timer_stop(s->loop, &s->hs_timer);
     ev_timer_stop(s->loop, &s->fps_timer);
+    ev_timer_stop(s->loop, &s->idle_timer);
+    ev_timer_stop(s->loop, &s->rd_timer);
+    ev_timer_stop(s->loop, &s->wr_timer);
     s->ops->on_close(s->owner, s, reason);
 }
 
@@ -287,6 +372,7 @@ void sess_input(sess *s)
         if (rc == PROTO_ONE_MSG) s->ops->on_message(s->owner, s, &m);
     }
     if (s->in_off == s->in_len) s->in_off = s->in_len = 0;
+    read_deadline(s);
     sess_kick(s);
 }
 
@@ -315,6 +401,7 @@ static void on_io(ev_loop *l, int fd, int mask, void *data)
             return;
         }
         if (r > 0) {
+            s->last_io_ms = ev_now_ms();
             s->in_off = 0;
             s->in_len = (size_t)r;
             sess_input(s);

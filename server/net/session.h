@@ -29,6 +29,20 @@ enum {
     SESS_IN_CHUNK = 64 * 1024,  /* bytes read per wakeup (STYLE.md 8) */
 };
 
+/* The connection deadlines (redis `timeout`, nginx client_body_timeout / send_timeout), in
+ * milliseconds; 0 turns one off. The owner keeps one copy for all its sessions (sess.lim).
+ * idle_ms: an authenticated session that neither sends nor receives a byte for this long, with
+ *   no request of its own in progress (an OPEN preparing, frames owed), is closed.
+ * read_ms: once the first byte of a message arrived, the whole message must arrive within
+ *   this; a client trickling a message (slowloris) cannot hold its slot.
+ * write_ms: while output waits on a full socket, some of it must leave within this; a client
+ *   that stops reading is closed rather than keeping its queue forever. */
+typedef struct sess_limits {
+    uint32_t idle_ms;
+    uint32_t read_ms;
+    uint32_t write_ms;
+} sess_limits;
+
 typedef struct sess_item {
     int is_frame;               /* 1: a RENDER's frame placeholder */
     int filled;                 /* bytes present (always 1 for non-frames) */
@@ -78,7 +92,14 @@ struct sess {
     int hello_seen, authed;
     uint16_t version;
     uint8_t challenge[AUTH_CHALLENGE_LEN];
-    ev_timer hs_timer;          /* handshake timeout */
+    ev_timer hs_timer;          /* handshake timeout; also the delay before an AUTH_FAILED */
+    const sess_limits *lim;     /* the owner's deadlines; NULL: none */
+    ev_timer idle_timer;        /* armed by sess_set_authed; re-armed while there is activity */
+    ev_timer rd_timer;          /* armed while a message is partly received */
+    ev_timer wr_timer;          /* armed while output waits on a full socket */
+    uint64_t last_io_ms;        /* the last byte read or written, for the idle deadline */
+    uint32_t fail_seq;          /* the HELLO whose wrong proof is answered after the delay */
+    int fail_noproof;           /* that HELLO carried no proof at all */
     int close_after;            /* BYE or a fatal error: flush, then close */
     int dead;                   /* closed; freed at the next safe point */
     char close_reason[160];
@@ -119,6 +140,13 @@ struct sess {
  * Returns NULL when out of memory. Start it with sess_kick. */
 sess *sess_new(uint32_t id, int fd, const char *addr, ev_loop *loop, const sess_ops *ops,
                void *owner);
+
+/* sess_set_authed: the session passed authentication: requests after HELLO are decoded with
+ * the full limits, and the idle deadline starts. */
+void sess_set_authed(sess *s);
+/* sess_busy: 1 while the session waits on the server (an OPEN preparing, frames owed, output
+ * queued), so silence from the client is not idleness. */
+int sess_busy(const sess *s);
 
 /* sess_input: decodes and hands over the buffered input until it runs out, the session
  * pauses (paused = 1, e.g. an OPEN waiting for its cloud) or closes; then sess_kick. Call it

@@ -1,0 +1,657 @@
+/* test_hardening.c — the daemon under hostile or broken clients and files (project issue 14),
+ * through the real binaries:
+ *
+ *  - deadlines and admission: 64 sockets that stay silent, stop half-way through a message or
+ *    trickle one byte a second (before and after HELLO) while a real client connects, renders
+ *    and leaves, its latency compared with the same client's on a quiet daemon; the same with
+ *    a token set and 64 sockets that keep reconnecting and failing to authenticate; the delay
+ *    of failed authentications growing per address; a client that stops reading is dropped
+ *    after --write-timeout.
+ *
+ * Attackers connect from other loopback addresses (127.0.0.2 and up, which Linux routes to
+ * the loopback device) so that the per-address limit sees them apart from the real client at
+ * 127.0.0.1. Deadlines are configured short (1-2 s) to keep the file fast; every wait is
+ * bounded. The figures measured are printed on stdout for README's Security section. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <arpa/inet.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <poll.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <openssl/evp.h>
+#include <openssl/hmac.h>
+
+#include "common/daemonproc.h"
+#include "common/testutil.h"
+#include "proto.h"
+
+static const char TOKEN[] = "correct horse battery staple";
+
+typedef struct fx {
+    char root[512];
+    char data[600], cache[600], token[600];
+    tu_daemon d;
+} fx;
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+static int setup(void **state)
+{
+    fx *f = calloc(1, sizeof *f);
+    if (!f || !tu_tmpdir(f->root, sizeof f->root)) return -1;
+    snprintf(f->data, sizeof f->data, "%s/data", f->root);
+    snprintf(f->cache, sizeof f->cache, "%s/cache", f->root);
+    snprintf(f->token, sizeof f->token, "%s/token", f->root);
+    if (mkdir(f->data, 0755) != 0 || mkdir(f->cache, 0700) != 0) return -1;
+    char src[600], dst[700];
+    tu_data("bun000.ply", src, sizeof src);
+    snprintf(dst, sizeof dst, "%s/bunny.ply", f->data);
+    if (tu_copy_file(src, dst) != 0) return -1;
+    if (tu_write_file(f->token, TOKEN, strlen(TOKEN)) != 0 || chmod(f->token, 0600) != 0) return -1;
+    signal(SIGPIPE, SIG_IGN);
+    *state = f;
+    return 0;
+}
+
+static int teardown(void **state)
+{
+    fx *f = *state;
+    if (f->d.pid > 0) tu_daemon_stop(&f->d);
+    /* HARDENING_KEEP=1 keeps the directory (the daemon's logs) for a look after a run. */
+    if (!getenv("HARDENING_KEEP")) tu_rm_rf(f->root);
+    else printf("kept %s\n", f->root);
+    free(f);
+    return 0;
+}
+
+/* log_count: occurrences of needle in the daemon's log. */
+static int log_count(const tu_daemon *d, const char *needle)
+{
+    size_t len;
+    char *log = (char *)tu_read_file(d->log, &len);
+    if (!log) return 0;
+    int n = 0;
+    for (const char *p = log; (p = strstr(p, needle)); p += strlen(needle)) n++;
+    free(log);
+    return n;
+}
+
+/* ---- sockets ---- */
+
+/* connect_from: a TCP connection from 127.0.0.<src> to 127.0.0.1:port; blocking unless
+ * nonblock. Returns the fd or -1. */
+static int connect_from(int src, int port, int nonblock)
+{
+    int fd = socket(AF_INET, SOCK_STREAM | (nonblock ? SOCK_NONBLOCK : 0), 0);
+    if (fd < 0) return -1;
+    struct sockaddr_in a = {.sin_family = AF_INET};
+    a.sin_addr.s_addr = htonl(0x7f000000u | (uint32_t)src);
+    if (bind(fd, (struct sockaddr *)&a, sizeof a) != 0) { close(fd); return -1; }
+    int one = 1;
+    setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    struct timeval tv = {10, 0};
+    setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    a.sin_port = htons((uint16_t)port);
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    if (connect(fd, (struct sockaddr *)&a, sizeof a) != 0 && errno != EINPROGRESS) {
+        close(fd);
+        return -1;
+    }
+    return fd;
+}
+
+static int write_all(int fd, const void *p, size_t n)
+{
+    const uint8_t *b = p;
+    while (n) {
+        ssize_t w = send(fd, b, n, MSG_NOSIGNAL);
+        if (w < 0 && errno == EINTR) continue;
+        if (w <= 0) return -1;
+        b += w;
+        n -= (size_t)w;
+    }
+    return 0;
+}
+
+static int read_all(int fd, void *p, size_t n)
+{
+    uint8_t *b = p;
+    while (n) {
+        ssize_t g = recv(fd, b, n, 0);
+        if (g < 0 && errno == EINTR) continue;
+        if (g <= 0) return -1;
+        b += g;
+        n -= (size_t)g;
+    }
+    return 0;
+}
+
+/* A message received by recv_msg. */
+typedef struct msg {
+    proto_header h;
+    uint8_t *pl;
+} msg;
+
+/* recv_msg: the next message into m (payload replaced); its type, or -1 on EOF/timeout. */
+static int recv_msg(int fd, msg *m)
+{
+    uint8_t h[PROTO_HEADER_LEN];
+    if (read_all(fd, h, sizeof h) != 0) return -1;
+    proto_get_header(h, &m->h);
+    if (m->h.magic != PROTO_MAGIC || m->h.len > PROTO_MAX_FRAME) return -1;
+    free(m->pl);
+    m->pl = malloc(m->h.len + 1u);
+    if (!m->pl || read_all(fd, m->pl, m->h.len) != 0) return -1;
+    return m->h.type;
+}
+
+/* recv_skip: the next message that is not PROGRESS. */
+static int recv_skip(int fd, msg *m)
+{
+    int t;
+    while ((t = recv_msg(fd, m)) == PROTO_MSG_PROGRESS) {}
+    return t;
+}
+
+/* error_code: the code of the ERROR in m, or -1. */
+static int error_code(const msg *m, char *text, size_t len)
+{
+    proto_errmsg em;
+    if (m->h.type != PROTO_MSG_ERROR || proto_parse_error(m->pl, m->h.len, &em, NULL) != 0) return -1;
+    if (text) snprintf(text, len, "%.200s", em.text);
+    return (int)em.code;
+}
+
+static int send_buf(int fd, proto_buf *b)
+{
+    int rc = write_all(fd, b->data, b->len);
+    proto_buf_free(b);
+    return rc;
+}
+
+/* hello_bytes: an encoded HELLO (with the proof when proof != NULL) in b. */
+static void hello_bytes(proto_buf *b, uint32_t seq, const uint8_t *proof)
+{
+    proto_hello h = {.min_version = 1, .max_version = 1};
+    snprintf(h.client, sizeof h.client, "test_hardening");
+    if (proof) {
+        h.proof_len = PROTO_AUTH_LEN;
+        memcpy(h.proof, proof, PROTO_AUTH_LEN);
+    }
+    assert_int_equal(proto_enc_hello(b, seq, &h), 0);
+}
+
+/* handshake: HELLO (and with a token, the proof of the challenge); 0 when authenticated. */
+static int handshake(int fd, int with_token, msg *m)
+{
+    proto_buf b = {0};
+    hello_bytes(&b, 1, NULL);
+    if (send_buf(fd, &b) != 0 || recv_msg(fd, m) != PROTO_MSG_WELCOME) return -1;
+    proto_welcome w;
+    if (proto_parse_welcome(m->pl, m->h.len, &w, NULL) != 0) return -1;
+    if (!with_token) return w.authenticated ? 0 : -1;
+    uint8_t mac[PROTO_AUTH_LEN];
+    unsigned int len = 0;
+    if (!HMAC(EVP_sha256(), TOKEN, (int)strlen(TOKEN), w.challenge, PROTO_AUTH_LEN, mac, &len))
+        return -1;
+    hello_bytes(&b, 2, mac);
+    if (send_buf(fd, &b) != 0 || recv_msg(fd, m) != PROTO_MSG_WELCOME) return -1;
+    if (proto_parse_welcome(m->pl, m->h.len, &w, NULL) != 0) return -1;
+    return w.authenticated ? 0 : -1;
+}
+
+/* legit_session: what a real client does: connects from 127.0.0.1, authenticates, opens the
+ * bunny, renders one 160x120 points frame and says BYE. Returns its wall time in seconds, or
+ * a negative value (after printing why) when any step failed. */
+static double legit_session(int port, int with_token)
+{
+    double t0 = now_s();
+    msg m = {0};
+    const char *why = NULL;
+    int fd = connect_from(1, port, 0);
+    proto_buf b = {0};
+    if (fd < 0) { why = "connect"; goto out; }
+    if (handshake(fd, with_token, &m) != 0) { why = "handshake"; goto out; }
+    assert_int_equal(proto_enc_open(&b, 3, "bunny"), 0);
+    if (send_buf(fd, &b) != 0 || recv_skip(fd, &m) != PROTO_MSG_INFO) { why = "OPEN"; goto out; }
+    proto_camera c = {.eye = {0.3, 0.2, 0.3}, .target = {0, 0.1, 0}, .up = {0, 1, 0},
+                      .fov_deg = 45, .width = 160, .height = 120};
+    sp_params p;
+    sp_params_defaults(&p);
+    char err[128];
+    assert_int_equal(sp_param_set_kv(&p, "pipeline=points", err, sizeof err), 0);
+    proto_param_rec rec;
+    proto_param_rec_from(&p, sp_param_find("pipeline"), &rec);
+    assert_int_equal(proto_enc_params(&b, 4, &rec, 1), 0);
+    assert_int_equal(proto_enc_camera(&b, 5, &c), 0);
+    assert_int_equal(proto_enc_empty(&b, PROTO_MSG_RENDER, 6), 0);
+    if (send_buf(fd, &b) != 0 || recv_msg(fd, &m) != PROTO_MSG_OK) { why = "PARAMS"; goto out; }
+    if (recv_msg(fd, &m) != PROTO_MSG_FRAME || m.h.seq != 6) { why = "RENDER"; goto out; }
+    assert_int_equal(proto_enc_empty(&b, PROTO_MSG_BYE, 7), 0);
+    if (send_buf(fd, &b) != 0) { why = "BYE"; goto out; }
+    uint8_t x;
+    if (recv(fd, &x, 1, 0) != 0) why = "close after BYE";
+out:
+    if (why) {
+        char text[256] = "";
+        int code = error_code(&m, text, sizeof text);
+        printf("legit client failed at %s (ERROR %s: %s)\n", why, code > 0 ? proto_err_name(code) : "-",
+               text);
+    }
+    if (fd >= 0) close(fd);
+    free(m.pl);
+    return why ? -1.0 : now_s() - t0;
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* legit_rounds: n legit sessions; fills the median and the maximum (seconds). Returns the
+ * number of sessions that failed (the caller asserts, after stopping any attacker thread). */
+static int legit_rounds(int port, int with_token, int n, double *median, double *max)
+{
+    double v[64];
+    int failed = 0, ok = 0;
+    for (int i = 0; i < n && i < 64; i++) {
+        double t = legit_session(port, with_token);
+        if (t < 0) failed++;
+        else v[ok++] = t;
+    }
+    if (ok) qsort(v, (size_t)ok, sizeof *v, cmp_double);
+    *median = ok ? v[ok / 2] : -1;
+    *max = ok ? v[ok - 1] : -1;
+    return failed;
+}
+
+/* ---- attackers: one thread driving 64 sockets with poll ---- */
+
+enum {
+    N_ATTACK = 64,
+    A_IDLE = 0,        /* connects and says nothing */
+    A_HALF,            /* sends 10 bytes of a HELLO header, then nothing */
+    A_SLOW,            /* sends a HELLO one byte a second */
+    A_AUTH_IDLE,       /* completes HELLO (no token), then nothing */
+    A_AUTH_HALF,       /* completes HELLO, then half a PING */
+    A_AUTH_SLOW,       /* completes HELLO, then a PING one byte a second */
+    A_KINDS,
+    A_BADPROOF = 100,  /* with a token: HELLO, a wrong proof, wait for the answer, reconnect */
+};
+
+typedef struct attacker {
+    int fd, kind, src;
+    int stage;              /* bytes of the scripted message sent so far */
+    double next_byte;       /* slow kinds: when the next byte goes */
+    double connected;       /* when it last connected: reconnects are paced to 50 a second */
+    uint8_t script[256];
+    size_t script_len;
+    uint8_t in[4096];
+    size_t in_len;
+} attacker;
+
+typedef struct attack {
+    int port;
+    int kinds;              /* A_KINDS: the six kinds in turn; A_BADPROOF: all bad proofs */
+    volatile int stop;
+    attacker a[N_ATTACK];
+    int closed[A_KINDS + 1];   /* closures seen by the server's doing, per kind */
+    int reconnects, refused;
+    pthread_t th;
+} attack;
+
+/* attacker_start: (re)connects a and sends what its kind sends at once. */
+static void attacker_start(attack *k, attacker *a)
+{
+    a->fd = connect_from(a->src, k->port, 0);
+    a->connected = now_s();
+    a->stage = 0;
+    a->in_len = 0;
+    a->next_byte = now_s() + 1.0;
+    proto_buf b = {0};
+    uint8_t ping[64];
+    proto_buf pb = {0};
+    proto_ping p = {.token = 7};
+    assert_int_equal(proto_enc_ping(&pb, 9, &p), 0);
+    assert_true(pb.len <= sizeof ping);
+    memcpy(ping, pb.data, pb.len);
+    size_t ping_len = pb.len;
+    proto_buf_free(&pb);
+    hello_bytes(&b, 1, NULL);
+    memcpy(a->script, b.data, b.len);
+    a->script_len = b.len;
+    if (a->fd < 0) { proto_buf_free(&b); return; }
+    switch (a->kind) {
+    case A_IDLE: break;
+    case A_HALF: write_all(a->fd, b.data, 10); break;
+    case A_SLOW: write_all(a->fd, b.data, 1); a->stage = 1; break;
+    case A_AUTH_IDLE: write_all(a->fd, b.data, b.len); break;
+    case A_AUTH_HALF:
+        write_all(a->fd, b.data, b.len);
+        write_all(a->fd, ping, 10);
+        break;
+    case A_AUTH_SLOW:
+        write_all(a->fd, b.data, b.len);
+        memcpy(a->script, ping, ping_len);
+        a->script_len = ping_len;
+        write_all(a->fd, ping, 1);
+        a->stage = 1;
+        break;
+    case A_BADPROOF: write_all(a->fd, b.data, b.len); break;
+    }
+    proto_buf_free(&b);
+    /* Non-blocking from here on: the thread only polls. */
+    if (a->fd >= 0) fcntl(a->fd, F_SETFL, fcntl(a->fd, F_GETFL) | O_NONBLOCK);
+}
+
+/* attacker_read: consumes what the server sent; returns 1 when the server closed. For the
+ * bad-proof kind, answers the first WELCOME with a wrong proof. */
+static int attacker_read(attack *k, attacker *a)
+{
+    for (;;) {
+        ssize_t g = recv(a->fd, a->in + a->in_len, sizeof a->in - a->in_len, 0);
+        if (g == 0) return 1;
+        if (g < 0) return errno == EAGAIN || errno == EWOULDBLOCK ? 0 : 1;
+        a->in_len += (size_t)g;
+        if (a->kind == A_BADPROOF && a->stage == 0 && a->in_len >= PROTO_HEADER_LEN) {
+            proto_header h;
+            proto_get_header(a->in, &h);
+            if (a->in_len >= PROTO_HEADER_LEN + h.len && h.type == PROTO_MSG_WELCOME) {
+                uint8_t wrong[PROTO_AUTH_LEN];
+                memset(wrong, 0x5a, sizeof wrong);
+                proto_buf b = {0};
+                hello_bytes(&b, 2, wrong);
+                write_all(a->fd, b.data, b.len);
+                proto_buf_free(&b);
+                a->stage = 1;
+            }
+        }
+        if (a->in_len == sizeof a->in) a->in_len = 0; /* only EOF matters from here */
+    }
+    (void)k;
+}
+
+static void *attack_main(void *p)
+{
+    attack *k = p;
+    while (!k->stop) {
+        struct pollfd pf[N_ATTACK];
+        for (int i = 0; i < N_ATTACK; i++) pf[i] = (struct pollfd){.fd = k->a[i].fd, .events = POLLIN};
+        poll(pf, N_ATTACK, 50);
+        double t = now_s();
+        for (int i = 0; i < N_ATTACK && !k->stop; i++) {
+            attacker *a = &k->a[i];
+            int closed = a->fd < 0;
+            if (!closed && (pf[i].revents & (POLLIN | POLLHUP | POLLERR))) closed = attacker_read(k, a);
+            if (!closed && (a->kind == A_SLOW || a->kind == A_AUTH_SLOW) && t >= a->next_byte &&
+                (size_t)a->stage < a->script_len) {
+                if (send(a->fd, a->script + a->stage, 1, MSG_NOSIGNAL) == 1) a->stage++;
+                a->next_byte = t + 1.0;
+            }
+            if (closed) {
+                if (a->fd >= 0) {
+                    /* An ERROR BUSY first (per-address or pool limits) is a refusal at the
+                     * door, not a deadline. */
+                    int busy = 0;
+                    proto_header h;
+                    if (a->in_len >= PROTO_HEADER_LEN) {
+                        proto_get_header(a->in, &h);
+                        msg em = {.h = h, .pl = a->in + PROTO_HEADER_LEN};
+                        busy = h.type == PROTO_MSG_ERROR && a->in_len >= PROTO_HEADER_LEN + h.len &&
+                               error_code(&em, NULL, 0) == PROTO_E_BUSY;
+                    }
+                    if (busy) k->refused++;
+                    else k->closed[a->kind == A_BADPROOF ? A_KINDS : a->kind]++;
+                    close(a->fd);
+                    a->fd = -1;
+                }
+                if (t - a->connected < 0.02) continue;
+                k->reconnects++;
+                attacker_start(k, a);
+            }
+        }
+    }
+    return NULL;
+}
+
+/* attack_begin: 64 attackers from 127.0.0.2-5 (16 each), kinds in turn. */
+static void attack_begin(attack *k, int port, int kinds)
+{
+    memset(k, 0, sizeof *k);
+    k->port = port;
+    k->kinds = kinds;
+    for (int i = 0; i < N_ATTACK; i++) {
+        attacker *a = &k->a[i];
+        a->kind = kinds == A_BADPROOF ? A_BADPROOF : i % A_KINDS;
+        a->src = 2 + i % 4;
+        attacker_start(k, a);
+        assert_true(a->fd >= 0);
+    }
+    assert_int_equal(pthread_create(&k->th, NULL, attack_main, k), 0);
+}
+
+static void attack_end(attack *k)
+{
+    k->stop = 1;
+    pthread_join(k->th, NULL);
+    for (int i = 0; i < N_ATTACK; i++)
+        if (k->a[i].fd >= 0) close(k->a[i].fd);
+}
+
+/* The audit's finding: connections waiting for HELLO counted toward --max-clients and held
+ * their slot for the 10 s handshake timeout (a legitimate client got BUSY for 65 s+), and an
+ * authenticated connection had no deadline at all. Here 64 such sockets (silent, half a
+ * message, one byte a second; before and after HELLO) keep reconnecting while a legitimate
+ * client connects, renders and leaves five times: each of its sessions succeeds, in about the
+ * time it takes on a quiet daemon, and the daemon's deadlines close the attackers. */
+static void test_slow_clients(void **state)
+{
+    fx *f = *state;
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
+                          "--preload", "bunny", "--max-unauth", "16", "--read-timeout", "1",
+                          "--idle-timeout", "2", "--handshake-timeout", "2", NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    double med0, max0, med1, max1;
+    legit_session(f->d.port, 0); /* waits for the preload; not measured */
+    assert_int_equal(legit_rounds(f->d.port, 0, 5, &med0, &max0), 0);
+    attack k;
+    attack_begin(&k, f->d.port, A_KINDS);
+    usleep(300000); /* every attacker connected and stuck */
+    int failed = legit_rounds(f->d.port, 0, 9, &med1, &max1);
+    /* Long enough for every deadline to act: read 1 s, idle 2 s, handshake 2 s. */
+    usleep(2600000);
+    attack_end(&k);
+    assert_int_equal(failed, 0);
+    printf("slow clients: legit session median %.1f ms (max %.1f) quiet, %.1f ms (max %.1f) "
+           "with 64 attackers; closed by the daemon: idle %d, half %d, slow %d, auth+idle %d, "
+           "auth+half %d, auth+slow %d; refused %d\n", med0 * 1e3, max0 * 1e3, med1 * 1e3,
+           max1 * 1e3, k.closed[A_IDLE], k.closed[A_HALF], k.closed[A_SLOW],
+           k.closed[A_AUTH_IDLE], k.closed[A_AUTH_HALF], k.closed[A_AUTH_SLOW], k.refused);
+    /* Normal latency: within 3x the quiet median plus 100 ms of scheduling on 2 cores. */
+    assert_true(med1 <= 3 * med0 + 0.1);
+    assert_true(max1 <= 3 * max0 + 0.3);
+    /* Each kind was closed by the server: the deadlines and the unauthenticated pool act. */
+    for (int kind = 0; kind < A_KINDS; kind++)
+        if (k.closed[kind] < 1) fail_msg("no attacker of kind %d was closed by the daemon", kind);
+    assert_true(log_count(&f->d, "(--read-timeout)") >= 1);
+    assert_true(log_count(&f->d, "(--idle-timeout)") >= 1);
+    assert_true(log_count(&f->d, "(--max-unauth)") >= 1);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+}
+
+/* With a token: 64 sockets that keep connecting and sending wrong proofs (16 from each of four
+ * addresses) while a legitimate client with the token connects, renders and leaves. Failed
+ * proofs are answered late (the delay grows per address), so the attackers sit in the
+ * unauthenticated pool and the per-address limit rather than in --max-clients. */
+static void test_unauth_flood(void **state)
+{
+    fx *f = *state;
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
+                          "--preload", "bunny", "--token-file", f->token,
+                          "--max-per-addr", "12", "--auth-fail-delay", "50", NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    double med0, max0, med1, max1;
+    legit_session(f->d.port, 1);
+    assert_int_equal(legit_rounds(f->d.port, 1, 5, &med0, &max0), 0);
+    attack k;
+    attack_begin(&k, f->d.port, A_BADPROOF);
+    usleep(300000);
+    int failed = legit_rounds(f->d.port, 1, 9, &med1, &max1);
+    attack_end(&k);
+    assert_int_equal(failed, 0);
+    int delayed = log_count(&f->d, "authentication failed (");
+    int per_addr = log_count(&f->d, "(--max-per-addr)");
+    printf("unauthenticated flood: legit session median %.1f ms (max %.1f) quiet, %.1f ms "
+           "(max %.1f) with 64 reconnecting sockets; %d wrong proofs answered, %d connections "
+           "refused by --max-per-addr, %d reconnects\n", med0 * 1e3, max0 * 1e3, med1 * 1e3,
+           max1 * 1e3, delayed, per_addr, k.reconnects);
+    assert_true(med1 <= 3 * med0 + 0.1);
+    assert_true(max1 <= 3 * max0 + 0.3);
+    assert_true(delayed >= 4);
+    assert_true(per_addr >= 1); /* 16 sockets an address against a limit of 12 */
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+}
+
+/* wrong_proof_time: one connection from 127.0.0.<src> that sends a wrong proof; the seconds
+ * from the proof to the AUTH_FAILED answer (the connection then closes). */
+static double wrong_proof_time(int src, int port)
+{
+    int fd = connect_from(src, port, 0);
+    assert_true(fd >= 0);
+    msg m = {0};
+    proto_buf b = {0};
+    hello_bytes(&b, 1, NULL);
+    assert_int_equal(send_buf(fd, &b), 0);
+    assert_int_equal(recv_msg(fd, &m), PROTO_MSG_WELCOME);
+    uint8_t wrong[PROTO_AUTH_LEN];
+    memset(wrong, 0xa5, sizeof wrong);
+    hello_bytes(&b, 2, wrong);
+    double t0 = now_s();
+    assert_int_equal(send_buf(fd, &b), 0);
+    assert_int_equal(recv_msg(fd, &m), PROTO_MSG_ERROR);
+    double dt = now_s() - t0;
+    assert_int_equal(error_code(&m, NULL, 0), PROTO_E_AUTH_FAILED);
+    assert_int_equal(m.h.seq, 2);
+    uint8_t x;
+    assert_int_equal(recv(fd, &x, 1, 0), 0);
+    close(fd);
+    free(m.pl);
+    return dt;
+}
+
+/* Failed authentications are answered after a delay that doubles per failure from the same
+ * address (100, 200, 400, 800 ms here), while another address is answered at once and a
+ * client with the token still gets in at once. */
+static void test_auth_fail_delay(void **state)
+{
+    fx *f = *state;
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
+                          "--token-file", f->token, "--auth-fail-delay", "100", NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    double d[4];
+    for (int i = 0; i < 4; i++) d[i] = wrong_proof_time(7, f->d.port);
+    double other = wrong_proof_time(8, f->d.port);
+    double t0 = now_s();
+    int fd = connect_from(1, f->d.port, 0);
+    msg m = {0};
+    assert_int_equal(handshake(fd, 1, &m), 0);
+    double legit = now_s() - t0;
+    close(fd);
+    free(m.pl);
+    printf("auth failure delays from one address: %.0f %.0f %.0f %.0f ms; first failure of "
+           "another address %.0f ms; a right proof %.1f ms\n", d[0] * 1e3, d[1] * 1e3,
+           d[2] * 1e3, d[3] * 1e3, other * 1e3, legit * 1e3);
+    for (int i = 0; i < 4; i++) {
+        double want = 0.1 * (1 << i);
+        assert_true(d[i] >= want * 0.95 && d[i] < want + 0.5);
+    }
+    assert_true(other >= 0.095 && other < 0.6);
+    assert_true(legit < 0.1);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+}
+
+/* A client that asks for frames and stops reading is closed once nothing could be written for
+ * --write-timeout (1 s here), instead of holding its queue; others are served meanwhile. */
+static void test_write_timeout(void **state)
+{
+    fx *f = *state;
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
+                          "--preload", "bunny", "--write-timeout", "1", NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    assert_true(legit_session(f->d.port, 0) > 0);
+    int fd = socket(AF_INET, SOCK_STREAM, 0);
+    int small = 4096;
+    setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &small, sizeof small);
+    struct sockaddr_in a = {.sin_family = AF_INET, .sin_port = htons((uint16_t)f->d.port)};
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    assert_int_equal(connect(fd, (struct sockaddr *)&a, sizeof a), 0);
+    msg m = {0};
+    assert_int_equal(handshake(fd, 0, &m), 0);
+    proto_buf b = {0};
+    assert_int_equal(proto_enc_open(&b, 3, "bunny"), 0);
+    assert_int_equal(send_buf(fd, &b), 0);
+    assert_int_equal(recv_skip(fd, &m), PROTO_MSG_INFO);
+    sp_params p;
+    sp_params_defaults(&p);
+    char err[128];
+    proto_param_rec recs[2];
+    assert_int_equal(sp_param_set_kv(&p, "pipeline=points", err, sizeof err), 0);
+    assert_int_equal(sp_param_set_kv(&p, "format=raw", err, sizeof err), 0);
+    proto_param_rec_from(&p, sp_param_find("pipeline"), &recs[0]);
+    proto_param_rec_from(&p, sp_param_find("format"), &recs[1]);
+    assert_int_equal(proto_enc_params(&b, 4, recs, 2), 0);
+    proto_camera c = {.eye = {0.3, 0.2, 0.3}, .target = {0, 0.1, 0}, .up = {0, 1, 0},
+                      .fov_deg = 45, .width = 1024, .height = 1024};
+    assert_int_equal(proto_enc_camera(&b, 5, &c), 0);
+    for (uint32_t i = 0; i < 3; i++) assert_int_equal(proto_enc_empty(&b, PROTO_MSG_RENDER, 6 + i), 0);
+    double t0 = now_s();
+    assert_int_equal(send_buf(fd, &b), 0);
+    /* 12 MiB of frames against a 4 KiB receive buffer, never read. */
+    double closed_at = -1;
+    for (int i = 0; i < 100 && closed_at < 0; i++) {
+        usleep(50000);
+        if (log_count(&f->d, "(--write-timeout)") > 0) closed_at = now_s() - t0;
+        if (i == 10) assert_true(legit_session(f->d.port, 0) > 0); /* others are served */
+    }
+    printf("a client that does not read: closed %.2f s after its RENDERs (--write-timeout 1)\n",
+           closed_at);
+    assert_true(closed_at >= 1.0 && closed_at < 4.0);
+    close(fd);
+    free(m.pl);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+}
+
+int main(void)
+{
+    setvbuf(stdout, NULL, _IOLBF, 0);
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test_setup_teardown(test_slow_clients, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_unauth_flood, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_auth_fail_delay, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_write_timeout, setup, teardown),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
