@@ -1,0 +1,44 @@
+#!/bin/sh
+# ab_render.sh — the same rendering benchmark for two builds, interleaved, so a change is judged
+# against the code before it on the same machine in the same minutes (frame times on a shared
+# 2-core VM move by +-15 % between runs; interleaving spreads that over both).
+#
+#   sh tests/bench/ab_render.sh OLD_BENCH NEW_BENCH FILE [ROUNDS] [render_bench options...]
+#
+# OLD_BENCH and NEW_BENCH are render_bench binaries (e.g. a worktree of the old commit built with
+# `make BUILD=/tmp/old build...`). Each round runs OLD then NEW (then NEW then OLD in the next
+# round) with --frames 10 on FILE; the table gives, per pipeline, the median over rounds of each
+# build's median frame time, and new / old. Extra arguments go to both (e.g. --zoom 3).
+set -eu
+old=${1:?usage: ab_render.sh OLD_BENCH NEW_BENCH FILE [ROUNDS] [options]}
+new=${2:?usage: ab_render.sh OLD_BENCH NEW_BENCH FILE [ROUNDS] [options]}
+file=${3:?usage: ab_render.sh OLD_BENCH NEW_BENCH FILE [ROUNDS] [options]}
+rounds=${4:-4}
+[ $# -ge 4 ] && shift 4 || shift $#
+tmp=$(mktemp -d "${TMPDIR:-/tmp}/splatd-ab.XXXXXX")
+trap 'rm -rf "$tmp"' EXIT
+
+# one BIN TAG: appends "pipeline ms" lines (render_bench's median column) to $tmp/TAG.
+one() {
+    bin=$1 tag=$2
+    shift 2
+    "$bin" "$file" --frames 10 --size 1280x720 --pipelines points,splat --label ab "$@" 2>/dev/null |
+        awk '$1 == "|" && ($6 == "points" || $6 == "splat") { print $6, $8 }' \
+        >> "$tmp/$tag"
+}
+i=0
+while [ $i -lt "$rounds" ]; do
+    if [ $((i % 2)) -eq 0 ]; then
+        one "$old" old "$@"; one "$new" new "$@"
+    else
+        one "$new" new "$@"; one "$old" old "$@"
+    fi
+    i=$((i + 1))
+done
+echo "| pipeline | old ms | new ms | new / old |"
+echo "|---|---|---|---|"
+for p in points splat; do
+    o=$(awk -v p=$p '$1 == p { print $2 }' "$tmp/old" | sort -n | awk '{ a[NR] = $1 } END { print (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2 }')
+    n=$(awk -v p=$p '$1 == p { print $2 }' "$tmp/new" | sort -n | awk '{ a[NR] = $1 } END { print (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2 }')
+    echo "| $p | $o | $n | $(awk -v a="$n" -v b="$o" 'BEGIN { printf "%.3f", a / b }') |"
+done
