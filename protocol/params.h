@@ -24,7 +24,12 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(BACKGROUND,   "background",   SP_T_VEC3,  background,   0,    1,        "0,0,0",  NULL)     \
     X(FORMAT,       "format",       SP_T_ENUM,  format,       0,    0,        "jpeg",   "jpeg|png|lz4|raw|exr") \
     X(QUALITY,      "quality",      SP_T_INT,   quality,      1,    100,      "85",     NULL)     \
-    X(SUBSAMPLING,  "subsampling",  SP_T_ENUM,  subsampling,  0,    0,        "420",    "444|422|420|gray")
+    X(SUBSAMPLING,  "subsampling",  SP_T_ENUM,  subsampling,  0,    0,        "420",    "444|422|420|gray") \
+    X(KAWATA_RHO_SCALE, "kawata_rho_scale", SP_T_FLOAT, kawata_rho_scale, 0.25, 16, "3.5", NULL) \
+    X(KAWATA_GAMMA, "kawata_gamma", SP_T_FLOAT, kawata_gamma, 0,    0.5,      "0.0075", NULL)   \
+    X(SHADING,      "shading",      SP_T_ENUM,  shading,      0,    0,        "lambert", "lambert|edl") \
+    X(EDL_STRENGTH, "edl_strength", SP_T_FLOAT, edl_strength, 0,    100,      "1",      NULL)     \
+    X(EDL_RADIUS,   "edl_radius",   SP_T_FLOAT, edl_radius,   0.5,  16,       "1.4",    NULL)
 
 enum {
 #define SP_ID_(id, name, type, field, lo, hi, def, vals) SP_##id,
@@ -42,6 +47,11 @@ enum { SP_EWA_AUTO = 0, SP_EWA_EXACT, SP_EWA_SPLIT };
 enum { SP_COLOR_RGB = 0, SP_COLOR_FIELD, SP_COLOR_NORMAL, SP_COLOR_DEPTH, SP_COLOR_INTENSITY };
 enum { SP_FMT_JPEG = 0, SP_FMT_PNG, SP_FMT_LZ4, SP_FMT_RAW, SP_FMT_EXR };
 enum { SP_SUB_444 = 0, SP_SUB_422, SP_SUB_420, SP_SUB_GRAY };
+/* shading: lambert = each pipeline's own shading only (splat: Lambert from the file's or
+ * prep's normals; kawata: Lambert from its per-frame normals; points: none, flat colour);
+ * edl = that, times Eye-Dome Lighting over the frame's eye depth (render.c, edl.c), for every
+ * pipeline: the depth cue that needs no normals at all. */
+enum { SP_SHADING_LAMBERT = 0, SP_SHADING_EDL };
 
 typedef struct sp_params {
     int32_t pipeline;
@@ -56,6 +66,11 @@ typedef struct sp_params {
     int32_t format;
     int64_t quality;
     int32_t subsampling;
+    float kawata_rho_scale; /* kawata: factor on the image buffer's pixel size rho (eq. 1-3) */
+    float kawata_gamma;     /* kawata: depth range of pass 2, a fraction of the box diagonal */
+    int32_t shading;        /* SP_SHADING_* */
+    float edl_strength;     /* EDL: 0 leaves the frame unchanged */
+    float edl_radius;       /* EDL: neighbour distance in pixels */
 } sp_params;
 
 typedef struct sp_param_info {

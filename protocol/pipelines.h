@@ -9,7 +9,8 @@
 
 #define SP_PIPELINE_LIST(X) \
     X(POINTS, points)       \
-    X(SPLAT, splat)
+    X(SPLAT, splat)         \
+    X(KAWATA, kawata)
 
 enum {
 #define SP_PIPE_ID_(id, name) SP_PIPE_##id,

@@ -16,7 +16,11 @@
     X(SPLAT_RAS)     /* splat: dispatch header + sampled (not deposited) splats */             \
     X(SPLAT_RECT)    /* splat: ivec4, the pixels pass 1 touched */                             \
     X(POINTS_DEPTH)  /* points: uint per pixel, the packed key or the depth bits */            \
-    X(POINTS_INDEX)  /* points: uint per pixel, the exact form's winning point */
+    X(POINTS_INDEX)  /* points: uint per pixel, the exact form's winning point */ \
+    X(KAWATA_DEPTH)  /* kawata: uint per buffer pixel, pass 1's nearest depth (float bits) */ \
+    X(KAWATA_NEAR)   /* kawata: uint per buffer pixel, the nearest point (cloud-wide index) */ \
+    X(KAWATA_FAR)    /* kawata: uint per buffer pixel, pass 2's key (depth step, index) */    \
+    X(KAWATA_COUNT)  /* kawata: uint, the splats drawn */
 
 #define RND_TEXTURE_UNITS(X)                                                                  \
     X(POS)           /* R32F: x y z per point (lib_fetch.glsl) */                              \
@@ -27,7 +31,17 @@
     X(SPLAT_SUMS)    /* splat: the sums as RGBA32F or RGBA32UI texels, 2 a pixel */            \
     X(SPLAT_KEYS)    /* splat: the keys as R32UI */                                            \
     X(POINTS_DEPTH)  /* points: POINTS_DEPTH as R32UI */                                       \
-    X(POINTS_INDEX)  /* points: POINTS_INDEX as R32UI */
+    X(POINTS_INDEX)  /* points: POINTS_INDEX as R32UI */                                     \
+    X(KAWATA_DEPTH)  /* kawata: KAWATA_DEPTH as R32UI */                                       \
+    X(KAWATA_NEAR)   /* kawata: KAWATA_NEAR as R32UI */                                        \
+    X(KAWATA_FAR)    /* kawata: KAWATA_FAR as R32UI */                                         \
+    X(KAWATA_P1)     /* kawata: RGBA32F 2-D, per buffer pixel the nearest point (eye, valid) */ \
+    X(KAWATA_P2)     /* kawata: RGBA32F 2-D, the farthest point within gamma */                 \
+    X(KAWATA_C1)     /* kawata: RGBA32F 2-D, the colour of P1 */                                \
+    X(KAWATA_C2)     /* kawata: RGBA32F 2-D, the colour of P2 */                                \
+    X(KAWATA_S0)     /* kawata: RGBA32F 2-D, the splat: frame x, y, eye depth, valid */         \
+    X(KAWATA_S1)     /* kawata: RGBA32F 2-D, the splat's colour */                              \
+    X(EDL_DEPTH)     /* EDL: the target's depth_eye (R32F 2-D texture, not a buffer) */
 
 enum {
 #define RND_B_ENUM_(name) RND_B_##name,

@@ -71,6 +71,7 @@ typedef struct rnd_gpu_cloud {
     double offset[3];          /* file coordinates = local + offset */
     float bmin[3], bmax[3];    /* local bounds */
     float sigma, radius_median;
+    float centroid[3];         /* local; the mean of the points (kawata's eq. 3) */
     uint32_t nsets;
     rnd_bufset *sets;
     uint64_t nchunks;
@@ -92,13 +93,13 @@ typedef struct rnd_view {
 
 /* The output every pipeline writes: fbo with colour attachment 0 = color (linear colour,
  * alpha = coverage) and, as draw buffer 1, depth_eye (eye-space distance along the view axis,
- * +inf where nothing was drawn), plus a 24-bit depth renderbuffer for raster pipelines, which
+ * +inf where nothing was drawn; fragment output location 1), plus a 24-bit depth renderbuffer for raster pipelines, which
  * the renderer does NOT clear: a pipeline that depth-tests clears it
  * (glClearBufferfv(GL_DEPTH, 0, &one)); on llvmpipe that clear costs ~5 ms at 1280x720.
  * Two kinds, picked per frame by the renderer:
  *   is_float  color RGBA16F, depth_eye R32F (frames with float colour and depth: EXR);
- *   8-bit     color RGBA8, depth_eye 0 (draw buffer 1 is GL_NONE, so depth output is
- *             dropped), alpha already cleared to 1 and write-masked (glColorMaski) so that
+ *   8-bit     color RGBA8, depth_eye R32F that draw buffer 1 reaches only in frames with
+ *             shading=edl (else it is GL_NONE and depth output is dropped: no cost), alpha already cleared to 1 and write-masked (glColorMaski) so that
  *             frames are opaque: pipelines leave the colour mask alone.
  * Compute pipelines may bind color and depth_eye as images (rgba16f or rgba8, r32f). */
 typedef struct rnd_target {
@@ -171,6 +172,12 @@ void rnd_kit_unbind(rnd_kit *k);
 
 /* ---- pipelines -------------------------------------------------------------------------- */
 
+/* What a pipeline may report about a frame (zero when it has nothing to say). */
+typedef struct rnd_draw_out {
+    uint64_t splats;           /* kawata: splats drawn (valid image-buffer pixels) */
+    int buffer_w, buffer_h;    /* kawata: the image buffer's size */
+} rnd_draw_out;
+
 /* What one frame asks of a pipeline. */
 typedef struct rnd_draw {
     const rnd_gpu_cloud *cloud;
@@ -178,6 +185,7 @@ typedef struct rnd_draw {
     const rnd_view *view;
     const sp_params *params;
     const rnd_target *target;  /* bound, cleared to the background (depth_eye to +inf) */
+    rnd_draw_out *out;         /* zeroed by the renderer; never NULL */
 } rnd_draw;
 
 typedef struct rnd_pipeline {

@@ -12,6 +12,7 @@
 #include <time.h>
 
 #include "camera.h"
+#include "edl.h"
 #include "gl_api.h"
 #include "gl_backend.h"
 #include "gl_names.h"
@@ -66,6 +67,8 @@ struct rnd_ctx {
     rnd_target target[2];
     rnd_chunk *visible;       /* one frame's chunks after culling */
     uint64_t visible_cap;
+    rnd_edl edl;              /* shading=edl's pass; edl.prog 0 when it did not build */
+    sd_err edl_err;           /* why not */
 };
 
 static uint64_t now_us(void)
@@ -153,6 +156,8 @@ rnd_ctx *rnd_create(const rnd_desc *desc, sd_err *err)
     r->sh = rnd_shaders_create(d.shader_dir, err);
     if (!r->sh) goto fail;
     if ((rc = rnd_kit_init(&r->kit, &r->gl, r->sh, &d.pipe, err)) < 0) goto fail;
+    /* EDL is optional: a driver that cannot build it refuses only frames that ask for it. */
+    rnd__edl_init(&r->edl, &r->kit, &r->edl_err);
     r->budget = d.gpu_memory ? d.gpu_memory : device_budget(r);
     uint64_t limit = (uint64_t)r->kit.max_texels / 3; /* positions: 3 R32F texels a point */
     if (limit > INT32_MAX) limit = INT32_MAX;           /* GLint firsts and counts */
@@ -228,6 +233,7 @@ void rnd_destroy(rnd_ctx *r)
             if (r->slots[i].used) slot_clear(r, &r->slots[i]);
         for (int i = 0; i < NPIPES; i++)
             if (r->pcreated[i]) pipelines[i]->destroy(&r->kit, r->pstate[i]);
+        rnd__edl_free(&r->edl, &r->gl);
         rnd_kit_free(&r->kit);
         target_free(&r->gl, &r->target[TARGET_8]);
         target_free(&r->gl, &r->target[TARGET_F]);
@@ -463,6 +469,10 @@ static int64_t add_cloud(rnd_ctx *r, const pc_prepared *pc, pc_prepared *src, sd
     }
     c->sigma = pc->sigma;
     c->radius_median = pc->radius_median;
+    double sum[3] = {0, 0, 0};
+    for (uint64_t i = 0; i < pc->n; i++)
+        for (int k = 0; k < 3; k++) sum[k] += pc->pos[3 * i + k];
+    for (int k = 0; k < 3; k++) c->centroid[k] = (float)(sum[k] / (double)pc->n);
     slot->bytes = cloud_bytes(pc->n);
     slot->last_used = ++r->clock;
     int rc = make_chunks(slot, pc, r->max_set_points, err);
@@ -559,7 +569,9 @@ static int target_ensure(rnd_ctx *r, int which, int w, int h, sd_err *err)
     target_free(gl, t);
     int is_float = which == TARGET_F;
     t->color = make_texture(gl, is_float ? GL_RGBA16F : GL_RGBA8, w, h);
-    if (is_float) t->depth_eye = make_texture(gl, GL_R32F, w, h);
+    /* The 8-bit target has a depth_eye too, for shading=edl: it is a draw buffer only in the
+     * frames that use it, so other frames neither clear nor write it. */
+    t->depth_eye = make_texture(gl, GL_R32F, w, h);
     gl->GenRenderbuffers(1, &t->depth_rb);
     gl->BindRenderbuffer(GL_RENDERBUFFER, t->depth_rb);
     gl->RenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, w, h);
@@ -567,11 +579,10 @@ static int target_ensure(rnd_ctx *r, int which, int w, int h, sd_err *err)
     gl->GenFramebuffers(1, &t->fbo);
     gl->BindFramebuffer(GL_FRAMEBUFFER, t->fbo);
     gl->FramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, t->color, 0);
-    if (is_float)
-        gl->FramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D,
-                                 t->depth_eye, 0);
+    gl->FramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D, t->depth_eye,
+                             0);
     gl->FramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, t->depth_rb);
-    /* Fragment output 1 (eye depth) goes nowhere in the 8-bit target. */
+    /* Fragment output 1 (eye depth) goes nowhere in the 8-bit target (but in EDL frames). */
     const GLenum bufs[2] = {GL_COLOR_ATTACHMENT0, is_float ? GL_COLOR_ATTACHMENT1 : GL_NONE};
     gl->DrawBuffers(2, bufs);
     gl->ReadBuffer(GL_COLOR_ATTACHMENT0);
@@ -634,6 +645,9 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     int pi = params->pipeline;
     if (pi < 0 || pi >= NPIPES)
         return sd_errf(err, SD_EINVAL, "pipeline %d is not one of the %d pipelines", pi, NPIPES);
+    int edl = params->shading == SP_SHADING_EDL;
+    if (edl && !r->edl.prog)
+        return sd_errf(err, SD_EGL, "shading=edl is not available: %s", r->edl_err.msg);
     const rnd_gpu_cloud *c = &slot->c;
     rnd_view v;
     int rc = rnd__view_setup(cam, c->offset, c->bmin, c->bmax, &v, err);
@@ -673,12 +687,23 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
                          t->is_float ? 0.0f : 1.0f};
     const float inf[4] = {INFINITY, 0, 0, 0};
     /* The depth renderbuffer is left to the pipelines that test depth (pipe.h). */
+    if (edl && !t->is_float) { /* EDL reads the eye depth: the 8-bit target writes it too */
+        const GLenum both[2] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
+        gl->DrawBuffers(2, both);
+    }
     gl->ClearBufferfv(GL_COLOR, 0, bg);
-    if (t->is_float) gl->ClearBufferfv(GL_COLOR, 1, inf);
-    else gl->ColorMaski(0, GL_TRUE, GL_TRUE, GL_TRUE, GL_FALSE);
+    if (t->is_float || edl) gl->ClearBufferfv(GL_COLOR, 1, inf);
+    if (!t->is_float) gl->ColorMaski(0, GL_TRUE, GL_TRUE, GL_TRUE, GL_FALSE);
+    rnd_draw_out out = {0};
     const rnd_draw draw = {.cloud = c, .cloud_data = slot->pdata[pi], .view = &v,
-                           .params = params, .target = t};
+                           .params = params, .target = t, .out = &out};
     rc = pipelines[pi]->render(&r->kit, r->pstate[pi], &draw, err);
+    if (rc == 0 && edl) rnd__edl_apply(&r->edl, gl, t, params->edl_strength, params->edl_radius);
+    if (edl && !t->is_float) {
+        const GLenum one[2] = {GL_COLOR_ATTACHMENT0, GL_NONE};
+        gl->BindFramebuffer(GL_FRAMEBUFFER, t->fbo);
+        gl->DrawBuffers(2, one);
+    }
     /* The pipeline may have bound other framebuffers and state. */
     gl->ColorMaski(0, GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
     gl->Disable(GL_DEPTH_TEST);
@@ -717,6 +742,9 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     frame->render_us = t1 - t0;
     frame->readback_us = t2 - t1;
     frame->points_drawn = v.points_visible;
+    frame->splats_drawn = out.splats;
+    frame->buffer_w = out.buffer_w;
+    frame->buffer_h = out.buffer_h;
     return gl_check(gl, "rendering a frame", err);
 }
 

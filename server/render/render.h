@@ -59,6 +59,8 @@ typedef struct rnd_frame {
     uint64_t render_us;       /* GPU work up to glFinish */
     uint64_t readback_us;
     uint64_t points_drawn;    /* after frustum culling and the point budget */
+    uint64_t splats_drawn;    /* kawata: splats of its image buffer drawn; 0 for the others */
+    int buffer_w, buffer_h;   /* kawata: its image buffer's size; 0 for the others */
 } rnd_frame;
 
 typedef struct rnd_ctx rnd_ctx;

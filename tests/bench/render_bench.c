@@ -62,6 +62,8 @@ typedef struct pipe_result {
     double frame_ms, readback_ms, jpeg_ms;
     double cpu_ms;  /* process CPU time of rnd_render (all threads), median */
     uint64_t drawn;
+    uint64_t splats;  /* kawata: splats drawn (last frame) */
+    int buffer_w, buffer_h; /* kawata: its image buffer (last frame) */
 } pipe_result;
 
 static double now_s(void)
@@ -294,6 +296,8 @@ static int bench_pipeline(rnd_ctx *r, uint32_t id, const rnd_camera *cam0, int p
         t_jpeg[i] = (t2 - t1) * 1e3;
         t_cpu[i] = (c1 - c0) * 1e3;
         res->drawn = f.points_drawn;
+        res->splats = f.splats_drawn;
+        res->buffer_w = f.buffer_w, res->buffer_h = f.buffer_h;
     }
     if (rc == 0) {
         res->frame_ms = median(t_frame, o->frames);
@@ -386,6 +390,15 @@ int main(int argc, char **argv)
                (unsigned long long)npts, name, res[k].frame_ms, ratio, res[k].readback_ms,
                res[k].jpeg_ms);
         fprintf(stderr, "cpu: %s %s %.1f ms/frame\n", o.label, name, res[k].cpu_ms);
+    }
+    /* Pipelines with an image buffer (kawata): its size and the splats drawn, one line each
+     * ("buffer: | label | pipeline | WxH | splats |"), for bench_render.sh's table. */
+    for (int k = 0; k < o.npipes; k++) {
+        if (!res[k].buffer_w) continue;
+        char name[32];
+        sp_enum_name(SP_PIPELINE, o.pipes[k], name, sizeof name);
+        printf("buffer: | %s | %s | %dx%d | %llu |\n", o.label, name, res[k].buffer_w,
+               res[k].buffer_h, (unsigned long long)res[k].splats);
     }
     rc = 0;
 fail:

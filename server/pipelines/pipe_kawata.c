@@ -1,0 +1,488 @@
+/* pipe_kawata.c — the `kawata` pipeline: Direct Point Rendering (Kawata & Kanai, ISVC 2005),
+ * five passes over clouds that need nothing but positions (colours are used when present;
+ * file normals, radii and F are never read), on compute shaders where the paper used point
+ * sprites and the depth test (DESIGN.md "Rasterisation strategy").
+ *
+ * Image buffer (eq. 1-3). The paper's eq. 2-3 are garbled in the text; DESIGN.md reads them as:
+ * rho = the frame-buffer pixels that the point spacing sigma covers at the distance of the
+ * cloud's centroid, sigma * (h_s / 2) / (tan(fov_y / 2) |v - p~|), times kawata_rho_scale, at
+ * least 1; the buffer is ceil(w_s / rho) x ceil(h_s / rho). sigma is the median
+ * nearest-neighbour distance from prep (the paper's minimum is 0 for duplicate points); a
+ * cloud without one (sigma 0) uses the spacing of its points spread over its bounding box's
+ * largest face. kawata_rho_scale defaults to 3.5: sigma is the *median* nearest-neighbour
+ * distance, and for irregular samples (a scan's sampling is not a grid) a buffer pixel of one
+ * sigma holds on average a fraction of a point (about 0.22 for uniformly random points), which
+ * leaves buffer pixels empty and the fit without support. Measured: at 1.5 Guanyin.ply's
+ * default view showed holes of several buffer pixels; at 2.5 it had none but a sparse plane of
+ * uniformly random points (test_sparse_holes) still had 28 empty frame pixels (3 with a 5x5
+ * gather of cut-off 2); at 3.5 (2.7 random points a buffer pixel, 12 of a grid) none. The price
+ * is the paper's own: a blurrier image than `splat` on clean scans.
+ *
+ *   pass 1  kawata_raster.comp, u_pass 1: per point, atomicMin of its eye depth (float bits)
+ *           into its buffer pixel: Omega_1's depth.
+ *   pass 2  kawata_raster.comp, u_pass 2: points with exactly that depth store their index
+ *           (atomicMin: ties go to the lowest index), points behind it by at most gamma store
+ *           atomicMax of (depth step quantised to the high bits | index): the farthest point
+ *           within gamma, Omega_2. gamma = kawata_gamma x the bounding box's diagonal (paper:
+ *           0.5-1 %; default 0.75 %). llvmpipe has no 64-bit atomics; quantising the step
+ *           relative to gamma leaves 32 - index bits levels for it (4096 for 1M points).
+ *   pass 3  kawata_fit.comp STAGE 1: per buffer pixel, both points to eye space with their
+ *           colours; STAGE 2 averages them (Omega_a, the splat's position),
+ *   pass 4  and (STAGE 2) fits z = Ax + By + C by least squares to the up to 18 points of the
+ *           3x3 neighbourhood in both buffers (eq. 4-5, Cramer's rule on coordinates centred
+ *           on Omega_a), normal (A, B, -1) turned towards the eye, Lambert shading (Omega_c).
+ *           Outliers: the paper drops points that pass 2 rejects, but a buffer pixel whose
+ *           nearest point is an outlier has nothing within gamma behind it, so here a buffer
+ *           pixel is kept only when at least KAWATA_MIN_SUPPORT of the other 17 points lie
+ *           within the depth tolerance of its nearest one (gamma plus KAWATA_SLOPE_PIXELS
+ *           buffer pixels of depth, so surfaces up to ~75 degrees from the view keep their
+ *           support). The same points, and only they, enter the fit.
+ *   pass 5  kawata_splat.vert/.frag: Gaussian splats from the buffer magnified to the frame,
+ *           normalised blending, as a gather: each frame pixel sums the splats of the 4x4 buffer
+ *           pixels around it whose centres lie within KAWATA_CUTOFF buffer pixels (kernel
+ *           sigma = half the cut-off), keeping only those within the depth tolerance of the
+ *           nearest one (the extended z-buffer's rule), and divides by the summed weight. On
+ *           llvmpipe a fragment pass shades whole pixel quads at once, where scattering
+ *           splats with float atomics runs lane by lane.
+ *
+ * A cloud in several buffer sets (pipe.h) is drawn set by set: passes 1 and 2 key points by
+ * their cloud-wide index, and STAGE 1 runs once per set, each resolving the points of its own. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "camera.h"
+#include "pipe.h"
+#include "shaders.h"
+
+enum { GROUP = 64, MAX_GROUPS_X = 65535 };
+enum { KAWATA_MIN_SUPPORT = 3 };     /* a plane needs three points; see the file comment */
+#define KAWATA_SLOPE_PIXELS 4.0f     /* depth tolerance: buffer pixels of depth per pixel */
+#define KAWATA_CUTOFF 1.5f           /* splat cut-off radius, buffer pixels (4x4 gather) */
+enum { TEX_ROUND = 64 };             /* buffer textures grow in steps of this many pixels */
+
+#define KAWATA_UNIFORMS(X)                                                                   \
+    X(VIEWPROJ, "u_viewproj") X(VIEW, "u_view") X(PROJ, "u_proj") X(BSIZE, "u_bsize")         \
+    X(FSIZE, "u_fsize") X(ZNEAR, "u_znear") X(ZFAR, "u_zfar") X(TOTAL, "u_total")             \
+    X(NRANGES, "u_nranges") X(FIRST, "u_first") X(STRIDE, "u_stride") X(THREADS, "u_threads")  \
+    X(PER, "u_per") X(BASE, "u_base") X(SETN, "u_count") X(PASS, "u_pass")                    \
+    X(IBITS, "u_index_bits") X(GAMMA, "u_gamma") X(QSCALE, "u_qscale") X(QMAX, "u_qmax")       \
+    X(SLOPE, "u_slope") X(COLOR, "u_color") X(LIGHT, "u_light") X(SUPPORT, "u_min_support")   \
+    X(WHICH, "u_which") X(CUTOFF, "u_cutoff") X(BLO, "u_blo") X(BHI, "u_bhi")
+
+enum {
+#define KW_U_ENUM_(id, name) U_##id,
+    KAWATA_UNIFORMS(KW_U_ENUM_)
+#undef KW_U_ENUM_
+    U_COUNT
+};
+
+enum { P_RASTER = 0, P_RESOLVE, P_FIT, P_SPLAT, P_COUNT };
+enum { B_DEPTH = 0, B_NEAR, B_FAR, B_COUNTER, NBUF };
+/* The 2-D textures of passes 3-5 (bindings.h RND_T_KAWATA_P1 ...), in unit order. */
+enum { X_P1 = 0, X_P2, X_C1, X_C2, X_S0, X_S1, NTEX };
+
+typedef struct kawata_state {
+    GLuint prog[P_COUNT];
+    GLint loc[P_COUNT][U_COUNT];
+    uint32_t per_invocation;   /* points per raster invocation (as pipe_points.c) */
+    GLuint vao;
+    GLuint buf[NBUF];
+    uint64_t bytes[NBUF];
+    GLuint depth_tex, near_tex, far_tex;  /* buffer textures over buf[B_DEPTH, NEAR, FAR] */
+    GLuint tex[NTEX];          /* RGBA32F, tex_w x tex_h (the buffer uses its lower left) */
+    int tex_w, tex_h;
+    GLuint fbo_pts, fbo_splat; /* P1 P2 C1 C2, and S0 S1, as colour attachments 0-3 / 0-1 */
+} kawata_state;
+
+static void free_textures(const gl_api *gl, kawata_state *s)
+{
+    if (s->tex[0]) gl->DeleteTextures(NTEX, s->tex);
+    if (s->fbo_pts) gl->DeleteFramebuffers(1, &s->fbo_pts);
+    if (s->fbo_splat) gl->DeleteFramebuffers(1, &s->fbo_splat);
+    memset(s->tex, 0, sizeof s->tex);
+    s->fbo_pts = s->fbo_splat = 0;
+    s->tex_w = s->tex_h = 0;
+}
+
+static void kawata_destroy(rnd_kit *k, void *state)
+{
+    kawata_state *s = state;
+    if (!s) return;
+    const gl_api *gl = k->gl;
+    for (int i = 0; i < P_COUNT; i++)
+        if (s->prog[i]) gl->DeleteProgram(s->prog[i]);
+    if (s->vao) gl->DeleteVertexArrays(1, &s->vao);
+    GLuint tex[3] = {s->depth_tex, s->near_tex, s->far_tex};
+    gl->DeleteTextures(3, tex);
+    gl->DeleteBuffers(NBUF, s->buf);
+    free_textures(gl, s);
+    memset(s, 0, sizeof *s);
+    free(s);
+}
+
+static int kawata_create(rnd_kit *k, void **state, sd_err *err)
+{
+    *state = NULL;
+    const gl_api *gl = k->gl;
+    kawata_state *s = calloc(1, sizeof *s);
+    if (!s) return sd_errf(err, SD_ENOMEM, "out of memory for the kawata pipeline");
+    /* llvmpipe pays ~50 ns per compute invocation (pipe_points.c): a run of points each. */
+    s->per_invocation = k->software ? 32 : 1;
+    static const struct {
+        const char *files[2];
+        int n;
+        const char *defs;
+    } progs[P_COUNT] = {
+        [P_RASTER] = {{"kawata_raster.comp"}, 1, NULL},
+        [P_RESOLVE] = {{"kawata_splat.vert", "kawata_fit.frag"}, 2, "#define STAGE 1\n"},
+        [P_FIT] = {{"kawata_splat.vert", "kawata_fit.frag"}, 2, "#define STAGE 2\n"},
+        [P_SPLAT] = {{"kawata_splat.vert", "kawata_splat.frag"}, 2, NULL},
+    };
+    static const char *const unames[U_COUNT] = {
+#define KW_U_NAME_(id, name) name,
+        KAWATA_UNIFORMS(KW_U_NAME_)
+#undef KW_U_NAME_
+    };
+    for (int p = 0; p < P_COUNT; p++) {
+        s->prog[p] = rnd_kit_program(k, progs[p].files, progs[p].n, progs[p].defs, err);
+        if (!s->prog[p]) {
+            kawata_destroy(k, s);
+            return err && err->code ? err->code : SD_EGL;
+        }
+        for (int u = 0; u < U_COUNT; u++) s->loc[p][u] = gl_uniform(gl, s->prog[p], unames[u]);
+    }
+    gl->GenVertexArrays(1, &s->vao);
+    gl->GenBuffers(NBUF, s->buf);
+    gl->GenTextures(1, &s->depth_tex);
+    gl->GenTextures(1, &s->near_tex);
+    gl->GenTextures(1, &s->far_tex);
+    int rc = gl_check(gl, "creating the kawata pipeline", err);
+    if (rc < 0) {
+        kawata_destroy(k, s);
+        return rc;
+    }
+    *state = s;
+    return 0;
+}
+
+/* ensure_textures: makes the RGBA32F textures and their framebuffers hold at least w x h
+ * (grown in steps of TEX_ROUND, never shrunk, so a moving camera does not reallocate them
+ * every frame). Returns 0 or SD_EGL. */
+static int ensure_textures(const gl_api *gl, kawata_state *s, int w, int h, sd_err *err)
+{
+    if (s->tex[0] && s->tex_w >= w && s->tex_h >= h) return 0;
+    int tw = s->tex_w > w ? s->tex_w : (w + TEX_ROUND - 1) / TEX_ROUND * TEX_ROUND;
+    int th = s->tex_h > h ? s->tex_h : (h + TEX_ROUND - 1) / TEX_ROUND * TEX_ROUND;
+    free_textures(gl, s);
+    gl->GenTextures(NTEX, s->tex);
+    for (int i = 0; i < NTEX; i++) {
+        gl->BindTexture(GL_TEXTURE_2D, s->tex[i]);
+        gl->TexStorage2D(GL_TEXTURE_2D, 1, GL_RGBA32F, tw, th);
+        gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+        gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    }
+    gl->BindTexture(GL_TEXTURE_2D, 0);
+    gl->GenFramebuffers(1, &s->fbo_pts);
+    gl->GenFramebuffers(1, &s->fbo_splat);
+    int rc = 0;
+    for (int f = 0; f < 2 && rc == 0; f++) {
+        gl->BindFramebuffer(GL_FRAMEBUFFER, f ? s->fbo_splat : s->fbo_pts);
+        int first = f ? X_S0 : X_P1, n = f ? 2 : 4;
+        for (int i = 0; i < n; i++)
+            gl->FramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0 + (GLenum)i,
+                                     GL_TEXTURE_2D, s->tex[first + i], 0);
+        GLenum st = gl->CheckFramebufferStatus(GL_FRAMEBUFFER);
+        if (st != GL_FRAMEBUFFER_COMPLETE)
+            rc = sd_errf(err, SD_EGL, "kawata: a %dx%d RGBA32F framebuffer is incomplete (0x%x)",
+                         tw, th, (unsigned)st);
+    }
+    gl->BindFramebuffer(GL_FRAMEBUFFER, 0);
+    if (rc < 0) {
+        free_textures(gl, s);
+        return rc;
+    }
+    s->tex_w = tw, s->tex_h = th;
+    return gl_check(gl, "making the kawata image buffer", err);
+}
+
+/* Bits for a point index of a cloud of n points, leaving 0 free in pass 2's keys: the smallest
+ * b with n <= 2^b - 1 (as pipe_points.c). */
+static uint32_t index_bits(uint64_t n)
+{
+    uint32_t b = 1;
+    while (b < 32 && ((uint64_t)1 << b) - 1 < n) b++;
+    return b;
+}
+
+/* kawata_rho: the image buffer's pixel size in frame pixels (eq. 1-3 as the file comment reads
+ * them), at least 1. */
+static double kawata_rho(const rnd_gpu_cloud *c, const rnd_view *v, float scale)
+{
+    double sigma = c->sigma;
+    if (!(sigma > 0)) {
+        /* no spacing from prep: points spread evenly over the box's largest face */
+        double e[3], face = 0;
+        for (int i = 0; i < 3; i++) e[i] = (double)c->bmax[i] - c->bmin[i];
+        for (int i = 0; i < 3; i++) face = fmax(face, e[i] * e[(i + 1) % 3]);
+        sigma = face > 0 ? sqrt(face / (double)c->n) : 0;
+    }
+    double dist = 0;
+    for (int i = 0; i < 3; i++)
+        dist += ((double)v->eye[i] - c->centroid[i]) * ((double)v->eye[i] - c->centroid[i]);
+    dist = sqrt(dist);
+    if (!(dist > 0) || !(sigma > 0)) return 1.0;
+    double rho = sigma * 0.5 * v->height / (tan(0.5 * v->fov_y) * dist) * scale;
+    return rho > 1.0 ? rho : 1.0;
+}
+
+/* buffer: grows s->buf[b] to bytes and binds it on storage block `block` (and, when tex is
+ * not 0, as an R32UI buffer texture on unit `unit`). */
+static void buffer(const gl_api *gl, kawata_state *s, int b, uint64_t bytes, GLuint block,
+                   GLuint tex, GLenum unit)
+{
+    rnd_kit_ensure_ssbo(gl, &s->buf[b], &s->bytes[b], bytes);
+    gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, block, s->buf[b]);
+    if (!tex) return;
+    gl->ActiveTexture(GL_TEXTURE0 + unit);
+    gl->BindTexture(GL_TEXTURE_BUFFER, tex);
+    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, s->buf[b]);
+    gl->ActiveTexture(GL_TEXTURE0);
+}
+
+static void fill(const gl_api *gl, GLuint buf, GLintptr at, GLsizeiptr bytes, GLuint value)
+{
+    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, buf);
+    gl->ClearBufferSubData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, at, bytes, GL_RED_INTEGER,
+                           GL_UNSIGNED_INT, &value);
+}
+
+/* bind_2d: the 2-D textures first .. first + n - 1 on their units (0: unbinds them). */
+static void bind_2d(const gl_api *gl, const kawata_state *s, int first, int n, int on)
+{
+    for (int i = first; i < first + n; i++) {
+        gl->ActiveTexture(GL_TEXTURE0 + RND_T_KAWATA_P1 + (GLenum)i);
+        gl->BindTexture(GL_TEXTURE_2D, on ? s->tex[i] : 0);
+    }
+    gl->ActiveTexture(GL_TEXTURE0);
+}
+
+/* Passes 1 and 2 over buffer set `set` (its range table and textures bound). */
+static void raster_set(const gl_api *gl, const kawata_state *s, const rnd_gpu_cloud *c,
+                       uint32_t set, uint32_t total, uint32_t nranges, uint32_t first, int pass)
+{
+    uint32_t per = s->per_invocation;
+    uint32_t groups = ((total + per - 1) / per + GROUP - 1) / GROUP;
+    if (!groups) groups = 1;
+    uint32_t gx = groups < MAX_GROUPS_X ? groups : MAX_GROUPS_X, gy = (groups + gx - 1) / gx;
+    uint32_t threads = gx * gy * GROUP;
+    const GLint *l = s->loc[P_RASTER];
+    gl->Uniform1ui(l[U_TOTAL], total);
+    gl->Uniform1ui(l[U_NRANGES], nranges);
+    gl->Uniform1ui(l[U_FIRST], first);
+    gl->Uniform1ui(l[U_STRIDE], gx * GROUP);
+    gl->Uniform1ui(l[U_THREADS], threads);
+    gl->Uniform1ui(l[U_PER], (total + threads - 1) / threads);
+    gl->Uniform1ui(l[U_BASE], (GLuint)c->sets[set].base);
+    gl->Uniform1i(l[U_PASS], pass);
+    gl->DispatchCompute(gx, gy, 1);
+    gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
+}
+
+/* draw_rect: one triangle over the viewport, limited to rect by the scissor. */
+static void draw_rect(const gl_api *gl, const kawata_state *s, const int r[4])
+{
+    gl->Scissor(r[0], r[1], r[2] - r[0], r[3] - r[1]);
+    gl->BindVertexArray(s->vao);
+    gl->DrawArrays(GL_TRIANGLES, 0, 3);
+    gl->BindVertexArray(0);
+}
+
+static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
+{
+    kawata_state *s = state;
+    const gl_api *gl = k->gl;
+    const rnd_gpu_cloud *c = d->cloud;
+    const rnd_view *v = d->view;
+    const sp_params *p = d->params;
+    if (!v->nchunks || !v->points_visible) return 0;
+    uint32_t ibits = index_bits(c->n);
+    if (ibits > 28)
+        return sd_errf(err, SD_ELIMIT, "the kawata pipeline keys points in 32 bits with at "
+                       "least 4 bits of depth: at most 2^28 - 1 points, not %llu",
+                       (unsigned long long)c->n);
+
+    /* The image buffer: ceil(w / rho) x ceil(h / rho) (never larger than the frame). */
+    double rho = kawata_rho(c, v, p->kawata_rho_scale);
+    int bw = (int)ceil(v->width / rho), bh = (int)ceil(v->height / rho);
+    if (bw > v->width) bw = v->width;
+    if (bh > v->height) bh = v->height;
+    d->out->buffer_w = bw;
+    d->out->buffer_h = bh;
+    uint64_t nb = (uint64_t)bw * (uint64_t)bh;
+    if (nb * 4 > (uint64_t)k->max_ssbo)
+        return sd_errf(err, SD_ELIMIT, "a %dx%d kawata image buffer needs a %llu-byte storage "
+                       "block, over the driver's %lld", bw, bh, (unsigned long long)(nb * 4),
+                       (long long)k->max_ssbo);
+    int rc = ensure_textures(gl, s, bw, bh, err);
+    if (rc < 0) return rc;
+
+    /* Only the buffer pixels of the cloud's screen rectangle (grown by one for the 3x3 fit) are
+     * cleared, resolved and fitted: points cannot land outside it, and the shaders treat
+     * pixels outside it as empty (they hold an earlier frame's data). */
+    int rect[4], brect[4];
+    rnd__screen_rect(v, c->bmin, c->bmax, 1, rect);
+    if (rect[2] <= rect[0] || rect[3] <= rect[1]) return 0;
+    brect[0] = (int)floor((double)rect[0] * bw / v->width) - 1;
+    brect[1] = (int)floor((double)rect[1] * bh / v->height) - 1;
+    brect[2] = (int)ceil((double)rect[2] * bw / v->width) + 1;
+    brect[3] = (int)ceil((double)rect[3] * bh / v->height) + 1;
+    brect[0] = brect[0] < 0 ? 0 : brect[0], brect[1] = brect[1] < 0 ? 0 : brect[1];
+    brect[2] = brect[2] > bw ? bw : brect[2], brect[3] = brect[3] > bh ? bh : brect[3];
+
+    /* gamma in local units; pass 2 quantises the depth step d - d1 in (0, gamma] to levels
+     * 1 .. qmax - 1 above the index bits (0 stays "none"). */
+    double diag = 0;
+    for (int i = 0; i < 3; i++) diag += ((double)c->bmax[i] - c->bmin[i]) * (c->bmax[i] - c->bmin[i]);
+    float gamma = (float)(p->kawata_gamma * sqrt(diag));
+    uint32_t qmax = (uint32_t)(((uint64_t)1 << (32 - ibits)) - 1);
+    float qscale = gamma > 0 ? (float)(qmax - 1) / gamma : 0.0f;
+    /* KAWATA_SLOPE_PIXELS buffer pixels of depth at unit depth. */
+    float slope = KAWATA_SLOPE_PIXELS * 2.0f * tanf(0.5f * v->fov_y) / (float)bh;
+    float cutoff = KAWATA_CUTOFF * fminf((float)v->width / bw, (float)v->height / bh);
+    float light[3], ll = sqrtf(p->light[0] * p->light[0] + p->light[1] * p->light[1] +
+                               p->light[2] * p->light[2]);
+    for (int i = 0; i < 3; i++) light[i] = ll > 0 ? p->light[i] / ll : (i == 2 ? 1.0f : 0.0f);
+
+    buffer(gl, s, B_DEPTH, nb * 4, RND_B_KAWATA_DEPTH, s->depth_tex, RND_T_KAWATA_DEPTH);
+    buffer(gl, s, B_NEAR, nb * 4, RND_B_KAWATA_NEAR, s->near_tex, RND_T_KAWATA_NEAR);
+    buffer(gl, s, B_FAR, nb * 4, RND_B_KAWATA_FAR, s->far_tex, RND_T_KAWATA_FAR);
+    buffer(gl, s, B_COUNTER, 4, RND_B_KAWATA_COUNT, 0, 0);
+    GLintptr row0 = (GLintptr)brect[1] * bw * 4;
+    GLsizeiptr rows = (GLsizeiptr)(brect[3] - brect[1]) * bw * 4;
+    fill(gl, s->buf[B_DEPTH], row0, rows, 0xFFFFFFFFu);
+    fill(gl, s->buf[B_NEAR], row0, rows, 0xFFFFFFFFu);
+    fill(gl, s->buf[B_FAR], row0, rows, 0);
+    fill(gl, s->buf[B_COUNTER], 0, 4, 0);
+    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+
+    /* Every program's per-frame uniforms (those a program lacks are -1 and skipped). */
+    for (int pr = 0; pr < P_COUNT; pr++) {
+        gl->UseProgram(s->prog[pr]);
+        const GLint *l = s->loc[pr];
+        if (l[U_VIEWPROJ] >= 0) gl->UniformMatrix4fv(l[U_VIEWPROJ], 1, GL_FALSE, v->viewproj);
+        if (l[U_VIEW] >= 0) gl->UniformMatrix4fv(l[U_VIEW], 1, GL_FALSE, v->view);
+        if (l[U_PROJ] >= 0) gl->UniformMatrix4fv(l[U_PROJ], 1, GL_FALSE, v->proj);
+        if (l[U_BSIZE] >= 0) gl->Uniform2i(l[U_BSIZE], bw, bh);
+        if (l[U_FSIZE] >= 0) gl->Uniform2i(l[U_FSIZE], v->width, v->height);
+        if (l[U_ZNEAR] >= 0) gl->Uniform1f(l[U_ZNEAR], v->znear);
+        if (l[U_ZFAR] >= 0) gl->Uniform1f(l[U_ZFAR], v->zfar);
+        if (l[U_IBITS] >= 0) gl->Uniform1ui(l[U_IBITS], ibits);
+        if (l[U_GAMMA] >= 0) gl->Uniform1f(l[U_GAMMA], gamma);
+        if (l[U_QSCALE] >= 0) gl->Uniform1f(l[U_QSCALE], qscale);
+        if (l[U_QMAX] >= 0) gl->Uniform1ui(l[U_QMAX], qmax);
+        if (l[U_SLOPE] >= 0) gl->Uniform1f(l[U_SLOPE], slope);
+        if (l[U_COLOR] >= 0) gl->Uniform1i(l[U_COLOR], p->color);
+        if (l[U_LIGHT] >= 0) gl->Uniform3fv(l[U_LIGHT], 1, light);
+        if (l[U_SUPPORT] >= 0) gl->Uniform1i(l[U_SUPPORT], KAWATA_MIN_SUPPORT);
+        if (l[U_CUTOFF] >= 0) gl->Uniform1f(l[U_CUTOFF], cutoff);
+        if (l[U_BLO] >= 0) gl->Uniform2i(l[U_BLO], brect[0], brect[1]);
+        if (l[U_BHI] >= 0) gl->Uniform2i(l[U_BHI], brect[2], brect[3]);
+    }
+
+    /* Passes 1 and 2, each over every buffer set (one set: its range table is made once). */
+    gl->UseProgram(s->prog[P_RASTER]);
+    int rebind = c->nsets > 1;
+    uint32_t nranges = 0, first = 0;
+    int64_t total = 0;
+    for (int pass = 1; pass <= 2; pass++)
+        for (uint32_t set = 0; set < c->nsets; set++) {
+            if (pass == 1 || rebind) {
+                total = rnd_kit_set_ranges(k, v, set, &nranges, &first, err);
+                if (total < 0) return (int)total;
+                rnd_kit_bind_set(k, &c->sets[set], p->color);
+            }
+            if (total > 0) raster_set(gl, s, c, set, (uint32_t)total, nranges, first, pass);
+        }
+
+    /* Pass 3, first half: both points of every buffer pixel into P1, C1, P2, C2 in one draw
+     * for a cloud in one buffer set; else per set the nearest points (draw buffers P1, C1),
+     * then the farthest (P2, C2), into textures cleared to "no point" over the rectangle. */
+    gl->Disable(GL_DEPTH_TEST);
+    gl->Disable(GL_BLEND);
+    gl->Enable(GL_SCISSOR_TEST);
+    gl->Viewport(0, 0, bw, bh);
+    /* The renderer masks the 8-bit target's alpha on draw buffer 0 (pipe.h); these textures
+     * need their w (the "point here" flag), so every channel is written until pass 5. */
+    for (GLuint i = 0; i < 4; i++) gl->ColorMaski(i, GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+    gl->BindFramebuffer(GL_FRAMEBUFFER, s->fbo_pts);
+    const GLenum all[4] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1, GL_COLOR_ATTACHMENT2,
+                           GL_COLOR_ATTACHMENT3};
+    const GLenum both[4] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT2, GL_COLOR_ATTACHMENT1,
+                            GL_COLOR_ATTACHMENT3};
+    const GLenum nearb[4] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT2, GL_NONE, GL_NONE};
+    const GLenum farb[4] = {GL_COLOR_ATTACHMENT1, GL_COLOR_ATTACHMENT3, GL_NONE, GL_NONE};
+    const float zero[4] = {0, 0, 0, 0};
+    gl->UseProgram(s->prog[P_RESOLVE]);
+    const GLint *lr = s->loc[P_RESOLVE];
+    if (!rebind) {
+        gl->DrawBuffers(4, both);
+        gl->Uniform1ui(lr[U_BASE], (GLuint)c->sets[0].base);
+        gl->Uniform1ui(lr[U_SETN], c->sets[0].n);
+        gl->Uniform1i(lr[U_WHICH], 2);
+        draw_rect(gl, s, brect);
+    } else {
+        gl->Scissor(brect[0], brect[1], brect[2] - brect[0], brect[3] - brect[1]);
+        gl->DrawBuffers(4, all);
+        for (int i = 0; i < 4; i++) gl->ClearBufferfv(GL_COLOR, i, zero);
+        for (uint32_t set = 0; set < c->nsets; set++) {
+            rnd_kit_bind_set(k, &c->sets[set], p->color);
+            gl->Uniform1ui(lr[U_BASE], (GLuint)c->sets[set].base);
+            gl->Uniform1ui(lr[U_SETN], c->sets[set].n);
+            for (int which = 0; which < 2; which++) {
+                gl->DrawBuffers(4, which ? farb : nearb);
+                gl->Uniform1i(lr[U_WHICH], which);
+                draw_rect(gl, s, brect);
+            }
+        }
+    }
+    /* Passes 3 (average) and 4 (plane fit, shading) into S0, S1. */
+    gl->BindFramebuffer(GL_FRAMEBUFFER, s->fbo_splat);
+    gl->DrawBuffers(2, all);
+    bind_2d(gl, s, X_P1, 4, 1);
+    gl->UseProgram(s->prog[P_FIT]);
+    draw_rect(gl, s, brect);
+    gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT |
+                      GL_BUFFER_UPDATE_BARRIER_BIT);
+
+    /* Pass 5 into the target over the cloud's screen rectangle, grown by the cut-off. */
+    rnd__screen_rect(v, c->bmin, c->bmax, (int)ceilf(cutoff) + 1, rect);
+    bind_2d(gl, s, X_S0, 2, 1);
+    gl->UseProgram(s->prog[P_SPLAT]);
+    gl->BindFramebuffer(GL_FRAMEBUFFER, d->target->fbo);
+    gl->ColorMaski(0, GL_TRUE, GL_TRUE, GL_TRUE, d->target->is_float ? GL_TRUE : GL_FALSE);
+    gl->Viewport(0, 0, v->width, v->height);
+    draw_rect(gl, s, rect);
+    gl->Disable(GL_SCISSOR_TEST);
+    /* The splat count; the frame waits for the GPU at its end anyway (render.c's glFinish). */
+    GLuint count = 0;
+    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->buf[B_COUNTER]);
+    gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, 4, &count);
+    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+    d->out->splats = count;
+    bind_2d(gl, s, X_P1, NTEX, 0);
+    for (GLuint b = RND_B_KAWATA_DEPTH; b <= RND_B_KAWATA_COUNT; b++)
+        gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, b, 0);
+    rnd_kit_unbind(k);
+    gl->UseProgram(0);
+    return GL_CHECK_PASS(gl, "the kawata passes", err);
+}
+
+const rnd_pipeline pipe_kawata = {
+    .name = "kawata",
+    .needs = 1u << RND_ATTR_POS | 1u << RND_ATTR_RGBA | 1u << RND_ATTR_FIELD |
+             1u << RND_ATTR_INTENSITY,
+    .create = kawata_create,
+    .destroy = kawata_destroy,
+    .render = kawata_render,
+};

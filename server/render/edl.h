@@ -1,0 +1,27 @@
+/* edl.h — Eye-Dome Lighting (Boucheny 2009, in the form Potree and CloudCompare use), a pass
+ * over a finished frame's eye depth for every pipeline (internal to the renderer; render.c
+ * runs it when shading=edl). */
+#pragma once
+#include "pipe.h"
+
+/* The darkening per unit of mean log2-depth obscurance at edl_strength 1: Potree's constant,
+ * so that strength 1 gives the look its users know. */
+#define RND_EDL_SCALE 300.0f
+
+typedef struct rnd_edl {
+    GLuint prog, vao;
+    GLint u_size, u_radius, u_k;
+} rnd_edl;
+
+/* rnd__edl_init: compiles edl.vert/edl.frag. Returns 0 or SD_E* with err filled.
+ * rnd__edl_free: releases it; safe on a zeroed struct. */
+int rnd__edl_init(rnd_edl *e, rnd_kit *k, sd_err *err);
+void rnd__edl_free(rnd_edl *e, const gl_api *gl);
+
+/* rnd__edl_apply: multiplies the colour of target t (bound state is left as the renderer
+ * expects: no blending, both draw buffers of the float target, alpha untouched) by the EDL
+ * shade exp(-RND_EDL_SCALE * strength * sum_n max(0, log2 z - log2 z_n) / 8) of its 8
+ * neighbours at `radius` pixels, read from t->depth_eye; background pixels (+inf) and
+ * neighbours outside the frame or on the background add nothing. strength 0 draws nothing. */
+void rnd__edl_apply(const rnd_edl *e, const gl_api *gl, const rnd_target *t, float strength,
+                    float radius);

@@ -1,0 +1,77 @@
+#version 430
+// kawata_raster.comp — passes 1 and 2 of the `kawata` pipeline (pipe_kawata.c): points into the
+// low-resolution image buffer (u_bsize), one program for both passes so that both compute
+// every point's depth with the same instructions (pass 2 compares them for equality).
+//   u_pass 1: depth[b] = min over the points of buffer pixel b of their eye depth (float bits:
+//             positive floats order like uints).
+//   u_pass 2: the point whose depth equals depth[b] stores its cloud-wide index in near[b]
+//             (atomicMin: ties go to the lowest index); a point behind it by at most u_gamma
+//             stores atomicMax((1 + quantised step) << u_index_bits | index) in far[b]: the
+//             farthest point within gamma (the paper's "write if the depth is larger" test).
+// Each invocation handles u_per points, u_threads apart, as points_raster.comp (llvmpipe's
+// per-invocation cost); every uniform the loop uses is read once into a local (llvmpipe
+// reloads uniforms at each use inside loops).
+
+layout(local_size_x = 64) in;
+
+#include "lib_bindings.glsl"
+
+layout(binding = T_POS) uniform samplerBuffer u_pos;
+// The same buffers as textures, for the tests before the atomics (gathers on llvmpipe). depth
+// only decreases in pass 1 and far only increases in pass 2, so a stale read costs a needless
+// atomic, never a missed one.
+layout(binding = T_KAWATA_DEPTH) uniform usamplerBuffer u_depth;
+layout(binding = T_KAWATA_FAR) uniform usamplerBuffer u_far;
+layout(std430, binding = B_KAWATA_DEPTH) restrict buffer Depth { uint depth[]; };
+layout(std430, binding = B_KAWATA_NEAR) restrict buffer Near { uint near[]; };
+layout(std430, binding = B_KAWATA_FAR) restrict buffer Far { uint far[]; };
+#include "lib_fetch.glsl"
+layout(binding = T_RANGES) uniform usamplerBuffer u_ranges;
+#include "lib_ranges.glsl"
+
+uniform mat4 u_viewproj;
+uniform ivec2 u_bsize;      // image buffer size
+uniform float u_znear, u_zfar;
+uniform uint u_total, u_nranges, u_first, u_stride, u_threads, u_per, u_base;
+uniform int u_pass;
+uniform uint u_index_bits;
+uniform float u_gamma;      // local units
+uniform float u_qscale;     // (u_qmax - 1) / u_gamma
+uniform uint u_qmax;        // 2^(32 - u_index_bits) - 1
+
+void main()
+{
+    mat4 viewproj = u_viewproj;
+    ivec2 bsize = u_bsize;
+    vec2 fb = vec2(bsize);
+    float znear = u_znear, zfar = u_zfar, gamma = u_gamma, qscale = u_qscale;
+    uint total = u_total, nranges = u_nranges, first = u_first, threads = u_threads;
+    uint per = u_per, base = u_base, ibits = u_index_bits, qtop = u_qmax - 1u;
+    int pass = u_pass;
+    uint gid = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * u_stride;
+    for (uint j = 0u; j < per; j++) {
+        uint k = gid + j * threads;
+        if (k >= total) break;
+        uint i = first + k;
+        if (nranges > 1u) i = point_of(u_ranges, nranges, k);
+        vec4 c = viewproj * vec4(fetch3(u_pos, i), 1.0);
+        float d = c.w;
+        if (!(d >= znear && d <= zfar)) continue;
+        vec2 b = (c.xy / d * 0.5 + 0.5) * fb;
+        if (!(b.x >= 0.0 && b.y >= 0.0 && b.x < fb.x && b.y < fb.y)) continue;
+        ivec2 q = min(ivec2(b), bsize - 1);
+        int pi = q.y * bsize.x + q.x;
+        uint key = floatBitsToUint(d);
+        uint d1 = texelFetch(u_depth, pi).x;
+        if (pass == 1) {
+            if (key < d1) atomicMin(depth[pi], key);
+        } else if (key == d1) {
+            atomicMin(near[pi], base + i);
+        } else {
+            float step = d - uintBitsToFloat(d1);
+            if (step > gamma) continue;
+            uint fk = ((1u + min(uint(step * qscale), qtop - 1u)) << ibits) | (base + i);
+            if (fk > texelFetch(u_far, pi).x) atomicMax(far[pi], fk);
+        }
+    }
+}
