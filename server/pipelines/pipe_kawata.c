@@ -68,7 +68,8 @@ enum { TEX_ROUND = 64 };             /* buffer textures grow in steps of this ma
     X(PER, "u_per") X(BASE, "u_base") X(SETN, "u_count") X(PASS, "u_pass")                    \
     X(IBITS, "u_index_bits") X(GAMMA, "u_gamma") X(QSCALE, "u_qscale") X(QMAX, "u_qmax")       \
     X(SLOPE, "u_slope") X(COLOR, "u_color") X(LIGHT, "u_light") X(SUPPORT, "u_min_support")   \
-    X(WHICH, "u_which") X(CUTOFF, "u_cutoff") X(BLO, "u_blo") X(BHI, "u_bhi")
+    X(WHICH, "u_which") X(CUTOFF, "u_cutoff") X(BLO, "u_blo") X(BHI, "u_bhi")              \
+    X(TINV, "u_tinv")
 
 enum {
 #define KW_U_ENUM_(id, name) U_##id,
@@ -388,6 +389,7 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
         if (l[U_CUTOFF] >= 0) gl->Uniform1f(l[U_CUTOFF], cutoff);
         if (l[U_BLO] >= 0) gl->Uniform2i(l[U_BLO], brect[0], brect[1]);
         if (l[U_BHI] >= 0) gl->Uniform2i(l[U_BHI], brect[2], brect[3]);
+        if (l[U_TINV] >= 0) gl->Uniform2f(l[U_TINV], 1.0f / s->tex_w, 1.0f / s->tex_h);
     }
 
     /* Passes 1 and 2, each over every buffer set (one set: its range table is made once). */

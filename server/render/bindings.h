@@ -41,7 +41,7 @@
     X(KAWATA_C2)     /* kawata: RGBA32F 2-D, the colour of P2 */                                \
     X(KAWATA_S0)     /* kawata: RGBA32F 2-D, the splat: frame x, y, eye depth, valid */         \
     X(KAWATA_S1)     /* kawata: RGBA32F 2-D, the splat's colour */                              \
-    X(EDL_DEPTH)     /* EDL: the target's depth_eye (R32F 2-D texture, not a buffer) */
+    X(EDL_DEPTH)     /* EDL: a copy of the target's depth_eye as R32F */
 
 enum {
 #define RND_B_ENUM_(name) RND_B_##name,

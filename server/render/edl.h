@@ -10,7 +10,9 @@
 
 typedef struct rnd_edl {
     GLuint prog, vao;
-    GLint u_size, u_radius, u_k;
+    GLint u_size, u_o1, u_o2, u_k;
+    GLuint copy_buf, copy_tex;   /* depth_eye copied into a buffer, read as a buffer texture */
+    uint64_t copy_bytes;
 } rnd_edl;
 
 /* rnd__edl_init: compiles edl.vert/edl.frag. Returns 0 or SD_E* with err filled.
@@ -21,7 +23,10 @@ void rnd__edl_free(rnd_edl *e, const gl_api *gl);
 /* rnd__edl_apply: multiplies the colour of target t (bound state is left as the renderer
  * expects: no blending, both draw buffers of the float target, alpha untouched) by the EDL
  * shade exp(-RND_EDL_SCALE * strength * sum_n max(0, log2 z - log2 z_n) / 8) of its 8
- * neighbours at `radius` pixels, read from t->depth_eye; background pixels (+inf) and
- * neighbours outside the frame or on the background add nothing. strength 0 draws nothing. */
-void rnd__edl_apply(const rnd_edl *e, const gl_api *gl, const rnd_target *t, float strength,
-                    float radius);
+ * neighbours at `radius` pixels (offsets (r, 0) and (r, r) / sqrt 2 rounded to pixels, turned
+ * by multiples of 90 degrees), read from t->depth_eye; background pixels (+inf) and neighbours
+ * outside the frame or on the background add nothing. Only the pixels of rect (x0, y0, x1, y1;
+ * the cloud's screen rectangle: nothing else has a depth) are read and shaded. strength 0
+ * draws nothing. */
+void rnd__edl_apply(rnd_edl *e, const gl_api *gl, const rnd_target *t, const int rect[4],
+                    float strength, float radius);

@@ -687,18 +687,34 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
                          t->is_float ? 0.0f : 1.0f};
     const float inf[4] = {INFINITY, 0, 0, 0};
     /* The depth renderbuffer is left to the pipelines that test depth (pipe.h). */
-    if (edl && !t->is_float) { /* EDL reads the eye depth: the 8-bit target writes it too */
-        const GLenum both[2] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
-        gl->DrawBuffers(2, both);
+    /* EDL reads the eye depth (the 8-bit target then writes it too) over the cloud's screen
+     * rectangle only: nothing else has depth, give or take what pipelines draw around a point
+     * (points: up to point_size / 2 <= 32 pixels; kawata and splat: a few pixels; a magnified
+     * close-up's box covers the frame anyway). The 8-bit target clears its depth there only. */
+    int edl_rect[4] = {0, 0, 0, 0};
+    if (edl) {
+        rnd__screen_rect(&v, c->bmin, c->bmax, 64 + (int)ceilf(params->edl_radius), edl_rect);
+        if (!t->is_float) {
+            const GLenum both[2] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
+            gl->DrawBuffers(2, both);
+        }
     }
     gl->ClearBufferfv(GL_COLOR, 0, bg);
-    if (t->is_float || edl) gl->ClearBufferfv(GL_COLOR, 1, inf);
+    if (t->is_float) {
+        gl->ClearBufferfv(GL_COLOR, 1, inf);
+    } else if (edl) {
+        gl->Enable(GL_SCISSOR_TEST);
+        gl->Scissor(edl_rect[0], edl_rect[1], edl_rect[2] - edl_rect[0], edl_rect[3] - edl_rect[1]);
+        gl->ClearBufferfv(GL_COLOR, 1, inf);
+        gl->Disable(GL_SCISSOR_TEST);
+    }
     if (!t->is_float) gl->ColorMaski(0, GL_TRUE, GL_TRUE, GL_TRUE, GL_FALSE);
     rnd_draw_out out = {0};
     const rnd_draw draw = {.cloud = c, .cloud_data = slot->pdata[pi], .view = &v,
                            .params = params, .target = t, .out = &out};
     rc = pipelines[pi]->render(&r->kit, r->pstate[pi], &draw, err);
-    if (rc == 0 && edl) rnd__edl_apply(&r->edl, gl, t, params->edl_strength, params->edl_radius);
+    if (rc == 0 && edl)
+        rnd__edl_apply(&r->edl, gl, t, edl_rect, params->edl_strength, params->edl_radius);
     if (edl && !t->is_float) {
         const GLenum one[2] = {GL_COLOR_ATTACHMENT0, GL_NONE};
         gl->BindFramebuffer(GL_FRAMEBUFFER, t->fbo);
