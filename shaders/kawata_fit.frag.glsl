@@ -1,23 +1,24 @@
 #version 430
 // kawata_fit.frag — passes 3 and 4 of the `kawata` pipeline (pipe_kawata.c), fragment passes
 // over the image buffer's pixels (the viewport is the buffer, the scissor the cloud's rectangle
-// in it): llvmpipe shades whole pixel quads at once and texelFetch gathers, where compute
-// invocations pay per work group and storage-buffer reads run lane by lane (measured: the two
-// stages as compute shaders took ~3x as long). pipe_kawata.c inserts "#define STAGE 1|2".
+// in it) that write storage buffers and draw nothing. Fragment passes because llvmpipe shades
+// whole pixel quads at once where compute invocations pay per work group (the stages as compute
+// shaders took longer), and every read goes through a buffer texture because texelFetch from one
+// gathers all SIMD lanes at once on llvmpipe, where a 2-D texelFetch costs several times as
+// much and storage-buffer reads run lane by lane. pipe_kawata.c inserts "#define STAGE 1|2".
 //   STAGE 1: the nearest point of each buffer pixel (near[b]) and the farthest within gamma
-//           (far[b]'s index bits) to eye space (w = 1) with their colours, into P1, C1 and
-//           P2, C2; (0, 0, 0, 0) marks "no point". u_which 2 (a cloud in one buffer set): both
-//           at once, outputs 0-3 = P1, C1, P2, C2, every pixel written. A cloud in several
-//           sets: per set, u_which 0 (the nearest) then 1 (the farthest) into outputs 0-1,
-//           which pipe_kawata.c's draw buffers send to P1, C1 or P2, C2, discarding pixels
-//           whose point is not of this set (they keep what another set wrote, or the clear).
+//           (far[b]'s index bits), when they belong to this buffer set, to eye space (w = 1)
+//           with their colours: pts[4b] = P1, pts[4b + 1] = P2, pts[4b + 2] = colour of P1,
+//           pts[4b + 3] = colour of P2; (0, 0, 0, 0) marks "no point". u_all 1 (a cloud in one
+//           set): every entry of every pixel written; else per set only its own points (the
+//           rows were cleared first).
 //   STAGE 2: the average of the two (Omega_a, pass 3), the least-squares plane z = Ax + By + C
 //           in eye space over the points of the 3x3 neighbourhood in both buffers that lie
 //           within the depth tolerance of the nearest point (eq. 4-5, pass 4; coordinates
 //           centred on Omega_a for conditioning, Cramer's rule), normal (A, B, -1) turned
-//           towards the eye, Lambert shading, and the splat for pass 5: S0 = (frame x, frame y,
-//           eye depth, 1), S1 = (colour, 1); (0, 0, 0, 0) when the pixel has no point or fewer
-//           than u_min_support supporters. Counts the splats in nsplats.
+//           towards the eye, Lambert shading, and the splat for pass 5: splats[2b] = (frame x,
+//           frame y, eye depth, 1), splats[2b + 1] = (colour, 1); (0, 0, 0, 0) when the pixel
+//           has no point or fewer than u_min_support supporters. Counts the splats in nsplats.
 
 #include "lib_bindings.glsl"
 
@@ -32,67 +33,50 @@ layout(binding = T_POS) uniform samplerBuffer u_pos;
 layout(binding = T_SRC) uniform usamplerBuffer u_src;
 layout(binding = T_KAWATA_NEAR) uniform usamplerBuffer u_near;
 layout(binding = T_KAWATA_FAR) uniform usamplerBuffer u_far;
+layout(std430, binding = B_KAWATA_PTS) writeonly restrict buffer Pts { vec4 pts[]; };
 #include "lib_fetch.glsl"
 #include "lib_colormap.glsl"
 uniform uint u_base, u_count, u_index_bits;
-uniform int u_which;
+uniform int u_all;
 
-layout(location = 0) out vec4 o_pos;
-layout(location = 1) out vec4 o_col;
-layout(location = 2) out vec4 o_pos2;
-layout(location = 3) out vec4 o_col2;
-
-// Point i of this set (l = i - u_base, wrapping for other sets' points) in eye space and its
-// colour; false when there is none or it is not of this set.
-bool point(uint i, out vec4 pos, out vec4 col)
+// Writes point i (cloud-wide) at entries e (position) and e + 2 (colour) when it is a point of
+// this set; else, when all, "no point".
+void put(uint i, int e, bool all)
 {
-    pos = vec4(0.0);
-    col = vec4(0.0);
-    uint l = i - u_base;
-    if (i == 0xFFFFFFFFu || l >= u_count) return false;
-    pos = vec4((u_view * vec4(fetch3(u_pos, l), 1.0)).xyz, 1.0);
+    uint l = i - u_base; // wraps for points of earlier sets
+    if (i == 0xFFFFFFFFu || l >= u_count) {
+        if (all) pts[e] = vec4(0.0), pts[e + 2] = vec4(0.0);
+        return;
+    }
+    pts[e] = vec4((u_view * vec4(fetch3(u_pos, l), 1.0)).xyz, 1.0);
     uint v = texelFetch(u_src, int(l)).x;
     int color = u_color;
     vec3 c = color == 1   ? colormap(uintBitsToFloat(v))
              : color == 4 ? vec3(clamp(uintBitsToFloat(v), 0.0, 1.0))
                           : unpackUnorm4x8(v).rgb;
-    col = vec4(c, 1.0);
-    return true;
+    pts[e + 2] = vec4(c, 1.0);
 }
 
 void main()
 {
     ivec2 q = ivec2(gl_FragCoord.xy);
     int b = q.y * u_bsize.x + q.x;
-    int which = u_which;
+    bool all = u_all != 0;
     uint k = texelFetch(u_far, b).x;
-    uint i2 = k == 0u ? 0xFFFFFFFFu : k & ((1u << u_index_bits) - 1u);
-    if (which == 2) {
-        point(texelFetch(u_near, b).x, o_pos, o_col);
-        point(i2, o_pos2, o_col2);
-        return;
-    }
-    if (!point(which == 0 ? texelFetch(u_near, b).x : i2, o_pos, o_col)) discard;
-    o_pos2 = vec4(0.0);
-    o_col2 = vec4(0.0);
+    put(texelFetch(u_near, b).x, 4 * b, all);
+    put(k == 0u ? 0xFFFFFFFFu : k & ((1u << u_index_bits) - 1u), 4 * b + 1, all);
 }
 #else
-layout(binding = T_KAWATA_P1) uniform sampler2D u_p1;
-layout(binding = T_KAWATA_P2) uniform sampler2D u_p2;
-layout(binding = T_KAWATA_C1) uniform sampler2D u_c1;
-layout(binding = T_KAWATA_C2) uniform sampler2D u_c2;
+layout(binding = T_KAWATA_PTS) uniform samplerBuffer u_pts;
+layout(std430, binding = B_KAWATA_SPLATS) writeonly restrict buffer Splats { vec4 splats[]; };
 layout(std430, binding = B_KAWATA_COUNT) restrict buffer Count { uint nsplats; };
 uniform mat4 u_proj;
 uniform ivec2 u_fsize;
 uniform float u_gamma;   // depth tolerance: u_gamma + u_slope * depth
 uniform float u_slope;
 uniform int u_min_support;
-uniform vec2 u_tinv;     // 1 / the textures' size (they may be larger than the buffer)
 uniform vec3 u_light;    // unit, eye space
 uniform float u_znear, u_zfar;
-
-layout(location = 0) out vec4 o_splat;
-layout(location = 1) out vec4 o_col;
 
 // The normal-equation sums of the plane fit, and the number of supporting points.
 struct Fit {
@@ -110,47 +94,46 @@ void add_point(vec4 t, vec3 pa, float z0, float tol, bool self, inout Fit f)
     f.sxz += e.x * e.z, f.syz += e.y * e.z, f.sz += e.z;
 }
 
-// Texel r of t. textureLod at the texel's centre (NEAREST filtering: exact) rather than
-// texelFetch: on llvmpipe a 2-D texelFetch costs several times a filtered lookup (measured in
-// edl.frag's first form: 9 texelFetch a pixel ~4x the textureLod form).
-vec4 at(sampler2D t, ivec2 r)
-{
-    return textureLod(t, (vec2(r) + 0.5) * u_tinv, 0.0);
-}
-
 // Both buffers' points of neighbour q + (dx, dy), when it lies in this frame's rectangle.
-void add_pixel(ivec2 q, int dx, int dy, ivec2 blo, ivec2 bhi, vec3 pa, float z0, float tol,
-               inout Fit f)
+void add_pixel(ivec2 q, int dx, int dy, ivec2 blo, ivec2 bhi, int w, vec3 pa, float z0,
+               float tol, inout Fit f)
 {
     ivec2 r = q + ivec2(dx, dy);
     if (r.x < blo.x || r.y < blo.y || r.x >= bhi.x || r.y >= bhi.y) return;
-    add_point(at(u_p1, r), pa, z0, tol, dx == 0 && dy == 0, f);
-    add_point(at(u_p2, r), pa, z0, tol, false, f);
+    int e = 4 * (r.y * w + r.x);
+    add_point(texelFetch(u_pts, e), pa, z0, tol, dx == 0 && dy == 0, f);
+    add_point(texelFetch(u_pts, e + 1), pa, z0, tol, false, f);
 }
 
 void main()
 {
     ivec2 blo = u_blo, bhi = u_bhi;
+    int w = u_bsize.x;
     ivec2 q = ivec2(gl_FragCoord.xy);
-    vec4 a1 = at(u_p1, q);
-    o_splat = vec4(0.0);
-    o_col = vec4(0.0);
-    if (a1.w == 0.0) return;
-    vec4 a2 = at(u_p2, q);
+    int b = q.y * w + q.x;
+    vec4 a1 = texelFetch(u_pts, 4 * b);
+    if (a1.w == 0.0) {
+        splats[2 * b] = vec4(0.0);
+        return;
+    }
+    vec4 a2 = texelFetch(u_pts, 4 * b + 1);
     vec3 pa = a2.w > 0.0 ? 0.5 * (a1.xyz + a2.xyz) : a1.xyz; // pass 3
     float tol = u_gamma + u_slope * (-a1.z);
     Fit f = Fit(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0);
     // Written out, not looped: llvmpipe keeps named values in registers.
-    add_pixel(q, -1, -1, blo, bhi, pa, a1.z, tol, f);
-    add_pixel(q, 0, -1, blo, bhi, pa, a1.z, tol, f);
-    add_pixel(q, 1, -1, blo, bhi, pa, a1.z, tol, f);
-    add_pixel(q, -1, 0, blo, bhi, pa, a1.z, tol, f);
-    add_pixel(q, 0, 0, blo, bhi, pa, a1.z, tol, f);
-    add_pixel(q, 1, 0, blo, bhi, pa, a1.z, tol, f);
-    add_pixel(q, -1, 1, blo, bhi, pa, a1.z, tol, f);
-    add_pixel(q, 0, 1, blo, bhi, pa, a1.z, tol, f);
-    add_pixel(q, 1, 1, blo, bhi, pa, a1.z, tol, f);
-    if (f.support < u_min_support) return;
+    add_pixel(q, -1, -1, blo, bhi, w, pa, a1.z, tol, f);
+    add_pixel(q, 0, -1, blo, bhi, w, pa, a1.z, tol, f);
+    add_pixel(q, 1, -1, blo, bhi, w, pa, a1.z, tol, f);
+    add_pixel(q, -1, 0, blo, bhi, w, pa, a1.z, tol, f);
+    add_pixel(q, 0, 0, blo, bhi, w, pa, a1.z, tol, f);
+    add_pixel(q, 1, 0, blo, bhi, w, pa, a1.z, tol, f);
+    add_pixel(q, -1, 1, blo, bhi, w, pa, a1.z, tol, f);
+    add_pixel(q, 0, 1, blo, bhi, w, pa, a1.z, tol, f);
+    add_pixel(q, 1, 1, blo, bhi, w, pa, a1.z, tol, f);
+    if (f.support < u_min_support) {
+        splats[2 * b] = vec4(0.0);
+        return;
+    }
     // Cramer's rule on [sxx sxy sx; sxy syy sy; sx sy n] (A B C)^T = (sxz syz sz)^T (mat3 takes
     // columns; the matrix is symmetric).
     float det = determinant(mat3(f.sxx, f.sxy, f.sx, f.sxy, f.syy, f.sy, f.sx, f.sy, f.n));
@@ -160,8 +143,8 @@ void main()
         float B = determinant(mat3(f.sxx, f.sxy, f.sx, f.sxz, f.syz, f.sz, f.sx, f.sy, f.n)) / det;
         nrm = normalize(vec3(-A, -B, 1.0)); // (A, B, -1) turned towards the eye (+z)
     }
-    vec3 c1 = at(u_c1, q).rgb;
-    vec3 col = a2.w > 0.0 ? 0.5 * (c1 + at(u_c2, q).rgb) : c1;
+    vec3 c1 = texelFetch(u_pts, 4 * b + 2).rgb;
+    vec3 col = a2.w > 0.0 ? 0.5 * (c1 + texelFetch(u_pts, 4 * b + 3).rgb) : c1;
     int color = u_color;
     if (color == 2) {
         col = transpose(mat3(u_view)) * nrm * 0.5 + 0.5; // local normals, as `points`
@@ -171,8 +154,8 @@ void main()
         col *= 0.2 + 0.8 * max(dot(nrm, u_light), 0.0); // ambient + Lambert
     }
     vec4 clip = u_proj * vec4(pa, 1.0);
-    o_splat = vec4((clip.xy / clip.w * 0.5 + 0.5) * vec2(u_fsize), -pa.z, 1.0);
-    o_col = vec4(col, 1.0);
+    splats[2 * b] = vec4((clip.xy / clip.w * 0.5 + 0.5) * vec2(u_fsize), -pa.z, 1.0);
+    splats[2 * b + 1] = vec4(col, 1.0);
     atomicAdd(nsplats, 1u);
 }
 #endif

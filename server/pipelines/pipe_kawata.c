@@ -59,7 +59,7 @@ enum { GROUP = 64, MAX_GROUPS_X = 65535 };
 enum { KAWATA_MIN_SUPPORT = 3 };     /* a plane needs three points; see the file comment */
 #define KAWATA_SLOPE_PIXELS 4.0f     /* depth tolerance: buffer pixels of depth per pixel */
 #define KAWATA_CUTOFF 1.5f           /* splat cut-off radius, buffer pixels (4x4 gather) */
-enum { TEX_ROUND = 64 };             /* buffer textures grow in steps of this many pixels */
+enum { TEX_ROUND = 64 };             /* the stages' framebuffer grows in steps of this */
 
 #define KAWATA_UNIFORMS(X)                                                                   \
     X(VIEWPROJ, "u_viewproj") X(VIEW, "u_view") X(PROJ, "u_proj") X(BSIZE, "u_bsize")         \
@@ -68,8 +68,7 @@ enum { TEX_ROUND = 64 };             /* buffer textures grow in steps of this ma
     X(PER, "u_per") X(BASE, "u_base") X(SETN, "u_count") X(PASS, "u_pass")                    \
     X(IBITS, "u_index_bits") X(GAMMA, "u_gamma") X(QSCALE, "u_qscale") X(QMAX, "u_qmax")       \
     X(SLOPE, "u_slope") X(COLOR, "u_color") X(LIGHT, "u_light") X(SUPPORT, "u_min_support")   \
-    X(WHICH, "u_which") X(CUTOFF, "u_cutoff") X(BLO, "u_blo") X(BHI, "u_bhi")              \
-    X(TINV, "u_tinv")
+    X(ALL, "u_all") X(CUTOFF, "u_cutoff") X(BLO, "u_blo") X(BHI, "u_bhi")
 
 enum {
 #define KW_U_ENUM_(id, name) U_##id,
@@ -79,9 +78,8 @@ enum {
 };
 
 enum { P_RASTER = 0, P_RESOLVE, P_FIT, P_SPLAT, P_COUNT };
-enum { B_DEPTH = 0, B_NEAR, B_FAR, B_COUNTER, NBUF };
-/* The 2-D textures of passes 3-5 (bindings.h RND_T_KAWATA_P1 ...), in unit order. */
-enum { X_P1 = 0, X_P2, X_C1, X_C2, X_S0, X_S1, NTEX };
+enum { B_DEPTH = 0, B_NEAR, B_FAR, B_PTS, B_SPLATS, B_COUNTER, NBUF };
+enum { PTS_BYTES = 64, SPLAT_BYTES = 32 }; /* per buffer pixel */
 
 typedef struct kawata_state {
     GLuint prog[P_COUNT];
@@ -90,20 +88,19 @@ typedef struct kawata_state {
     GLuint vao;
     GLuint buf[NBUF];
     uint64_t bytes[NBUF];
-    GLuint depth_tex, near_tex, far_tex;  /* buffer textures over buf[B_DEPTH, NEAR, FAR] */
-    GLuint tex[NTEX];          /* RGBA32F, tex_w x tex_h (the buffer uses its lower left) */
-    int tex_w, tex_h;
-    GLuint fbo_pts, fbo_splat; /* P1 P2 C1 C2, and S0 S1, as colour attachments 0-3 / 0-1 */
+    GLuint tex[NBUF];          /* buffer textures over buf[] (0 for the counter) */
+    /* Passes 3-4 are fragment passes that only write storage buffers; this R8 texture, grown
+     * as needed and never drawn to (draw buffer GL_NONE), gives their framebuffer its size. */
+    GLuint rt, fbo;
+    int rt_w, rt_h;
 } kawata_state;
 
 static void free_textures(const gl_api *gl, kawata_state *s)
 {
-    if (s->tex[0]) gl->DeleteTextures(NTEX, s->tex);
-    if (s->fbo_pts) gl->DeleteFramebuffers(1, &s->fbo_pts);
-    if (s->fbo_splat) gl->DeleteFramebuffers(1, &s->fbo_splat);
-    memset(s->tex, 0, sizeof s->tex);
-    s->fbo_pts = s->fbo_splat = 0;
-    s->tex_w = s->tex_h = 0;
+    if (s->rt) gl->DeleteTextures(1, &s->rt);
+    if (s->fbo) gl->DeleteFramebuffers(1, &s->fbo);
+    s->rt = s->fbo = 0;
+    s->rt_w = s->rt_h = 0;
 }
 
 static void kawata_destroy(rnd_kit *k, void *state)
@@ -114,8 +111,7 @@ static void kawata_destroy(rnd_kit *k, void *state)
     for (int i = 0; i < P_COUNT; i++)
         if (s->prog[i]) gl->DeleteProgram(s->prog[i]);
     if (s->vao) gl->DeleteVertexArrays(1, &s->vao);
-    GLuint tex[3] = {s->depth_tex, s->near_tex, s->far_tex};
-    gl->DeleteTextures(3, tex);
+    gl->DeleteTextures(NBUF, s->tex);
     gl->DeleteBuffers(NBUF, s->buf);
     free_textures(gl, s);
     memset(s, 0, sizeof *s);
@@ -155,9 +151,7 @@ static int kawata_create(rnd_kit *k, void **state, sd_err *err)
     }
     gl->GenVertexArrays(1, &s->vao);
     gl->GenBuffers(NBUF, s->buf);
-    gl->GenTextures(1, &s->depth_tex);
-    gl->GenTextures(1, &s->near_tex);
-    gl->GenTextures(1, &s->far_tex);
+    gl->GenTextures(NBUF, s->tex);
     int rc = gl_check(gl, "creating the kawata pipeline", err);
     if (rc < 0) {
         kawata_destroy(k, s);
@@ -167,44 +161,32 @@ static int kawata_create(rnd_kit *k, void **state, sd_err *err)
     return 0;
 }
 
-/* ensure_textures: makes the RGBA32F textures and their framebuffers hold at least w x h
- * (grown in steps of TEX_ROUND, never shrunk, so a moving camera does not reallocate them
- * every frame). Returns 0 or SD_EGL. */
-static int ensure_textures(const gl_api *gl, kawata_state *s, int w, int h, sd_err *err)
+/* ensure_target: makes the stages' framebuffer at least w x h (grown in steps of TEX_ROUND,
+ * never shrunk, so a moving camera does not reallocate it every frame). Returns 0 or SD_EGL. */
+static int ensure_target(const gl_api *gl, kawata_state *s, int w, int h, sd_err *err)
 {
-    if (s->tex[0] && s->tex_w >= w && s->tex_h >= h) return 0;
-    int tw = s->tex_w > w ? s->tex_w : (w + TEX_ROUND - 1) / TEX_ROUND * TEX_ROUND;
-    int th = s->tex_h > h ? s->tex_h : (h + TEX_ROUND - 1) / TEX_ROUND * TEX_ROUND;
+    if (s->rt && s->rt_w >= w && s->rt_h >= h) return 0;
+    int tw = s->rt_w > w ? s->rt_w : (w + TEX_ROUND - 1) / TEX_ROUND * TEX_ROUND;
+    int th = s->rt_h > h ? s->rt_h : (h + TEX_ROUND - 1) / TEX_ROUND * TEX_ROUND;
     free_textures(gl, s);
-    gl->GenTextures(NTEX, s->tex);
-    for (int i = 0; i < NTEX; i++) {
-        gl->BindTexture(GL_TEXTURE_2D, s->tex[i]);
-        gl->TexStorage2D(GL_TEXTURE_2D, 1, GL_RGBA32F, tw, th);
-        gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-        gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-    }
+    gl->GenTextures(1, &s->rt);
+    gl->BindTexture(GL_TEXTURE_2D, s->rt);
+    gl->TexStorage2D(GL_TEXTURE_2D, 1, GL_R8, tw, th);
     gl->BindTexture(GL_TEXTURE_2D, 0);
-    gl->GenFramebuffers(1, &s->fbo_pts);
-    gl->GenFramebuffers(1, &s->fbo_splat);
-    int rc = 0;
-    for (int f = 0; f < 2 && rc == 0; f++) {
-        gl->BindFramebuffer(GL_FRAMEBUFFER, f ? s->fbo_splat : s->fbo_pts);
-        int first = f ? X_S0 : X_P1, n = f ? 2 : 4;
-        for (int i = 0; i < n; i++)
-            gl->FramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0 + (GLenum)i,
-                                     GL_TEXTURE_2D, s->tex[first + i], 0);
-        GLenum st = gl->CheckFramebufferStatus(GL_FRAMEBUFFER);
-        if (st != GL_FRAMEBUFFER_COMPLETE)
-            rc = sd_errf(err, SD_EGL, "kawata: a %dx%d RGBA32F framebuffer is incomplete (0x%x)",
-                         tw, th, (unsigned)st);
-    }
+    gl->GenFramebuffers(1, &s->fbo);
+    gl->BindFramebuffer(GL_FRAMEBUFFER, s->fbo);
+    gl->FramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, s->rt, 0);
+    const GLenum none = GL_NONE;
+    gl->DrawBuffers(1, &none);
+    GLenum st = gl->CheckFramebufferStatus(GL_FRAMEBUFFER);
     gl->BindFramebuffer(GL_FRAMEBUFFER, 0);
-    if (rc < 0) {
+    if (st != GL_FRAMEBUFFER_COMPLETE) {
         free_textures(gl, s);
-        return rc;
+        return sd_errf(err, SD_EGL, "kawata: a %dx%d framebuffer is incomplete (0x%x)", tw, th,
+                       (unsigned)st);
     }
-    s->tex_w = tw, s->tex_h = th;
-    return gl_check(gl, "making the kawata image buffer", err);
+    s->rt_w = tw, s->rt_h = th;
+    return gl_check(gl, "making the kawata passes' framebuffer", err);
 }
 
 /* Bits for a point index of a cloud of n points, leaving 0 free in pass 2's keys: the smallest
@@ -237,17 +219,17 @@ static double kawata_rho(const rnd_gpu_cloud *c, const rnd_view *v, float scale)
     return rho > 1.0 ? rho : 1.0;
 }
 
-/* buffer: grows s->buf[b] to bytes and binds it on storage block `block` (and, when tex is
- * not 0, as an R32UI buffer texture on unit `unit`). */
+/* buffer: grows s->buf[b] to bytes and binds it on storage block `block` and, when format is
+ * not 0, as a buffer texture of that format on unit `unit`. */
 static void buffer(const gl_api *gl, kawata_state *s, int b, uint64_t bytes, GLuint block,
-                   GLuint tex, GLenum unit)
+                   GLenum format, GLenum unit)
 {
     rnd_kit_ensure_ssbo(gl, &s->buf[b], &s->bytes[b], bytes);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, block, s->buf[b]);
-    if (!tex) return;
+    if (!format) return;
     gl->ActiveTexture(GL_TEXTURE0 + unit);
-    gl->BindTexture(GL_TEXTURE_BUFFER, tex);
-    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, s->buf[b]);
+    gl->BindTexture(GL_TEXTURE_BUFFER, s->tex[b]);
+    gl->TexBuffer(GL_TEXTURE_BUFFER, format, s->buf[b]);
     gl->ActiveTexture(GL_TEXTURE0);
 }
 
@@ -256,16 +238,6 @@ static void fill(const gl_api *gl, GLuint buf, GLintptr at, GLsizeiptr bytes, GL
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, buf);
     gl->ClearBufferSubData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, at, bytes, GL_RED_INTEGER,
                            GL_UNSIGNED_INT, &value);
-}
-
-/* bind_2d: the 2-D textures first .. first + n - 1 on their units (0: unbinds them). */
-static void bind_2d(const gl_api *gl, const kawata_state *s, int first, int n, int on)
-{
-    for (int i = first; i < first + n; i++) {
-        gl->ActiveTexture(GL_TEXTURE0 + RND_T_KAWATA_P1 + (GLenum)i);
-        gl->BindTexture(GL_TEXTURE_2D, on ? s->tex[i] : 0);
-    }
-    gl->ActiveTexture(GL_TEXTURE0);
 }
 
 /* Passes 1 and 2 over buffer set `set` (its range table and textures bound). */
@@ -321,11 +293,11 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     d->out->buffer_w = bw;
     d->out->buffer_h = bh;
     uint64_t nb = (uint64_t)bw * (uint64_t)bh;
-    if (nb * 4 > (uint64_t)k->max_ssbo)
+    if (nb * PTS_BYTES > (uint64_t)k->max_ssbo || nb * 4 > (uint64_t)k->max_texels)
         return sd_errf(err, SD_ELIMIT, "a %dx%d kawata image buffer needs a %llu-byte storage "
-                       "block, over the driver's %lld", bw, bh, (unsigned long long)(nb * 4),
-                       (long long)k->max_ssbo);
-    int rc = ensure_textures(gl, s, bw, bh, err);
+                       "block, over the driver's %lld", bw, bh,
+                       (unsigned long long)(nb * PTS_BYTES), (long long)k->max_ssbo);
+    int rc = ensure_target(gl, s, bw, bh, err);
     if (rc < 0) return rc;
 
     /* Only the buffer pixels of the cloud's screen rectangle (grown by one for the 3x3 fit) are
@@ -355,9 +327,12 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
                                p->light[2] * p->light[2]);
     for (int i = 0; i < 3; i++) light[i] = ll > 0 ? p->light[i] / ll : (i == 2 ? 1.0f : 0.0f);
 
-    buffer(gl, s, B_DEPTH, nb * 4, RND_B_KAWATA_DEPTH, s->depth_tex, RND_T_KAWATA_DEPTH);
-    buffer(gl, s, B_NEAR, nb * 4, RND_B_KAWATA_NEAR, s->near_tex, RND_T_KAWATA_NEAR);
-    buffer(gl, s, B_FAR, nb * 4, RND_B_KAWATA_FAR, s->far_tex, RND_T_KAWATA_FAR);
+    buffer(gl, s, B_DEPTH, nb * 4, RND_B_KAWATA_DEPTH, GL_R32UI, RND_T_KAWATA_DEPTH);
+    buffer(gl, s, B_NEAR, nb * 4, RND_B_KAWATA_NEAR, GL_R32UI, RND_T_KAWATA_NEAR);
+    buffer(gl, s, B_FAR, nb * 4, RND_B_KAWATA_FAR, GL_R32UI, RND_T_KAWATA_FAR);
+    buffer(gl, s, B_PTS, nb * PTS_BYTES, RND_B_KAWATA_PTS, GL_RGBA32F, RND_T_KAWATA_PTS);
+    buffer(gl, s, B_SPLATS, nb * SPLAT_BYTES, RND_B_KAWATA_SPLATS, GL_RGBA32F,
+           RND_T_KAWATA_SPLATS);
     buffer(gl, s, B_COUNTER, 4, RND_B_KAWATA_COUNT, 0, 0);
     GLintptr row0 = (GLintptr)brect[1] * bw * 4;
     GLsizeiptr rows = (GLsizeiptr)(brect[3] - brect[1]) * bw * 4;
@@ -389,7 +364,6 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
         if (l[U_CUTOFF] >= 0) gl->Uniform1f(l[U_CUTOFF], cutoff);
         if (l[U_BLO] >= 0) gl->Uniform2i(l[U_BLO], brect[0], brect[1]);
         if (l[U_BHI] >= 0) gl->Uniform2i(l[U_BHI], brect[2], brect[3]);
-        if (l[U_TINV] >= 0) gl->Uniform2f(l[U_TINV], 1.0f / s->tex_w, 1.0f / s->tex_h);
     }
 
     /* Passes 1 and 2, each over every buffer set (one set: its range table is made once). */
@@ -407,51 +381,28 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
             if (total > 0) raster_set(gl, s, c, set, (uint32_t)total, nranges, first, pass);
         }
 
-    /* Pass 3, first half: both points of every buffer pixel into P1, C1, P2, C2 in one draw
-     * for a cloud in one buffer set; else per set the nearest points (draw buffers P1, C1),
-     * then the farthest (P2, C2), into textures cleared to "no point" over the rectangle. */
+    /* Pass 3, first half: both points of every buffer pixel to eye space, in one pass for a
+     * cloud in one buffer set; else the rows are cleared to "no point" and each set writes the
+     * points it holds. Fragment passes that write storage buffers only. */
     gl->Disable(GL_DEPTH_TEST);
     gl->Disable(GL_BLEND);
     gl->Enable(GL_SCISSOR_TEST);
+    gl->BindFramebuffer(GL_FRAMEBUFFER, s->fbo);
     gl->Viewport(0, 0, bw, bh);
-    /* The renderer masks the 8-bit target's alpha on draw buffer 0 (pipe.h); these textures
-     * need their w (the "point here" flag), so every channel is written until pass 5. */
-    for (GLuint i = 0; i < 4; i++) gl->ColorMaski(i, GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
-    gl->BindFramebuffer(GL_FRAMEBUFFER, s->fbo_pts);
-    const GLenum all[4] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1, GL_COLOR_ATTACHMENT2,
-                           GL_COLOR_ATTACHMENT3};
-    const GLenum both[4] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT2, GL_COLOR_ATTACHMENT1,
-                            GL_COLOR_ATTACHMENT3};
-    const GLenum nearb[4] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT2, GL_NONE, GL_NONE};
-    const GLenum farb[4] = {GL_COLOR_ATTACHMENT1, GL_COLOR_ATTACHMENT3, GL_NONE, GL_NONE};
-    const float zero[4] = {0, 0, 0, 0};
+    if (rebind)
+        fill(gl, s->buf[B_PTS], (GLintptr)brect[1] * bw * PTS_BYTES,
+             (GLsizeiptr)(brect[3] - brect[1]) * bw * PTS_BYTES, 0);
     gl->UseProgram(s->prog[P_RESOLVE]);
     const GLint *lr = s->loc[P_RESOLVE];
-    if (!rebind) {
-        gl->DrawBuffers(4, both);
-        gl->Uniform1ui(lr[U_BASE], (GLuint)c->sets[0].base);
-        gl->Uniform1ui(lr[U_SETN], c->sets[0].n);
-        gl->Uniform1i(lr[U_WHICH], 2);
+    gl->Uniform1i(lr[U_ALL], !rebind);
+    for (uint32_t set = 0; set < c->nsets; set++) {
+        if (rebind) rnd_kit_bind_set(k, &c->sets[set], p->color);
+        gl->Uniform1ui(lr[U_BASE], (GLuint)c->sets[set].base);
+        gl->Uniform1ui(lr[U_SETN], c->sets[set].n);
         draw_rect(gl, s, brect);
-    } else {
-        gl->Scissor(brect[0], brect[1], brect[2] - brect[0], brect[3] - brect[1]);
-        gl->DrawBuffers(4, all);
-        for (int i = 0; i < 4; i++) gl->ClearBufferfv(GL_COLOR, i, zero);
-        for (uint32_t set = 0; set < c->nsets; set++) {
-            rnd_kit_bind_set(k, &c->sets[set], p->color);
-            gl->Uniform1ui(lr[U_BASE], (GLuint)c->sets[set].base);
-            gl->Uniform1ui(lr[U_SETN], c->sets[set].n);
-            for (int which = 0; which < 2; which++) {
-                gl->DrawBuffers(4, which ? farb : nearb);
-                gl->Uniform1i(lr[U_WHICH], which);
-                draw_rect(gl, s, brect);
-            }
-        }
+        gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
     }
-    /* Passes 3 (average) and 4 (plane fit, shading) into S0, S1. */
-    gl->BindFramebuffer(GL_FRAMEBUFFER, s->fbo_splat);
-    gl->DrawBuffers(2, all);
-    bind_2d(gl, s, X_P1, 4, 1);
+    /* Passes 3 (average) and 4 (plane fit, shading): the splats. */
     gl->UseProgram(s->prog[P_FIT]);
     draw_rect(gl, s, brect);
     gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT |
@@ -459,10 +410,8 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
 
     /* Pass 5 into the target over the cloud's screen rectangle, grown by the cut-off. */
     rnd__screen_rect(v, c->bmin, c->bmax, (int)ceilf(cutoff) + 1, rect);
-    bind_2d(gl, s, X_S0, 2, 1);
     gl->UseProgram(s->prog[P_SPLAT]);
     gl->BindFramebuffer(GL_FRAMEBUFFER, d->target->fbo);
-    gl->ColorMaski(0, GL_TRUE, GL_TRUE, GL_TRUE, d->target->is_float ? GL_TRUE : GL_FALSE);
     gl->Viewport(0, 0, v->width, v->height);
     draw_rect(gl, s, rect);
     gl->Disable(GL_SCISSOR_TEST);
@@ -472,7 +421,6 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, 4, &count);
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
     d->out->splats = count;
-    bind_2d(gl, s, X_P1, NTEX, 0);
     for (GLuint b = RND_B_KAWATA_DEPTH; b <= RND_B_KAWATA_COUNT; b++)
         gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, b, 0);
     rnd_kit_unbind(k);

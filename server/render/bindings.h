@@ -20,6 +20,8 @@
     X(KAWATA_DEPTH)  /* kawata: uint per buffer pixel, pass 1's nearest depth (float bits) */ \
     X(KAWATA_NEAR)   /* kawata: uint per buffer pixel, the nearest point (cloud-wide index) */ \
     X(KAWATA_FAR)    /* kawata: uint per buffer pixel, pass 2's key (depth step, index) */    \
+    X(KAWATA_PTS)    /* kawata: 4 vec4 per buffer pixel: P1, P2 (eye, valid), their colours */ \
+    X(KAWATA_SPLATS) /* kawata: 2 vec4 per buffer pixel: the splat (frame x, y, depth), colour */\
     X(KAWATA_COUNT)  /* kawata: uint, the splats drawn */
 
 #define RND_TEXTURE_UNITS(X)                                                                  \
@@ -35,12 +37,8 @@
     X(KAWATA_DEPTH)  /* kawata: KAWATA_DEPTH as R32UI */                                       \
     X(KAWATA_NEAR)   /* kawata: KAWATA_NEAR as R32UI */                                        \
     X(KAWATA_FAR)    /* kawata: KAWATA_FAR as R32UI */                                         \
-    X(KAWATA_P1)     /* kawata: RGBA32F 2-D, per buffer pixel the nearest point (eye, valid) */ \
-    X(KAWATA_P2)     /* kawata: RGBA32F 2-D, the farthest point within gamma */                 \
-    X(KAWATA_C1)     /* kawata: RGBA32F 2-D, the colour of P1 */                                \
-    X(KAWATA_C2)     /* kawata: RGBA32F 2-D, the colour of P2 */                                \
-    X(KAWATA_S0)     /* kawata: RGBA32F 2-D, the splat: frame x, y, eye depth, valid */         \
-    X(KAWATA_S1)     /* kawata: RGBA32F 2-D, the splat's colour */                              \
+    X(KAWATA_PTS)    /* kawata: KAWATA_PTS as RGBA32F, 4 texels a buffer pixel */             \
+    X(KAWATA_SPLATS) /* kawata: KAWATA_SPLATS as RGBA32F, 2 texels a buffer pixel */          \
     X(EDL_DEPTH)     /* EDL: a copy of the target's depth_eye as R32F */
 
 enum {
