@@ -261,6 +261,64 @@ static void test_sparse_holes(void **state)
     pc_prepared_free(&pc);
 }
 
+/* ---- buffer sets ---- */
+
+/* A cloud split into several buffer sets (rnd_desc.max_set_points, as the renderer does for
+ * clouds over GL_MAX_TEXTURE_BUFFER_SIZE / 3 points) draws exactly what one set draws: passes 1
+ * and 2 key points by their cloud-wide index and pass 3 resolves each set's own points
+ * (pipe_kawata.c), so the frames must be equal bit for bit, in colour and in depth. The scene
+ * is test_outliers' plane with its outliers, whose last points (the outliers) land in the last
+ * set, under the camera of test_outliers and a closer, tilted one. */
+static void test_buffer_sets(void **state)
+{
+    rnd_ctx *r = *state;
+    enum { N = 20000, NOUT = N / 20 };
+    rnd_desc d = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS"),
+                  .max_set_points = 6000};
+    sd_err err = {0};
+    rnd_ctx *r4 = rnd_create(&d, &err);
+    if (!r4) fail_msg("rnd_create: %s", err.msg);
+    rng g;
+    g.s = 14;
+    pc_prepared pc;
+    tu_new_cloud(&pc, N + NOUT, 0);
+    for (uint64_t i = 0; i < N + NOUT; i++) {
+        float *p = pc.pos + 3 * i;
+        p[0] = (float)(uniform(&g) - 0.5), p[1] = (float)(uniform(&g) - 0.5);
+        p[2] = i < N ? (float)(0.002 * gauss(&g)) : (float)(0.05 + 0.45 * uniform(&g));
+        if (i >= N) set_rgb(&pc, i, 255, 0, 0);
+        else set_rgb(&pc, i, (uint8_t)(100 + i % 100), 200, (uint8_t)(i % 256));
+    }
+    pc.sigma = poisson_sigma(1.0, N);
+    tu_finish_cloud(&pc, OFF);
+    uint32_t id1 = tu_upload(r, &pc), id4 = tu_upload(r4, &pc);
+    const rnd_camera cams[2] = {cam_at(0, 0, 2.0, 40, W, H), cam_at(0.4, -0.3, 1.2, 50, W, H)};
+    for (int v = 0; v < 2; v++) {
+        sp_params p;
+        sp_params_defaults(&p);
+        p.pipeline = SP_PIPE_KAWATA;
+        rnd_frame f1 = {0}, f4 = {0};
+        tu_render(r, id1, &cams[v], &p, 1, &f1);
+        tu_render(r4, id4, &cams[v], &p, 1, &f4);
+        size_t n = (size_t)W * H, covered = 0;
+        for (size_t i = 0; i < n; i++) covered += !is_bg(f1.rgba8 + 4 * i);
+        int same = memcmp(f1.rgba8, f4.rgba8, n * 4) == 0 &&
+                   memcmp(f1.depth, f4.depth, n * sizeof *f1.depth) == 0;
+        printf("buffer sets, view %d: %zu covered, %llu splats one set, %llu four; identical %d\n",
+               v, covered, (unsigned long long)f1.splats_drawn,
+               (unsigned long long)f4.splats_drawn, same);
+        assert_true(covered > n / 5);
+        assert_int_equal(f1.splats_drawn, f4.splats_drawn);
+        assert_true(same);
+        rnd_frame_free(&f1);
+        rnd_frame_free(&f4);
+    }
+    rnd_release(r, id1);
+    rnd_release(r4, id4);
+    rnd_destroy(r4);
+    pc_prepared_free(&pc);
+}
+
 /* ---- a real scan ---- */
 
 static int png_read_rgba(const char *path, int *w, int *h, uint8_t **rgba)
@@ -562,6 +620,7 @@ int main(void)
         cmocka_unit_test(test_outliers),
         cmocka_unit_test(test_tilted_normals),
         cmocka_unit_test(test_sparse_holes),
+        cmocka_unit_test(test_buffer_sets),
         cmocka_unit_test(test_bunny),
         cmocka_unit_test(test_edl_strength_zero),
         cmocka_unit_test(test_edl_step),
