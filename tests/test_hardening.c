@@ -7,6 +7,10 @@
  *    a token set and 64 sockets that keep reconnecting and failing to authenticate; the delay
  *    of failed authentications growing per address; a client that stops reading is dropped
  *    after --write-timeout.
+ *  - files changing under the reader: a mapped file truncated during its parse is an error of
+ *    that load (pc__guarded turns the SIGBUS into SD_EIO), also end to end while the daemon
+ *    prepares it for a client, and the daemon goes on serving others; the streamed hash of a
+ *    source file equals the one-shot hash.
  *
  * Attackers connect from other loopback addresses (127.0.0.2 and up, which Linux routes to
  * the loopback device) so that the per-address limit sees them apart from the real client at
@@ -38,9 +42,12 @@
 #include <openssl/evp.h>
 #include <openssl/hmac.h>
 
+#include "cloud.h"
 #include "common/daemonproc.h"
 #include "common/testutil.h"
+#include "io_text.h"
 #include "proto.h"
+#include "sd_hash.h"
 
 static const char TOKEN[] = "correct horse battery staple";
 
@@ -644,14 +651,156 @@ static void test_write_timeout(void **state)
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
+/* ---- files changing under the reader ---- */
+
+typedef struct trunc_job {
+    const char *path;
+    const pc__file *f;
+    int reached;            /* the parse read past the new end (it must not get there) */
+} trunc_job;
+
+/* trunc_parse: truncates the mapped file to one page, then reads a byte far past that. */
+static int trunc_parse(void *arg)
+{
+    trunc_job *j = arg;
+    if (truncate(j->path, 4096) != 0) return SD_EINVAL;
+    volatile uint8_t x = j->f->data[j->f->size / 2];
+    (void)x;
+    j->reached = 1;
+    return 0;
+}
+
+/* A file that shrinks while it is parsed through its mapping ends that parse with SD_EIO and a
+ * message saying so (the SIGBUS is caught), and a later SIGBUS-free parse works as before. */
+static void test_guarded_truncation(void **state)
+{
+    fx *f = *state;
+    char path[700];
+    snprintf(path, sizeof path, "%s/shrinks.bin", f->root);
+    size_t n = 4u << 20;
+    uint8_t *b = calloc(1, n);
+    assert_non_null(b);
+    assert_int_equal(tu_write_file(path, b, n), 0);
+    free(b);
+    pc__file file;
+    sd_err err = {0};
+    assert_int_equal(pc__file_open(path, &file, &err), 0);
+    trunc_job j = {.path = path, .f = &file};
+    int rc = pc__guarded(&file, path, trunc_parse, &j, &err);
+    pc__file_close(&file);
+    assert_int_equal(rc, SD_EIO);
+    assert_int_equal(j.reached, 0);
+    assert_non_null(strstr(err.msg, "changed while it was being read"));
+    /* The reader still works on a whole file afterwards (the handler stays installed). */
+    char ply[600];
+    pc_cloud c;
+    assert_int_equal(pc_load(tu_data("bun000.ply", ply, sizeof ply), &c, &err), 0);
+    assert_int_equal(c.n, 40256);
+    pc_cloud_free(&c);
+}
+
+/* The streamed hash (a source file hashed in 1 MiB pieces by pread) equals sd_hash64 of the
+ * whole buffer, whatever the piece sizes: cache keys written before stay valid. */
+static void test_hash_stream(void **state)
+{
+    (void)state;
+    size_t n = 100003;
+    uint8_t *b = malloc(n);
+    assert_non_null(b);
+    uint64_t x = 88172645463325252ull;
+    for (size_t i = 0; i < n; i++) {
+        x ^= x << 13; x ^= x >> 7; x ^= x << 17;
+        b[i] = (uint8_t)x;
+    }
+    static const size_t pieces[] = {1, 7, 31, 32, 33, 64, 1000, 4096};
+    for (size_t len = 0; len < n; len = len * 3 + 1) {
+        for (size_t p = 0; p < sizeof pieces / sizeof *pieces; p++) {
+            sd_hash_state hs;
+            sd_hash64_init(&hs, 5);
+            for (size_t off = 0; off < len; off += pieces[p])
+                sd_hash64_update(&hs, b + off, len - off < pieces[p] ? len - off : pieces[p]);
+            assert_true(sd_hash64_final(&hs) == sd_hash64(b, len, 5));
+        }
+    }
+    free(b);
+}
+
+/* write_ascii_ply: an ascii PLY of n points (x y z) at path; its parse takes a while. */
+static void write_ascii_ply(const char *path, int n)
+{
+    FILE *fp = fopen(path, "w");
+    assert_non_null(fp);
+    fprintf(fp, "ply\nformat ascii 1.0\nelement vertex %d\nproperty float x\nproperty float y\n"
+            "property float z\nend_header\n", n);
+    for (int i = 0; i < n; i++)
+        fprintf(fp, "%.6f %.6f %.6f\n", (i % 1000) * 0.001, (i / 1000) * 0.001,
+                0.01 * (double)(((unsigned)i * 7919u) % 101u));
+    assert_int_equal(fclose(fp), 0);
+}
+
+/* The audit's crash: a cloud file truncated while the daemon prepares it killed the daemon
+ * with SIGBUS. Now the client that opened it gets LOAD_FAILED saying the file changed, and the
+ * daemon serves another client right after. The truncation is timed into the parse of a large
+ * ascii PLY; an attempt that truncates too early (before the parse maps the file) fails as a
+ * short file instead, so up to five attempts are made until one hits the parse. */
+static void test_truncate_during_prep(void **state)
+{
+    fx *f = *state;
+    char big[700], model[700];
+    snprintf(model, sizeof model, "%s/model.ply", f->root);
+    write_ascii_ply(model, 1000000);
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
+                          "--preload", "bunny", NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    assert_true(legit_session(f->d.port, 0) > 0);
+    int hit = 0, attempts = 0;
+    double delay = 0.05;
+    for (; attempts < 5 && !hit; attempts++) {
+        snprintf(big, sizeof big, "%s/big%d.ply", f->data, attempts);
+        assert_int_equal(tu_copy_file(model, big), 0);
+        int fd = connect_from(1, f->d.port, 0);
+        msg m = {0};
+        assert_int_equal(handshake(fd, 0, &m), 0);
+        proto_buf b = {0};
+        char name[32];
+        snprintf(name, sizeof name, "big%d", attempts);
+        assert_int_equal(proto_enc_open(&b, 3, name), 0);
+        assert_int_equal(send_buf(fd, &b), 0);
+        usleep((useconds_t)(delay * 1e6));
+        assert_int_equal(truncate(big, 100000), 0);
+        int t = recv_skip(fd, &m);
+        char text[256] = "";
+        int code = error_code(&m, text, sizeof text);
+        printf("truncated %.0f ms after OPEN: %s %s\n", delay * 1e3,
+               t == PROTO_MSG_ERROR ? proto_err_name(code) : "no error", text);
+        /* Whatever the moment, the client gets an error (never INFO from a cut file's parse of
+         * the old size, never a dead daemon). */
+        assert_int_equal(t, PROTO_MSG_ERROR);
+        assert_int_equal(code, PROTO_E_LOAD_FAILED);
+        hit = strstr(text, "changed while it was being read") != NULL;
+        /* Another client is served at once. */
+        assert_true(legit_session(f->d.port, 0) > 0);
+        close(fd);
+        free(m.pl);
+        delay *= 2;
+    }
+    assert_true(hit);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+}
+
 int main(void)
 {
     setvbuf(stdout, NULL, _IOLBF, 0);
+    /* HARDENING_ONLY=test_name runs one test (cmocka's filter, * allowed). */
+    if (getenv("HARDENING_ONLY")) cmocka_set_test_filter(getenv("HARDENING_ONLY"));
     const struct CMUnitTest tests[] = {
         cmocka_unit_test_setup_teardown(test_slow_clients, setup, teardown),
         cmocka_unit_test_setup_teardown(test_unauth_flood, setup, teardown),
         cmocka_unit_test_setup_teardown(test_auth_fail_delay, setup, teardown),
         cmocka_unit_test_setup_teardown(test_write_timeout, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_guarded_truncation, setup, teardown),
+        cmocka_unit_test(test_hash_stream),
+        cmocka_unit_test_setup_teardown(test_truncate_during_prep, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -120,18 +120,30 @@ static int parse_header(const char *path, const uint8_t *d, size_t size, las_hea
     return 0;
 }
 
-int pc_read_las(const char *path, pc_raw *raw, sd_err *err)
+/* What the guarded part of pc_read_las works on (it allocates nothing but raw's arrays). */
+typedef struct las_job {
+    const char *path;
+    const pc__file *f;
+    pc_raw *raw;
+    sd_err *err;
+} las_job;
+
+/* las_parse: the header and the point records of the file mapped in j->f, into j->raw. */
+static int las_parse(void *arg)
 {
-    pc__file file;
-    int rc = pc__file_open(path, &file, err);
-    if (rc) return rc;
+    las_job *j = arg;
+    const char *path = j->path;
+    const pc__file *fp = j->f;
+    pc__file file = *fp;
+    pc_raw *raw = j->raw;
+    sd_err *err = j->err;
     las_header h = {0};
-    rc = parse_header(path, file.data, file.size, &h, err);
-    if (rc) goto out;
+    int rc = parse_header(path, file.data, file.size, &h, err);
+    if (rc) return rc;
     unsigned rgb = las_formats[h.format].rgb;
     raw->attrs = PC_ATTR_INTENSITY | PC_ATTR_CLASS | (rgb ? PC_ATTR_RGB : 0);
     rc = pc_raw_reserve(raw, (size_t)h.count, err);
-    if (rc) goto out;
+    if (rc) return rc;
 
     const uint8_t *rec = file.data + h.data_off;
     size_t n = (size_t)h.count;
@@ -165,7 +177,16 @@ int pc_read_las(const char *path, pc_raw *raw, sd_err *err)
     }
     raw->n = n;
     snprintf(raw->format, sizeof raw->format, "LAS 1.%u format %u", h.minor, h.format);
-out:
+    return 0;
+}
+
+int pc_read_las(const char *path, pc_raw *raw, sd_err *err)
+{
+    pc__file file;
+    int rc = pc__file_open(path, &file, err);
+    if (rc) return rc;
+    las_job j = {.path = path, .f = &file, .raw = raw, .err = err};
+    rc = pc__guarded(&file, path, las_parse, &j, err);
     pc__file_close(&file);
     return rc;
 }

@@ -510,6 +510,8 @@ typedef struct pcd_reader {
     size_t stride[16];       /* per used field: bytes from one point's value to the next */
     uint16_t *col16;         /* 3 per point, when h->sep_rgb */
     uint32_t col_max;
+    void *scratch;           /* the body reader's buffer, kept here so that pc_read_pcd frees
+                              * it even when a SIGBUS ends the parse mid-way (pc__guarded) */
 } pcd_reader;
 
 #define PCD_BLOCK 2048 /* points converted at a time: the double buffer stays in L1 */
@@ -644,6 +646,7 @@ static int read_compressed(const char *path, const pcd_header *h, const uint8_t 
     if (!buf)
         return sd_errf(err, SD_ENOMEM, "%s: out of memory for %u uncompressed bytes", path,
                        usize);
+    rd->scratch = buf;
     int rc = pc_lzf_decompress(data + h->data_off + 8, csize, buf, usize, path,
                                h->data_off + 8, err);
     if (rc == 0) {
@@ -655,6 +658,7 @@ static int read_compressed(const char *path, const pcd_header *h, const uint8_t 
         }
         decode_points(rd, (size_t)h->points, raw);
     }
+    rd->scratch = NULL;
     free(buf);
     return rc;
 }
@@ -702,6 +706,7 @@ static int read_ascii(const char *path, const pcd_header *h, const uint8_t *data
 {
     uint8_t *rec = malloc((size_t)h->point_size);
     if (!rec) return sd_errf(err, SD_ENOMEM, "%s: out of memory", path);
+    rd->scratch = rec;
     for (int u = 0; u < h->n_used; u++) {
         rd->base[u] = rec + h->f[h->used[u]].off;
         rd->stride[u] = 0;
@@ -753,7 +758,90 @@ static int read_ascii(const char *path, const pcd_header *h, const uint8_t *data
         }
         decode_points(rd, 1, raw);
     }
+    rd->scratch = NULL;
     free(rec);
+    return rc;
+}
+
+/* What the guarded part of pc_read_pcd works on (pc__guarded: every allocation of the parse is
+ * reachable from h and rd). */
+typedef struct pcd_job {
+    const char *path;
+    const pc__file *f;
+    pcd_header *h;
+    pcd_reader *rd;
+    pc_raw *raw;
+    sd_err *err;
+} pcd_job;
+
+/* pcd_parse: the header and body of the file mapped in j->f, into j->raw. */
+static int pcd_parse(void *arg)
+{
+    pcd_job *j = arg;
+    const char *path = j->path;
+    const pc__file file = *j->f;
+    pcd_header *h = j->h;
+    pcd_reader *rd = j->rd;
+    pc_raw *raw = j->raw;
+    sd_err *err = j->err;
+    int rc = 0;
+    if (file.size == 0) {
+        rc = sd_errf(err, SD_ETRUNC, "%s: the file is empty (no header at offset 0)", path);
+        goto out;
+    }
+    rc = parse_header_lines(path, file.data, file.size, h, err);
+    if (!rc) rc = check_header(path, h, raw, err);
+    if (rc) goto out;
+    if (h->points == 0) {
+        rc = sd_errf(err, SD_EEMPTY, "%s: the header declares 0 points (line %d)", path,
+                     h->ln_points ? h->ln_points : h->ln_width);
+        goto out;
+    }
+    int ascii = !strcmp(h->data, "ascii"), compressed = !strcmp(h->data, "binary_compressed");
+    uint64_t left = file.size - h->data_off;
+    uint32_t csize = 0, usize = 0;
+    /* An ascii point needs at least one character per value plus a separator each. */
+    if (ascii && h->points > (left + 1) / (2 * h->values))
+        rc = sd_errf(err, SD_ETRUNC, "%s: the header declares %llu points of %llu values, more "
+                     "than the %llu bytes after the header (offset %llu, line %d) can hold",
+                     path, (unsigned long long)h->points, (unsigned long long)h->values,
+                     (unsigned long long)left, (unsigned long long)h->data_off, h->ln_data + 1);
+    else if (!ascii && !compressed && h->points > left / h->point_size)
+        rc = sd_errf(err, SD_ETRUNC, "%s: the header declares %llu points of %llu bytes, but "
+                     "only %llu bytes follow the header at offset %llu", path,
+                     (unsigned long long)h->points, (unsigned long long)h->point_size,
+                     (unsigned long long)left, (unsigned long long)h->data_off);
+    else if (compressed)
+        rc = compressed_sizes(path, h, file.data, file.size, &csize, &usize, err);
+    if (rc) goto out;
+    /* Bounded by the file size (ascii, binary) or by the checked uncompressed size. */
+    rc = pc_raw_reserve(raw, (size_t)h->points, err);
+    if (rc) goto out;
+    if (h->sep_rgb) {
+        rd->col16 = malloc((size_t)h->points * 3 * sizeof *rd->col16);
+        if (!rd->col16) {
+            rc = sd_errf(err, SD_ENOMEM, "%s: out of memory for %llu colours", path,
+                         (unsigned long long)h->points);
+            goto out;
+        }
+    }
+    if (ascii) rc = read_ascii(path, h, file.data, file.size, rd, raw, err);
+    else if (compressed) rc = read_compressed(path, h, file.data, csize, usize, rd, raw, err);
+    else read_binary(h, file.data, rd, raw);
+    if (rc) goto out;
+    finish_colours(rd, raw);
+    snprintf(raw->format, sizeof raw->format, "PCD%s%s %s", h->version[0] ? " " : "", h->version,
+             h->data);
+    /* PCL writes the identity pose when it knows no sensor (its default): only another pose
+     * says where the sensor was. */
+    static const double identity[7] = {0, 0, 0, 1, 0, 0, 0};
+    int posed = 0;
+    for (int k = 0; k < 7; k++) posed |= h->viewpoint[k] != identity[k];
+    if (h->ln_viewpoint && posed) {
+        raw->has_viewpoint = 1;
+        memcpy(raw->viewpoint, h->viewpoint, sizeof raw->viewpoint);
+    }
+out:
     return rc;
 }
 
@@ -764,63 +852,9 @@ int pc_read_pcd(const char *path, pc_raw *raw, sd_err *err)
     if (rc) return rc;
     pcd_header h = {0};
     pcd_reader rd = {.h = &h};
-    if (file.size == 0) {
-        rc = sd_errf(err, SD_ETRUNC, "%s: the file is empty (no header at offset 0)", path);
-        goto out;
-    }
-    rc = parse_header_lines(path, file.data, file.size, &h, err);
-    if (!rc) rc = check_header(path, &h, raw, err);
-    if (rc) goto out;
-    if (h.points == 0) {
-        rc = sd_errf(err, SD_EEMPTY, "%s: the header declares 0 points (line %d)", path,
-                     h.ln_points ? h.ln_points : h.ln_width);
-        goto out;
-    }
-    int ascii = !strcmp(h.data, "ascii"), compressed = !strcmp(h.data, "binary_compressed");
-    uint64_t left = file.size - h.data_off;
-    uint32_t csize = 0, usize = 0;
-    /* An ascii point needs at least one character per value plus a separator each. */
-    if (ascii && h.points > (left + 1) / (2 * h.values))
-        rc = sd_errf(err, SD_ETRUNC, "%s: the header declares %llu points of %llu values, more "
-                     "than the %llu bytes after the header (offset %llu, line %d) can hold",
-                     path, (unsigned long long)h.points, (unsigned long long)h.values,
-                     (unsigned long long)left, (unsigned long long)h.data_off, h.ln_data + 1);
-    else if (!ascii && !compressed && h.points > left / h.point_size)
-        rc = sd_errf(err, SD_ETRUNC, "%s: the header declares %llu points of %llu bytes, but "
-                     "only %llu bytes follow the header at offset %llu", path,
-                     (unsigned long long)h.points, (unsigned long long)h.point_size,
-                     (unsigned long long)left, (unsigned long long)h.data_off);
-    else if (compressed)
-        rc = compressed_sizes(path, &h, file.data, file.size, &csize, &usize, err);
-    if (rc) goto out;
-    /* Bounded by the file size (ascii, binary) or by the checked uncompressed size. */
-    rc = pc_raw_reserve(raw, (size_t)h.points, err);
-    if (rc) goto out;
-    if (h.sep_rgb) {
-        rd.col16 = malloc((size_t)h.points * 3 * sizeof *rd.col16);
-        if (!rd.col16) {
-            rc = sd_errf(err, SD_ENOMEM, "%s: out of memory for %llu colours", path,
-                         (unsigned long long)h.points);
-            goto out;
-        }
-    }
-    if (ascii) rc = read_ascii(path, &h, file.data, file.size, &rd, raw, err);
-    else if (compressed) rc = read_compressed(path, &h, file.data, csize, usize, &rd, raw, err);
-    else read_binary(&h, file.data, &rd, raw);
-    if (rc) goto out;
-    finish_colours(&rd, raw);
-    snprintf(raw->format, sizeof raw->format, "PCD%s%s %s", h.version[0] ? " " : "", h.version,
-             h.data);
-    /* PCL writes the identity pose when it knows no sensor (its default): only another pose
-     * says where the sensor was. */
-    static const double identity[7] = {0, 0, 0, 1, 0, 0, 0};
-    int posed = 0;
-    for (int k = 0; k < 7; k++) posed |= h.viewpoint[k] != identity[k];
-    if (h.ln_viewpoint && posed) {
-        raw->has_viewpoint = 1;
-        memcpy(raw->viewpoint, h.viewpoint, sizeof raw->viewpoint);
-    }
-out:
+    pcd_job j = {.path = path, .f = &file, .h = &h, .rd = &rd, .raw = raw, .err = err};
+    rc = pc__guarded(&file, path, pcd_parse, &j, err);
+    free(rd.scratch);
     free(rd.col16);
     header_free(&h);
     pc__file_close(&file);

@@ -742,48 +742,62 @@ static void normalise(pc_raw *raw)
     }
 }
 
-int pc_read_ply(const char *path, pc_raw *raw, sd_err *err)
+/* What the guarded part of pc_read_ply works on (pc__guarded: everything reachable here). */
+typedef struct ply_job {
+    const char *path;
+    const pc__file *f;
+    ply_header *h;
+    ply_slot *slot;
+    pc_raw *raw;
+    sd_err *err;
+} ply_job;
+
+/* ply_parse: the header and every element of the file mapped in j->f, into j->raw. */
+static int ply_parse(void *arg)
 {
-    if (!path || !raw) return sd_errf(err, SD_EINVAL, "pc_read_ply: NULL argument");
-    pc__file f;
-    int rc = pc__file_open(path, &f, err);
+    ply_job *j = arg;
+    ply_header *h = j->h;
+    pc_raw *raw = j->raw;
+    ply_ctx c = {.path = j->path, .data = j->f->data, .size = j->f->size, .err = j->err};
+    int rc = parse_header(&c, h);
     if (rc < 0) return rc;
-    ply_header *h = calloc(1, sizeof *h);
-    ply_slot *slot = calloc(PLY_MAX_PROPS, sizeof *slot);
-    if (!h || !slot) {
-        rc = sd_errf(err, SD_ENOMEM, "%s: out of memory for the PLY header", path);
-        goto done;
-    }
-    ply_ctx c = {.path = path, .data = f.data, .size = f.size, .err = err};
-    rc = parse_header(&c, h);
-    if (rc < 0) goto done;
     const int host_be = __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__;
     c.swap = h->fmt != FMT_ASCII && ((h->fmt == FMT_BE) != host_be);
 
     size_t vi = h->nelem;
     for (size_t k = 0; k < h->nelem && vi == h->nelem; k++)
         if (!strcmp(h->elems[k].name, "vertex")) vi = k;
-    if (vi == h->nelem) {
-        rc = sd_errf(err, SD_EFORMAT, "%s: line %zu: the header declares no element 'vertex'",
-                     path, h->data_line - 1);
-        goto done;
-    }
-    rc = plan_vertex(&c, h, &h->elems[vi], slot, raw);
-    if (rc < 0) goto done;
+    if (vi == h->nelem)
+        return sd_errf(j->err, SD_EFORMAT, "%s: line %zu: the header declares no element 'vertex'",
+                       j->path, h->data_line - 1);
+    rc = plan_vertex(&c, h, &h->elems[vi], j->slot, raw);
+    if (rc < 0) return rc;
     int have_alpha = rc;
     snprintf(raw->format, sizeof raw->format, "PLY %s %s", fmt_name[h->fmt], h->version);
 
     for (size_t k = 0; k < h->nelem; k++) {
-        const ply_slot *sl = k == vi ? slot : NULL;
+        const ply_slot *sl = k == vi ? j->slot : NULL;
         rc = h->fmt == FMT_ASCII ? asc_element(&c, h, &h->elems[k], sl, raw, have_alpha)
                                  : bin_element(&c, h, &h->elems[k], sl, raw, have_alpha);
-        if (rc < 0) goto done;
+        if (rc < 0) return rc;
     }
     if (raw->attrs & PC_ATTR_NORMAL) normalise(raw);
-    rc = 0;
-done:
-    free(h);
-    free(slot);
+    return 0;
+}
+
+int pc_read_ply(const char *path, pc_raw *raw, sd_err *err)
+{
+    if (!path || !raw) return sd_errf(err, SD_EINVAL, "pc_read_ply: NULL argument");
+    pc__file f;
+    int rc = pc__file_open(path, &f, err);
+    if (rc < 0) return rc;
+    ply_job j = {.path = path, .f = &f, .raw = raw, .err = err};
+    j.h = calloc(1, sizeof *j.h);
+    j.slot = calloc(PLY_MAX_PROPS, sizeof *j.slot);
+    if (!j.h || !j.slot) rc = sd_errf(err, SD_ENOMEM, "%s: out of memory for the PLY header", path);
+    else rc = pc__guarded(&f, path, ply_parse, &j, err);
+    free(j.h);
+    free(j.slot);
     pc__file_close(&f);
-    return rc;
+    return rc < 0 ? rc : 0;
 }

@@ -17,12 +17,20 @@ typedef struct pc__file {
     void *map;           /* what munmap needs, NULL when nothing was mapped */
 } pc__file;
 
-/* pc__file_open: maps path read-only into f. Returns 0, or SD_EIO with err naming the file and
- * the system's reason. f is zeroed on failure. */
+/* pc__file_open: maps the regular file path read-only into f. Returns 0, or SD_EIO with err
+ * naming the file and the system's reason (not a regular file: a FIFO is refused at once,
+ * without waiting for a writer). f is zeroed on failure. Parse the bytes under pc__guarded. */
 int pc__file_open(const char *path, pc__file *f, sd_err *err);
 
 /* pc__file_close: unmaps f and zeroes it; safe to call twice. */
 void pc__file_close(pc__file *f);
+
+/* pc__guarded: returns parse(arg), run so that the file f shrinking under it (a SIGBUS on its
+ * mapping) ends the parse with SD_EIO and err saying the file changed, instead of killing the
+ * process. After such an end, parse has stopped mid-way: whatever it allocated must be
+ * reachable from arg for the caller to free. Not reentrant within one thread. */
+int pc__guarded(const pc__file *f, const char *path, int (*parse)(void *arg), void *arg,
+                sd_err *err);
 
 /* pc__is_space: 1 for the token separators of the text formats (space, tab, \r, \v, \f). */
 static inline int pc__is_space(int c)

@@ -192,14 +192,23 @@ static int store_row(xyz_ctx *x, pc_raw *raw, const double *v)
     return 0;
 }
 
-int pc_read_xyz(const char *path, pc_raw *raw, sd_err *err)
+/* What the guarded part of pc_read_xyz works on (pc__guarded: its colour array is in x). */
+typedef struct xyz_job {
+    const pc__file *f;
+    xyz_ctx *x;
+    pc_raw *raw;
+} xyz_job;
+
+/* xyz_parse: every line of the file mapped in j->f, into j->raw. */
+static int xyz_parse(void *arg)
 {
-    if (!path || !raw) return sd_errf(err, SD_EINVAL, "pc_read_xyz: NULL argument");
-    pc__file f;
-    int rc = pc__file_open(path, &f, err);
-    if (rc < 0) return rc;
-    xyz_ctx x = {.path = path, .err = err, .bound = f.size / 6 + 1};
-    const char *s = (const char *)f.data, *end = s + f.size;
+    xyz_job *j = arg;
+    xyz_ctx *x = j->x;
+    pc_raw *raw = j->raw;
+    const char *path = x->path;
+    sd_err *err = x->err;
+    int rc = 0;
+    const char *s = (const char *)j->f->data, *end = s + j->f->size;
     const char *p = s;
     size_t ln = 0;
     for (; p < end; p = p < end ? p + 1 : p) { /* p is at a line's '\n' at the loop's end */
@@ -221,39 +230,49 @@ int pc_read_xyz(const char *path, pc_raw *raw, sd_err *err)
                          "%s: line %zu: bad number token '%.*s'%s", path, ln,
                          (int)(t - bad > 40 ? 40 : t - bad), bad,
                          partial ? " (the file ends inside it)" : "");
-            goto done;
+            return rc;
         }
-        if (n == 1 && (x.ncol == 0 || x.count_line)) {
+        if (n == 1 && (x->ncol == 0 || x->count_line)) {
             /* A PTS count line: before the first row, or starting the next block of a
              * multi-scan file whose first block had one. */
-            rc = check_block(&x, raw, ln);
-            if (rc < 0) goto done;
-            rc = count_row(&x, raw, q, te, v[0], ln);
-            if (rc < 0) goto done;
+            rc = check_block(x, raw, ln);
+            if (rc < 0) return rc;
+            rc = count_row(x, raw, q, te, v[0], ln);
+            if (rc < 0) return rc;
             continue;
         }
-        if (x.ncol == 0) {
-            rc = first_row(&x, raw, n, ln, cut);
-            if (rc < 0) goto done;
-        } else if (n != x.ncol) {
-            rc = sd_errf(err, cut && n < x.ncol ? SD_ETRUNC : SD_EFORMAT,
+        if (x->ncol == 0) {
+            rc = first_row(x, raw, n, ln, cut);
+            if (rc < 0) return rc;
+        } else if (n != x->ncol) {
+            rc = sd_errf(err, cut && n < x->ncol ? SD_ETRUNC : SD_EFORMAT,
                          "%s: line %zu: %d%s values, but the first data row (line %zu) has %d%s",
                          path, ln, n > XYZ_MAX_COLS ? XYZ_MAX_COLS : n,
-                         n > XYZ_MAX_COLS ? " or more" : "", x.first_line, x.ncol,
-                         cut && n < x.ncol ? " (the file ends inside this row)" : "");
-            goto done;
+                         n > XYZ_MAX_COLS ? " or more" : "", x->first_line, x->ncol,
+                         cut && n < x->ncol ? " (the file ends inside this row)" : "");
+            return rc;
         }
-        rc = store_row(&x, raw, v);
-        if (rc < 0) goto done;
+        rc = store_row(x, raw, v);
+        if (rc < 0) return rc;
     }
-    rc = check_block(&x, raw, ln);
-    if (rc < 0) goto done;
-    if (x.ncol == 0 && !raw->format[0])
+    rc = check_block(x, raw, ln);
+    if (rc < 0) return rc;
+    if (x->ncol == 0 && !raw->format[0])
         snprintf(raw->format, sizeof raw->format, "%s text (no rows)",
-                 x.count_line ? "PTS" : "XYZ");
-    if (raw->attrs & PC_ATTR_RGB) finish_colour(&x, raw);
-    rc = 0;
-done:
+                 x->count_line ? "PTS" : "XYZ");
+    if (raw->attrs & PC_ATTR_RGB) finish_colour(x, raw);
+    return 0;
+}
+
+int pc_read_xyz(const char *path, pc_raw *raw, sd_err *err)
+{
+    if (!path || !raw) return sd_errf(err, SD_EINVAL, "pc_read_xyz: NULL argument");
+    pc__file f;
+    int rc = pc__file_open(path, &f, err);
+    if (rc < 0) return rc;
+    xyz_ctx x = {.path = path, .err = err, .bound = f.size / 6 + 1};
+    xyz_job j = {.f = &f, .x = &x, .raw = raw};
+    rc = pc__guarded(&f, path, xyz_parse, &j, err);
     free(x.col);
     pc__file_close(&f);
     return rc;

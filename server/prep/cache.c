@@ -102,19 +102,32 @@ int cache_path_for(const char *src, const char *dir, int k, char *buf, size_t le
     return 0;
 }
 
-/* Hashes the whole file at fd (size bytes) through a read-only mapping. */
+/* Hashes the whole file at fd (size bytes), read in 1 MiB pieces with pread rather than
+ * mapped: a mapped source truncated under the hash would raise SIGBUS in the daemon. Returns 0,
+ * -1 with errno on a read error, or -2 when the file ended before size bytes (it changed). */
 static int hash_file(int fd, uint64_t size, uint64_t *out)
 {
-    if (size == 0) {
-        *out = sd_hash64("", 0, 0);
-        return 0;
+    enum { PIECE = 1 << 20 };
+    uint8_t *buf = malloc(PIECE);
+    if (!buf) return -1;
+    sd_hash_state hs;
+    sd_hash64_init(&hs, 0);
+    uint64_t off = 0;
+    int rc = 0;
+    while (off < size) {
+        size_t want = size - off < PIECE ? (size_t)(size - off) : PIECE;
+        ssize_t r = pread(fd, buf, want, (off_t)off);
+        if (r < 0 && errno == EINTR) continue;
+        if (r <= 0) {
+            rc = r < 0 ? -1 : -2;
+            break;
+        }
+        sd_hash64_update(&hs, buf, (size_t)r);
+        off += (uint64_t)r;
     }
-    void *m = mmap(NULL, (size_t)size, PROT_READ, MAP_PRIVATE, fd, 0);
-    if (m == MAP_FAILED) return -1;
-    madvise(m, (size_t)size, MADV_SEQUENTIAL);
-    *out = sd_hash64(m, (size_t)size, 0);
-    munmap(m, (size_t)size);
-    return 0;
+    free(buf);
+    *out = sd_hash64_final(&hs);
+    return rc;
 }
 
 typedef struct src_key {
@@ -124,7 +137,9 @@ typedef struct src_key {
 
 static int source_key(const char *src, src_key *key, sd_err *err)
 {
-    int fd = open(src, O_RDONLY | O_CLOEXEC);
+    /* O_NONBLOCK: a FIFO put in place of a cloud must not block the open until a writer comes;
+     * it is refused by the regular-file check at once. */
+    int fd = open(src, O_RDONLY | O_CLOEXEC | O_NONBLOCK);
     if (fd < 0) return sd_errf(err, SD_EIO, "%s: %s", src, strerror(errno));
     struct stat st;
     if (fstat(fd, &st) < 0 || !S_ISREG(st.st_mode)) {
@@ -134,8 +149,12 @@ static int source_key(const char *src, src_key *key, sd_err *err)
     key->size = (uint64_t)st.st_size;
     key->mtime_ns = (int64_t)st.st_mtim.tv_sec * 1000000000LL + st.st_mtim.tv_nsec;
     int rc = hash_file(fd, key->size, &key->hash);
+    int e = errno;
     close(fd);
-    if (rc < 0) return sd_errf(err, SD_EIO, "%s: cannot map for hashing: %s", src, strerror(errno));
+    if (rc == -2)
+        return sd_errf(err, SD_EIO, "%s: the file changed while it was being read (it became "
+                       "shorter); try again once it is complete", src);
+    if (rc < 0) return sd_errf(err, SD_EIO, "%s: cannot read: %s", src, strerror(e));
     return 0;
 }
 
