@@ -29,7 +29,7 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(KAWATA_GAMMA, "kawata_gamma", SP_T_FLOAT, kawata_gamma, 0,    0.5,      "0.0075", NULL)   \
     X(SHADING,      "shading",      SP_T_ENUM,  shading,      0,    0,        "lambert", "lambert|edl") \
     X(EDL_STRENGTH, "edl_strength", SP_T_FLOAT, edl_strength, 0,    100,      "1",      NULL)     \
-    X(EDL_RADIUS,   "edl_radius",   SP_T_FLOAT, edl_radius,   0.5,  16,       "1.4",    NULL)
+    X(EDL_RADIUS,   "edl_radius",   SP_T_FLOAT, edl_radius,   0.5,  16,       "1",      NULL)
 
 enum {
 #define SP_ID_(id, name, type, field, lo, hi, def, vals) SP_##id,

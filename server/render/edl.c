@@ -24,8 +24,9 @@ int rnd__edl_init(rnd_edl *e, rnd_kit *k, sd_err *err)
     if (!e->prog) return err && err->code ? err->code : SD_EGL;
     const gl_api *gl = k->gl;
     e->u_size = gl_uniform(gl, e->prog, "u_size");
-    e->u_o1 = gl_uniform(gl, e->prog, "u_o1");
-    e->u_o2 = gl_uniform(gl, e->prog, "u_o2");
+    e->u_r = gl_uniform(gl, e->prog, "u_r");
+    e->u_lo = gl_uniform(gl, e->prog, "u_lo");
+    e->u_hi = gl_uniform(gl, e->prog, "u_hi");
     e->u_k = gl_uniform(gl, e->prog, "u_k");
     gl->GenVertexArrays(1, &e->vao);
     gl->GenBuffers(1, &e->copy_buf);
@@ -50,7 +51,7 @@ void rnd__edl_apply(rnd_edl *e, const gl_api *gl, const rnd_target *t, const int
 {
     if (!(strength > 0.0f) || !e->prog) return; /* strength 0: the frame stays bit for bit */
     if (rect[2] <= rect[0] || rect[3] <= rect[1]) return;
-    /* The rectangle's rows of depth_eye into copy_buf, at their place in a full frame. */
+    /* The rectangle of depth_eye into copy_buf, at its place in a full frame. */
     uint64_t bytes = (uint64_t)t->width * (uint64_t)t->height * 4;
     if (e->copy_bytes < bytes) {
         gl->BindBuffer(GL_PIXEL_PACK_BUFFER, e->copy_buf);
@@ -60,10 +61,12 @@ void rnd__edl_apply(rnd_edl *e, const gl_api *gl, const rnd_target *t, const int
     gl->BindFramebuffer(GL_FRAMEBUFFER, t->fbo);
     gl->BindBuffer(GL_PIXEL_PACK_BUFFER, e->copy_buf);
     gl->PixelStorei(GL_PACK_ALIGNMENT, 4);
+    gl->PixelStorei(GL_PACK_ROW_LENGTH, t->width);
     gl->ReadBuffer(GL_COLOR_ATTACHMENT1);
-    gl->ReadPixels(0, rect[1], t->width, rect[3] - rect[1], GL_RED, GL_FLOAT,
-                   (void *)(uintptr_t)((uint64_t)rect[1] * (uint64_t)t->width * 4));
+    gl->ReadPixels(rect[0], rect[1], rect[2] - rect[0], rect[3] - rect[1], GL_RED, GL_FLOAT,
+                   (void *)(uintptr_t)(((uint64_t)rect[1] * (uint64_t)t->width + rect[0]) * 4));
     gl->ReadBuffer(GL_COLOR_ATTACHMENT0);
+    gl->PixelStorei(GL_PACK_ROW_LENGTH, 0);
     gl->BindBuffer(GL_PIXEL_PACK_BUFFER, 0);
     gl->MemoryBarrier(GL_PIXEL_BUFFER_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
     /* depth_eye is read, so it must not be a draw buffer during the pass. */
@@ -81,11 +84,11 @@ void rnd__edl_apply(rnd_edl *e, const gl_api *gl, const rnd_target *t, const int
     gl->ActiveTexture(GL_TEXTURE0);
     gl->UseProgram(e->prog);
     gl->Uniform2i(e->u_size, t->width, t->height);
-    /* round() as in C (halves away from zero) on non-negative values */
-    int r1 = (int)floorf(radius + 0.5f), r2 = (int)floorf(radius * 0.70710678f + 0.5f);
-    gl->Uniform2i(e->u_o1, r1, 0);
-    gl->Uniform2i(e->u_o2, r2, r2);
-    gl->Uniform1f(e->u_k, RND_EDL_SCALE * strength / 8.0f);
+    int r = (int)floorf(radius + 0.5f);
+    gl->Uniform1i(e->u_r, r > 1 ? r : 1);
+    gl->Uniform2i(e->u_lo, rect[0], rect[1]);
+    gl->Uniform2i(e->u_hi, rect[2], rect[3]);
+    gl->Uniform1f(e->u_k, RND_EDL_SCALE * strength / 4.0f);
     gl->Enable(GL_SCISSOR_TEST);
     gl->Scissor(rect[0], rect[1], rect[2] - rect[0], rect[3] - rect[1]);
     gl->BindVertexArray(e->vao);

@@ -10,7 +10,7 @@
 
 typedef struct rnd_edl {
     GLuint prog, vao;
-    GLint u_size, u_o1, u_o2, u_k;
+    GLint u_size, u_lo, u_hi, u_r, u_k;
     GLuint copy_buf, copy_tex;   /* depth_eye copied into a buffer, read as a buffer texture */
     uint64_t copy_bytes;
 } rnd_edl;
@@ -22,9 +22,9 @@ void rnd__edl_free(rnd_edl *e, const gl_api *gl);
 
 /* rnd__edl_apply: multiplies the colour of target t (bound state is left as the renderer
  * expects: no blending, both draw buffers of the float target, alpha untouched) by the EDL
- * shade exp(-RND_EDL_SCALE * strength * sum_n max(0, log2 z - log2 z_n) / 8) of its 8
- * neighbours at `radius` pixels (offsets (r, 0) and (r, r) / sqrt 2 rounded to pixels, turned
- * by multiples of 90 degrees), read from t->depth_eye; background pixels (+inf) and neighbours
+ * shade exp(-RND_EDL_SCALE * strength * sum_n max(0, log2 z - log2 z_n) / 4) of its 4
+ * neighbours at `radius` pixels (rounded to whole pixels, at least 1: right, up, left,
+ * down), read from t->depth_eye; background pixels (+inf) and neighbours
  * outside the frame or on the background add nothing. Only the pixels of rect (x0, y0, x1, y1;
  * the cloud's screen rectangle: nothing else has a depth) are read and shaded. strength 0
  * draws nothing. */

@@ -6,6 +6,8 @@
  *                [--set key=value ...]   (parameters for every pipeline, e.g. ewa=exact)
  *                [--shader-dir DIR]      (read the .glsl files from DIR: try a shader edit unbuilt)
  *                [--zoom Z]              (eye Z times closer to the target: a close-up, culled)
+ *                [--edl-cost]            (also: each pipeline's frames with and without
+ *                                         shading=edl, interleaved; see below)
  *
  * Loads FILE (pc_load) and preprocesses it (prep_run, default k, T threads: 0 = every core),
  * timing both; uploads the prepared cloud and renders, per pipeline, 1 + N frames of the
@@ -26,7 +28,13 @@
  *   "splat_radius_median: R"   (prep's median splat radius, for the ParaView comparison)
  *   "prep: | cloud | points | load s | prep s | points/s |"   (a Markdown row)
  *   "| cloud | points | pipeline | ms/frame | ratio | readback ms | jpeg ms |" rows.
- * --save DIR writes DIR/<label>-<pipeline>.png of the last frame (to look at what was timed). */
+ * --save DIR writes DIR/<label>-<pipeline>.png of the last frame (to look at what was timed).
+ * --edl-cost: per pipeline, N pairs of frames at the same camera, shading=lambert then
+ *   shading=edl (the --set parameters otherwise), and on stdout
+ *   "edl: | cloud | pipeline | lambert ms | edl ms | EDL ms | EDL CPU ms |", medians of the
+ *   wall-clock (as ms/frame) and of the per-pair differences, wall and process CPU. Pairs of
+ *   adjacent frames cancel most of a shared machine's drifting load, which the difference of
+ *   two separate runs does not (a few ms against a 3 ms target). */
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
@@ -56,6 +64,7 @@ typedef struct bench_opts {
     int npipes;
     const char *sets[MAX_PIPES]; /* --set key=value, applied to every pipeline's parameters */
     int nsets;
+    int edl_cost;                /* --edl-cost */
 } bench_opts;
 
 typedef struct pipe_result {
@@ -167,6 +176,10 @@ static int parse_args(int argc, char **argv, bench_opts *o)
     if (parse_pipelines(o, "points,splat") != 0) return -1;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
+        if (!strcmp(a, "--edl-cost")) {
+            o->edl_cost = 1;
+            continue;
+        }
         int takes = a[0] == '-' && a[1] == '-';
         if (takes && !v) {
             fprintf(stderr, "render_bench: %s needs a value\n", a);
@@ -316,6 +329,50 @@ static int bench_pipeline(rnd_ctx *r, uint32_t id, const rnd_camera *cam0, int p
     return rc;
 }
 
+/* bench_edl: o->frames pairs of frames of pipeline pipe at one camera each, shading=lambert
+ * then shading=edl, printing the "edl:" row (see the top). Returns 0 or SD_E*. */
+static int bench_edl(rnd_ctx *r, uint32_t id, const rnd_camera *cam0, int pipe,
+                     const bench_opts *o, sd_err *err)
+{
+    sp_params p[2];
+    char emsg[200];
+    for (int k = 0; k < 2; k++) {
+        sp_params_defaults(&p[k]);
+        for (int i = 0; i < o->nsets; i++) sp_param_set_kv(&p[k], o->sets[i], emsg, sizeof emsg);
+        p[k].pipeline = pipe;
+        p[k].shading = k ? SP_SHADING_EDL : SP_SHADING_LAMBERT;
+    }
+    double *t = calloc((size_t)o->frames * 4, sizeof(double));
+    if (!t) return sd_errf(err, SD_ENOMEM, "render_bench: out of memory");
+    double *ta = t, *tb = t + o->frames, *dw = tb + o->frames, *dc = dw + o->frames;
+    rnd_frame f;
+    memset(&f, 0, sizeof f);
+    int rc = 0;
+    for (int i = -1; i < o->frames && rc == 0; i++) {
+        rnd_camera cam;
+        orbit(cam0, (i + 1) * 0.5 * M_PI / 180.0, &cam);
+        double w[2], c[2];
+        for (int k = 0; k < 2 && rc == 0; k++) {
+            double c0 = cpu_s(), t0 = now_s();
+            rc = rnd_render(r, id, &cam, &p[k], 0, &f, err);
+            w[k] = (now_s() - t0) * 1e3 - (double)f.readback_us * 1e-3;
+            c[k] = (cpu_s() - c0) * 1e3;
+        }
+        if (rc < 0 || i < 0) continue;
+        ta[i] = w[0], tb[i] = w[1], dw[i] = w[1] - w[0], dc[i] = c[1] - c[0];
+    }
+    if (rc == 0) {
+        char name[32];
+        sp_enum_name(SP_PIPELINE, pipe, name, sizeof name);
+        printf("edl: | %s | %s | %.1f | %.1f | %.2f | %.2f |\n", o->label, name,
+               median(ta, o->frames), median(tb, o->frames), median(dw, o->frames),
+               median(dc, o->frames));
+    }
+    rnd_frame_free(&f);
+    free(t);
+    return rc;
+}
+
 /* load_and_prep: pc_load + prep_run of o->file into pc, printing the "prep:" row.
  * Returns 0 or a negative SD_E* code with err filled. */
 static int load_and_prep(const bench_opts *o, pc_prepared *pc, sd_err *err)
@@ -391,6 +448,8 @@ int main(int argc, char **argv)
                res[k].jpeg_ms);
         fprintf(stderr, "cpu: %s %s %.1f ms/frame\n", o.label, name, res[k].cpu_ms);
     }
+    for (int k = 0; k < o.npipes && o.edl_cost; k++)
+        if (bench_edl(r, (uint32_t)id, &cam0, o.pipes[k], &o, &err) < 0) goto fail;
     /* Pipelines with an image buffer (kawata): its size and the splats drawn, one line each
      * ("buffer: | label | pipeline | WxH | splats |"), for bench_render.sh's table. */
     for (int k = 0; k < o.npipes; k++) {
