@@ -136,6 +136,15 @@ static void test_path_lines(void **state)
     assert_int_equal(cp_parse_line("1 2 3 4 5 6 0 0 1 200", &c, err, sizeof err), -1);
     assert_non_null(strstr(err, "fov"));
     assert_int_equal(cp_parse_line("1 2 3 4 5 6 0 0 1 nan", &c, err, sizeof err), -1);
+    /* The fov range is open at both ends, (0, 180): 0 and 180 are refused, values just inside
+     * are taken. */
+    assert_int_equal(cp_parse_line("1 2 3 4 5 6 0 0 1 0", &c, err, sizeof err), -1);
+    assert_non_null(strstr(err, "fov 0 is out of range"));
+    assert_int_equal(cp_parse_line("1 2 3 4 5 6 0 0 1 180", &c, err, sizeof err), -1);
+    assert_int_equal(cp_parse_line("1 2 3 4 5 6 0 0 1 0.5", &c, err, sizeof err), 1);
+    assert_true(c.fov == 0.5f);
+    assert_int_equal(cp_parse_line("1 2 3 4 5 6 0 0 1 179.5", &c, err, sizeof err), 1);
+    assert_true(c.fov == 179.5f);
     assert_int_equal(cp_parse_line("1 2 3 4 5 6 0 0 1 45abc", &c, err, sizeof err), -1);
 
     char dir[256], path[300];
@@ -185,6 +194,11 @@ static void test_patterns(void **state)
     assert_int_equal(cp_pattern_check("%n%d.jpg", err, sizeof err), -1);
     assert_int_equal(cp_pattern_check("%-5d.jpg", err, sizeof err), -1);
     assert_int_equal(cp_pattern_check("%99d.jpg", err, sizeof err), -1);
+    /* campath.h: a width N < 20; 19 is the widest taken, 20 the narrowest refused. */
+    assert_int_equal(cp_pattern_check("%19d.jpg", err, sizeof err), 0);
+    assert_int_equal(cp_pattern_check("%019d.jpg", err, sizeof err), 0);
+    assert_int_equal(cp_pattern_check("%20d.jpg", err, sizeof err), -1);
+    assert_int_equal(cp_pattern_check("%020d.jpg", err, sizeof err), -1);
     assert_int_equal(cp_pattern_check("%", err, sizeof err), -1);
     assert_int_equal(cp_pattern_check("d/%05d.jpg", err, sizeof err), 0);
 
@@ -247,6 +261,9 @@ static void test_progress_line(void **state)
     /* 1 of 10000 in 1 s: 9999 s left = 2:46:39 */
     cp_progress_line(buf, sizeof buf, 1, 10000, 1.0, 0);
     assert_non_null(strstr(buf, "ETA 2:46:39"));
+    /* Nothing to do (every frame already on disk) is complete: a full bar, not an empty one. */
+    cp_progress_line(buf, sizeof buf, 0, 0, 0.0, 4);
+    assert_string_equal(buf, "[####] 0/0  0.0 frames/s  ETA --:--");
 }
 
 static void test_cameras(void **state)

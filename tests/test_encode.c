@@ -20,6 +20,7 @@
 
 #include "encode.h"
 #include "frame_decode.h"
+#include "frame_lz4.h"
 #include "half.h"
 #include "common/testutil.h"
 
@@ -208,6 +209,13 @@ static void check_jpeg(int w, int h)
                                sizeof msg), 0);
     assert_true(rgba[0] == rgba[1] && rgba[1] == rgba[2] && rgba[3] == 255);
 
+    /* 4:2:2: the subsampling asked for is the one the JPEG header declares (TurboJPEG's own
+     * header parser, independent of the encoder's mapping of SP_SUB_* values). */
+    p.subsampling = SP_SUB_422;
+    assert_int_equal(enc_encode(e, &f, &p, &out, &len, &err), 0);
+    assert_int_equal(tjDecompressHeader3(tj, out, len, &dw, &dh, &samp, &cs), 0);
+    assert_int_equal(samp, TJSAMP_422);
+
     /* 4:2:0 at q85 (the defaults) is what the header says, and smaller than 4:4:4 q90. */
     size_t len444 = 0;
     p.subsampling = SP_SUB_444;
@@ -383,6 +391,29 @@ static void test_lz4_rejects_damage(void **state)
     put32(b + 12, 333u * 171 * 4 + 4);
     assert_int_equal(DEC(len, 0, 0), FD_EFORMAT);              /* raw size != w*h*4 */
     assert_non_null(strstr(msg, "byte 12"));
+    /* frame_lz4.h: each dimension in 1..SP_FRAME_MAX_DIM. A one-pixel-wide column of
+     * SP_FRAME_MAX_DIM rows passes the header check, one more row (or column) is refused by
+     * name; the header alone is parsed, with a length the block could expand from. */
+    {
+        uint8_t hd[SP_LZ4_HEADER_SIZE];
+        uint32_t hw = 0, hh = 0;
+        char over[16];
+        snprintf(over, sizeof over, "%d", SP_FRAME_MAX_DIM + 1);
+        const size_t big = (size_t)SP_LZ4_HEADER_SIZE + 4u * (SP_FRAME_MAX_DIM + 1);
+        memcpy(hd, b, 4);
+        for (int side = 0; side < 2; side++) {
+            put32(hd + 4 + 4 * side, 1);
+            put32(hd + 8 - 4 * side, SP_FRAME_MAX_DIM);
+            put32(hd + 12, 4u * SP_FRAME_MAX_DIM);
+            assert_int_equal(sp_lz4_header_get(hd, big, &hw, &hh, msg, sizeof msg), SP_LZ4_OK);
+            assert_int_equal(side ? hw : hh, SP_FRAME_MAX_DIM);
+            put32(hd + 8 - 4 * side, SP_FRAME_MAX_DIM + 1);
+            put32(hd + 12, 4u * (SP_FRAME_MAX_DIM + 1));
+            assert_int_equal(sp_lz4_header_get(hd, big, &hw, &hh, msg, sizeof msg),
+                             SP_LZ4_ELIMIT);
+            assert_non_null(strstr(msg, over));
+        }
+    }
     /* An oversized but consistent header (16384x16384 = 1 GiB) on a small payload is refused
      * before anything is allocated for it. */
     RESET();
@@ -620,6 +651,10 @@ static void test_write_file_formats_and_errors(void **state)
     assert_non_null(strstr(err.msg, "no extension"));
     assert_int_equal(enc_format_from_path("x.tar.Jpg", &err), SP_FMT_JPEG);
     assert_int_equal(enc_format_from_path("dir.png/x", &err), SD_EINVAL);
+    /* A hidden file's leading dot starts its name, not an extension: "out/.png" has none. */
+    assert_int_equal(enc_format_from_path("out/.png", &err), SD_EINVAL);
+    assert_non_null(strstr(err.msg, "no extension"));
+    assert_int_equal(enc_format_from_path(".jpg", &err), SD_EINVAL);
     assert_int_equal(dir_entries(dir), 4);
 
     /* A directory that does not exist: an error naming the path, nothing left behind. */

@@ -4,6 +4,8 @@
 #include <stdint.h>
 #include <setjmp.h>
 #include <cmocka.h>
+#include <math.h>
+#include <stdio.h>
 #include <string.h>
 
 #include "params.h"
@@ -104,6 +106,73 @@ static void test_pipeline_list_matches_table(void **state)
     }
 }
 
+/* The numeric ranges are those PROTOCOL.md publishes, both ends inclusive: each end is
+ * accepted and the nearest value beyond it refused (floats compared as f32, so the next f32
+ * past the end; integers one past; vec3 per component, each component in turn). The values
+ * come from the protocol text, not from sp_param_table. */
+static void test_ranges_match_protocol_md(void **state)
+{
+    (void)state;
+    static const struct { const char *name; double lo, hi; } ranges[] = {
+        {"splat_scale", 0.01, 100}, {"lowpass", 0, 16}, {"point_size", 1, 64},
+        {"point_budget", 0, 4e9},   {"quality", 1, 100}, {"light", -1, 1},
+        {"background", 0, 1},
+    };
+    char v[128], err[256];
+    for (size_t i = 0; i < sizeof ranges / sizeof ranges[0]; i++) {
+        const char *name = ranges[i].name;
+        int id = sp_param_find(name);
+        assert_true(id >= 0);
+        sp_type t = sp_param_table[id].type;
+        for (int end = 0; end < 2; end++) {
+            double at = end ? ranges[i].hi : ranges[i].lo;
+            double past;
+            if (t == SP_T_INT) past = end ? at + 1 : at - 1;
+            else past = nextafterf((float)at, end ? INFINITY : -INFINITY);
+            for (int comp = 0; comp < (t == SP_T_VEC3 ? 3 : 1); comp++) {
+                for (int beyond = 0; beyond < 2; beyond++) {
+                    double x = beyond ? past : at;
+                    if (t == SP_T_VEC3) {
+                        /* the other components at the range's middle */
+                        double mid = 0.5 * (ranges[i].lo + ranges[i].hi), c[3] = {mid, mid, mid};
+                        c[comp] = x;
+                        snprintf(v, sizeof v, "%.9g,%.9g,%.9g", c[0], c[1], c[2]);
+                    } else {
+                        snprintf(v, sizeof v, t == SP_T_INT ? "%.0f" : "%.9g", x);
+                    }
+                    sp_params p;
+                    sp_params_defaults(&p);
+                    int rc = sp_param_set_text(&p, name, v, err, sizeof err);
+                    if (rc != (beyond ? -1 : 0))
+                        fail_msg("%s=%s: got %d, want %s", name, v, rc,
+                                 beyond ? "refused" : "accepted");
+                    if (beyond) assert_non_null(strstr(err, "out of range"));
+                }
+            }
+        }
+    }
+}
+
+/* Enum values match whole names only: an abbreviation, an extension or an empty value is not
+ * a value, even when it is a prefix of one. */
+static void test_enum_exact_names(void **state)
+{
+    (void)state;
+    sp_params p;
+    sp_params_defaults(&p);
+    char err[256];
+    static const char *bad[] = {"pipeline=poi", "pipeline=p", "pipeline=", "color=rg",
+                                "format=pn", "subsampling=44", "ewa=ex", "pipeline=pointsx"};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        if (sp_param_set_kv(&p, bad[i], err, sizeof err) != -1)
+            fail_msg("'%s' was accepted", bad[i]);
+        assert_non_null(strstr(err, "is not one of"));
+    }
+    assert_int_equal(p.pipeline, SP_PIPE_SPLAT); /* unchanged */
+    assert_int_equal(sp_param_set_kv(&p, "subsampling=444", err, sizeof err), 0);
+    assert_int_equal(p.subsampling, SP_SUB_444);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -111,6 +180,8 @@ int main(void)
         cmocka_unit_test(test_set_and_errors),
         cmocka_unit_test(test_enum_names),
         cmocka_unit_test(test_pipeline_list_matches_table),
+        cmocka_unit_test(test_ranges_match_protocol_md),
+        cmocka_unit_test(test_enum_exact_names),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -98,6 +98,28 @@ static void test_morton_roundtrip_and_sort(void **state)
     free(pos); free(codes); free(perm); free(seen);
 }
 
+/* morton.h's rule for a point outside the frame: its cell on each axis is clamped to
+ * [0, 2^21 - 1]. The frame of the unit cube's two corners; a point far beyond the high corner
+ * is in the last cell on all three axes, so its code has all 63 bits set, one far below the low
+ * corner (or NaN) in cell 0. Proves the clamp returns the last cell, not one past it (which the
+ * 21-bit spreading would wrap to cell 0). */
+static void test_morton_clamps_outside_points(void **state)
+{
+    (void)state;
+    const float corners[6] = {0, 0, 0, 1, 1, 1};
+    prep_morton_frame f;
+    prep_morton_frame_of(corners, 2, &f);
+    const uint64_t all = (1ull << 63) - 1;
+    const float high[3] = {5, 5, 5}, low[3] = {-5, -5, -5};
+    assert_true(prep_morton_code(&f, high) == all);
+    assert_true(prep_morton_code(&f, low) == 0);
+    /* Mixed: x beyond the high side (all x bits, every third bit from bit 0), y and z below. */
+    const float mixed[3] = {1e6f, -1e6f, NAN};
+    assert_true(prep_morton_code(&f, mixed) == 0x1249249249249249ull);
+    const float inf[3] = {INFINITY, INFINITY, INFINITY};
+    assert_true(prep_morton_code(&f, inf) == all);
+}
+
 /* ---- eigen solver ---- */
 
 /* A random rotation (from a random unit quaternion) into R (rows are the eigenvectors). */
@@ -160,6 +182,23 @@ static void test_eigen_solver(void **state)
     assert_true(v[2] == 1);
     prep_sym3_smallest(&Z, v);
     assert_true(v[2] == 1);
+}
+
+/* pca.h: the covariance is that of the neighbourhood including the point itself. The point at
+ * the origin and four neighbours (+-1, 0, 1), (0, +-1, 1): over the five points the means are
+ * (0, 0, 4/5) and the covariance is diag(2/5, 2/5, 4/5 - 16/25) = diag(0.4, 0.4, 0.16), so the
+ * normal is +-z and the surface variation lambda_0 / trace = 0.16 / 0.96 = 1/6. Leaving the
+ * point out would make the four coplanar neighbours a perfect plane (variation 0). */
+static void test_pca_counts_the_point_itself(void **state)
+{
+    (void)state;
+    const float pos[15] = {0, 0, 0, 1, 0, 1, -1, 0, 1, 0, 1, 1, 0, -1, 1};
+    const uint32_t nbr[4] = {1, 2, 3, 4};
+    float n[3], curv = -1;
+    prep_pca_normal(pos, 0, nbr, 4, n, &curv);
+    assert_true(fabsf(fabsf(n[2]) - 1) < 1e-6f);
+    assert_true(fabsf(n[0]) < 1e-6f && fabsf(n[1]) < 1e-6f);
+    assert_true(fabs(curv - 1.0 / 6.0) < 1e-6);
 }
 
 /* ---- kNN against brute force ---- */
@@ -724,6 +763,57 @@ static void test_field_vegetation_vs_plane(void **state)
     pc_cloud_free(&c);
 }
 
+/* sigma is the median nearest-neighbour distance, not the minimum (DESIGN.md: the paper's
+ * minimum is zero for duplicate points). 4096 points on a grid of spacing 1 and, far away,
+ * 1024 on a grid of spacing 0.25: four fifths of the points have their nearest neighbour at 1,
+ * so the median is 1 while the minimum would be 0.25. */
+static void test_sigma_is_median(void **state)
+{
+    (void)state;
+    const int a = 64, b = 32;
+    pc_cloud c = make_cloud((size_t)a * a + (size_t)b * b);
+    size_t k = 0;
+    for (int i = 0; i < a; i++)
+        for (int j = 0; j < a; j++, k++) {
+            c.pos[3 * k] = (float)i; c.pos[3 * k + 1] = (float)j; c.pos[3 * k + 2] = 0;
+        }
+    for (int i = 0; i < b; i++)
+        for (int j = 0; j < b; j++, k++) {
+            c.pos[3 * k] = (float)(1000 + i * 0.25); c.pos[3 * k + 1] = (float)(j * 0.25);
+            c.pos[3 * k + 2] = 0;
+        }
+    prep_desc d = {.k = 24, .threads = 2};
+    pc_prepared p;
+    sd_err err = {0};
+    assert_int_equal(prep_run(&c, &d, &p, &err), 0);
+    assert_true(fabs(p.sigma - 1.0) <= 1e-6);
+    pc_prepared_free(&p);
+    pc_cloud_free(&c);
+}
+
+/* A cloud of exactly k points has k - 1 neighbours per point: prep uses K = n - 1 rather than
+ * asking the kNN for as many neighbours as there are points. The unit square's corners with
+ * k = 4: K = 3, the farthest other corner is the diagonal one at sqrt 2, so every radius is
+ * r = 2 sqrt2 / sqrt3 (eq. 20) and sigma = 1. */
+static void test_cloud_of_exactly_k_points(void **state)
+{
+    (void)state;
+    pc_cloud c = make_cloud(4);
+    const float sq[12] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0};
+    memcpy(c.pos, sq, sizeof sq);
+    prep_desc d = {.k = 4, .threads = 1};
+    pc_prepared p;
+    sd_err err = {0};
+    int rc = prep_run(&c, &d, &p, &err);
+    if (rc != 0) fail_msg("prep_run of 4 points with k = 4: %s", err.msg);
+    assert_int_equal(p.k, 3);
+    double want = 2 * sqrt(2.0) / sqrt(3.0);
+    for (size_t i = 0; i < 4; i++) assert_true(fabs(p.radius[i] - want) <= 1e-6 * want);
+    assert_true(fabs(p.sigma - 1.0) <= 1e-6);
+    pc_prepared_free(&p);
+    pc_cloud_free(&c);
+}
+
 /* ---- Morton order, batches, attribute permutation ---- */
 
 static uint8_t tag(const float *p, int ch)
@@ -1094,7 +1184,9 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_morton_roundtrip_and_sort),
+        cmocka_unit_test(test_morton_clamps_outside_points),
         cmocka_unit_test(test_eigen_solver),
+        cmocka_unit_test(test_pca_counts_the_point_itself),
         cmocka_unit_test(test_percentile),
         cmocka_unit_test(test_knn_bad_args),
         cmocka_unit_test(test_knn_hard_cases),
@@ -1108,6 +1200,8 @@ int main(void)
         cmocka_unit_test(test_radius_outlier_limited),
         cmocka_unit_test(test_radius_scatter_limited),
         cmocka_unit_test(test_field_vegetation_vs_plane),
+        cmocka_unit_test(test_sigma_is_median),
+        cmocka_unit_test(test_cloud_of_exactly_k_points),
         cmocka_unit_test(test_morton_order_and_attributes),
         cmocka_unit_test(test_morton_locality_cube),
         cmocka_unit_test(test_threads_identical),
