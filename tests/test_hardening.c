@@ -11,6 +11,11 @@
  *    that load (pc__guarded turns the SIGBUS into SD_EIO), also end to end while the daemon
  *    prepares it for a client, and the daemon goes on serving others; the streamed hash of a
  *    source file equals the one-shot hash.
+ *  - cache files: symlinks planted at the cache's name and at the old predictable temporary
+ *    name are never followed; `splatd prep` killed (SIGKILL) while it writes its cache leaves
+ *    no temporary file, and a dead writer's leftover is swept at the next start; `splatd prep`
+ *    exits 1 when it cannot write its cache; a FIFO in place of a cloud or a cache is refused
+ *    at once instead of blocking.
  *
  * Attackers connect from other loopback addresses (127.0.0.2 and up, which Linux routes to
  * the loopback device) so that the per-address limit sees them apart from the real client at
@@ -23,6 +28,7 @@
 #include <cmocka.h>
 
 #include <arpa/inet.h>
+#include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <netinet/in.h>
@@ -42,10 +48,12 @@
 #include <openssl/evp.h>
 #include <openssl/hmac.h>
 
+#include "cache.h"
 #include "cloud.h"
 #include "common/daemonproc.h"
 #include "common/testutil.h"
 #include "io_text.h"
+#include "prep.h"
 #include "proto.h"
 #include "sd_hash.h"
 
@@ -788,6 +796,287 @@ static void test_truncate_during_prep(void **state)
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
+/* ---- cache files ---- */
+
+/* run_cmd: runs argv (NULL-terminated) with stdout and stderr to out_path; between fork and
+ * exec the child waits for a byte on a pipe, so the caller can act knowing the pid first
+ * (before(pid, user) when not NULL). Waits up to secs; returns the exit status (0-255), 256 +
+ * the signal when killed, or -2 after a timeout (the child is killed then). *elapsed gets the
+ * seconds it ran. */
+static int run_cmd(const char *const *argv, const char *out_path, double secs, double *elapsed,
+                   void (*before)(pid_t pid, void *user), void *user)
+{
+    int go[2];
+    if (pipe(go) != 0) return -1;
+    pid_t pid = fork();
+    if (pid < 0) return -1;
+    if (pid == 0) {
+        close(go[1]);
+        char c;
+        if (read(go[0], &c, 1) != 1) _exit(126);
+        int fd = open(out_path, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        if (fd >= 0) {
+            dup2(fd, 1);
+            dup2(fd, 2);
+            close(fd);
+        }
+        execv(argv[0], (char *const *)argv);
+        _exit(127);
+    }
+    close(go[0]);
+    if (before) before(pid, user);
+    double t0 = now_s();
+    if (write(go[1], "x", 1) != 1) {}
+    close(go[1]);
+    int st = 0;
+    for (;;) {
+        pid_t w = waitpid(pid, &st, WNOHANG);
+        if (w == pid) break;
+        if (now_s() - t0 > secs) {
+            kill(pid, SIGKILL);
+            waitpid(pid, &st, 0);
+            if (elapsed) *elapsed = now_s() - t0;
+            return -2;
+        }
+        usleep(2000);
+    }
+    if (elapsed) *elapsed = now_s() - t0;
+    return WIFEXITED(st) ? WEXITSTATUS(st) : 256 + WTERMSIG(st);
+}
+
+/* count_tmp: entries of dir whose name contains ".tmp." (cache writers' temporary files). */
+static int count_tmp(const char *dir)
+{
+    DIR *d = opendir(dir);
+    if (!d) return 0;
+    int n = 0;
+    struct dirent *e;
+    while ((e = readdir(d)))
+        if (strstr(e->d_name, ".tmp.")) n++;
+    closedir(d);
+    return n;
+}
+
+typedef struct plant {
+    char cpath[4096];
+    char victim[700];
+    char planted[4200];
+} plant;
+
+/* plant_tmp_link: before(): the name the previous writer used for its temporary file,
+ * "<cache>.tmp.<pid>", as a symlink to the victim. */
+static void plant_tmp_link(pid_t pid, void *user)
+{
+    plant *p = user;
+    snprintf(p->planted, sizeof p->planted, "%s.tmp.%ld", p->cpath, (long)pid);
+    if (symlink(p->victim, p->planted) != 0) fail_msg("cannot plant %s", p->planted);
+}
+
+/* A local attacker who can guess the cache's file names plants symlinks to a file of the
+ * daemon's user: at the cache file's own name and at "<cache>.tmp.<pid>", the name the previous
+ * code opened with O_CREAT|O_TRUNC (which followed the link and overwrote the victim). Neither
+ * is followed now: the victim keeps its bytes, the cache becomes a regular file of mode 0600
+ * that loads ("hit"), and the cache directory, created by splatd, is 0700. */
+static void test_cache_symlinks(void **state)
+{
+    fx *f = *state;
+    char src[700], cdir[700], out[700];
+    snprintf(src, sizeof src, "%s/bunny.ply", f->data);
+    snprintf(cdir, sizeof cdir, "%s/newcache", f->root);
+    snprintf(out, sizeof out, "%s/prep.out", f->root);
+    plant p = {0};
+    snprintf(p.victim, sizeof p.victim, "%s/victim", f->root);
+    static const char keep[] = "the victim's own bytes\n";
+    assert_int_equal(tu_write_file(p.victim, keep, strlen(keep)), 0);
+    sd_err err = {0};
+    assert_int_equal(cache_path_for(src, cdir, PREP_DEFAULT_K, p.cpath, sizeof p.cpath, &err), 0);
+    assert_int_equal(mkdir(cdir, 0700), 0);
+    assert_int_equal(symlink(p.victim, p.cpath), 0);
+    const char *argv[] = {tu_splatd_bin(), "prep", src, "--cache", cdir, "--quiet", NULL};
+    double el;
+    int rc = run_cmd(argv, out, 60, &el, plant_tmp_link, &p);
+    assert_int_equal(rc, 0);
+    size_t len;
+    char *v = (char *)tu_read_file(p.victim, &len);
+    assert_non_null(v);
+    assert_int_equal(len, strlen(keep));
+    assert_memory_equal(v, keep, len);
+    free(v);
+    struct stat st;
+    assert_int_equal(lstat(p.cpath, &st), 0);
+    assert_true(S_ISREG(st.st_mode));
+    assert_int_equal(st.st_mode & 0777, 0600);
+    assert_int_equal(lstat(p.planted, &st), 0); /* left alone: never used, never followed */
+    assert_true(S_ISLNK(st.st_mode));
+    rc = run_cmd(argv, out, 60, &el, NULL, NULL);
+    assert_int_equal(rc, 0);
+    char *o = (char *)tu_read_file(out, &len);
+    assert_non_null(o);
+    assert_non_null(strstr(o, "(hit)"));
+    free(o);
+    /* A directory splatd creates is its owner's alone. */
+    char fresh[800];
+    snprintf(fresh, sizeof fresh, "%s/made/by/splatd", f->root);
+    const char *argv2[] = {tu_splatd_bin(), "prep", src, "--cache", fresh, "--quiet", NULL};
+    assert_int_equal(run_cmd(argv2, out, 60, &el, NULL, NULL), 0);
+    assert_int_equal(stat(fresh, &st), 0);
+    assert_int_equal(st.st_mode & 0777, 0700);
+    printf("cache symlinks: victim intact, cache a 0600 regular file, new directories 0700\n");
+}
+
+typedef struct killer {
+    const char *cdir;
+    int killed_writing;     /* the kill came while the writer held a file in the cache dir */
+} killer;
+
+/* writing_now: 1 when process pid has a file of directory dir open (its cache being
+ * written: an O_TMPFILE file shows as "DIR/#N (deleted)"). */
+static int writing_now(pid_t pid, const char *dir)
+{
+    char fdd[64], link[400], target[4096];
+    snprintf(fdd, sizeof fdd, "/proc/%ld/fd", (long)pid);
+    DIR *d = opendir(fdd);
+    if (!d) return 0;
+    int hit = 0;
+    struct dirent *e;
+    size_t dl = strlen(dir);
+    while (!hit && (e = readdir(d))) {
+        snprintf(link, sizeof link, "%s/%s", fdd, e->d_name);
+        ssize_t n = readlink(link, target, sizeof target - 1);
+        if (n <= 0) continue;
+        target[n] = 0;
+        hit = !strncmp(target, dir, dl) && target[dl] == '/';
+    }
+    closedir(d);
+    return hit;
+}
+
+/* `splatd prep` killed with SIGKILL while it writes its cache (caught in the act through
+ * /proc/PID/fd) leaves no temporary file: the file it writes has no name until it is complete.
+ * A leftover of a dead writer (the O_EXCL fallback, or a crash between link and rename) is
+ * removed when the daemon starts; a live writer's is kept. */
+static void test_cache_kill9(void **state)
+{
+    fx *f = *state;
+    char src[700], cdir[700], out[700];
+    snprintf(src, sizeof src, "%s/big.ply", f->data);
+    write_ascii_ply(src, 300000);
+    snprintf(cdir, sizeof cdir, "%s/k9cache", f->root);
+    snprintf(out, sizeof out, "%s/prep.out", f->root);
+    int caught = 0, runs = 0;
+    for (; runs < 3 && !caught; runs++) {
+        /* Run in the background, watched from here: fork+exec without run_cmd's wait. */
+        pid_t pid = fork();
+        assert_true(pid >= 0);
+        if (pid == 0) {
+            int fd = open(out, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+            if (fd >= 0) { dup2(fd, 1); dup2(fd, 2); close(fd); }
+            execl(tu_splatd_bin(), tu_splatd_bin(), "prep", src, "--cache", cdir, "--force",
+                  "--quiet", (char *)NULL);
+            _exit(127);
+        }
+        double t0 = now_s();
+        int st;
+        for (;;) {
+            if (writing_now(pid, cdir)) {
+                kill(pid, SIGKILL);
+                caught = 1;
+            }
+            if (waitpid(pid, &st, WNOHANG) == pid) break;
+            if (now_s() - t0 > 60) {
+                kill(pid, SIGKILL);
+                waitpid(pid, &st, 0);
+                fail_msg("splatd prep did not finish in 60 s");
+            }
+            usleep(200);
+        }
+        assert_int_equal(count_tmp(cdir), 0);
+    }
+    printf("cache kill -9: caught writing on run %d; no temporary file left\n", runs);
+    assert_true(caught);
+    /* Leftovers: one of a dead writer (a pid that does not exist), one of this live process. */
+    char dead[800], live[800];
+    long dead_pid = 4194303;
+    while (kill((pid_t)dead_pid, 0) == 0 || errno != ESRCH) dead_pid--;
+    snprintf(dead, sizeof dead, "%s/big.ply.0.k24.splc.tmp.%ld.00112233aabb", cdir, dead_pid);
+    snprintf(live, sizeof live, "%s/big.ply.0.k24.splc.tmp.%ld.00112233aabb", cdir, (long)getpid());
+    assert_int_equal(tu_write_file(dead, "x", 1), 0);
+    assert_int_equal(tu_write_file(live, "x", 1), 0);
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", cdir, NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    struct stat st;
+    assert_int_equal(stat(dead, &st), -1);
+    assert_int_equal(stat(live, &st), 0);
+    assert_int_equal(log_count(&f->d, "removed 1 temporary file(s) of interrupted cache writes"), 1);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+    unlink(live);
+}
+
+/* `splatd prep` exits 1 when it prepared the cloud but could not write its cache (a cache
+ * path under a regular file; a cache directory others may write), and 0 when it could. */
+static void test_prep_exit_status(void **state)
+{
+    fx *f = *state;
+    char src[700], out[700], notdir[700], bad[800], open_dir[700];
+    snprintf(src, sizeof src, "%s/bunny.ply", f->data);
+    snprintf(out, sizeof out, "%s/prep.out", f->root);
+    snprintf(notdir, sizeof notdir, "%s/afile", f->root);
+    snprintf(bad, sizeof bad, "%s/sub", notdir);
+    snprintf(open_dir, sizeof open_dir, "%s/shared", f->root);
+    assert_int_equal(tu_write_file(notdir, "x", 1), 0);
+    assert_int_equal(mkdir(open_dir, 0700), 0);
+    assert_int_equal(chmod(open_dir, 0777), 0);
+    double el;
+    const char *a1[] = {tu_splatd_bin(), "prep", src, "--cache", bad, "--quiet", NULL};
+    assert_int_equal(run_cmd(a1, out, 60, &el, NULL, NULL), 1);
+    size_t len;
+    char *o = (char *)tu_read_file(out, &len);
+    assert_non_null(o);
+    assert_non_null(strstr(o, "cannot create cache directory"));
+    free(o);
+    const char *a2[] = {tu_splatd_bin(), "prep", src, "--cache", open_dir, "--quiet", NULL};
+    assert_int_equal(run_cmd(a2, out, 60, &el, NULL, NULL), 1);
+    o = (char *)tu_read_file(out, &len);
+    assert_non_null(o);
+    assert_non_null(strstr(o, "writable by others"));
+    free(o);
+    const char *a3[] = {tu_splatd_bin(), "prep", src, "--cache", f->cache, "--quiet", NULL};
+    assert_int_equal(run_cmd(a3, out, 60, &el, NULL, NULL), 0);
+}
+
+/* A FIFO where a cloud or a cache file is expected is refused at once: opening one for
+ * reading would wait for a writer forever (the prep thread of the daemon with it). */
+static void test_fifo_refused(void **state)
+{
+    fx *f = *state;
+    char fifo[700], out[700], src[700], cpath[4096];
+    snprintf(fifo, sizeof fifo, "%s/pipe.ply", f->data);
+    snprintf(out, sizeof out, "%s/prep.out", f->root);
+    assert_int_equal(mkfifo(fifo, 0644), 0);
+    double el;
+    const char *a1[] = {tu_splatd_bin(), "prep", fifo, "--cache", f->cache, "--quiet", NULL};
+    int rc = run_cmd(a1, out, 10, &el, NULL, NULL);
+    size_t len;
+    char *o = (char *)tu_read_file(out, &len);
+    printf("FIFO as a cloud: splatd prep exited %d after %.0f ms: %s", rc, el * 1e3, o ? o : "");
+    assert_int_equal(rc, 1);
+    assert_true(el < 2.0);
+    assert_non_null(o);
+    assert_non_null(strstr(o, "not a regular file"));
+    free(o);
+    /* A FIFO at the cache's name: treated as no cache, replaced by the real one. */
+    snprintf(src, sizeof src, "%s/bunny.ply", f->data);
+    sd_err err = {0};
+    assert_int_equal(cache_path_for(src, f->cache, PREP_DEFAULT_K, cpath, sizeof cpath, &err), 0);
+    assert_int_equal(mkfifo(cpath, 0600), 0);
+    const char *a2[] = {tu_splatd_bin(), "prep", src, "--cache", f->cache, "--quiet", NULL};
+    rc = run_cmd(a2, out, 30, &el, NULL, NULL);
+    assert_int_equal(rc, 0);
+    struct stat st;
+    assert_int_equal(lstat(cpath, &st), 0);
+    assert_true(S_ISREG(st.st_mode));
+}
+
 int main(void)
 {
     setvbuf(stdout, NULL, _IOLBF, 0);
@@ -801,6 +1090,10 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_guarded_truncation, setup, teardown),
         cmocka_unit_test(test_hash_stream),
         cmocka_unit_test_setup_teardown(test_truncate_during_prep, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_cache_symlinks, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_cache_kill9, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_prep_exit_status, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_fifo_refused, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -74,6 +74,11 @@ int cmd_prep(int argc, char **argv)
     pc_prepared p;
     cache_result r;
     sd_err err = {0};
+    char cdir[4096];
+    int swept = 0;
+    if (cache_dir_for(d.dir, cdir, sizeof cdir) == 0) cache_sweep(cdir, &swept);
+    if (swept) fprintf(stderr, "splatd prep: removed %d temporary file(s) of interrupted cache "
+                       "writes from %s\n", swept, cdir);
     if (cache_open_cloud(file, &d, &p, &r, &err) < 0) {
         fprintf(stderr, "splatd prep: %s\n", err.msg);
         return 1;
@@ -110,5 +115,10 @@ int cmd_prep(int argc, char **argv)
                p.stats.t_normals, p.stats.t_radius, p.stats.t_field, r.t_write);
     }
     pc_prepared_free(&p);
+    if (r.write_failed) {
+        /* The point of `prep` is the cache: without it the command failed. */
+        fprintf(stderr, "splatd prep: %s\n", r.write_error);
+        return 1;
+    }
     return 0;
 }

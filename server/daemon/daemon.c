@@ -7,6 +7,7 @@
  * SIGPIPE is ignored and sends use MSG_NOSIGNAL. */
 #include <errno.h>
 #include <getopt.h>
+#include <limits.h>
 #include <pthread.h>
 #include <signal.h>
 #include <stdio.h>
@@ -17,6 +18,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include "cache.h"
 #include "commands.h"
 #include "datadir.h"
 #include "srv.h"
@@ -582,6 +584,13 @@ static int start(srv *sv)
                 "127.0.0.1.\n", sv->o.host);
         return 1;
     }
+    /* Temporary files of cache writes interrupted by a crash or kill -9 (the O_EXCL fallback
+     * where O_TMPFILE is missing) are removed before anything is prepared. */
+    char cdir[PATH_MAX];
+    int swept = 0;
+    if (cache_dir_for(sv->o.cache_dir, cdir, sizeof cdir) == 0) cache_sweep(cdir, &swept);
+    if (swept) srv_log(sv, NULL, "removed %d temporary file(s) of interrupted cache writes from %s",
+                       swept, cdir);
     /* Block the stop signals before any thread starts, so only the signalfd sees them. */
     sigset_t ss;
     sigemptyset(&ss);

@@ -7,14 +7,17 @@
  * bit-flipped cache is detected and rebuilt, never used. */
 #include "cache.h"
 
+#include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <libgen.h>
+#include <signal.h>
 #include <limits.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
+#include <sys/random.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
@@ -54,6 +57,8 @@ static double now_s(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
+/* mkdir_p: creates dir and its missing parents, each 0700: the cache holds the data of the
+ * clouds, and a directory only its owner can write is where nobody else can plant a link. */
 static int mkdir_p(const char *dir)
 {
     char tmp[PATH_MAX];
@@ -61,28 +66,105 @@ static int mkdir_p(const char *dir)
     for (char *p = tmp + 1; *p; p++) {
         if (*p != '/') continue;
         *p = 0;
-        if (mkdir(tmp, 0755) < 0 && errno != EEXIST) return -1;
+        if (mkdir(tmp, 0700) < 0 && errno != EEXIST) return -1;
         *p = '/';
     }
-    if (mkdir(tmp, 0755) < 0 && errno != EEXIST) return -1;
+    if (mkdir(tmp, 0700) < 0 && errno != EEXIST) return -1;
+    return 0;
+}
+
+/* open_cache_dir: creates dir when missing and opens it (never through a symlink) for the
+ * *at() calls that write in it. Refuses a directory that another user owns or that group or
+ * others may write: there, anyone could swap names under the writer. Returns the fd, or -1
+ * with err filled. */
+static int open_cache_dir(const char *dir, sd_err *err)
+{
+    if (mkdir_p(dir) < 0) {
+        sd_errf(err, SD_EIO, "cannot create cache directory %s: %s", dir, strerror(errno));
+        return -1;
+    }
+    int dfd = open(dir, O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC);
+    if (dfd < 0) {
+        sd_errf(err, SD_EIO, "cannot open cache directory %s: %s", dir,
+                errno == ELOOP ? "it is a symbolic link" : strerror(errno));
+        return -1;
+    }
+    struct stat st;
+    if (fstat(dfd, &st) < 0) {
+        sd_errf(err, SD_EIO, "cache directory %s: %s", dir, strerror(errno));
+        close(dfd);
+        return -1;
+    }
+    if (st.st_uid != geteuid() || (st.st_mode & (S_IWGRP | S_IWOTH))) {
+        sd_errf(err, SD_EIO, "cache directory %s is %s (mode %04o); caches are written only "
+                "in a directory this user owns and nobody else can write (make it 0700)", dir,
+                st.st_uid != geteuid() ? "owned by another user" : "writable by others",
+                (unsigned)(st.st_mode & 07777));
+        close(dfd);
+        return -1;
+    }
+    return dfd;
+}
+
+/* Temporary names: "<cache file name>.tmp.<pid>.<12 hex digits>". The pid lets the sweep tell
+ * a dead writer's leftover from a live writer's file; the random part makes the name
+ * unpredictable. */
+#define CACHE_TMP_TAG ".tmp."
+
+static void tmp_name(const char *base, char *buf, size_t len)
+{
+    uint8_t r[6] = {0};
+    if (getrandom(r, sizeof r, 0) != (ssize_t)sizeof r) {
+        /* No entropy source: the names stay unique (O_EXCL below), only predictable. */
+        uint64_t t = (uint64_t)(now_s() * 1e9);
+        memcpy(r, &t, sizeof r);
+    }
+    snprintf(buf, len, "%s" CACHE_TMP_TAG "%ld.%02x%02x%02x%02x%02x%02x", base, (long)getpid(),
+             r[0], r[1], r[2], r[3], r[4], r[5]);
+}
+
+int cache_sweep(const char *dir, int *removed)
+{
+    if (removed) *removed = 0;
+    DIR *d = dir ? opendir(dir) : NULL;
+    if (!d) return 0;
+    struct dirent *e;
+    while ((e = readdir(d))) {
+        const char *t = strstr(e->d_name, ".splc" CACHE_TMP_TAG);
+        if (!t) continue;
+        char *end;
+        long pid = strtol(t + strlen(".splc" CACHE_TMP_TAG), &end, 10);
+        if (pid <= 0 || (*end != '.' && *end != 0)) continue;
+        /* A live writer's file (this process's or another's: a `splatd prep` beside the
+         * daemon) is left alone; a dead one's is garbage. */
+        if (pid == (long)getpid() || kill((pid_t)pid, 0) == 0 || errno != ESRCH) continue;
+        if (unlinkat(dirfd(d), e->d_name, 0) == 0 && removed) (*removed)++;
+    }
+    closedir(d);
+    return 0;
+}
+
+int cache_dir_for(const char *dir, char *buf, size_t len)
+{
+    if (dir && *dir) {
+        snprintf(buf, len, "%s", dir);
+        return 0;
+    }
+    const char *e;
+    if ((e = getenv("SPLATD_CACHE")) && *e) snprintf(buf, len, "%s", e);
+    else if ((e = getenv("XDG_CACHE_HOME")) && *e) snprintf(buf, len, "%s/splatd", e);
+    else if ((e = getenv("HOME")) && *e) snprintf(buf, len, "%s/.cache/splatd", e);
+    else return -1; /* the default then depends on each source's directory */
     return 0;
 }
 
 /* Picks the default cache directory (see cache_desc.dir) for src. */
 static void default_dir(const char *src, char *buf, size_t len)
 {
-    const char *e;
-    if ((e = getenv("SPLATD_CACHE")) && *e) {
-        snprintf(buf, len, "%s", e);
-    } else if ((e = getenv("XDG_CACHE_HOME")) && *e) {
-        snprintf(buf, len, "%s/splatd", e);
-    } else if ((e = getenv("HOME")) && *e) {
-        snprintf(buf, len, "%s/.cache/splatd", e);
-    } else {
-        char tmp[PATH_MAX];
-        snprintf(tmp, sizeof tmp, "%s", src);
-        snprintf(buf, len, "%s/.splatd-cache", dirname(tmp));
-    }
+    if (cache_dir_for(NULL, buf, len) == 0) return;
+    char tmp[PATH_MAX];
+    snprintf(tmp, sizeof tmp, "%s", src);
+    snprintf(buf, len, "%s/.splatd-cache", dirname(tmp));
 }
 
 int cache_path_for(const char *src, const char *dir, int k, char *buf, size_t len, sd_err *err)
@@ -205,7 +287,8 @@ static int check_header(int fd, const struct stat *st, const src_key *key, int c
 static int try_load(const char *cpath, const src_key *key, int k, pc_prepared *out, char *why,
                     size_t whylen)
 {
-    int fd = open(cpath, O_RDONLY | O_CLOEXEC);
+    /* O_NOFOLLOW: a symlink at the cache's name is nobody's cache (it is replaced on write). */
+    int fd = open(cpath, O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
     if (fd < 0) {
         snprintf(why, whylen, "no cache");
         return 0;
@@ -272,7 +355,7 @@ int cache_probe_points(const char *src, const char *dir, int k, uint64_t *points
         return 0;
     src_key key = {.size = (uint64_t)ss.st_size,
                    .mtime_ns = (int64_t)ss.st_mtim.tv_sec * 1000000000LL + ss.st_mtim.tv_nsec};
-    int fd = open(cpath, O_RDONLY | O_CLOEXEC);
+    int fd = open(cpath, O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
     if (fd < 0) return 0;
     cache_header h;
     int ok = fstat(fd, &cs) == 0 && check_header(fd, &cs, &key, 0, k, &h, why, sizeof why) == 1;
@@ -296,16 +379,57 @@ static int write_all(int fd, const void *p, size_t len)
     return 0;
 }
 
-/* Writes p to cpath through a temporary file, fsync and rename. */
+/* create_tmp: a new file for writing in directory dfd that no one else can have made or
+ * linked: an unnamed O_TMPFILE file when the file system has them (nothing is left behind if
+ * the process dies while writing), else a random name created with O_EXCL | O_NOFOLLOW (a
+ * symlink planted there makes the create fail, never followed). *named is set to 1 and name
+ * filled in the second case. Returns the fd or -1 with errno. */
+static int create_tmp(int dfd, const char *base, char *name, size_t len, int *named)
+{
+    *named = 0;
+    int fd = openat(dfd, ".", O_TMPFILE | O_WRONLY | O_CLOEXEC, 0600);
+    if (fd >= 0) return fd;
+    if (errno != EOPNOTSUPP && errno != EISDIR && errno != EINVAL && errno != ENOENT) return -1;
+    for (int tries = 0; tries < 16; tries++) {
+        tmp_name(base, name, len);
+        fd = openat(dfd, name, O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0600);
+        if (fd >= 0 || errno != EEXIST) break;
+    }
+    if (fd >= 0) *named = 1;
+    return fd;
+}
+
+/* link_tmp: gives the unnamed file fd the new random name name in dfd (linkat fails, never
+ * follows, when the name exists). Returns 0 or -1 with errno. */
+static int link_tmp(int fd, int dfd, const char *base, char *name, size_t len)
+{
+    char proc[64];
+    snprintf(proc, sizeof proc, "/proc/self/fd/%d", fd);
+    for (int tries = 0; tries < 16; tries++) {
+        tmp_name(base, name, len);
+        int rc = linkat(AT_FDCWD, proc, dfd, name, AT_SYMLINK_FOLLOW);
+        if (rc < 0 && errno == ENOENT) /* no /proc: the same through AT_EMPTY_PATH */
+            rc = linkat(fd, "", dfd, name, AT_EMPTY_PATH);
+        if (rc == 0 || errno != EEXIST) return rc;
+    }
+    return -1;
+}
+
+/* Writes p to cpath: into a new temporary file in the cache directory (create_tmp), fsynced,
+ * then renamed over cpath (rename replaces a symlink at cpath rather than following it) and
+ * the directory fsynced. Returns 0 or SD_EIO with err. */
 static int write_cache(const char *cpath, const src_key *key, const pc_prepared *p, sd_err *err)
 {
-    char dir[PATH_MAX], tmp[PATH_MAX + 32];
+    char dir[PATH_MAX], tmp[PATH_MAX];
     snprintf(dir, sizeof dir, "%s", cpath);
     char *slash = strrchr(dir, '/');
-    if (slash) *slash = 0;
-    if (mkdir_p(dir) < 0)
-        return sd_errf(err, SD_EIO, "cannot create cache directory %s: %s", dir, strerror(errno));
-    snprintf(tmp, sizeof tmp, "%s.tmp.%ld", cpath, (long)getpid());
+    const char *base = cpath;
+    if (slash) {
+        *slash = 0;
+        base = slash + 1;
+    } else {
+        snprintf(dir, sizeof dir, ".");
+    }
 
     static const uint8_t zero[CACHE_BLOCK_OFFSET];
     cache_header h;
@@ -335,25 +459,38 @@ static int write_cache(const char *cpath, const src_key *key, const pc_prepared 
     h.stats = p->stats;
     h.header_hash = sd_hash64(&h, offsetof(cache_header, header_hash), 0);
 
-    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    if (fd < 0) return sd_errf(err, SD_EIO, "cannot write cache %s: %s", tmp, strerror(errno));
+    int dfd = open_cache_dir(dir, err);
+    if (dfd < 0) return SD_EIO;
+    int named = 0;
+    int fd = create_tmp(dfd, base, tmp, sizeof tmp, &named);
+    if (fd < 0) {
+        int e = errno;
+        close(dfd);
+        return sd_errf(err, SD_EIO, "cannot write cache %s: %s", cpath, strerror(e));
+    }
     int bad = write_all(fd, &h, sizeof h) || write_all(fd, zero, CACHE_BLOCK_OFFSET - sizeof h) ||
               write_all(fd, p->block, p->block_len) || fsync(fd);
     int saved = errno;
+    if (!bad && !named) {
+        bad = link_tmp(fd, dfd, base, tmp, sizeof tmp) != 0;
+        saved = errno;
+        named = !bad;
+    }
     if (close(fd) < 0 && !bad) {
         bad = 1;
         saved = errno;
     }
-    if (bad || rename(tmp, cpath) < 0) {
-        if (!bad) saved = errno;
-        unlink(tmp);
+    if (!bad && renameat(dfd, tmp, dfd, base) < 0) {
+        bad = 1;
+        saved = errno;
+    }
+    if (bad) {
+        if (named) unlinkat(dfd, tmp, 0);
+        close(dfd);
         return sd_errf(err, SD_EIO, "cannot write cache %s: %s", cpath, strerror(saved));
     }
-    int dfd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (dfd >= 0) {
-        fsync(dfd); /* make the rename durable */
-        close(dfd);
-    }
+    fsync(dfd); /* make the rename durable */
+    close(dfd);
     return 0;
 }
 
@@ -404,10 +541,14 @@ int cache_open_cloud(const char *src, const cache_desc *d, pc_prepared *out, cac
 
     double t2 = now_s();
     sd_err werr = {0};
-    if (write_cache(rr.path, &key, out, &werr) < 0 && dd.warn) {
-        char msg[700];
-        snprintf(msg, sizeof msg, "%s (continuing without a cache)", werr.msg);
-        dd.warn(dd.user, msg);
+    if (write_cache(rr.path, &key, out, &werr) < 0) {
+        rr.write_failed = 1;
+        snprintf(rr.write_error, sizeof rr.write_error, "%s", werr.msg);
+        if (dd.warn) {
+            char msg[700];
+            snprintf(msg, sizeof msg, "%s (continuing without a cache)", werr.msg);
+            dd.warn(dd.user, msg);
+        }
     }
     rr.t_write = now_s() - t2;
     if (res) *res = rr;
@@ -416,7 +557,7 @@ int cache_open_cloud(const char *src, const cache_desc *d, pc_prepared *out, cac
 
 int cache__set_version(const char *cache_path, uint32_t version)
 {
-    int fd = open(cache_path, O_RDWR | O_CLOEXEC);
+    int fd = open(cache_path, O_RDWR | O_CLOEXEC | O_NOFOLLOW);
     if (fd < 0) return -1;
     cache_header h;
     int rc = -1;

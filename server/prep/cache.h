@@ -31,11 +31,16 @@ typedef struct cache_result {
     double t_prep;         /* seconds: preprocessing (miss) */
     double t_write;        /* seconds: cache write (miss) */
     uint64_t file_size;
+    int write_failed;      /* 1: prepared, but the cache could not be written (write_error) */
+    char write_error[600];
 } cache_result;
 
 /* cache_open_cloud: returns in out the prepared cloud of the file src: from a valid cache
  * (mmapped) or by loading, preparing and caching it. Returns 0 or a negative SD_E* code. A cache
- * that cannot be written (read-only directory) is reported through warn, not as an error. */
+ * that cannot be written (read-only directory, one others may write) is reported through warn
+ * and res->write_failed, not as an error: the prepared cloud is still returned. Caches are
+ * written to an unnamed (O_TMPFILE) or random O_EXCL|O_NOFOLLOW file in the cache directory,
+ * mode 0600, and renamed into place. */
 int cache_open_cloud(const char *src, const cache_desc *d, pc_prepared *out, cache_result *res,
                      sd_err *err);
 
@@ -47,6 +52,15 @@ int cache_probe(const char *src, const char *dir, int k);
 /* cache_probe_points: cache_probe that also gives the prepared cloud's point count (from the
  * header) in *points when it returns 1 (points may be NULL). */
 int cache_probe_points(const char *src, const char *dir, int k, uint64_t *points);
+
+/* cache_sweep: removes from directory dir the temporary files of cache writers that died
+ * (killed while writing, before their rename); a live writer's are kept. *removed (may be
+ * NULL) gets their count. Returns 0 (a missing directory is nothing to sweep). */
+int cache_sweep(const char *dir, int *removed);
+/* cache_dir_for: the cache directory for dir (NULL: the default) in buf. Returns 0, or -1 when
+ * the default depends on each source file's directory (no $SPLATD_CACHE, $XDG_CACHE_HOME,
+ * $HOME). */
+int cache_dir_for(const char *dir, char *buf, size_t len);
 
 /* cache_path_for: the cache file path for src under directory dir (NULL: the default). */
 int cache_path_for(const char *src, const char *dir, int k, char *buf, size_t len, sd_err *err);
