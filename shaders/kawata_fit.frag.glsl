@@ -78,20 +78,23 @@ uniform int u_min_support;
 uniform vec3 u_light;    // unit, eye space
 uniform float u_znear, u_zfar;
 
-// The normal-equation sums of the plane fit, and the number of supporting points.
+// The normal-equation sums of the plane fit, the number of supporting points, and the plane
+// of the first round (g: A, B, C; g.w: the residual bound of the second round, 0 in the first).
 struct Fit {
-    float sxx, sxy, syy, sx, sy, n, sxz, syz, sz;
+    float sxx, sxy, syy, sx, sy, n, sxz, syz, sz, szz;
     int support;
+    vec4 g;
 };
 
 void add_point(vec4 t, vec3 pa, float z0, float tol, bool self, inout Fit f)
 {
     if (t.w == 0.0 || abs(t.z - z0) > tol) return;
-    if (!self) f.support++;
     vec3 e = t.xyz - pa;
+    if (f.g.w > 0.0 && abs(e.z - (f.g.x * e.x + f.g.y * e.y + f.g.z)) > f.g.w) return;
+    if (!self) f.support++;
     f.sxx += e.x * e.x, f.sxy += e.x * e.y, f.syy += e.y * e.y;
     f.sx += e.x, f.sy += e.y, f.n += 1.0;
-    f.sxz += e.x * e.z, f.syz += e.y * e.z, f.sz += e.z;
+    f.sxz += e.x * e.z, f.syz += e.y * e.z, f.sz += e.z, f.szz += e.z * e.z;
 }
 
 // Both buffers' points of neighbour q + (dx, dy), when it lies in this frame's rectangle.
@@ -103,6 +106,37 @@ void add_pixel(ivec2 q, int dx, int dy, ivec2 blo, ivec2 bhi, int w, vec3 pa, fl
     int e = 4 * (r.y * w + r.x);
     add_point(texelFetch(u_pts, e), pa, z0, tol, dx == 0 && dy == 0, f);
     add_point(texelFetch(u_pts, e + 1), pa, z0, tol, false, f);
+}
+
+// One round of the fit over the 3x3 neighbourhood (written out, not looped: llvmpipe keeps
+// named values in registers).
+void gather(inout Fit f, ivec2 q, ivec2 blo, ivec2 bhi, int w, vec3 pa, float z0, float tol)
+{
+    f.sxx = f.sxy = f.syy = f.sx = f.sy = f.n = f.sxz = f.syz = f.sz = f.szz = 0.0;
+    f.support = 0;
+    add_pixel(q, -1, -1, blo, bhi, w, pa, z0, tol, f);
+    add_pixel(q, 0, -1, blo, bhi, w, pa, z0, tol, f);
+    add_pixel(q, 1, -1, blo, bhi, w, pa, z0, tol, f);
+    add_pixel(q, -1, 0, blo, bhi, w, pa, z0, tol, f);
+    add_pixel(q, 0, 0, blo, bhi, w, pa, z0, tol, f);
+    add_pixel(q, 1, 0, blo, bhi, w, pa, z0, tol, f);
+    add_pixel(q, -1, 1, blo, bhi, w, pa, z0, tol, f);
+    add_pixel(q, 0, 1, blo, bhi, w, pa, z0, tol, f);
+    add_pixel(q, 1, 1, blo, bhi, w, pa, z0, tol, f);
+}
+
+// Solves the round's normal equations by Cramer's rule on [sxx sxy sx; sxy syy sy; sx sy n]
+// (A B C)^T = (sxz syz sz)^T (mat3 takes columns; the matrix is symmetric). Returns false
+// when they are singular (fewer than 3 points, or all on a line).
+bool solve(Fit f, out vec3 abc)
+{
+    abc = vec3(0.0);
+    float det = determinant(mat3(f.sxx, f.sxy, f.sx, f.sxy, f.syy, f.sy, f.sx, f.sy, f.n));
+    if (!(abs(det) > 1e-6 * f.sxx * f.syy * f.n)) return false;
+    abc.x = determinant(mat3(f.sxz, f.syz, f.sz, f.sxy, f.syy, f.sy, f.sx, f.sy, f.n)) / det;
+    abc.y = determinant(mat3(f.sxx, f.sxy, f.sx, f.sxz, f.syz, f.sz, f.sx, f.sy, f.n)) / det;
+    abc.z = determinant(mat3(f.sxx, f.sxy, f.sx, f.sxy, f.syy, f.sy, f.sxz, f.syz, f.sz)) / det;
+    return true;
 }
 
 void main()
@@ -119,29 +153,40 @@ void main()
     vec4 a2 = texelFetch(u_pts, 4 * b + 1);
     vec3 pa = a2.w > 0.0 ? 0.5 * (a1.xyz + a2.xyz) : a1.xyz; // pass 3
     float tol = u_gamma + u_slope * (-a1.z);
-    Fit f = Fit(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0);
-    // Written out, not looped: llvmpipe keeps named values in registers.
-    add_pixel(q, -1, -1, blo, bhi, w, pa, a1.z, tol, f);
-    add_pixel(q, 0, -1, blo, bhi, w, pa, a1.z, tol, f);
-    add_pixel(q, 1, -1, blo, bhi, w, pa, a1.z, tol, f);
-    add_pixel(q, -1, 0, blo, bhi, w, pa, a1.z, tol, f);
-    add_pixel(q, 0, 0, blo, bhi, w, pa, a1.z, tol, f);
-    add_pixel(q, 1, 0, blo, bhi, w, pa, a1.z, tol, f);
-    add_pixel(q, -1, 1, blo, bhi, w, pa, a1.z, tol, f);
-    add_pixel(q, 0, 1, blo, bhi, w, pa, a1.z, tol, f);
-    add_pixel(q, 1, 1, blo, bhi, w, pa, a1.z, tol, f);
+    Fit f;
+    f.g = vec4(0.0);
+    gather(f, q, blo, bhi, w, pa, a1.z, tol);
     if (f.support < u_min_support) {
         splats[2 * b] = vec4(0.0);
         return;
     }
-    // Cramer's rule on [sxx sxy sx; sxy syy sy; sx sy n] (A B C)^T = (sxz syz sz)^T (mat3 takes
-    // columns; the matrix is symmetric).
-    float det = determinant(mat3(f.sxx, f.sxy, f.sx, f.sxy, f.syy, f.sy, f.sx, f.sy, f.n));
     vec3 nrm = vec3(0.0, 0.0, 1.0);
-    if (abs(det) > 1e-6 * f.sxx * f.syy * f.n) {
-        float A = determinant(mat3(f.sxz, f.syz, f.sz, f.sxy, f.syy, f.sy, f.sx, f.sy, f.n)) / det;
-        float B = determinant(mat3(f.sxx, f.sxy, f.sx, f.sxz, f.syz, f.sz, f.sx, f.sy, f.n)) / det;
-        nrm = normalize(vec3(-A, -B, 1.0)); // (A, B, -1) turned towards the eye (+z)
+    vec3 abc;
+    if (solve(f, abc)) {
+        // A second round without the points farther from the first plane than 2.5 times the
+        // residuals' RMS (at least a quarter of a buffer pixel, so exact planes lose nothing to
+        // rounding): gamma is a fraction of the whole cloud's size, so in a large scene stray
+        // points well off a surface still lie within it, and one of them tilts a fit of 18
+        // points enough to darken its pixel. When the nearest point itself is such a stray,
+        // the pixel is dropped (pass 5 fills it from its neighbours), as the paper drops
+        // outliers. The residual sum of squares from the sums: sum (z - Ax - By - C)^2.
+        float rss = f.szz - 2.0 * (abc.x * f.sxz + abc.y * f.syz + abc.z * f.sz) +
+                    abc.x * abc.x * f.sxx + 2.0 * abc.x * abc.y * f.sxy +
+                    abc.y * abc.y * f.syy + 2.0 * abc.x * abc.z * f.sx +
+                    2.0 * abc.y * abc.z * f.sy + abc.z * abc.z * f.n;
+        float bound = max(2.5 * sqrt(max(rss, 0.0) / f.n), 0.0625 * u_slope * (-a1.z));
+        vec3 e1 = a1.xyz - pa;
+        if (abs(e1.z - (abc.x * e1.x + abc.y * e1.y + abc.z)) > bound) {
+            splats[2 * b] = vec4(0.0);
+            return;
+        }
+        f.g = vec4(abc, bound);
+        gather(f, q, blo, bhi, w, pa, a1.z, tol);
+        if (f.support < u_min_support) {
+            splats[2 * b] = vec4(0.0);
+            return;
+        }
+        if (solve(f, abc)) nrm = normalize(vec3(-abc.x, -abc.y, 1.0)); // (A, B, -1) towards +z
     }
     vec3 c1 = texelFetch(u_pts, 4 * b + 2).rgb;
     vec3 col = a2.w > 0.0 ? 0.5 * (c1 + texelFetch(u_pts, 4 * b + 3).rgb) : c1;

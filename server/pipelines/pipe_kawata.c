@@ -38,12 +38,14 @@
  *           buffer pixels of depth, so surfaces up to ~75 degrees from the view keep their
  *           support). The same points, and only they, enter the fit.
  *   pass 5  kawata_splat.vert/.frag: Gaussian splats from the buffer magnified to the frame,
- *           normalised blending, as a gather: each frame pixel sums the splats of the 4x4 buffer
- *           pixels around it whose centres lie within KAWATA_CUTOFF buffer pixels (kernel
- *           sigma = half the cut-off), keeping only those within the depth tolerance of the
- *           nearest one (the extended z-buffer's rule), and divides by the summed weight. On
- *           llvmpipe a fragment pass shades whole pixel quads at once, where scattering
- *           splats with float atomics runs lane by lane.
+ *           normalised blending, as a gather: each frame pixel sums the splats of the 5x5 buffer
+ *           pixels around it whose centres lie within KAWATA_CUTOFF (2) buffer pixels, kernel
+ *           standard deviation KAWATA_SIGMA (0.75), keeping only those within the depth
+ *           tolerance of the nearest one (the extended z-buffer's rule), and divides by the
+ *           summed weight. A cut-off of 1.5 (a 4x4 gather) left 94 one-pixel holes in the
+ *           README figure's view of the 1M scan, where buffer pixels of the far ground are
+ *           empty; 2 leaves 14. On llvmpipe a fragment pass shades whole pixel quads at once,
+ *           where scattering splats with float atomics runs lane by lane.
  *
  * A cloud in several buffer sets (pipe.h) is drawn set by set: passes 1 and 2 key points by
  * their cloud-wide index, and STAGE 1 runs once per set, each resolving the points of its own. */
@@ -58,7 +60,8 @@
 enum { GROUP = 64, MAX_GROUPS_X = 65535 };
 enum { KAWATA_MIN_SUPPORT = 3 };     /* a plane needs three points; see the file comment */
 #define KAWATA_SLOPE_PIXELS 4.0f     /* depth tolerance: buffer pixels of depth per pixel */
-#define KAWATA_CUTOFF 1.5f           /* splat cut-off radius, buffer pixels (4x4 gather) */
+#define KAWATA_CUTOFF 2.0f           /* splat cut-off radius, buffer pixels (5x5 gather) */
+#define KAWATA_SIGMA 0.75f           /* the splats' standard deviation, buffer pixels */
 enum { TEX_ROUND = 64 };             /* the stages' framebuffer grows in steps of this */
 
 #define KAWATA_UNIFORMS(X)                                                                   \
@@ -68,7 +71,7 @@ enum { TEX_ROUND = 64 };             /* the stages' framebuffer grows in steps o
     X(PER, "u_per") X(BASE, "u_base") X(SETN, "u_count") X(PASS, "u_pass")                    \
     X(IBITS, "u_index_bits") X(GAMMA, "u_gamma") X(QSCALE, "u_qscale") X(QMAX, "u_qmax")       \
     X(SLOPE, "u_slope") X(COLOR, "u_color") X(LIGHT, "u_light") X(SUPPORT, "u_min_support")   \
-    X(ALL, "u_all") X(CUTOFF, "u_cutoff") X(BLO, "u_blo") X(BHI, "u_bhi")
+    X(ALL, "u_all") X(CUTOFF, "u_cutoff") X(BLO, "u_blo") X(BHI, "u_bhi") X(KERNEL, "u_k")
 
 enum {
 #define KW_U_ENUM_(id, name) U_##id,
@@ -322,7 +325,8 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     float qscale = gamma > 0 ? (float)(qmax - 1) / gamma : 0.0f;
     /* KAWATA_SLOPE_PIXELS buffer pixels of depth at unit depth. */
     float slope = KAWATA_SLOPE_PIXELS * 2.0f * tanf(0.5f * v->fov_y) / (float)bh;
-    float cutoff = KAWATA_CUTOFF * fminf((float)v->width / bw, (float)v->height / bh);
+    float pixel = fminf((float)v->width / bw, (float)v->height / bh); /* frame px a buffer px */
+    float cutoff = KAWATA_CUTOFF * pixel, ksig = KAWATA_SIGMA * pixel;
     float light[3], ll = sqrtf(p->light[0] * p->light[0] + p->light[1] * p->light[1] +
                                p->light[2] * p->light[2]);
     for (int i = 0; i < 3; i++) light[i] = ll > 0 ? p->light[i] / ll : (i == 2 ? 1.0f : 0.0f);
@@ -362,6 +366,7 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
         if (l[U_LIGHT] >= 0) gl->Uniform3fv(l[U_LIGHT], 1, light);
         if (l[U_SUPPORT] >= 0) gl->Uniform1i(l[U_SUPPORT], KAWATA_MIN_SUPPORT);
         if (l[U_CUTOFF] >= 0) gl->Uniform1f(l[U_CUTOFF], cutoff);
+        if (l[U_KERNEL] >= 0) gl->Uniform1f(l[U_KERNEL], 1.0f / (2.0f * ksig * ksig));
         if (l[U_BLO] >= 0) gl->Uniform2i(l[U_BLO], brect[0], brect[1]);
         if (l[U_BHI] >= 0) gl->Uniform2i(l[U_BHI], brect[2], brect[3]);
     }
