@@ -150,7 +150,9 @@ static void test_outliers(void **state)
  * covered, so no splat of the silhouette takes part) every recovered normal must lie within 3
  * degrees of the truth (the issue's bound). The plane is exact, so the fit is too up to float
  * rounding; the 8-bit read-back adds at most 0.5/255 * 2 per component, under 0.4 degrees.
- * Measured: mean ~0.2, max ~0.5 degrees. */
+ * Measured: 0.163 degrees on every interior pixel (the fit is exact, so all show one colour, and
+ * that is the 8-bit rounding of the true normal). A fit with A and B swapped, or the normal not
+ * turned towards the eye, lands tens of degrees off. */
 static void test_tilted_normals(void **state)
 {
     rnd_ctx *r = *state;
