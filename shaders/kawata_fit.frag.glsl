@@ -97,32 +97,13 @@ void add_point(vec4 t, vec3 pa, float z0, float tol, bool self, inout Fit f)
     f.sxz += e.x * e.z, f.syz += e.y * e.z, f.sz += e.z, f.szz += e.z * e.z;
 }
 
-// Both buffers' points of neighbour q + (dx, dy), when it lies in this frame's rectangle.
-void add_pixel(ivec2 q, int dx, int dy, ivec2 blo, ivec2 bhi, int w, vec3 pa, float z0,
-               float tol, inout Fit f)
+// Point j (0: nearest, 1: farthest) of neighbour q + (dx, dy); "no point" outside this
+// frame's rectangle.
+vec4 point_at(ivec2 q, int dx, int dy, int j, ivec2 blo, ivec2 bhi, int w)
 {
     ivec2 r = q + ivec2(dx, dy);
-    if (r.x < blo.x || r.y < blo.y || r.x >= bhi.x || r.y >= bhi.y) return;
-    int e = 4 * (r.y * w + r.x);
-    add_point(texelFetch(u_pts, e), pa, z0, tol, dx == 0 && dy == 0, f);
-    add_point(texelFetch(u_pts, e + 1), pa, z0, tol, false, f);
-}
-
-// One round of the fit over the 3x3 neighbourhood (written out, not looped: llvmpipe keeps
-// named values in registers).
-void gather(inout Fit f, ivec2 q, ivec2 blo, ivec2 bhi, int w, vec3 pa, float z0, float tol)
-{
-    f.sxx = f.sxy = f.syy = f.sx = f.sy = f.n = f.sxz = f.syz = f.sz = f.szz = 0.0;
-    f.support = 0;
-    add_pixel(q, -1, -1, blo, bhi, w, pa, z0, tol, f);
-    add_pixel(q, 0, -1, blo, bhi, w, pa, z0, tol, f);
-    add_pixel(q, 1, -1, blo, bhi, w, pa, z0, tol, f);
-    add_pixel(q, -1, 0, blo, bhi, w, pa, z0, tol, f);
-    add_pixel(q, 0, 0, blo, bhi, w, pa, z0, tol, f);
-    add_pixel(q, 1, 0, blo, bhi, w, pa, z0, tol, f);
-    add_pixel(q, -1, 1, blo, bhi, w, pa, z0, tol, f);
-    add_pixel(q, 0, 1, blo, bhi, w, pa, z0, tol, f);
-    add_pixel(q, 1, 1, blo, bhi, w, pa, z0, tol, f);
+    if (r.x < blo.x || r.y < blo.y || r.x >= bhi.x || r.y >= bhi.y) return vec4(0.0);
+    return texelFetch(u_pts, 4 * (r.y * w + r.x) + j);
 }
 
 // Solves the round's normal equations by Cramer's rule on [sxx sxy sx; sxy syy sy; sx sy n]
@@ -153,9 +134,49 @@ void main()
     vec4 a2 = texelFetch(u_pts, 4 * b + 1);
     vec3 pa = a2.w > 0.0 ? 0.5 * (a1.xyz + a2.xyz) : a1.xyz; // pass 3
     float tol = u_gamma + u_slope * (-a1.z);
+    // The up to 18 points of the 3x3 neighbourhood in both buffers, fetched once for both
+    // rounds and named (llvmpipe keeps named values in registers; arrays and loops measured
+    // ~10x slower in splat_resolve.frag.glsl).
+    vec4 v00 = point_at(q, -1, -1, 0, blo, bhi, w);
+    vec4 v01 = point_at(q, -1, -1, 1, blo, bhi, w);
+    vec4 v10 = point_at(q, 0, -1, 0, blo, bhi, w);
+    vec4 v11 = point_at(q, 0, -1, 1, blo, bhi, w);
+    vec4 v20 = point_at(q, 1, -1, 0, blo, bhi, w);
+    vec4 v21 = point_at(q, 1, -1, 1, blo, bhi, w);
+    vec4 v30 = point_at(q, -1, 0, 0, blo, bhi, w);
+    vec4 v31 = point_at(q, -1, 0, 1, blo, bhi, w);
+    vec4 v40 = point_at(q, 0, 0, 0, blo, bhi, w);
+    vec4 v41 = point_at(q, 0, 0, 1, blo, bhi, w);
+    vec4 v50 = point_at(q, 1, 0, 0, blo, bhi, w);
+    vec4 v51 = point_at(q, 1, 0, 1, blo, bhi, w);
+    vec4 v60 = point_at(q, -1, 1, 0, blo, bhi, w);
+    vec4 v61 = point_at(q, -1, 1, 1, blo, bhi, w);
+    vec4 v70 = point_at(q, 0, 1, 0, blo, bhi, w);
+    vec4 v71 = point_at(q, 0, 1, 1, blo, bhi, w);
+    vec4 v80 = point_at(q, 1, 1, 0, blo, bhi, w);
+    vec4 v81 = point_at(q, 1, 1, 1, blo, bhi, w);
     Fit f;
     f.g = vec4(0.0);
-    gather(f, q, blo, bhi, w, pa, a1.z, tol);
+    f.sxx = f.sxy = f.syy = f.sx = f.sy = f.n = f.sxz = f.syz = f.sz = f.szz = 0.0;
+    f.support = 0;
+    add_point(v00, pa, a1.z, tol, false, f);
+    add_point(v01, pa, a1.z, tol, false, f);
+    add_point(v10, pa, a1.z, tol, false, f);
+    add_point(v11, pa, a1.z, tol, false, f);
+    add_point(v20, pa, a1.z, tol, false, f);
+    add_point(v21, pa, a1.z, tol, false, f);
+    add_point(v30, pa, a1.z, tol, false, f);
+    add_point(v31, pa, a1.z, tol, false, f);
+    add_point(v40, pa, a1.z, tol, true, f);
+    add_point(v41, pa, a1.z, tol, false, f);
+    add_point(v50, pa, a1.z, tol, false, f);
+    add_point(v51, pa, a1.z, tol, false, f);
+    add_point(v60, pa, a1.z, tol, false, f);
+    add_point(v61, pa, a1.z, tol, false, f);
+    add_point(v70, pa, a1.z, tol, false, f);
+    add_point(v71, pa, a1.z, tol, false, f);
+    add_point(v80, pa, a1.z, tol, false, f);
+    add_point(v81, pa, a1.z, tol, false, f);
     if (f.support < u_min_support) {
         splats[2 * b] = vec4(0.0);
         return;
@@ -181,7 +202,26 @@ void main()
             return;
         }
         f.g = vec4(abc, bound);
-        gather(f, q, blo, bhi, w, pa, a1.z, tol);
+        f.sxx = f.sxy = f.syy = f.sx = f.sy = f.n = f.sxz = f.syz = f.sz = f.szz = 0.0;
+        f.support = 0;
+        add_point(v00, pa, a1.z, tol, false, f);
+        add_point(v01, pa, a1.z, tol, false, f);
+        add_point(v10, pa, a1.z, tol, false, f);
+        add_point(v11, pa, a1.z, tol, false, f);
+        add_point(v20, pa, a1.z, tol, false, f);
+        add_point(v21, pa, a1.z, tol, false, f);
+        add_point(v30, pa, a1.z, tol, false, f);
+        add_point(v31, pa, a1.z, tol, false, f);
+        add_point(v40, pa, a1.z, tol, true, f);
+        add_point(v41, pa, a1.z, tol, false, f);
+        add_point(v50, pa, a1.z, tol, false, f);
+        add_point(v51, pa, a1.z, tol, false, f);
+        add_point(v60, pa, a1.z, tol, false, f);
+        add_point(v61, pa, a1.z, tol, false, f);
+        add_point(v70, pa, a1.z, tol, false, f);
+        add_point(v71, pa, a1.z, tol, false, f);
+        add_point(v80, pa, a1.z, tol, false, f);
+        add_point(v81, pa, a1.z, tol, false, f);
         if (f.support < u_min_support) {
             splats[2 * b] = vec4(0.0);
             return;
