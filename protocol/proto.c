@@ -645,6 +645,12 @@ static int camera_check(const proto_camera *m, proto_error *e)
             if (!isfinite(v[k][i]))
                 return proto_errorf(e, PROTO_E_BAD_CAMERA, "CAMERA %s[%d] is not finite",
                                     nm[k], i);
+            else if (fabs(v[k][i]) > PROTO_MAX_COORD)
+                /* Checked before any arithmetic: 1e308 - 0 squared is infinite, which would
+                 * otherwise be reported as "eye and target are the same point". */
+                return proto_errorf(e, PROTO_E_BAD_CAMERA, "CAMERA %s[%d] = %g is out of range: "
+                                    "coordinates are at most %g in magnitude", nm[k], i,
+                                    v[k][i], PROTO_MAX_COORD);
     if (!isfinite(m->fov_deg) || !(m->fov_deg > 0.0f && m->fov_deg < 180.0f))
         return proto_errorf(e, PROTO_E_BAD_CAMERA, "CAMERA fov %g is out of range (0, 180) "
                             "degrees", (double)m->fov_deg);

@@ -44,6 +44,10 @@
 #define PROTO_MAX_ERRTEXT    1024u /* ERROR message text */
 #define PROTO_MAX_PARAMS     64u   /* records in one PARAMS message */
 #define PROTO_MAX_DIM        16384u /* largest width or height a CAMERA may ask for */
+#define PROTO_MAX_COORD      1e12   /* largest |coordinate| of a CAMERA's eye, target and up:
+                                     * far beyond any georeferenced scan (ECEF is ~6.4e6 m),
+                                     * and small enough that differences, squares and lengths
+                                     * stay finite in double */
 #define PROTO_AUTH_LEN       32u   /* challenge and HMAC-SHA256 proof */
 
 /* ---- message types ----------------------------------------------------------------------

@@ -1250,6 +1250,8 @@ static void test_sigterm(void **state)
     /* The RENDER sent before the signal is still answered. */
     assert_int_equal(raw_recv(&r), PROTO_MSG_FRAME);
     assert_int_equal(r.h.seq, s);
+    /* Then SHUTTING_DOWN (sequence 0: no request's answer), then the connection closes. */
+    raw_expect_error(&r, PROTO_E_SHUTTING_DOWN, 0);
     raw_expect_closed(&r);
     raw_close(&r);
     int st = 0;

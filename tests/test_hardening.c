@@ -16,6 +16,9 @@
  *    no temporary file, and a dead writer's leftover is swept at the next start; `splatd prep`
  *    exits 1 when it cannot write its cache; a FIFO in place of a cloud or a cache is refused
  *    at once instead of blocking.
+ *  - error texts: a parameter name of invalid UTF-8 and control characters, and a file's
+ *    binary bytes, come back escaped (valid UTF-8, no control characters); a CAMERA with eye
+ *    1e308 is refused as out of range; SIGTERM sends SHUTTING_DOWN before closing.
  *
  * Attackers connect from other loopback addresses (127.0.0.2 and up, which Linux routes to
  * the loopback device) so that the per-address limit sees them apart from the real client at
@@ -1077,6 +1080,106 @@ static void test_fifo_refused(void **state)
     assert_true(S_ISREG(st.st_mode));
 }
 
+/* ---- error texts, camera range, shutdown ---- */
+
+/* clean_utf8: 1 when t is well-formed UTF-8 (checked by decoding: no overlong form, no
+ * surrogate, nothing over U+10FFFF) without control characters. */
+static int clean_utf8(const char *t)
+{
+    const unsigned char *p = (const unsigned char *)t;
+    while (*p) {
+        unsigned c = *p, need, cp;
+        if (c < 0x80) {
+            if (c < 0x20 || c == 0x7f) return 0;
+            p++;
+            continue;
+        }
+        if ((c & 0xe0) == 0xc0) { need = 1; cp = c & 0x1f; }
+        else if ((c & 0xf0) == 0xe0) { need = 2; cp = c & 0x0f; }
+        else if ((c & 0xf8) == 0xf0) { need = 3; cp = c & 0x07; }
+        else return 0;
+        for (unsigned i = 1; i <= need; i++) {
+            if ((p[i] & 0xc0) != 0x80) return 0;
+            cp = (cp << 6) | (p[i] & 0x3f);
+        }
+        static const unsigned minimum[4] = {0, 0x80, 0x800, 0x10000};
+        if (cp < minimum[need] || cp > 0x10ffff || (cp >= 0xd800 && cp <= 0xdfff)) return 0;
+        p += need + 1;
+    }
+    return 1;
+}
+
+/* expect_error: the next non-PROGRESS message on fd is ERROR code; its text in text. */
+static void expect_error(int fd, msg *m, int code, char *text, size_t len)
+{
+    int t = recv_skip(fd, m);
+    assert_int_equal(t, PROTO_MSG_ERROR);
+    proto_errmsg em;
+    assert_int_equal(proto_parse_error(m->pl, m->h.len, &em, NULL), 0);
+    snprintf(text, len, "%s", em.text);
+    if ((int)em.code != code)
+        fail_msg("expected %s, got %s: %s", proto_err_name(code), proto_err_name((int)em.code), em.text);
+}
+
+static void test_error_texts(void **state)
+{
+    fx *f = *state;
+    char path[700];
+    snprintf(path, sizeof path, "%s/garbage.xyz", f->data);
+    static const char garbage[] = "1 2 3\n4 5 6\n\x80\xff\x01\x1b[31mred \xc0\xaf 7 8\n";
+    assert_int_equal(tu_write_file(path, garbage, sizeof garbage - 1), 0);
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
+                          "--preload", "bunny", NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    int fd = connect_from(1, f->d.port, 0);
+    msg m = {0};
+    assert_int_equal(handshake(fd, 0, &m), 0);
+    char text[1100];
+
+    /* A parameter name of invalid UTF-8, an escape sequence and a newline. */
+    proto_param_rec rec = {.type = SP_T_FLOAT, .u.f = 1};
+    snprintf(rec.name, sizeof rec.name, "\xff\xfe\x01\x1b[2Jevil\nname\xed\xa0\x80");
+    proto_buf b = {0};
+    assert_int_equal(proto_enc_params(&b, 3, &rec, 1), 0);
+    assert_int_equal(send_buf(fd, &b), 0);
+    expect_error(fd, &m, PROTO_E_BAD_PARAM_NAME, text, sizeof text);
+    printf("unknown parameter, as sent back: %s\n", text);
+    assert_true(clean_utf8(text));
+    assert_non_null(strstr(text, "\\xff\\xfe\\x01\\x1b[2Jevil\\x0aname"));
+
+    /* A file's binary bytes in a parse error. */
+    assert_int_equal(proto_enc_open(&b, 4, "garbage"), 0);
+    assert_int_equal(send_buf(fd, &b), 0);
+    expect_error(fd, &m, PROTO_E_LOAD_FAILED, text, sizeof text);
+    printf("binary file bytes, as sent back: %s\n", text);
+    assert_true(clean_utf8(text));
+    assert_null(strchr(text, 0x1b));
+
+    /* A CAMERA 1e308 away: out of range, not "eye and target are the same point". */
+    assert_int_equal(proto_enc_open(&b, 5, "bunny"), 0);
+    assert_int_equal(send_buf(fd, &b), 0);
+    assert_int_equal(recv_skip(fd, &m), PROTO_MSG_INFO);
+    proto_camera c = {.eye = {1e308, 0, 0}, .target = {0, 0, 0}, .up = {0, 1, 0}, .fov_deg = 45,
+                      .width = 64, .height = 64};
+    assert_int_equal(proto_enc_camera(&b, 6, &c), 0);
+    assert_int_equal(send_buf(fd, &b), 0);
+    expect_error(fd, &m, PROTO_E_BAD_CAMERA, text, sizeof text);
+    printf("eye 1e308: %s\n", text);
+    assert_non_null(strstr(text, "eye[0] = 1e+308 is out of range"));
+    assert_int_equal(m.h.seq, 6);
+
+    /* SIGTERM: the connected client is told SHUTTING_DOWN (sequence 0), then the connection
+     * closes and the daemon exits 0. */
+    assert_int_equal(kill(f->d.pid, SIGTERM), 0);
+    expect_error(fd, &m, PROTO_E_SHUTTING_DOWN, text, sizeof text);
+    assert_int_equal(m.h.seq, 0);
+    uint8_t x;
+    assert_int_equal(recv(fd, &x, 1, 0), 0);
+    close(fd);
+    free(m.pl);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+}
+
 int main(void)
 {
     setvbuf(stdout, NULL, _IOLBF, 0);
@@ -1094,6 +1197,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_cache_kill9, setup, teardown),
         cmocka_unit_test_setup_teardown(test_prep_exit_status, setup, teardown),
         cmocka_unit_test_setup_teardown(test_fifo_refused, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_error_texts, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -520,9 +520,11 @@ static void begin_shutdown(srv *sv, const char *why)
         if (!s || s->dead) continue;
         s->stream = 0;
         ev_timer_stop(sv->loop, &s->fps_timer);
-        s->close_after = 1;
-        snprintf(s->close_reason, sizeof s->close_reason, "server shutting down");
-        sess_kick(s);
+        /* SHUTTING_DOWN goes after the answers already queued (the frames in flight are
+         * finished and sent first), then the connection closes. */
+        answer_and_close(sv, s, 0, PROTO_E_SHUTTING_DOWN,
+                         "the server is shutting down; reconnect later");
+        if (!s->dead) snprintf(s->close_reason, sizeof s->close_reason, "server shutting down");
     }
     ev_timer_start(sv->loop, &sv->stop_timer, (uint64_t)sv->o.shutdown_ms, on_stop_deadline, sv);
 }

@@ -49,13 +49,55 @@ void srv_release_frame(void *user, uint32_t id)
     rt_frame_released(sv->rt, id);
 }
 
+/* utf8_len: the length (1-4) of the well-formed UTF-8 sequence at p (n bytes available), or
+ * 0 when it is not one (RFC 3629: no overlong forms, no surrogates, at most U+10FFFF). */
+static size_t utf8_len(const unsigned char *p, size_t n)
+{
+    unsigned c = p[0];
+    if (c < 0x80) return 1;
+    size_t k = c >= 0xf0 ? 4 : c >= 0xe0 ? 3 : c >= 0xc2 ? 2 : 0;
+    if (k == 0 || c > 0xf4 || k > n) return 0;
+    for (size_t i = 1; i < k; i++)
+        if ((p[i] & 0xc0) != 0x80) return 0;
+    if (c == 0xe0 && p[1] < 0xa0) return 0; /* overlong */
+    if (c == 0xed && p[1] > 0x9f) return 0; /* surrogates */
+    if (c == 0xf0 && p[1] < 0x90) return 0; /* overlong */
+    if (c == 0xf4 && p[1] > 0x8f) return 0; /* over U+10FFFF */
+    return k;
+}
+
+void srv_clean_text(const char *in, char *out, size_t len)
+{
+    const unsigned char *p = (const unsigned char *)in;
+    size_t n = strlen(in), o = 0;
+    if (len == 0) return;
+    while (n) {
+        size_t k = utf8_len(p, n);
+        int escape = k == 0 || (k == 1 && (*p < 0x20 || *p == 0x7f));
+        size_t need = escape ? 4 : k;
+        if (o + need + 1 > len) break; /* never cut a sequence or an escape in half */
+        if (escape) {
+            snprintf(out + o, len - o, "\\x%02x", *p);
+            k = 1;
+        } else {
+            memcpy(out + o, p, k);
+        }
+        o += need;
+        p += k;
+        n -= k;
+    }
+    out[o] = 0;
+}
+
 /* send_error: queues ERROR code for request seq; a fatal code (PROTOCOL.md 6) stops reading and
  * closes the connection once the output is flushed. Logs one line. */
 static void send_error(srv *sv, sess *s, uint32_t seq, int code, const char *msg)
 {
     proto_buf b = {.version = s->version};
+    /* Texts may quote the client's own bytes (a parameter name) or a file's (a bad token):
+     * the client gets valid UTF-8 without control characters, the log one line. */
     char text[PROTO_MAX_ERRTEXT + 1];
-    snprintf(text, sizeof text, "%s", msg);
+    srv_clean_text(msg, text, sizeof text);
     srv_log(sv, s, "error %s (seq %u): %s", proto_err_name(code), seq, text);
     if (proto_enc_error(&b, seq, (uint32_t)code, text) == 0) sess_send(s, &b);
     else proto_buf_free(&b);
@@ -239,7 +281,7 @@ static void on_hello(srv *sv, sess *s, const proto_msg *m)
     if (s->authed) { send_welcome(sv, s, m->h.seq); return; } /* harmless repeat */
     int v = proto_pick_version(h.min_version, h.max_version, &pe);
     if (v < 0) { send_error(sv, s, m->h.seq, -v, pe.msg); return; }
-    snprintf(s->client_name, sizeof s->client_name, "%s", h.client);
+    srv_clean_text(h.client, s->client_name, sizeof s->client_name); /* for the log */
     if (!s->hello_seen) {
         s->hello_seen = 1;
         s->version = (uint16_t)v;
@@ -565,7 +607,9 @@ static void on_frame_ev(srv *sv, rt_event *ev)
         for (sess_item *it = s->head; it; it = it->next) {
             if (it->is_frame && !it->filled) {
                 proto_buf b = {.version = s->version};
-                if (proto_enc_error(&b, it->seq, PROTO_E_RENDER_FAILED, ev->err.msg) == 0) {
+                char text[PROTO_MAX_ERRTEXT + 1];
+                srv_clean_text(ev->err.msg, text, sizeof text);
+                if (proto_enc_error(&b, it->seq, PROTO_E_RENDER_FAILED, text) == 0) {
                     it->data = b.data;
                     it->len = b.len;
                     it->filled = 1;

@@ -102,6 +102,11 @@ int srv_admit(srv *sv, sess *s, uint32_t seq);
  * AUTH_FAILED (then closes) after a delay that doubles with each failure from its address. */
 void srv_auth_failed(srv *sv, sess *s, uint32_t seq, int noproof);
 
+/* srv_clean_text: in as text safe to send and log, at most len - 1 bytes and NUL-terminated:
+ * well-formed UTF-8 kept, every other byte and every control character (newlines included)
+ * written as \xNN; a sequence or escape that does not fit is dropped whole. */
+void srv_clean_text(const char *in, char *out, size_t len);
+
 /* srv_handle: sess_ops.on_message: one decoded message of s (owner = the srv). */
 void srv_handle(void *owner, sess *s, const proto_msg *m);
 /* srv_decode_error: sess_ops.on_decode_error: answers the malformed input with its ERROR,
