@@ -217,7 +217,11 @@ typedef struct src_key {
     int64_t mtime_ns;
 } src_key;
 
-static int source_key(const char *src, src_key *key, sd_err *err)
+/* source_key: the size and modification time of the regular file src in key, and with
+ * with_hash its content hash as well. With with_hash and key->size already set (a stat taken
+ * earlier), a file whose size or time differs now fails as changed: the hash must describe the
+ * bytes the caller parsed or is about to trust. Returns 0 or SD_EIO with err. */
+static int source_key(const char *src, src_key *key, int with_hash, sd_err *err)
 {
     /* O_NONBLOCK: a FIFO put in place of a cloud must not block the open until a writer comes;
      * it is refused by the regular-file check at once. */
@@ -228,14 +232,20 @@ static int source_key(const char *src, src_key *key, sd_err *err)
         close(fd);
         return sd_errf(err, SD_EIO, "%s: not a regular file", src);
     }
-    key->size = (uint64_t)st.st_size;
-    key->mtime_ns = (int64_t)st.st_mtim.tv_sec * 1000000000LL + st.st_mtim.tv_nsec;
-    int rc = hash_file(fd, key->size, &key->hash);
+    uint64_t size = (uint64_t)st.st_size;
+    int64_t mtime = (int64_t)st.st_mtim.tv_sec * 1000000000LL + st.st_mtim.tv_nsec;
+    if (!with_hash) {
+        close(fd);
+        key->size = size;
+        key->mtime_ns = mtime;
+        return 0;
+    }
+    int rc = size != key->size || mtime != key->mtime_ns ? -2 : hash_file(fd, size, &key->hash);
     int e = errno;
     close(fd);
     if (rc == -2)
-        return sd_errf(err, SD_EIO, "%s: the file changed while it was being read (it became "
-                       "shorter); try again once it is complete", src);
+        return sd_errf(err, SD_EIO, "%s: the file changed while it was being read (its size or "
+                       "time changed); try again once it is complete", src);
     if (rc < 0) return sd_errf(err, SD_EIO, "%s: cannot read: %s", src, strerror(e));
     return 0;
 }
@@ -284,8 +294,8 @@ static int check_header(int fd, const struct stat *st, const src_key *key, int c
 
 /* Tries to map a valid cache. Returns 1 on success, 0 when there is none or it is out of date
  * (why says which), -1 when it is damaged (why says how: the caller warns). */
-static int try_load(const char *cpath, const src_key *key, int k, pc_prepared *out, char *why,
-                    size_t whylen)
+static int try_load(const char *cpath, const char *src, src_key *key, int k, pc_prepared *out,
+                    char *why, size_t whylen)
 {
     /* O_NOFOLLOW: a symlink at the cache's name is nobody's cache (it is replaced on write). */
     int fd = open(cpath, O_RDONLY | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
@@ -300,8 +310,17 @@ static int try_load(const char *cpath, const src_key *key, int k, pc_prepared *o
         snprintf(why, whylen, "it cannot be read: %s", strerror(errno));
         goto out;
     }
-    rc = check_header(fd, &st, key, 1, k, &h, why, whylen);
+    /* The cheap checks first (header, version, k, the source's size and time): the source's
+     * content is hashed only for a cache that could be used, never for one that is stale
+     * anyway, nor before the source's own header has been looked at (cache_open_cloud). */
+    rc = check_header(fd, &st, key, 0, k, &h, why, whylen);
     if (rc != 1) goto out;
+    sd_err herr = {0};
+    if (source_key(src, key, 1, &herr) < 0 || key->hash != h.src_hash) {
+        snprintf(why, whylen, "source changed (content)");
+        rc = 0;
+        goto out;
+    }
     rc = -1;
     size_t maplen = (size_t)st.st_size;
     uint8_t *m = mmap(NULL, maplen, PROT_READ, MAP_PRIVATE, fd, 0);
@@ -506,12 +525,12 @@ int cache_open_cloud(const char *src, const cache_desc *d, pc_prepared *out, cac
 
     double t0 = now_s();
     src_key key = {0};
-    if ((rc = source_key(src, &key, err)) < 0) return rc;
+    if ((rc = source_key(src, &key, 0, err)) < 0) return rc;
     rr.file_size = key.size;
     if ((rc = cache_path_for(src, dd.dir, dd.k, rr.path, sizeof rr.path, err)) < 0) return rc;
 
     if (!dd.force) {
-        int got = try_load(rr.path, &key, dd.k, out, rr.why, sizeof rr.why);
+        int got = try_load(rr.path, src, &key, dd.k, out, rr.why, sizeof rr.why);
         if (got == 1) {
             rr.hit = 1;
             rr.t_read = now_s() - t0;
@@ -528,8 +547,15 @@ int cache_open_cloud(const char *src, const cache_desc *d, pc_prepared *out, cac
         snprintf(rr.why, sizeof rr.why, "rebuild forced");
     }
 
+    /* The reader checks the file's header before it reads the rest, so a file that is no cloud
+     * fails at once; the content hash for the new cache's key is taken after a successful
+     * parse (the bytes are then in the page cache), from a file of the same size and time. */
     pc_cloud cloud;
     if ((rc = pc_load(src, &cloud, err)) < 0) return rc;
+    if ((rc = source_key(src, &key, 1, err)) < 0) {
+        pc_cloud_free(&cloud);
+        return rc;
+    }
     rr.t_read = now_s() - t0;
 
     double t1 = now_s();
