@@ -19,6 +19,8 @@
  *  - error texts: a parameter name of invalid UTF-8 and control characters, and a file's
  *    binary bytes, come back escaped (valid UTF-8, no control characters); a CAMERA with eye
  *    1e308 is refused as out of range; SIGTERM sends SHUTTING_DOWN before closing.
+ *  - the frame memory budget (--max-frame-bytes): a frame larger than it is refused; clients
+ *    that ask for frames and do not read hold at most the budget, not two frames each.
  *  - headers before hashing: a 4 GiB file that is no cloud is refused by its header at once,
  *    not after hashing its content.
  *
@@ -1209,6 +1211,126 @@ static void test_header_before_hash(void **state)
     unlink(junk);
 }
 
+/* ---- the frame memory budget ---- */
+
+static long rss_kb(pid_t pid)
+{
+    char path[64], line[256];
+    snprintf(path, sizeof path, "/proc/%ld/status", (long)pid);
+    FILE *fp = fopen(path, "r");
+    if (!fp) return -1;
+    long kb = -1;
+    while (fgets(line, sizeof line, fp))
+        if (!strncmp(line, "VmRSS:", 6)) kb = atol(line + 6);
+    fclose(fp);
+    return kb;
+}
+
+/* raw_client: connects with a small receive buffer, opens bunny, asks for w x h raw frames
+ * and sends n RENDERs without reading their answers. Returns the fd. */
+static int raw_client(int port, int w, int h, int n)
+{
+    int fd = socket(AF_INET, SOCK_STREAM, 0);
+    assert_true(fd >= 0);
+    int small = 4096;
+    setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &small, sizeof small);
+    struct timeval tv = {10, 0};
+    setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    struct sockaddr_in a = {.sin_family = AF_INET, .sin_port = htons((uint16_t)port)};
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    assert_int_equal(connect(fd, (struct sockaddr *)&a, sizeof a), 0);
+    msg m = {0};
+    assert_int_equal(handshake(fd, 0, &m), 0);
+    proto_buf b = {0};
+    assert_int_equal(proto_enc_open(&b, 3, "bunny"), 0);
+    assert_int_equal(send_buf(fd, &b), 0);
+    assert_int_equal(recv_skip(fd, &m), PROTO_MSG_INFO);
+    free(m.pl);
+    sp_params p;
+    sp_params_defaults(&p);
+    char err[128];
+    proto_param_rec recs[2];
+    assert_int_equal(sp_param_set_kv(&p, "pipeline=points", err, sizeof err), 0);
+    assert_int_equal(sp_param_set_kv(&p, "format=raw", err, sizeof err), 0);
+    proto_param_rec_from(&p, sp_param_find("pipeline"), &recs[0]);
+    proto_param_rec_from(&p, sp_param_find("format"), &recs[1]);
+    assert_int_equal(proto_enc_params(&b, 4, recs, 2), 0);
+    proto_camera c = {.eye = {0.3, 0.2, 0.3}, .target = {0, 0.1, 0}, .up = {0, 1, 0},
+                      .fov_deg = 45, .width = (uint32_t)w, .height = (uint32_t)h};
+    assert_int_equal(proto_enc_camera(&b, 5, &c), 0);
+    for (int i = 0; i < n; i++)
+        assert_int_equal(proto_enc_empty(&b, PROTO_MSG_RENDER, 6 + (uint32_t)i), 0);
+    assert_int_equal(send_buf(fd, &b), 0);
+    return fd;
+}
+
+/* drain: reads fd's answers until n FRAMEs have come (after OK); returns the FRAMEs read. */
+static int drain(int fd, int n)
+{
+    msg m = {0};
+    int frames = 0;
+    while (frames < n) {
+        int t = recv_msg(fd, &m);
+        if (t < 0) break;
+        if (t == PROTO_MSG_FRAME) frames++;
+    }
+    free(m.pl);
+    return frames;
+}
+
+/* held_growth: starts a daemon with extra args, lets 6 clients each ask for two 1024x1024 raw
+ * frames (4 MiB each) without reading, and returns how much the daemon's RSS grew (kB); then
+ * the clients read, and every frame arrives. */
+static long held_growth(fx *f, const char *budget)
+{
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
+                          "--preload", "bunny", budget ? "--max-frame-bytes" : NULL, budget, NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    /* Warm-up: one client gets two such frames, so the renderer's buffers exist already. */
+    int w = raw_client(f->d.port, 1024, 1024, 2);
+    assert_int_equal(drain(w, 2), 2);
+    close(w);
+    usleep(200000);
+    long before = rss_kb(f->d.pid);
+    int fds[6];
+    for (int i = 0; i < 6; i++) fds[i] = raw_client(f->d.port, 1024, 1024, 2);
+    usleep(1000000);
+    long during = rss_kb(f->d.pid);
+    for (int i = 0; i < 6; i++) {
+        assert_int_equal(drain(fds[i], 2), 2);
+        close(fds[i]);
+    }
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+    return during - before;
+}
+
+/* A frame larger than --max-frame-bytes is refused with its size and the limit; frames that
+ * fit wait for room, so six clients that ask for 1024x1024 raw frames and do not read hold a
+ * bounded amount, not two frames each; and every frame is delivered once they read. */
+static void test_frame_budget(void **state)
+{
+    fx *f = *state;
+    long bounded = held_growth(f, "20M");
+    long unbounded = held_growth(f, NULL);
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
+                          "--preload", "bunny", "--max-frame-bytes", "20M", NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    int fd = raw_client(f->d.port, 2048, 2048, 1);
+    msg m = {0};
+    char text[1100];
+    assert_int_equal(recv_msg(fd, &m), PROTO_MSG_OK); /* the PARAMS */
+    expect_error(fd, &m, PROTO_E_BAD_CAMERA, text, sizeof text);
+    close(fd);
+    free(m.pl);
+    printf("frame budget: 6 clients not reading 2 raw 1024x1024 frames each: daemon RSS +%ld "
+           "MiB with --max-frame-bytes 20M, +%ld MiB without; 2048x2048: %s\n", bounded / 1024,
+           unbounded / 1024, text);
+    assert_non_null(strstr(text, "--max-frame-bytes"));
+    /* Each waiting 4 MiB frame is 4 MiB of RSS: at least three frames' difference. */
+    assert_true(unbounded - bounded > 12 * 1024);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+}
+
 int main(void)
 {
     setvbuf(stdout, NULL, _IOLBF, 0);
@@ -1228,6 +1350,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_fifo_refused, setup, teardown),
         cmocka_unit_test_setup_teardown(test_error_texts, setup, teardown),
         cmocka_unit_test_setup_teardown(test_header_before_hash, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_frame_budget, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

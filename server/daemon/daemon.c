@@ -55,6 +55,9 @@ static void usage(FILE *f)
             "                       (default 30; 0: no limit)\n"
             "  --write-timeout S    close a client whose output could not move for S seconds because\n"
             "                       it does not read (default 30; 0: no limit)\n"
+            "  --max-frame-bytes SIZE  memory all frames being rendered, encoded or waiting to be\n"
+            "                       sent may hold (suffix K, M or G; default: a quarter of RAM); a\n"
+            "                       frame waits until it fits, one larger than SIZE is refused\n"
             "  --auth-fail-delay MS  delay before a failed authentication is answered, doubling with\n"
             "                       each failure from the same address up to 64x (default 250 for\n"
             "                       non-loopback clients; given explicitly, loopback clients too;\n"
@@ -91,7 +94,7 @@ static int parse_size(const char *s, uint64_t *out)
 static int parse_opts(int argc, char **argv, srv_opts *o)
 {
     enum { O_LISTEN = 1000, O_DATA, O_CACHE, O_BACKEND, O_TOKEN, O_PRELOAD, O_SHADERS, O_MAXC,
-           O_PORTFILE, O_HS, O_GPUMEM, O_IDLE, O_RDTO, O_WRTO, O_UNAUTH, O_PERADDR, O_AUTHDELAY,
+           O_PORTFILE, O_HS, O_GPUMEM, O_FRAMEMEM, O_IDLE, O_RDTO, O_WRTO, O_UNAUTH, O_PERADDR, O_AUTHDELAY,
            O_HELP };
     static const struct option lo[] = {
         {"listen", required_argument, 0, O_LISTEN},   {"data", required_argument, 0, O_DATA},
@@ -100,6 +103,7 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
         {"shader-dir", required_argument, 0, O_SHADERS}, {"max-clients", required_argument, 0, O_MAXC},
         {"port-file", required_argument, 0, O_PORTFILE}, {"handshake-timeout", required_argument, 0, O_HS},
         {"gpu-memory", required_argument, 0, O_GPUMEM},
+        {"max-frame-bytes", required_argument, 0, O_FRAMEMEM},
         {"idle-timeout", required_argument, 0, O_IDLE}, {"read-timeout", required_argument, 0, O_RDTO},
         {"write-timeout", required_argument, 0, O_WRTO}, {"max-unauth", required_argument, 0, O_UNAUTH},
         {"max-per-addr", required_argument, 0, O_PERADDR},
@@ -166,6 +170,13 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
             if (parse_size(optarg, &o->gpu_memory) != 0) {
                 fprintf(stderr, "splatd: --gpu-memory '%s': expected a size such as 512M or 4G "
                         "(at least 1M)\n", optarg);
+                return -1;
+            }
+            break;
+        case O_FRAMEMEM:
+            if (parse_size(optarg, &o->max_frame_bytes) != 0) {
+                fprintf(stderr, "splatd: --max-frame-bytes '%s': expected a size such as 512M or "
+                        "4G (at least 1M)\n", optarg);
                 return -1;
             }
             break;
@@ -626,6 +637,7 @@ static int start(srv *sv)
         .rnd = {.backend = sv->o.backend, .shader_dir = sv->o.shader_dir,
                 .max_width = sv->max_w, .max_height = sv->max_h, .gpu_memory = sv->o.gpu_memory},
         .max_clients = sv->nslots, .cache_dir = sv->o.cache_dir,
+        .frame_budget = sv->o.max_frame_bytes,
         .pack = srv_pack_frame, .pack_user = sv,
     };
     sv->rt = rt_create(&rd, sv->loop, &err);
@@ -633,9 +645,10 @@ static int start(srv *sv)
         fprintf(stderr, "splatd: cannot start the renderer: %s\n", err.msg);
         return 1;
     }
-    srv_log(sv, NULL, "renderer: %s (%s); cloud buffers held to %llu MiB of GPU memory",
-            rt_renderer_string(sv->rt), rt_backend_name(sv->rt),
-            (unsigned long long)(rt_gpu_budget(sv->rt) >> 20));
+    srv_log(sv, NULL, "renderer: %s (%s); cloud buffers held to %llu MiB of GPU memory, frames "
+            "to %llu MiB (--max-frame-bytes)", rt_renderer_string(sv->rt), rt_backend_name(sv->rt),
+            (unsigned long long)(rt_gpu_budget(sv->rt) >> 20),
+            (unsigned long long)(rt_frame_budget(sv->rt) >> 20));
     for (int i = 0; i < sv->o.npreload; i++) {
         if (srv_preload(sv, sv->o.preload[i], &err) != 0) {
             fprintf(stderr, "splatd: --preload %s: %s\n", sv->o.preload[i], err.msg);

@@ -223,6 +223,23 @@ static void make_request(srv *sv, sess *s, rt_request *rq, uint32_t req_seq)
 
 static void on_fps_timer(ev_loop *l, ev_timer *t, void *data);
 
+/* frame_fits: 1 when a frame of rq is within --max-frame-bytes on its own; else answers
+ * BAD_CAMERA to request seq (its size and format ask for more than the server may hold) and
+ * returns 0. */
+static int frame_fits(srv *sv, sess *s, const rt_request *rq, uint32_t seq)
+{
+    uint64_t c = rt_frame_cost(rq), b = rt_frame_budget(sv->rt);
+    if (c <= b) return 1;
+    char t[240], fmt[32];
+    const char *fname = sp_enum_name(SP_FORMAT, rq->params.format, fmt, sizeof fmt);
+    snprintf(t, sizeof t, "a %dx%d frame in format %s needs up to %llu MiB, over this server's "
+             "%llu MiB for frames (--max-frame-bytes): ask for a smaller size or format",
+             rq->cam.width, rq->cam.height, fname ? fname : "?",
+             (unsigned long long)(c >> 20), (unsigned long long)(b >> 20));
+    send_error(sv, s, seq, PROTO_E_BAD_CAMERA, t);
+    return 0;
+}
+
 /* stream_update: in stream mode, submits the session's current view (latest wins), held back
  * by the fps timer when max_fps would be exceeded. */
 static void stream_update(srv *sv, sess *s, uint32_t seq)
@@ -242,6 +259,7 @@ static void stream_update(srv *sv, sess *s, uint32_t seq)
     s->last_stream_ms = now;
     rt_request rq;
     make_request(sv, s, &rq, seq);
+    if (!frame_fits(sv, s, &rq, seq)) return;
     rt_submit_latest(sv->rt, s->id, &rq);
 }
 
@@ -445,6 +463,7 @@ static void on_render(srv *sv, sess *s, const proto_msg *m)
     }
     rt_request rq;
     make_request(sv, s, &rq, m->h.seq);
+    if (!frame_fits(sv, s, &rq, m->h.seq)) return;
     if (s->frames_queued >= RT_QUEUE_MAX + RT_MAX_OUTSTANDING ||
         rt_submit_queue(sv->rt, s->id, &rq) != 0) {
         char t[128];

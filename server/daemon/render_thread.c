@@ -11,6 +11,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "encode.h"
 #include "ev.h"
@@ -25,6 +26,11 @@ typedef struct rt_slot {
     int qhead, qn;
     int outstanding;            /* rendering + encoding + waiting at the loop */
     int stream_blocked;         /* a streamed frame waits unsent at the loop */
+    uint64_t cost[RT_MAX_OUTSTANDING]; /* rt_frame_cost of each outstanding frame, oldest at
+                                        * cost_head: frames leave in the order they started
+                                        * (one render thread, one FIFO encoder, in-order
+                                        * delivery), so a release gives back the oldest */
+    int cost_head;
 } rt_slot;
 
 typedef struct rt_encjob {
@@ -62,6 +68,8 @@ struct rt_ctx {
     sd_err init_err;
     char renderer[256], backend[32];
     uint64_t gpu_budget;        /* the renderer's cloud budget, bytes */
+    uint64_t frame_budget;      /* --max-frame-bytes: frames outstanding may hold this much */
+    uint64_t frame_held;        /* rt_frame_cost of every outstanding frame */
     pthread_t th_render, th_enc, th_prep;
     int started_render, started_enc, started_prep;
 };
@@ -90,29 +98,81 @@ static rt_slot *slot_of(rt_ctx *rt, uint32_t id)
     return &rt->slots[i];
 }
 
-/* pick: the next slot (round-robin) with work and room for a frame; fills rq and stream. mu held. */
+uint64_t rt_frame_cost(const rt_request *rq)
+{
+    /* Bytes per pixel of the encoded output at most (JPEG's worst case stays under 3; LZ4
+     * grows incompressible data by under 0.5 %: 4.02 rounded up; EXR: half RGBA + float Z). */
+    static const unsigned enc_bpp[] = {[SP_FMT_JPEG] = 3, [SP_FMT_PNG] = 5, [SP_FMT_LZ4] = 5,
+                                       [SP_FMT_RAW] = 4, [SP_FMT_EXR] = 12};
+    unsigned f = rq->params.format >= 0 && rq->params.format <= SP_FMT_EXR
+                     ? (unsigned)rq->params.format : SP_FMT_EXR;
+    uint64_t px = (uint64_t)(rq->cam.width > 0 ? rq->cam.width : RND_DEFAULT_WIDTH) *
+                  (uint64_t)(rq->cam.height > 0 ? rq->cam.height : RND_DEFAULT_HEIGHT);
+    /* The read-back colour and depth (8 bytes a pixel), the encoder's output, and the packed
+     * FRAME message it is copied into; plus the fixed headers. */
+    return px * (8 + 2 * (uint64_t)enc_bpp[f]) + 65536;
+}
+
+/* next_request: the request slot s would render next (its queue first), or NULL. */
+static const rt_request *next_request(const rt_slot *s)
+{
+    if (!s->id || s->outstanding >= RT_MAX_OUTSTANDING) return NULL;
+    if (s->qn) return &s->q[s->qhead];
+    if (s->has_latest && !s->stream_blocked) return &s->latest;
+    return NULL;
+}
+
+/* fits: whether a frame of cost c may start now under --max-frame-bytes. With nothing held it
+ * always may (the loop refuses single frames over the budget before they are submitted). */
+static int fits(const rt_ctx *rt, uint64_t c)
+{
+    return rt->frame_held == 0 || rt->frame_held + c <= rt->frame_budget;
+}
+
+/* pick: the next slot (round-robin) with work and room for a frame; fills rq and stream. When
+ * that slot's frame does not fit the frame budget, nobody is picked (until frames are
+ * released): later slots' smaller frames do not overtake it, so a large frame cannot starve.
+ * mu held. */
 static rt_slot *pick(rt_ctx *rt, rt_request *rq, int *stream)
 {
     for (int k = 0; k < rt->nslots; k++) {
         int i = (rt->rr_next + k) % rt->nslots;
         rt_slot *s = &rt->slots[i];
-        if (!s->id || s->outstanding >= RT_MAX_OUTSTANDING) continue;
+        const rt_request *nx = next_request(s);
+        if (!nx) continue;
+        if (!fits(rt, rt_frame_cost(nx))) return NULL;
         if (s->qn) {
             *rq = s->q[s->qhead];
             s->qhead = (s->qhead + 1) % RT_QUEUE_MAX;
             s->qn--;
             *stream = 0;
-        } else if (s->has_latest && !s->stream_blocked) {
+        } else {
             *rq = s->latest;
             s->has_latest = 0;
             *stream = 1;
-        } else {
-            continue;
         }
         rt->rr_next = (i + 1) % rt->nslots;
         return s;
     }
     return NULL;
+}
+
+/* slot_hold: s starts a frame of cost c. mu held. */
+static void slot_hold(rt_ctx *rt, rt_slot *s, uint64_t c)
+{
+    s->cost[(s->cost_head + s->outstanding) % RT_MAX_OUTSTANDING] = c;
+    s->outstanding++;
+    rt->frame_held += c;
+}
+
+/* slot_release: s's oldest outstanding frame is gone (sent, dropped or failed). mu held. */
+static void slot_release(rt_ctx *rt, rt_slot *s)
+{
+    if (s->outstanding <= 0) return;
+    uint64_t c = s->cost[s->cost_head];
+    rt->frame_held = rt->frame_held >= c ? rt->frame_held - c : 0;
+    s->cost_head = (s->cost_head + 1) % RT_MAX_OUTSTANDING;
+    s->outstanding--;
 }
 
 static int free_frame(rt_ctx *rt)
@@ -126,10 +186,10 @@ static int has_work(rt_ctx *rt)
 {
     if (rt->up_head) return 1;
     if (free_frame(rt) < 0) return 0;
-    for (int i = 0; i < rt->nslots; i++) {
-        rt_slot *s = &rt->slots[i];
-        if (s->id && s->outstanding < RT_MAX_OUTSTANDING && (s->qn || (s->has_latest && !s->stream_blocked)))
-            return 1;
+    /* The same order as pick: the first slot with work decides. */
+    for (int k = 0; k < rt->nslots; k++) {
+        const rt_request *nx = next_request(&rt->slots[(rt->rr_next + k) % rt->nslots]);
+        if (nx) return fits(rt, rt_frame_cost(nx));
     }
     return 0;
 }
@@ -215,7 +275,7 @@ static void *render_main(void *arg)
         int fi = free_frame(rt);
         rt_slot *s = fi >= 0 ? pick(rt, &rq, &stream) : NULL;
         if (!s) continue;
-        s->outstanding++;
+        slot_hold(rt, s, rt_frame_cost(&rq));
         rt->frame_busy[fi] = 1;
         rt->rendering = 1;
         rt_encjob job = {.frame = fi, .params = rq.params};
@@ -235,7 +295,7 @@ static void *render_main(void *arg)
         if (rc != 0) {
             rt->frame_busy[fi] = 0;
             rt_slot *s2 = slot_of(rt, job.meta.client);
-            if (s2) s2->outstanding--;
+            if (s2) slot_release(rt, s2);
             rt_event *ev = calloc(1, sizeof *ev);
             if (ev) {
                 ev->kind = RT_EV_FRAME_FAILED;
@@ -309,7 +369,7 @@ static void *enc_main(void *arg)
         }
         if (rc != 0 || !ev) { /* nothing reaches the loop's waiting slot */
             rt_slot *s = slot_of(rt, job.meta.client);
-            if (s) s->outstanding--;
+            if (s) slot_release(rt, s);
         }
         pthread_cond_broadcast(&rt->cv_render);
     }
@@ -407,6 +467,13 @@ rt_ctx *rt_create(const rt_desc *d, ev_loop *loop, sd_err *err)
     rt->d = *d;
     rt->loop = loop;
     rt->nslots = d->max_clients > 0 ? d->max_clients : 64;
+    rt->frame_budget = d->frame_budget;
+    if (!rt->frame_budget) {
+        /* Default: a quarter of the machine's memory, at least 256 MiB. */
+        long pages = sysconf(_SC_PHYS_PAGES), psz = sysconf(_SC_PAGESIZE);
+        uint64_t ram = pages > 0 && psz > 0 ? (uint64_t)pages * (uint64_t)psz : 0;
+        rt->frame_budget = ram / 4 > (256u << 20) ? ram / 4 : (256u << 20);
+    }
     if (rt->nslots > 0xffff) rt->nslots = 0xffff;
     rt->slots = calloc((size_t)rt->nslots, sizeof *rt->slots);
     pthread_mutex_init(&rt->mu, NULL);
@@ -508,6 +575,7 @@ void rt_destroy(rt_ctx *rt)
 const char *rt_renderer_string(const rt_ctx *rt) { return rt->renderer; }
 const char *rt_backend_name(const rt_ctx *rt) { return rt->backend; }
 uint64_t rt_gpu_budget(const rt_ctx *rt) { return rt->gpu_budget; }
+uint64_t rt_frame_budget(const rt_ctx *rt) { return rt->frame_budget; }
 
 int rt_client_open(rt_ctx *rt, uint32_t id)
 {
@@ -524,7 +592,13 @@ void rt_client_close(rt_ctx *rt, uint32_t id)
 {
     pthread_mutex_lock(&rt->mu);
     rt_slot *s = slot_of(rt, id);
-    if (s) memset(s, 0, sizeof *s);
+    if (s) {
+        /* Its frames in flight are dropped when they arrive at the loop; their bytes are
+         * given back now (for a moment the budget counts less than is held). */
+        while (s->outstanding > 0) slot_release(rt, s);
+        memset(s, 0, sizeof *s);
+        pthread_cond_signal(&rt->cv_render);
+    }
     pthread_mutex_unlock(&rt->mu);
 }
 
@@ -564,7 +638,7 @@ void rt_frame_released(rt_ctx *rt, uint32_t id)
     pthread_mutex_lock(&rt->mu);
     rt_slot *s = slot_of(rt, id);
     if (s && s->outstanding > 0) {
-        s->outstanding--;
+        slot_release(rt, s);
         pthread_cond_signal(&rt->cv_render);
     }
     pthread_mutex_unlock(&rt->mu);

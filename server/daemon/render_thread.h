@@ -55,6 +55,9 @@ typedef struct rt_desc {
     int max_clients;        /* slots; client ids must be < 2^16 in their low bits (index) */
     const char *cache_dir;  /* default NULL: cache.h's default */
     int prep_threads;       /* default 0: every core (passed to cache_desc.threads) */
+    uint64_t frame_budget;  /* --max-frame-bytes: bytes all frames outstanding (rendering,
+                             * encoding, waiting at the loop) may hold, by rt_frame_cost;
+                             * default 0: a quarter of RAM, at least 256 MiB */
     rt_pack_fn pack;        /* required */
     void *pack_user;
 } rt_desc;
@@ -109,6 +112,14 @@ const char *rt_renderer_string(const rt_ctx *rt);
 const char *rt_backend_name(const rt_ctx *rt);
 /* rt_gpu_budget: the bytes of cloud buffers the renderer keeps on the GPU (rnd_desc.gpu_memory). */
 uint64_t rt_gpu_budget(const rt_ctx *rt);
+
+/* rt_frame_budget: the frame budget in bytes (rt_desc.frame_budget or its default). */
+uint64_t rt_frame_budget(const rt_ctx *rt);
+/* rt_frame_cost: the bytes a frame of rq may hold at most while it is rendered, encoded and
+ * waits to be sent (read-back, encoder output and the packed message). A frame starts only
+ * while the costs of the frames outstanding plus its own stay within the budget; the loop
+ * refuses a single frame over it (rt_frame_budget). */
+uint64_t rt_frame_cost(const rt_request *rq);
 
 /* rt_client_open: claims the slot of client id (index = id & 0xffff < max_clients). Returns 0
  * or SD_ELIMIT. rt_client_close: drops its requests; frames already in flight are still

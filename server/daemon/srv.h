@@ -34,6 +34,7 @@ typedef struct srv_opts {
     int auth_delay_local;        /* --auth-fail-delay given: loopback clients are delayed too */
     int shutdown_ms;             /* default 5000: how long SIGTERM waits for frames in flight */
     uint64_t gpu_memory;         /* --gpu-memory; default 0: the renderer sizes it */
+    uint64_t max_frame_bytes;    /* --max-frame-bytes; default 0: a quarter of RAM */
 } srv_opts;
 
 typedef struct srv_waiter {
