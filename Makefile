@@ -47,6 +47,10 @@ CLIENT_LIBS := $(shell pkg-config --libs libcrypto liblz4 libturbojpeg 2>/dev/nu
 SERVER_LIBS := $(shell pkg-config --libs egl opengl osmesa libturbojpeg libpng liblz4 libcrypto 2>/dev/null) \
                $(FLANN_LIBS) $(EXR_LIBS) -lpthread -lm
 TEST_LIBS   := $(SERVER_LIBS) $(shell pkg-config --libs cmocka 2>/dev/null)
+#   VIEW_LIBS    splat-view, the SDL2 window of `splat view` (a binary of its own, so that
+#                `splat` and libsplatclient never need SDL2 or X11)
+SDL_CFLAGS  := $(shell pkg-config --cflags sdl2 2>/dev/null)
+VIEW_LIBS   := $(CLIENT_LIBS) $(shell pkg-config --libs sdl2 2>/dev/null) -lpthread
 
 WARN    := -Wall -Wextra -Werror -Wshadow -Wstrict-prototypes -Wmissing-prototypes -Wno-unused-parameter
 CFLAGS  ?= -O2 -g
@@ -78,7 +82,7 @@ inc_of = $(or $(INC_$(patsubst %/,%,$(dir $(1)))),$(INC_ALL))
 
 PROTO_SRC  := $(wildcard protocol/*.c)
 SERVER_SRC := $(filter-out server/cmd/main.c,$(wildcard server/*/*.c))
-CLIENT_LIB_SRC := $(filter-out client/splat_main.c,$(wildcard client/*.c))
+CLIENT_LIB_SRC := $(filter-out client/splat_main.c client/splat_view.c,$(wildcard client/*.c))
 SHADERS    := $(sort $(wildcard shaders/*.glsl))
 TEST_SRC   := $(wildcard tests/test_*.c)
 TEST_COMMON_SRC := $(wildcard tests/common/*.c)
@@ -144,6 +148,12 @@ $(1)/bin/splat: $(1)/obj/client/splat_main.o $(1)/libsplatclient.a
 	@mkdir -p $$(dir $$@)
 	$$(CC) $(2) -o $$@ $$^ $$(CLIENT_LIBS)
 
+$(1)/obj/client/splat_view.o: BASE_CFLAGS += $(SDL_CFLAGS)
+
+$(1)/bin/splat-view: $(1)/obj/client/splat_view.o $(1)/libsplatclient.a
+	@mkdir -p $$(dir $$@)
+	$$(CC) $(2) -o $$@ $$^ $$(VIEW_LIBS)
+
 $(1)/tests/%: $(1)/obj/tests/%.o $(1)/libtestcommon.a $(1)/libsplatd.a $(1)/libsplatclient.a
 	@mkdir -p $$(dir $$@)
 	$$(CC) $(2) -o $$@ $$^ $$(TEST_LIBS)
@@ -177,7 +187,7 @@ $(BUILD)/gen/shaders_gen.c $(BUILD)/gen/shaders_gen.h &: $(BUILD)/embed_shaders 
 	$(BUILD)/embed_shaders $(BUILD)/gen/shaders_gen $(SHADERS)
 
 .PHONY: all test asan bench fuzz run install clean
-all: $(BUILD)/bin/splatd $(BUILD)/bin/splat $(BUILD)/libsplatclient.a $(BUILD)/libsplatclient.so $(TOOLS)
+all: $(BUILD)/bin/splatd $(BUILD)/bin/splat $(BUILD)/bin/splat-view $(BUILD)/libsplatclient.a $(BUILD)/libsplatclient.so $(TOOLS)
 
 $(BUILD)/libsplatclient.so: $(call obj,$(BUILD),$(CLIENT_LIB_SRC) $(PROTO_SRC))
 	$(CC) -shared -Wl,-soname,libsplatclient.so.0 -Wl,--version-script=client/libsplatclient.map \
@@ -185,6 +195,7 @@ $(BUILD)/libsplatclient.so: $(call obj,$(BUILD),$(CLIENT_LIB_SRC) $(PROTO_SRC))
 
 # The tests find the binaries and data through these variables.
 TEST_ENV = SPLATD_BIN=$(abspath $(1)/bin/splatd) SPLAT_BIN=$(abspath $(1)/bin/splat) \
+           SPLAT_VIEW_BIN=$(abspath $(1)/bin/splat-view) \
            SPLATD_TOOLS=$(abspath $(1)/tools) SPLATD_TESTDATA=$(abspath tests/data) \
            SPLATD_SHADERS=$(abspath shaders)
 
@@ -192,7 +203,8 @@ ASAN_ENV = ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stac
            LSAN_OPTIONS=suppressions=$(abspath tests/lsan.supp)
 
 # make test: the plain run, the sanitizer run, and one closing line counting the tests of both.
-test: all $(TESTS) $(ASAN_TESTS) $(BUILD)/asan/bin/splatd $(BUILD)/asan/bin/splat $(ASAN_TOOLS)
+test: all $(TESTS) $(ASAN_TESTS) $(BUILD)/asan/bin/splatd $(BUILD)/asan/bin/splat \
+      $(BUILD)/asan/bin/splat-view $(ASAN_TOOLS)
 	@rm -f $(BUILD)/test-totals
 	@$(call TEST_ENV,$(BUILD)) TEST_TOTALS=$(abspath $(BUILD)/test-totals) sh tests/run.sh "plain" $(TESTS)
 	@$(call TEST_ENV,$(BUILD)/asan) $(ASAN_ENV) TEST_TOTALS=$(abspath $(BUILD)/test-totals) \
@@ -200,7 +212,8 @@ test: all $(TESTS) $(ASAN_TESTS) $(BUILD)/asan/bin/splatd $(BUILD)/asan/bin/spla
 	@awk '{p += $$1; f += $$2; s += $$3} END {printf "total: %d passed, %d failed, %d skipped\n", p, f, s}' \
 	  $(BUILD)/test-totals
 
-asan: $(ASAN_TESTS) $(BUILD)/asan/bin/splatd $(BUILD)/asan/bin/splat $(ASAN_TOOLS)
+asan: $(ASAN_TESTS) $(BUILD)/asan/bin/splatd $(BUILD)/asan/bin/splat $(BUILD)/asan/bin/splat-view \
+      $(ASAN_TOOLS)
 	@$(call TEST_ENV,$(BUILD)/asan) $(ASAN_ENV) sh tests/run.sh "asan" $(ASAN_TESTS)
 
 bench: all $(BENCHES)
@@ -215,7 +228,7 @@ run: all
 
 install: all
 	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/lib/pkgconfig $(DESTDIR)$(PREFIX)/include
-	install -m 755 $(BUILD)/bin/splatd $(BUILD)/bin/splat $(DESTDIR)$(PREFIX)/bin/
+	install -m 755 $(BUILD)/bin/splatd $(BUILD)/bin/splat $(BUILD)/bin/splat-view $(DESTDIR)$(PREFIX)/bin/
 	install -m 644 $(BUILD)/libsplatclient.a $(DESTDIR)$(PREFIX)/lib/
 	install -m 755 $(BUILD)/libsplatclient.so $(DESTDIR)$(PREFIX)/lib/libsplatclient.so.0
 	ln -sf libsplatclient.so.0 $(DESTDIR)$(PREFIX)/lib/libsplatclient.so

@@ -67,6 +67,7 @@ static void usage(FILE *f, const char *cmd)
             "  render NAME -o FILE        render one frame (.jpg .png .exr .raw)\n"
             "  path NAME (--path FILE | --orbit N) -o 'dir/%%05d.jpg'\n"
             "                             render a camera path; frames already written are skipped\n"
+            "  view NAME [--size WxH]     an interactive window (the program splat-view, SDL2)\n"
             "  --version                  print the version and exit\n"
             "\n");
         fputs(conn_opts, f);
@@ -396,10 +397,65 @@ out:
     return rc;
 }
 
+/* exec_view: `splat view ...` runs the viewer, splat-view, a binary of its own so that `splat`
+ * needs no SDL2 or X11: $SPLAT_VIEW_BIN, else splat-view next to this program, else the one
+ * on PATH. argv without the word "view" goes to it. Returns only when no viewer could run. */
+static int exec_view(int argc, char **argv, int view_at)
+{
+    char **av = calloc((size_t)argc + 1, sizeof *av);
+    if (!av) return EXIT_FAIL;
+    int n = 0;
+    av[n++] = "splat-view";
+    for (int i = 1; i < argc; i++)
+        if (i != view_at) av[n++] = argv[i];
+    av[n] = NULL;
+    const char *env = getenv("SPLAT_VIEW_BIN");
+    if (env && env[0]) {
+        execv(env, av);
+        fprintf(stderr, "splat: cannot run the viewer %s: %s\n", env, strerror(errno));
+        free(av);
+        return EXIT_FAIL;
+    }
+    char self[4096];
+    ssize_t len = readlink("/proc/self/exe", self, sizeof self - 16);
+    if (len > 0) {
+        self[len] = 0;
+        char *slash = strrchr(self, '/');
+        if (slash) {
+            strcpy(slash + 1, "splat-view");
+            execv(self, av);
+        }
+    }
+    execvp("splat-view", av);
+    fprintf(stderr, "splat: cannot run the viewer splat-view (build it with make, or set "
+            "SPLAT_VIEW_BIN): %s\n", strerror(errno));
+    free(av);
+    return EXIT_FAIL;
+}
+
+/* view_command: the index of the word "view" when it is the command (the first operand,
+ * after any connection options and their values), else 0. */
+static int view_command(int argc, char **argv)
+{
+    for (int i = 1; i < argc; i++) {
+        const char *s = argv[i];
+        if (!strcmp(s, "--host") || !strcmp(s, "--port") || !strcmp(s, "--token-file") ||
+            !strcmp(s, "--timeout")) {
+            i++;
+            continue;
+        }
+        if (s[0] == '-') continue;
+        return strcmp(s, "view") ? 0 : i;
+    }
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     cli_args a;
     char err[600];
+    int view_at = view_command(argc, argv);
+    if (view_at) return exec_view(argc, argv, view_at);
     if (cli_parse(argc, argv, &a, err, sizeof err) < 0) {
         fprintf(stderr, "splat: %s\n", err);
         return EXIT_USAGE;

@@ -31,6 +31,8 @@ pc:libpng=libpng-dev
 pc:liblz4=liblz4-dev
 pc:libcrypto=libssl-dev
 pc:cmocka=libcmocka-dev
+pc:sdl2=libsdl2-dev
+file:/usr/bin/Xvfb=xvfb
 "
 
 # present ENTRY: 0 when the thing the entry names is on this machine.
