@@ -1331,6 +1331,34 @@ static void test_frame_budget(void **state)
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
+/* Beyond loopback the token must be at least 16 bytes; a FIFO as the token file is refused at
+ * start-up at once instead of blocking it. */
+static void test_token_checks(void **state)
+{
+    fx *f = *state;
+    char shorttok[700], fifo[700];
+    snprintf(shorttok, sizeof shorttok, "%s/short", f->root);
+    snprintf(fifo, sizeof fifo, "%s/tokfifo", f->root);
+    assert_int_equal(tu_write_file(shorttok, "tooshort\n", 9), 0);
+    assert_int_equal(chmod(shorttok, 0600), 0);
+    assert_int_equal(mkfifo(fifo, 0600), 0);
+    int st = 0;
+    const char *a1[] = {"--listen", "0.0.0.0:0", "--data", f->data, "--token-file", shorttok, NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, &st, a1), -1);
+    assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 1);
+    assert_int_equal(log_count(&f->d, "is 8 bytes; listening on 0.0.0.0 (not loopback) needs at least 16"), 1);
+    double t0 = now_s();
+    const char *a2[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--token-file", fifo, NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, &st, a2), -1);
+    assert_true(now_s() - t0 < 5);
+    assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 1);
+    assert_int_equal(log_count(&f->d, "is not a regular file"), 1);
+    /* A long enough token: it starts. */
+    const char *a3[] = {"--listen", "0.0.0.0:0", "--data", f->data, "--token-file", f->token, NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, a3), 0);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+}
+
 int main(void)
 {
     setvbuf(stdout, NULL, _IOLBF, 0);
@@ -1351,6 +1379,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_error_texts, setup, teardown),
         cmocka_unit_test_setup_teardown(test_header_before_hash, setup, teardown),
         cmocka_unit_test_setup_teardown(test_frame_budget, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_token_checks, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -590,6 +590,15 @@ static int start(srv *sv)
         fprintf(stderr, "splatd: %s\n", err.msg);
         return 1;
     }
+    if (sv->o.token_file && !net_host_is_loopback(sv->o.host) && sv->token.len < SRV_TOKEN_MIN) {
+        /* Beyond loopback the token is all that stands between the network and the data, and
+         * the delay per failure only slows guessing down: a short token would not last. */
+        fprintf(stderr,
+                "splatd: the token in %s is %zu bytes; listening on %s (not loopback) needs at "
+                "least %d (head -c 32 /dev/urandom | base64 > F)\n", sv->o.token_file,
+                sv->token.len, sv->o.host, SRV_TOKEN_MIN);
+        return 1;
+    }
     if (!sv->o.token_file && !net_host_is_loopback(sv->o.host)) {
         fprintf(stderr,
                 "splatd: refusing to listen on %s without authentication: anyone who can reach "

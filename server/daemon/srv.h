@@ -10,7 +10,10 @@
 #include "render_thread.h"
 #include "session.h"
 
-enum { SRV_MAX_PRELOAD = 32 };
+enum {
+    SRV_MAX_PRELOAD = 32,
+    SRV_TOKEN_MIN = 16,          /* bytes of token needed to listen beyond loopback */
+};
 
 typedef struct srv_opts {
     char host[NET_ADDR_LEN];     /* default 127.0.0.1 */

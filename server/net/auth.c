@@ -15,8 +15,9 @@
 int auth_token_load(const char *path, auth_token *t, sd_err *err)
 {
     memset(t, 0, sizeof *t);
-    /* A symlink is followed (systemd credentials are symlinks); fstat checks its target. */
-    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    /* A symlink is followed (systemd credentials are symlinks); fstat checks its target.
+     * O_NONBLOCK: a FIFO in its place must not block start-up; it is refused below. */
+    int fd = open(path, O_RDONLY | O_CLOEXEC | O_NONBLOCK);
     if (fd < 0) return sd_errf(err, SD_EIO, "token file %s: cannot open: %s", path, strerror(errno));
     struct stat st;
     int rc = 0;
