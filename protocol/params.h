@@ -29,7 +29,12 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(KAWATA_GAMMA, "kawata_gamma", SP_T_FLOAT, kawata_gamma, 0,    0.5,      "0.0075", NULL)   \
     X(SHADING,      "shading",      SP_T_ENUM,  shading,      0,    0,        "lambert", "lambert|edl") \
     X(EDL_STRENGTH, "edl_strength", SP_T_FLOAT, edl_strength, 0,    100,      "1",      NULL)     \
-    X(EDL_RADIUS,   "edl_radius",   SP_T_FLOAT, edl_radius,   0.5,  16,       "1",      NULL)
+    X(EDL_RADIUS,   "edl_radius",   SP_T_FLOAT, edl_radius,   0.5,  16,       "1",      NULL)     \
+    X(MODEL,        "model",        SP_T_ENUM,  model,        0,    0,        "express", "express") \
+    X(LAMBDA,       "lambda",       SP_T_FLOAT, lambda,       0,    1,        "0.5",    NULL)     \
+    X(T,            "t",            SP_T_FLOAT, t,            0,    1,        "0.5",    NULL)     \
+    X(L_M,          "l_m",          SP_T_FLOAT, l_m,          0,    1,        "0",      NULL)     \
+    X(FIELD,        "field",        SP_T_ENUM,  field,        0,    0,        "uncertainty", "uncertainty|height|intensity")
 
 enum {
 #define SP_ID_(id, name, type, field, lo, hi, def, vals) SP_##id,
@@ -52,6 +57,14 @@ enum { SP_SUB_444 = 0, SP_SUB_422, SP_SUB_420, SP_SUB_GRAY };
  * edl = that, times Eye-Dome Lighting over the frame's eye depth (render.c, edl.c), for every
  * pipeline: the depth cue that needs no normals at all. */
 enum { SP_SHADING_LAMBERT = 0, SP_SHADING_EDL };
+/* model: the Soft Transparency density model; only the Express-Model (eq. 19) is implemented,
+ * so the Base- and Concentric-Models are refused as unknown enum values. */
+enum { SP_MODEL_EXPRESS = 0 };
+/* field: the scalar F of the solid/soft split, each in [0, 1]: uncertainty = prep's eq. 21
+ * (already normalised by the cloud's 99th percentile and clamped); height = (z - zmin) / (zmax -
+ * zmin) over the cloud's local bounds; intensity = the file's intensity normalised by its range
+ * at upload (render.c). */
+enum { SP_FIELD_UNCERTAINTY = 0, SP_FIELD_HEIGHT, SP_FIELD_INTENSITY };
 
 typedef struct sp_params {
     int32_t pipeline;
@@ -71,6 +84,11 @@ typedef struct sp_params {
     int32_t shading;        /* SP_SHADING_* */
     float edl_strength;     /* EDL: 0 leaves the frame unchanged */
     float edl_radius;       /* EDL: neighbour distance in pixels */
+    int32_t model;          /* soft: SP_MODEL_* (only the Express-Model exists) */
+    float lambda;           /* soft, olt: opacity scale lambda (Soft Transparency eq. 19) */
+    float t;                /* soft, olt: points with field value F <= t are solid */
+    float l_m;              /* soft: transparency modulation range (eq. 22); <= t: off */
+    int32_t field;          /* soft, olt: SP_FIELD_*, the source of F */
 } sp_params;
 
 typedef struct sp_param_info {

@@ -10,7 +10,8 @@
 #define SP_PIPELINE_LIST(X) \
     X(POINTS, points)       \
     X(SPLAT, splat)         \
-    X(KAWATA, kawata)
+    X(KAWATA, kawata)       \
+    X(SOFT, soft)
 
 enum {
 #define SP_PIPE_ID_(id, name) SP_PIPE_##id,

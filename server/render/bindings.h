@@ -39,7 +39,9 @@
     X(KAWATA_FAR)    /* kawata: KAWATA_FAR as R32UI */                                         \
     X(KAWATA_PTS)    /* kawata: KAWATA_PTS as RGBA32F, 4 texels a buffer pixel */             \
     X(KAWATA_SPLATS) /* kawata: KAWATA_SPLATS as RGBA32F, 2 texels a buffer pixel */          \
-    X(EDL_DEPTH)     /* EDL: a copy of the target's depth_eye as R32F */
+    X(EDL_DEPTH)     /* EDL: a copy of the target's depth_eye as R32F */                      \
+    X(SOFT_F)        /* soft: R32UI float bits of the field source (FIELD or INTENSITY) */    \
+    X(SOFT_IDX)      /* soft: R32UI soft point indices sorted along the three axes */
 
 enum {
 #define RND_B_ENUM_(name) RND_B_##name,

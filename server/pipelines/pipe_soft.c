@@ -1,0 +1,528 @@
+/* pipe_soft.c — the `soft` pipeline: Soft Transparency (Seemann et al.), the Express-Model.
+ *
+ * The solid/soft split. Each point has a scalar F in [0, 1] from the source `field`
+ * (uncertainty: prep's eq. 21, already normalised by the cloud's 99th percentile; height:
+ * (z - zmin) / (zmax - zmin) over the cloud's local bounds; intensity: the file's intensity,
+ * normalised by its range at upload). Points with F <= t are solid and are drawn by the `splat`
+ * pipeline's own passes (splat_passes.h), given a view whose chunks are the runs of solid points
+ * of the frame's visible chunks: the splat shaders are unchanged and read only solid points
+ * through their range table. Points with F > t are soft.
+ *
+ * Why runs and not a per-point filter in a splat shader variant: no splat program changes
+ * (t = 1 gives the frame's own chunks back, so exactly the splat image), and the split costs
+ * nothing per point beyond lib_ranges' binary search over more ranges, which grows with the
+ * log of the runs. The runs are made on the CPU when the cloud attaches and again only when
+ * `field` or `t` changes (one pass over the points), and intersected with the view's chunks per
+ * frame (a merge of two sorted lists).
+ *
+ * The soft points (Express-Model, eq. 19). Each is a view-facing disc of the splat radius times
+ * splat_scale, drawn as one GL point sprite (soft.vert/.frag) whose fragments get the opacity
+ * Phi = lambda (cos(pi d / r) + 1) / 2 at distance d from the centre, composited with the
+ * premultiplied "over" (ONE, ONE_MINUS_SRC_ALPHA) after the splat resolve of each stripe,
+ * tested against the solid surface's depth (splat__keys_texture) and writing no depth.
+ *
+ * Order: the paper's pre-sorted index arrays. At attach, the points of every buffer set are
+ * sorted along x, y and z (a stable radix sort of the coordinates' order-preserving bits) on the
+ * CPU; when `field` or `t` changes, the soft points of each sorted array are kept (the order
+ * stays) and uploaded as one R32UI buffer texture of three arrays. Per frame the axis closest to
+ * the view direction picks the array, read forwards or backwards by the vertex shader, so that
+ * the first primitive drawn is the farthest: GL blends in primitive order, so the "over" is
+ * applied back to front with no per-frame sort. Three arrays read both ways are the paper's six
+ * (half its memory). Why this order and not a tile compositor on llvmpipe: it costs no sort
+ * and no per-pixel lists per frame, only the soft points' sprites; the sprites are the slow
+ * path on llvmpipe, but only soft points take it (see README's performance section for the
+ * measured cost). The order is exact for discs separated along the chosen axis and the
+ * paper's approximation otherwise; a cloud in several buffer sets draws its sets by their
+ * centres along the axis, each set sorted within.
+ *
+ * Transparency modulation (eq. 22). For t < F < l_m the opacity is interpolated between the
+ * model's Phi and a near-solid disc, with W = (F - t) / (l_m - t): Phi_f = (1 - d/r)(1 - W) +
+ * Phi W. The paper writes the first term lambda (1 - d); read literally its mean over a disc
+ * (lambda / 3) is below the cosine's (0.30 lambda), so it would not make the points "rendered
+ * with higher density when close to the threshold" as the paper's text and figure 5 say. We
+ * leave lambda out: at the threshold a soft disc is as dense as a solid splat at its centre,
+ * and the colour step between solid and soft regions shrinks (test_modulation measures it).
+ * l_m <= t turns the modulation off.
+ *
+ * What is not here: model=base and model=concentric (the enum only has express, so they are
+ * refused as unknown values naming what exists), field sources beyond uncertainty, height and
+ * intensity, and soft discs larger than the GL's point size limit (llvmpipe: 255 pixels) are
+ * drawn at that size. Culling: soft points are drawn whether or not their chunk was culled
+ * (the GL clips them); the point budget applies to solid points only. */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "pipe.h"
+#include "shaders.h"
+#include "splat_passes.h"
+
+#define SOFT_UNIFORMS(X)                                                                     \
+    X(VIEW, "u_view") X(PROJ, "u_proj") X(SIZE, "u_size") X(SCALE, "u_scale")                \
+    X(MAXSIZE, "u_maxsize") X(COLOR, "u_color") X(ZNEAR, "u_znear") X(ZFAR, "u_zfar")         \
+    X(FIELD, "u_field") X(ZRANGE, "u_zrange") X(T, "u_t") X(LM, "u_lm") X(BASE, "u_base")     \
+    X(N, "u_n") X(REV, "u_rev") X(STRIPE, "u_stripe") X(KEYS_ON, "u_keys_on")                 \
+    X(LAMBDA, "u_lambda")
+
+enum {
+#define SOFT_U_ENUM_(id, name) SU_##id,
+    SOFT_UNIFORMS(SOFT_U_ENUM_)
+#undef SOFT_U_ENUM_
+    SU_COUNT
+};
+
+typedef struct soft_state {
+    void *splat;               /* the splat passes' own state (splat__create) */
+    GLuint prog;
+    GLint loc[SU_COUNT];
+    GLuint vao;                /* empty: the vertex shader pulls everything */
+    GLuint f_tex, idx_tex;     /* buffer textures on RND_T_SOFT_F and RND_T_SOFT_IDX */
+    float max_point;           /* GL_POINT_SIZE_RANGE's upper end */
+    rnd_chunk *chunks;         /* the frame's solid chunks */
+    uint64_t chunks_cap;
+} soft_state;
+
+/* Per buffer set of a cloud: what the split needs on the CPU and the soft index arrays. */
+typedef struct soft_set {
+    uint32_t n;
+    float *z;                  /* local z per point (field=height) */
+    float *f_unc, *f_int;      /* F per point: uncertainty, intensity */
+    uint32_t *sorted[3];       /* point indices sorted along x, y, z */
+    uint32_t *runs;            /* solid runs: (first, count) pairs, in point order */
+    uint32_t nruns;
+    uint32_t nsoft;            /* soft points for the current split */
+    GLuint idx_buf;            /* 3 * nsoft uint32: the soft points of sorted[0..2] */
+    float centre[3];           /* mean of the set's bounds: the order of sets */
+} soft_set;
+
+typedef struct soft_cloud {
+    uint32_t nsets;
+    soft_set *sets;
+    int have_split;            /* the split below has been made */
+    int field;
+    float t;
+} soft_cloud;
+
+static void soft_destroy(rnd_kit *k, void *state)
+{
+    soft_state *s = state;
+    if (!s) return;
+    const gl_api *gl = k->gl;
+    if (s->splat) splat__destroy(k, s->splat);
+    if (s->prog) gl->DeleteProgram(s->prog);
+    if (s->vao) gl->DeleteVertexArrays(1, &s->vao);
+    if (s->f_tex) gl->DeleteTextures(1, &s->f_tex);
+    if (s->idx_tex) gl->DeleteTextures(1, &s->idx_tex);
+    free(s->chunks);
+    memset(s, 0, sizeof *s);
+    free(s);
+}
+
+static int soft_create(rnd_kit *k, void **state, sd_err *err)
+{
+    *state = NULL;
+    const gl_api *gl = k->gl;
+    soft_state *s = calloc(1, sizeof *s);
+    if (!s) return sd_errf(err, SD_ENOMEM, "out of memory creating the soft pipeline");
+    int rc = splat__create(k, &s->splat, err);
+    if (rc < 0) {
+        soft_destroy(k, s);
+        return rc;
+    }
+    static const char *const files[2] = {"soft.vert", "soft.frag"};
+    s->prog = rnd_kit_program(k, files, 2, "", err);
+    if (!s->prog) {
+        soft_destroy(k, s);
+        return err ? err->code : SD_EGL;
+    }
+    static const char *const unames[SU_COUNT] = {
+#define SOFT_U_NAME_(id, name) name,
+        SOFT_UNIFORMS(SOFT_U_NAME_)
+#undef SOFT_U_NAME_
+    };
+    for (int u = 0; u < SU_COUNT; u++) s->loc[u] = gl_uniform(gl, s->prog, unames[u]);
+    gl->GenVertexArrays(1, &s->vao);
+    gl->GenTextures(1, &s->f_tex);
+    gl->GenTextures(1, &s->idx_tex);
+    GLfloat range[2] = {1.0f, 1.0f};
+    gl->GetFloatv(GL_POINT_SIZE_RANGE, range);
+    s->max_point = range[1] >= 1.0f ? range[1] : 1.0f;
+    rc = gl_check(gl, "creating the soft pipeline", err);
+    if (rc < 0) {
+        soft_destroy(k, s);
+        return rc;
+    }
+    *state = s;
+    return 0;
+}
+
+/* ---- per-cloud data ------------------------------------------------------------------------ */
+
+static void soft_detach(rnd_kit *k, void *state, void *cloud_data)
+{
+    (void)state;
+    soft_cloud *sc = cloud_data;
+    if (!sc) return;
+    for (uint32_t i = 0; i < sc->nsets; i++) {
+        soft_set *ss = &sc->sets[i];
+        free(ss->z), free(ss->f_unc), free(ss->f_int), free(ss->runs);
+        for (int a = 0; a < 3; a++) free(ss->sorted[a]);
+        if (ss->idx_buf) k->gl->DeleteBuffers(1, &ss->idx_buf);
+    }
+    free(sc->sets);
+    free(sc);
+}
+
+/* Order-preserving bits of a float: unsigned comparison of the results orders the floats. */
+static uint32_t float_key(float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, 4);
+    return (u & 0x80000000u) ? ~u : u | 0x80000000u;
+}
+
+/* sort_axis: out = 0..n-1 ordered by key (a stable LSD radix sort, 4 passes of 8 bits; ties keep
+ * point order). tmp_k, tmp_i are scratch of n entries. */
+static void sort_axis(const uint32_t *key, uint32_t n, uint32_t *out, uint32_t *kbuf,
+                      uint32_t *tmp_k, uint32_t *tmp_i)
+{
+    for (uint32_t i = 0; i < n; i++) out[i] = i, kbuf[i] = key[i];
+    for (int shift = 0; shift < 32; shift += 8) {
+        uint32_t count[257] = {0};
+        for (uint32_t i = 0; i < n; i++) count[((kbuf[i] >> shift) & 255u) + 1]++;
+        for (int b = 0; b < 256; b++) count[b + 1] += count[b];
+        for (uint32_t i = 0; i < n; i++) {
+            uint32_t b = (kbuf[i] >> shift) & 255u, at = count[b]++;
+            tmp_k[at] = kbuf[i], tmp_i[at] = out[i];
+        }
+        memcpy(kbuf, tmp_k, (size_t)n * 4);
+        memcpy(out, tmp_i, (size_t)n * 4);
+    }
+}
+
+/* read_buffer: n * comps 4-byte values of GL buffer buf into a new array (NULL: no memory). */
+static void *read_buffer(const gl_api *gl, GLuint buf, uint64_t words)
+{
+    void *p = malloc(words ? words * 4 : 4);
+    if (!p) return NULL;
+    gl->BindBuffer(GL_COPY_READ_BUFFER, buf);
+    gl->GetBufferSubData(GL_COPY_READ_BUFFER, 0, (GLsizeiptr)(words * 4), p);
+    gl->BindBuffer(GL_COPY_READ_BUFFER, 0);
+    return p;
+}
+
+/* attach: reads back each set's positions, F and intensity once, and sorts its points along the
+ * three axes. The split itself waits for the first frame (it depends on field and t). */
+static int soft_attach(rnd_kit *k, void *state, const rnd_gpu_cloud *c, void **cloud_data,
+                       sd_err *err)
+{
+    (void)state;
+    const gl_api *gl = k->gl;
+    *cloud_data = NULL;
+    soft_cloud *sc = calloc(1, sizeof *sc);
+    if (!sc) return sd_errf(err, SD_ENOMEM, "out of memory attaching a cloud to soft");
+    sc->sets = calloc(c->nsets ? c->nsets : 1, sizeof *sc->sets);
+    if (!sc->sets) {
+        free(sc);
+        return sd_errf(err, SD_ENOMEM, "out of memory attaching a cloud to soft");
+    }
+    sc->nsets = c->nsets;
+    for (uint32_t si = 0; si < c->nsets; si++) {
+        const rnd_bufset *b = &c->sets[si];
+        soft_set *ss = &sc->sets[si];
+        uint32_t n = b->n;
+        ss->n = n;
+        float *pos = read_buffer(gl, b->buf[RND_ATTR_POS], (uint64_t)n * 3);
+        uint32_t *keys = malloc((size_t)(n ? n : 1) * 4 * 4);
+        ss->z = malloc((size_t)(n ? n : 1) * 4);
+        ss->f_unc = read_buffer(gl, b->buf[RND_ATTR_FIELD], n);
+        ss->f_int = read_buffer(gl, b->buf[RND_ATTR_INTENSITY], n);
+        for (int a = 0; a < 3; a++) ss->sorted[a] = malloc((size_t)(n ? n : 1) * 4);
+        int ok = pos && keys && ss->z && ss->f_unc && ss->f_int && ss->sorted[0] &&
+                 ss->sorted[1] && ss->sorted[2];
+        if (ok) {
+            float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+            for (int a = 0; a < 3; a++) {
+                for (uint32_t i = 0; i < n; i++) {
+                    float v = pos[3 * (size_t)i + a];
+                    keys[i] = float_key(v);
+                    lo[a] = fminf(lo[a], v), hi[a] = fmaxf(hi[a], v);
+                }
+                sort_axis(keys, n, ss->sorted[a], keys + n, keys + 2 * (size_t)n,
+                          keys + 3 * (size_t)n);
+                ss->centre[a] = n ? 0.5f * (lo[a] + hi[a]) : 0.0f;
+            }
+            for (uint32_t i = 0; i < n; i++) ss->z[i] = pos[3 * (size_t)i + 2];
+        }
+        free(pos);
+        free(keys);
+        if (!ok) {
+            soft_detach(k, state, sc);
+            return sd_errf(err, SD_ENOMEM, "out of memory sorting a cloud's points for soft");
+        }
+    }
+    int rc = gl_check(gl, "attaching a cloud to soft", err);
+    if (rc < 0) {
+        soft_detach(k, state, sc);
+        return rc;
+    }
+    *cloud_data = sc;
+    return 0;
+}
+
+/* field_of: F of point i of set ss for source field (params.h SP_FIELD_*), in [0, 1]. */
+static float field_of(const soft_set *ss, int field, float z0, float zinv, uint32_t i)
+{
+    if (field == SP_FIELD_HEIGHT) {
+        float f = (ss->z[i] - z0) * zinv;
+        return f < 0.0f ? 0.0f : f > 1.0f ? 1.0f : f;
+    }
+    return field == SP_FIELD_INTENSITY ? ss->f_int[i] : ss->f_unc[i];
+}
+
+/* make_split: the solid runs and the uploaded soft index arrays of every set for (field, t).
+ * Returns 0 or SD_ENOMEM. */
+static int make_split(const gl_api *gl, const rnd_gpu_cloud *c, soft_cloud *sc, int field,
+                      float t, sd_err *err)
+{
+    float z0 = c->bmin[2], dz = c->bmax[2] - c->bmin[2];
+    float zinv = dz > 0.0f ? 1.0f / dz : 0.0f;
+    for (uint32_t si = 0; si < sc->nsets; si++) {
+        soft_set *ss = &sc->sets[si];
+        uint32_t n = ss->n;
+        uint8_t *soft = malloc(n ? n : 1);
+        if (!soft) return sd_errf(err, SD_ENOMEM, "out of memory splitting a cloud");
+        uint32_t nsoft = 0, nruns = 0;
+        for (uint32_t i = 0; i < n; i++) {
+            soft[i] = field_of(ss, field, z0, zinv, i) > t;
+            nsoft += soft[i];
+            nruns += !soft[i] && (i == 0 || soft[i - 1]);
+        }
+        free(ss->runs);
+        ss->runs = malloc((size_t)(nruns ? nruns : 1) * 8);
+        uint32_t *idx = malloc((size_t)(nsoft ? nsoft : 1) * 3 * 4);
+        if (!ss->runs || !idx) {
+            free(soft), free(idx);
+            ss->nruns = 0;
+            return sd_errf(err, SD_ENOMEM, "out of memory splitting a cloud");
+        }
+        uint32_t r = 0;
+        for (uint32_t i = 0; i < n; i++) {
+            if (soft[i]) continue;
+            if (i == 0 || soft[i - 1]) ss->runs[2 * r] = i, ss->runs[2 * r + 1] = 0, r++;
+            ss->runs[2 * (r - 1) + 1]++;
+        }
+        ss->nruns = nruns;
+        for (int a = 0; a < 3; a++) {
+            uint32_t *o = idx + (size_t)a * nsoft;
+            for (uint32_t j = 0; j < n; j++)
+                if (soft[ss->sorted[a][j]]) *o++ = ss->sorted[a][j];
+        }
+        ss->nsoft = nsoft;
+        if (!ss->idx_buf) gl->GenBuffers(1, &ss->idx_buf);
+        gl->BindBuffer(GL_TEXTURE_BUFFER, ss->idx_buf);
+        gl->BufferData(GL_TEXTURE_BUFFER, (GLsizeiptr)((nsoft ? nsoft : 1) * 3ull * 4), idx,
+                       GL_STATIC_DRAW);
+        gl->BindBuffer(GL_TEXTURE_BUFFER, 0);
+        free(idx);
+        free(soft);
+    }
+    sc->have_split = 1, sc->field = field, sc->t = t;
+    return 0;
+}
+
+/* solid_view: *out = v with its chunks cut to the solid runs (set by set, point order kept).
+ * Returns 0 or SD_ENOMEM. */
+static int solid_view(soft_state *s, const rnd_view *v, const soft_cloud *sc, rnd_view *out,
+                      sd_err *err)
+{
+    *out = *v;
+    uint64_t n = 0, visible = 0;
+    uint32_t ci = 0;
+    while (ci < v->nchunks) {
+        uint32_t set = v->chunks[ci].set;
+        const soft_set *ss = &sc->sets[set];
+        uint32_t r = 0;
+        for (; ci < v->nchunks && v->chunks[ci].set == set; ci++) {
+            const rnd_chunk *ch = &v->chunks[ci];
+            uint64_t a = ch->first, b = (uint64_t)ch->first + ch->count;
+            while (r < ss->nruns && (uint64_t)ss->runs[2 * r] + ss->runs[2 * r + 1] <= a) r++;
+            for (uint32_t q = r; q < ss->nruns && ss->runs[2 * q] < b; q++) {
+                uint64_t lo = ss->runs[2 * q] > a ? ss->runs[2 * q] : a;
+                uint64_t hi = (uint64_t)ss->runs[2 * q] + ss->runs[2 * q + 1];
+                if (hi > b) hi = b;
+                if (hi <= lo) continue;
+                if (n == s->chunks_cap) {
+                    uint64_t cap = s->chunks_cap ? 2 * s->chunks_cap : 256;
+                    rnd_chunk *nc = realloc(s->chunks, cap * sizeof *nc);
+                    if (!nc) return sd_errf(err, SD_ENOMEM, "out of memory splitting a frame");
+                    s->chunks = nc, s->chunks_cap = cap;
+                }
+                rnd_chunk *o = &s->chunks[n++];
+                *o = *ch;
+                o->first = (uint32_t)lo, o->count = (uint32_t)(hi - lo);
+                visible += hi - lo;
+            }
+        }
+    }
+    out->chunks = s->chunks;
+    out->nchunks = (uint32_t)n;
+    out->points_visible = visible;
+    return 0;
+}
+
+/* ---- the frame ------------------------------------------------------------------------------- */
+
+typedef struct soft_order {
+    int axis, rev;             /* the sorted array, and whether it is read backwards */
+    uint32_t set_order[64];    /* sets back to front (clouds of up to 64 sets; more: set order) */
+} soft_order;
+
+/* order_sets: the axis closest to the view direction and the sets back to front along it. */
+static void order_sets(const rnd_view *v, const soft_cloud *sc, soft_order *o)
+{
+    /* The camera's forward direction in local coordinates is minus the view matrix's third
+     * row (column-major: elements 2, 6, 10). */
+    float fwd[3] = {-v->view[2], -v->view[6], -v->view[10]};
+    int axis = 0;
+    for (int a = 1; a < 3; a++)
+        if (fabsf(fwd[a]) > fabsf(fwd[axis])) axis = a;
+    o->axis = axis;
+    /* Looking along +axis, the far points have the largest coordinate: read the ascending
+     * array backwards. */
+    o->rev = fwd[axis] > 0.0f;
+    uint32_t n = sc->nsets < 64 ? sc->nsets : 64;
+    for (uint32_t i = 0; i < n; i++) o->set_order[i] = i;
+    for (uint32_t i = 1; i < n; i++) /* insertion sort: a handful of sets */
+        for (uint32_t j = i; j > 0; j--) {
+            float a = sc->sets[o->set_order[j - 1]].centre[axis];
+            float b = sc->sets[o->set_order[j]].centre[axis];
+            int swap = o->rev ? a < b : a > b;
+            if (!swap) break;
+            uint32_t tmp = o->set_order[j];
+            o->set_order[j] = o->set_order[j - 1], o->set_order[j - 1] = tmp;
+        }
+}
+
+/* draw_soft: the soft discs of every set over rows [y0, y0 + n) (keys: whether the splat
+ * passes left visibility keys for them, with halo row start yb). */
+static void draw_soft(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
+                      const soft_order *o, int keys, int y0, int n, int yb, int nb)
+{
+    const gl_api *gl = k->gl;
+    const rnd_view *v = d->view;
+    const sp_params *p = d->params;
+    const GLint *l = s->loc;
+    gl->UseProgram(s->prog);
+    gl->UniformMatrix4fv(l[SU_VIEW], 1, GL_FALSE, v->view);
+    gl->UniformMatrix4fv(l[SU_PROJ], 1, GL_FALSE, v->proj);
+    gl->Uniform2i(l[SU_SIZE], v->width, v->height);
+    if (l[SU_SCALE] >= 0) gl->Uniform1f(l[SU_SCALE], p->splat_scale);
+    if (l[SU_MAXSIZE] >= 0) gl->Uniform1f(l[SU_MAXSIZE], s->max_point);
+    if (l[SU_COLOR] >= 0) gl->Uniform1i(l[SU_COLOR], p->color);
+    if (l[SU_ZNEAR] >= 0) gl->Uniform1f(l[SU_ZNEAR], v->znear);
+    if (l[SU_ZFAR] >= 0) gl->Uniform1f(l[SU_ZFAR], v->zfar);
+    if (l[SU_FIELD] >= 0) gl->Uniform1i(l[SU_FIELD], p->field);
+    float dz = d->cloud->bmax[2] - d->cloud->bmin[2];
+    if (l[SU_ZRANGE] >= 0) gl->Uniform2f(l[SU_ZRANGE], d->cloud->bmin[2], dz > 0 ? 1.0f / dz : 0.0f);
+    if (l[SU_T] >= 0) gl->Uniform1f(l[SU_T], p->t);
+    if (l[SU_LM] >= 0) gl->Uniform1f(l[SU_LM], p->l_m);
+    if (l[SU_REV] >= 0) gl->Uniform1i(l[SU_REV], o->rev);
+    if (l[SU_STRIPE] >= 0) gl->Uniform2i(l[SU_STRIPE], yb, nb);
+    if (l[SU_KEYS_ON] >= 0) gl->Uniform1i(l[SU_KEYS_ON], keys);
+    if (l[SU_LAMBDA] >= 0) gl->Uniform1f(l[SU_LAMBDA], p->lambda);
+
+    gl->BindFramebuffer(GL_FRAMEBUFFER, d->target->fbo);
+    gl->Viewport(0, 0, v->width, v->height);
+    gl->Enable(GL_SCISSOR_TEST);
+    gl->Scissor(0, y0, v->width, n);
+    gl->Disable(GL_DEPTH_TEST);
+    gl->Enable(GL_BLEND);
+    gl->BlendFuncSeparate(GL_ONE, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
+    gl->ColorMaski(1, GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE); /* no depth writes */
+    gl->Enable(GL_PROGRAM_POINT_SIZE);
+    gl->ActiveTexture(GL_TEXTURE0 + RND_T_SPLAT_KEYS);
+    gl->BindTexture(GL_TEXTURE_BUFFER, splat__keys_texture(s->splat));
+    gl->BindVertexArray(s->vao);
+    uint32_t nsets = sc->nsets < 64 ? sc->nsets : 64;
+    for (uint32_t oi = 0; oi < sc->nsets; oi++) {
+        uint32_t si = oi < nsets ? o->set_order[oi] : oi;
+        const soft_set *ss = &sc->sets[si];
+        if (ss->nsoft == 0) continue;
+        rnd_kit_bind_set(k, &d->cloud->sets[si], p->color);
+        gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_F);
+        gl->BindTexture(GL_TEXTURE_BUFFER, s->f_tex);
+        gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI,
+                      d->cloud->sets[si].buf[p->field == SP_FIELD_INTENSITY ? RND_ATTR_INTENSITY
+                                                                             : RND_ATTR_FIELD]);
+        gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_IDX);
+        gl->BindTexture(GL_TEXTURE_BUFFER, s->idx_tex);
+        gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, ss->idx_buf);
+        gl->ActiveTexture(GL_TEXTURE0);
+        gl->Uniform1ui(l[SU_BASE], (GLuint)((uint64_t)o->axis * ss->nsoft));
+        gl->Uniform1ui(l[SU_N], ss->nsoft);
+        gl->DrawArrays(GL_POINTS, 0, (GLsizei)ss->nsoft);
+    }
+    gl->BindVertexArray(0);
+    gl->Disable(GL_PROGRAM_POINT_SIZE);
+    gl->ColorMaski(1, GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+    gl->Disable(GL_BLEND);
+    gl->Disable(GL_SCISSOR_TEST);
+}
+
+/* render: the split (remade when field or t changed), the splat passes over the solid runs,
+ * and per stripe the soft discs back to front over the resolved solid surface. */
+static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
+{
+    soft_state *s = state;
+    soft_cloud *sc = d->cloud_data;
+    const sp_params *p = d->params;
+    if (!sc) return sd_errf(err, SD_EINVAL, "soft: the cloud was not attached");
+    if (p->model != SP_MODEL_EXPRESS)
+        return sd_errf(err, SD_EINVAL, "soft: only model=express is implemented");
+    int rc = 0;
+    if (!sc->have_split || sc->field != p->field || sc->t != p->t)
+        if ((rc = make_split(k->gl, d->cloud, sc, p->field, p->t, err)) < 0) return rc;
+    rnd_view sv;
+    if ((rc = solid_view(s, d->view, sc, &sv, err)) < 0) return rc;
+    rnd_draw sd = *d;
+    sd.view = &sv;
+    soft_order o;
+    order_sets(d->view, sc, &o);
+
+    splat_frame f;
+    int nstripes = splat__frame_begin(k, s->splat, &sd, &f, err);
+    rc = nstripes < 0 ? nstripes : 0;
+    for (int i = 0; i < nstripes && rc == 0; i++) {
+        splat__stripe_begin(k, s->splat, &f, i);
+        if ((rc = splat__visibility(k, s->splat, &f, err)) == 0 &&
+            (rc = splat__attributes(k, s->splat, &f, err)) == 0) {
+            splat__resolve(k, s->splat, &f);
+            int height = d->view->height;
+            int yb = f.y0 > 0 ? f.y0 - 1 : 0; /* the keys' first row (splat's halo) */
+            int nb = (f.y0 + f.n < height ? f.y0 + f.n + 1 : f.y0 + f.n) - yb;
+            if (p->lambda > 0.0f || p->l_m > p->t)
+                draw_soft(k, s, d, sc, &o, 1, f.y0, f.n, yb, nb);
+            /* draw_soft bound its sets' buffers; splat binds one set once per frame, so give
+             * it back (several sets are rebound by the splat passes themselves). */
+            if (f.one_set) rnd_kit_bind_set(k, &d->cloud->sets[0], p->color);
+        }
+    }
+    if (nstripes == 0 && (p->lambda > 0.0f || p->l_m > p->t))
+        draw_soft(k, s, d, sc, &o, 0, 0, d->view->height, 0, d->view->height);
+    int end = splat__frame_end(k, s->splat, err);
+    return rc < 0 ? rc : end;
+}
+
+const rnd_pipeline pipe_soft = {
+    .name = "soft",
+    .needs = 1u << RND_ATTR_POS | 1u << RND_ATTR_NORMAL | 1u << RND_ATTR_RADIUS |
+             1u << RND_ATTR_RGBA | 1u << RND_ATTR_FIELD | 1u << RND_ATTR_INTENSITY,
+    .create = soft_create,
+    .destroy = soft_destroy,
+    .attach = soft_attach,
+    .detach = soft_detach,
+    .render = soft_render,
+};

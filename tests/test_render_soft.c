@@ -1,0 +1,521 @@
+/* test_render_soft.c — the `soft` pipeline (Soft Transparency, Express-Model) on llvmpipe
+ * through the public renderer (render.h), against analytic expectations:
+ *   - t = 1 (nothing soft) gives exactly the `splat` image;
+ *   - lambda = 0 makes the soft points invisible: the image equals `splat` of the solid points;
+ *   - one soft disc facing the camera has eq. 19's opacity at every pixel of its footprint;
+ *   - two soft discs of known colours composite as premultiplied "over", front over back, from
+ *     both view directions, and soft discs behind a solid surface are hidden by it;
+ *   - transparency modulation (eq. 22): the colour step at the solid/soft boundary of a plane
+ *     whose F ramps across t is at least 2x smaller with l_m than without;
+ *   - field=height on a real scan: lambda = 0 equals `splat` of the points at most half way up,
+ *     and t, lambda and field change between frames of one upload.
+ * Each check states its tolerance. Timings are in `make bench` (render_bench --pipelines
+ * points,splat,soft), not here. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "camera.h"
+#include "cloud.h"
+#include "prep.h"
+#include "render.h"
+#include "rndtest.h"
+#include "testutil.h"
+
+enum { W = 192, H = 192 };
+static const double OFF[3] = {500000.0, 4100000.0, 120.0}; /* a UTM-like offset */
+
+static rnd_ctx *g_ctx;
+
+static int setup(void **state)
+{
+    (void)state;
+    rnd_desc d = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS")};
+    sd_err err = {0};
+    g_ctx = rnd_create(&d, &err);
+    if (!g_ctx) fprintf(stderr, "rnd_create: %s\n", err.msg);
+    return g_ctx ? 0 : -1;
+}
+
+static int teardown(void **state)
+{
+    (void)state;
+    rnd_destroy(g_ctx);
+    g_ctx = NULL;
+    return 0;
+}
+
+/* A camera at local (0, 0, ez) looking at the local origin, up +y, fov 40, explicit clip
+ * distances (so that clouds with other bounds get the same projection). */
+static rnd_camera cam_z(double ez)
+{
+    rnd_camera c = {{OFF[0], OFF[1], ez + OFF[2]}, {OFF[0], OFF[1], OFF[2]}, {0, 1, 0},
+                    40, 0.05f, 20.0f, W, H};
+    return c;
+}
+
+/* The screen radius in pixels of a face-on disc of radius r at eye depth z (fov 40, H rows). */
+static double disc_px(double r, double z)
+{
+    return r / tan(20.0 * M_PI / 180.0) * 0.5 * H / z;
+}
+
+static const uint8_t *pix(const rnd_frame *f, int x, int y)
+{
+    return f->rgba8 + 4 * ((size_t)y * f->width + x);
+}
+
+/* max_diff: the largest channel difference (RGB) between two frames, and *ndiff the pixels
+ * that differ at all. */
+static int max_diff(const rnd_frame *a, const rnd_frame *b, int *ndiff)
+{
+    int m = 0, n = 0;
+    for (size_t i = 0; i < (size_t)a->width * a->height; i++) {
+        int any = 0;
+        for (int c = 0; c < 3; c++) {
+            int d = abs(a->rgba8[4 * i + c] - b->rgba8[4 * i + c]);
+            if (d > m) m = d;
+            any |= d != 0;
+        }
+        n += any;
+    }
+    if (ndiff) *ndiff = n;
+    return m;
+}
+
+static uint64_t rng_next(uint64_t *s)
+{
+    *s = *s * 6364136223846793005ull + 1442695040888963407ull;
+    return *s >> 33;
+}
+
+static float rng01(uint64_t *s)
+{
+    return (float)rng_next(s) / (float)(1u << 31);
+}
+
+/* A plane of nx x ny points z = 0, spacing h, radius 1.5 h, random colours and F (seeded). */
+static void random_plane(pc_prepared *pc, int nx, int ny, float h, uint64_t seed)
+{
+    tu_new_cloud(pc, (uint64_t)nx * ny, 0);
+    for (int j = 0; j < ny; j++)
+        for (int i = 0; i < nx; i++) {
+            uint64_t k = (uint64_t)j * nx + i;
+            pc->pos[3 * k] = (i - 0.5f * (nx - 1)) * h;
+            pc->pos[3 * k + 1] = (j - 0.5f * (ny - 1)) * h;
+            pc->pos[3 * k + 2] = 0.0f;
+            pc->radius[k] = 1.5f * h;
+            for (int c = 0; c < 3; c++) pc->rgba[4 * k + c] = (uint8_t)(rng_next(&seed) & 255);
+            pc->F[k] = rng01(&seed);
+        }
+}
+
+/* ---- tests ---- */
+
+/* t = 1: every F in [0, 1] is solid, so soft runs exactly the splat passes over exactly the
+ * frame's chunks: the images must be identical (tolerance 0), whatever lambda and l_m are. */
+static void test_t1_equals_splat(void **state)
+{
+    (void)state;
+    pc_prepared pc;
+    random_plane(&pc, 90, 90, 0.02f, 1);
+    tu_finish_cloud(&pc, OFF);
+    uint32_t id = tu_upload(g_ctx, &pc);
+    pc_prepared_free(&pc);
+    rnd_camera cam = cam_z(3.0);
+    cam.eye[0] += 0.7; /* an oblique view */
+    sp_params p;
+    sp_params_defaults(&p);
+    rnd_frame a = {0}, b = {0};
+    tu_render(g_ctx, id, &cam, &p, 0, &a);
+    const float lambdas[2] = {0.5f, 1.0f};
+    for (int i = 0; i < 2; i++) {
+        p.pipeline = SP_PIPE_SOFT, p.t = 1.0f, p.lambda = lambdas[i], p.l_m = 1.0f;
+        tu_render(g_ctx, id, &cam, &p, 0, &b);
+        int n, m = max_diff(&a, &b, &n);
+        printf("t = 1, lambda %.1f: max difference to splat %d (%d pixels)\n", lambdas[i], m, n);
+        assert_int_equal(m, 0);
+        rnd_frame_free(&b);
+    }
+    rnd_frame_free(&a);
+    rnd_release(g_ctx, id);
+}
+
+/* lambda = 0 (and no modulation): the soft points are invisible, and the solid ones are drawn
+ * by the splat passes as a cloud of only them would be. The soft points (random F > t) are
+ * lifted 0.1 in front of the solid ones' plane, so that they would show if drawn. The reference is `splat` of a second
+ * cloud holding just the solid points, in the same order, with the same offset and clip
+ * distances. Tolerance: at most 1 level in at most 0.5 % of the pixels — the splat passes read
+ * the same points but the weight sums are float atomics whose order can differ between the
+ * two dispatches; measured 0. The same frame with lambda = 0.5 must differ (the soft points
+ * are there) in at least 5 % of the pixels. */
+static void test_lambda0_is_solid_splat(void **state)
+{
+    (void)state;
+    enum { NX = 90 };
+    pc_prepared pc, solid;
+    random_plane(&pc, NX, NX, 0.02f, 2);
+    const float t = 0.6f;
+    uint64_t m = 0;
+    for (uint64_t i = 0; i < pc.n; i++) {
+        m += pc.F[i] <= t;
+        if (pc.F[i] > t) pc.pos[3 * i + 2] = 0.1f; /* soft points in front of the solid ones */
+    }
+    tu_new_cloud(&solid, m, 0);
+    for (uint64_t i = 0, j = 0; i < pc.n; i++) {
+        if (pc.F[i] > t) continue;
+        memcpy(&solid.pos[3 * j], &pc.pos[3 * i], 12);
+        memcpy(&solid.normal[3 * j], &pc.normal[3 * i], 12);
+        memcpy(&solid.rgba[4 * j], &pc.rgba[4 * i], 4);
+        solid.radius[j] = pc.radius[i], solid.F[j] = pc.F[i];
+        j++;
+    }
+    tu_finish_cloud(&pc, OFF);
+    tu_finish_cloud(&solid, OFF);
+    uint32_t id = tu_upload(g_ctx, &pc), sid = tu_upload(g_ctx, &solid);
+    printf("lambda = 0: %llu solid of %llu points\n", (unsigned long long)m,
+           (unsigned long long)pc.n);
+    pc_prepared_free(&pc);
+    pc_prepared_free(&solid);
+    rnd_camera cam = cam_z(3.0);
+    sp_params p;
+    sp_params_defaults(&p);
+    rnd_frame ref = {0}, f = {0};
+    tu_render(g_ctx, sid, &cam, &p, 0, &ref);
+    p.pipeline = SP_PIPE_SOFT, p.t = t, p.lambda = 0.0f;
+    tu_render(g_ctx, id, &cam, &p, 0, &f);
+    int n, md = max_diff(&ref, &f, &n);
+    printf("lambda = 0: max difference to splat of the solid points %d (%d pixels)\n", md, n);
+    assert_true(md <= 1);
+    assert_true(n <= W * H / 200);
+    rnd_frame_free(&f);
+    p.lambda = 0.5f;
+    tu_render(g_ctx, id, &cam, &p, 0, &f);
+    md = max_diff(&ref, &f, &n);
+    printf("lambda = 0.5: %d pixels differ from splat of the solid points\n", n);
+    assert_true(n >= W * H / 20);
+    rnd_frame_free(&f);
+    rnd_frame_free(&ref);
+    rnd_release(g_ctx, id);
+    rnd_release(g_ctx, sid);
+}
+
+/* One cloud of soft single points (F = 1, t = 0.5): (x, y, z, radius, rgb). */
+typedef struct disc {
+    float x, y, z, r;
+    uint8_t rgb[3];
+    float F;
+} disc;
+
+static uint32_t upload_discs(const disc *d, int n)
+{
+    pc_prepared pc;
+    tu_new_cloud(&pc, (uint64_t)n, 1);
+    for (int i = 0; i < n; i++) {
+        pc.pos[3 * i] = d[i].x, pc.pos[3 * i + 1] = d[i].y, pc.pos[3 * i + 2] = d[i].z;
+        pc.radius[i] = d[i].r;
+        memcpy(&pc.rgba[4 * i], d[i].rgb, 3);
+        pc.F[i] = d[i].F;
+    }
+    tu_finish_cloud(&pc, OFF);
+    uint32_t id = tu_upload(g_ctx, &pc);
+    pc_prepared_free(&pc);
+    return id;
+}
+
+/* Eq. 19 at normalised distance d. */
+static double phi19(double lambda, double d)
+{
+    return d < 1.0 ? lambda * (cos(M_PI * d) + 1.0) / 2.0 : 0.0;
+}
+
+/* A white soft disc facing the camera on black: each pixel's colour is the composited alpha,
+ * which must be eq. 19 at the pixel centre's distance from the disc's centre. Tolerance: 1 level
+ * of 8 bits (the blend's result is rounded to RGBA8 once), over every pixel whose distance is
+ * under 0.97 r (the rim, where the sprite's cut-off and the analytic radius may disagree by a
+ * fraction of a pixel, is left out); the centre pixel and the pixels nearest d = r / 2 are
+ * reported. */
+static void test_disc_opacity_eq19(void **state)
+{
+    (void)state;
+    const disc d[1] = {{0, 0, 0, 0.5f, {255, 255, 255}, 1.0f}};
+    uint32_t id = upload_discs(d, 1);
+    rnd_camera cam = cam_z(4.0);
+    sp_params p;
+    sp_params_defaults(&p);
+    p.pipeline = SP_PIPE_SOFT, p.t = 0.5f, p.lambda = 0.7f;
+    rnd_frame f = {0};
+    tu_render(g_ctx, id, &cam, &p, 0, &f);
+    double rpx = disc_px(0.5, 4.0), cx = 0.5 * W, cy = 0.5 * H;
+    int worst = 0, nin = 0;
+    double at_half = -1, best_half = 1e9;
+    int half_px = 0;
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            double dn = hypot(x + 0.5 - cx, y + 0.5 - cy) / rpx;
+            int got = pix(&f, x, y)[0];
+            if (dn >= 0.97 && dn <= 1.03) continue;
+            int want = (int)lround(255.0 * phi19(p.lambda, dn));
+            int e = abs(got - want);
+            if (e > worst) worst = e;
+            nin += dn < 1.0;
+            if (fabs(dn - 0.5) < best_half) best_half = fabs(dn - 0.5), at_half = dn, half_px = got;
+        }
+    int c0 = pix(&f, W / 2, H / 2)[0];
+    double dc = hypot(0.5, 0.5) / rpx;
+    printf("soft disc: %.1f px radius, %d pixels inside; centre pixel %d (eq. 19: %.2f), at d = "
+           "%.3f r %d (eq. 19: %.2f); largest error %d levels\n", rpx, nin, c0,
+           255.0 * phi19(p.lambda, dc), at_half, half_px, 255.0 * phi19(p.lambda, at_half), worst);
+    assert_true(nin > 1000);
+    assert_true(worst <= 1);
+    rnd_frame_free(&f);
+    rnd_release(g_ctx, id);
+}
+
+/* Two soft discs on the z axis, red at z = +0.3 and green at z = -0.3, both larger than the
+ * frame's centre region, seen from +z and from -z. At a pixel the front one's alpha aF and the
+ * back one's aB (eq. 19, known from the pixel's distance), the premultiplied "over" gives
+ * front colour aF cF + (1 - aF) aB cB. Tolerance: 2 levels (each of the two blends rounds to 8
+ * bits once). The wrong order would put aB in the back colour's channel and (1 - aB) aF in the
+ * front one's: with the alphas used here that is off by more than 40 levels. Also: a soft
+ * disc behind a solid plane (F = 0) is hidden where the plane is (that pixel equals the frame
+ * with lambda = 0, the plane alone, tolerance 0), and one in front of it blends over the plane's
+ * colour (tolerance 2 levels, as above). */
+static void test_two_layers_order(void **state)
+{
+    (void)state;
+    const disc d[2] = {{0, 0, 0.3f, 0.6f, {255, 0, 0}, 1.0f}, {0, 0, -0.3f, 0.6f, {0, 255, 0}, 1.0f}};
+    uint32_t id = upload_discs(d, 2);
+    sp_params p;
+    sp_params_defaults(&p);
+    p.pipeline = SP_PIPE_SOFT, p.t = 0.5f, p.lambda = 0.8f;
+    for (int side = 0; side < 2; side++) {
+        double ez = side == 0 ? 4.0 : -4.0;
+        rnd_camera cam = cam_z(ez);
+        rnd_frame f = {0};
+        tu_render(g_ctx, id, &cam, &p, 0, &f);
+        int worst = 0, wrong_min = 255;
+        const int xs[3] = {W / 2, W / 2 + 10, W / 2 + 20};
+        for (int q = 0; q < 3; q++) {
+            int x = xs[q], y = H / 2;
+            double off = hypot(x + 0.5 - 0.5 * W, y + 0.5 - 0.5 * H);
+            double zr = fabs(ez - 0.3), zg = fabs(ez + 0.3);
+            double ar = phi19(p.lambda, off / disc_px(0.6, zr));
+            double ag = phi19(p.lambda, off / disc_px(0.6, zg));
+            double r, g, rw, gw; /* right and wrong order */
+            if (side == 0) r = ar, g = (1 - ar) * ag, rw = (1 - ag) * ar, gw = ag;
+            else g = ag, r = (1 - ag) * ar, gw = (1 - ar) * ag, rw = ar;
+            const uint8_t *px = pix(&f, x, y);
+            int er = abs(px[0] - (int)lround(255 * r)), eg = abs(px[1] - (int)lround(255 * g));
+            worst = er > worst ? er : worst;
+            worst = eg > worst ? eg : worst;
+            int wr = abs((int)lround(255 * rw) - (int)lround(255 * r)) +
+                     abs((int)lround(255 * gw) - (int)lround(255 * g));
+            if (wr < wrong_min) wrong_min = wr;
+            printf("two layers from %s z, pixel (%d, %d): got (%d, %d), over gives (%.1f, %.1f), "
+                   "the other order (%.1f, %.1f)\n", side == 0 ? "+" : "-", x, y, px[0], px[1],
+                   255 * r, 255 * g, 255 * rw, 255 * gw);
+        }
+        assert_true(worst <= 2);
+        assert_true(wrong_min > 40); /* the check can tell the two orders apart */
+        rnd_frame_free(&f);
+    }
+    rnd_release(g_ctx, id);
+
+    /* A solid plane at z = 0 (blue, F = 0) over x < 0.6, a soft red disc behind it at x = 0.2
+     * and a soft green disc in front of it at x = -0.2 (both off the plane's right edge by
+     * design of their radius), seen from +z. */
+    enum { NX = 80 };
+    pc_prepared pc;
+    tu_new_cloud(&pc, NX * NX + 2, 0);
+    const float h = 0.02f;
+    for (int j = 0; j < NX; j++)
+        for (int i = 0; i < NX; i++) {
+            uint64_t k = (uint64_t)j * NX + i;
+            pc.pos[3 * k] = (i - 0.5f * (NX - 1)) * h;
+            pc.pos[3 * k + 1] = (j - 0.5f * (NX - 1)) * h;
+            pc.radius[k] = 1.5f * h;
+            pc.rgba[4 * k] = 0, pc.rgba[4 * k + 1] = 0, pc.rgba[4 * k + 2] = 255;
+            pc.F[k] = 0.0f;
+        }
+    const float sx[2] = {0.4f, -0.4f}, sz[2] = {-0.3f, 0.3f};
+    for (int s = 0; s < 2; s++) {
+        uint64_t k = NX * NX + (uint64_t)s;
+        pc.pos[3 * k] = sx[s], pc.pos[3 * k + 1] = 0, pc.pos[3 * k + 2] = sz[s];
+        pc.radius[k] = 0.15f;
+        pc.rgba[4 * k] = s == 0 ? 255 : 0, pc.rgba[4 * k + 1] = s == 1 ? 255 : 0;
+        pc.rgba[4 * k + 2] = 0;
+        pc.F[k] = 1.0f;
+    }
+    tu_finish_cloud(&pc, OFF);
+    uint32_t pid = tu_upload(g_ctx, &pc);
+    pc_prepared_free(&pc);
+    rnd_camera cam = cam_z(3.0);
+    rnd_frame fs = {0}, ft = {0};
+    sp_params ps = p;
+    ps.lambda = 0.0f; /* the plane alone */
+    tu_render(g_ctx, pid, &cam, &ps, 0, &fs);
+    tu_render(g_ctx, pid, &cam, &p, 0, &ft);
+    /* The disc centres' pixels. */
+    double f1 = 1.0 / tan(20.0 * M_PI / 180.0);
+    int bx = (int)floor((0.4 * f1 / 3.3 + 1) * 0.5 * W), gx = (int)floor((-0.4 * f1 / 2.7 + 1) * 0.5 * W);
+    const uint8_t *behind_s = pix(&fs, bx, H / 2), *behind_t = pix(&ft, bx, H / 2);
+    const uint8_t *front_s = pix(&fs, gx, H / 2), *front_t = pix(&ft, gx, H / 2);
+    double ag = phi19(p.lambda, hypot(gx + 0.5 - (-0.4 * f1 / 2.7 + 1) * 0.5 * W, 0.5) /
+                                    disc_px(0.15, 2.7));
+    printf("behind the solid plane: lambda 0 (%d, %d, %d), 0.8 (%d, %d, %d); in front: lambda 0 (%d, "
+           "%d, %d), soft (%d, %d, %d), over gives green %.1f, blue %.1f\n", behind_s[0],
+           behind_s[1], behind_s[2], behind_t[0], behind_t[1], behind_t[2], front_s[0],
+           front_s[1], front_s[2], front_t[0], front_t[1], front_t[2], 255 * ag,
+           (1 - ag) * front_s[2]);
+    assert_true(behind_s[2] > 100); /* the plane is there */
+    assert_memory_equal(behind_s, behind_t, 3);
+    assert_true(abs(front_t[1] - (int)lround(255 * ag)) <= 2);
+    assert_true(abs(front_t[2] - (int)lround((1 - ag) * front_s[2])) <= 2);
+    rnd_frame_free(&fs);
+    rnd_frame_free(&ft);
+    rnd_release(g_ctx, pid);
+}
+
+/* Modulation (eq. 22): a dense white plane whose F ramps linearly from 0 at the left edge to 1
+ * at the right, t = 0.4, lambda = 0.3. Along the middle row, the largest colour step between
+ * neighbouring pixels over the inner part of the plane (away from its edges) is measured
+ * without modulation (l_m = 0) and with l_m = 0.8; the second must be at most half the first
+ * (the issue's criterion). The steps are also required to be real: at least 20 levels without
+ * modulation. */
+static void test_modulation(void **state)
+{
+    (void)state;
+    enum { NX = 160, NY = 40 };
+    pc_prepared pc;
+    tu_new_cloud(&pc, NX * NY, 0);
+    const float h = 0.01f;
+    for (int j = 0; j < NY; j++)
+        for (int i = 0; i < NX; i++) {
+            uint64_t k = (uint64_t)j * NX + i;
+            pc.pos[3 * k] = (i - 0.5f * (NX - 1)) * h;
+            pc.pos[3 * k + 1] = (j - 0.5f * (NY - 1)) * h;
+            pc.radius[k] = 1.5f * h;
+            pc.F[k] = (float)i / (NX - 1);
+        }
+    tu_finish_cloud(&pc, OFF);
+    uint32_t id = tu_upload(g_ctx, &pc);
+    pc_prepared_free(&pc);
+    rnd_camera cam = cam_z(2.2);
+    sp_params p;
+    sp_params_defaults(&p);
+    p.pipeline = SP_PIPE_SOFT, p.t = 0.4f, p.lambda = 0.3f;
+    double half_w = 0.5 * (NX - 1) * h * (1.0 / tan(20.0 * M_PI / 180.0)) / 2.2 * 0.5 * H;
+    int x0 = (int)ceil(0.5 * W - half_w) + 6, x1 = (int)floor(0.5 * W + half_w) - 6;
+    int steps[2];
+    const float lms[2] = {0.0f, 0.8f};
+    for (int m = 0; m < 2; m++) {
+        p.l_m = lms[m];
+        rnd_frame f = {0};
+        tu_render(g_ctx, id, &cam, &p, 0, &f);
+        int worst = 0, wx = 0;
+        for (int x = x0; x < x1; x++) {
+            int s = 0;
+            for (int c = 0; c < 3; c++) {
+                int dd = abs(pix(&f, x + 1, H / 2)[c] - pix(&f, x, H / 2)[c]);
+                if (dd > s) s = dd;
+            }
+            if (s > worst) worst = s, wx = x;
+        }
+        steps[m] = worst;
+        printf("modulation l_m = %.1f: largest step %d levels at x = %d (plane x %d..%d; "
+               "left %d, right %d)\n", lms[m], worst, wx, x0, x1, pix(&f, x0, H / 2)[0],
+               pix(&f, x1, H / 2)[0]);
+        rnd_frame_free(&f);
+    }
+    assert_true(steps[0] >= 20);
+    assert_true(2 * steps[1] <= steps[0]);
+    rnd_release(g_ctx, id);
+}
+
+/* field=height on a real scan (bun000.ply, prepared here): F = (z - zmin) / (zmax - zmin). With
+ * lambda = 0 and t = 0.8 the frame equals `splat` of a cloud of the points with F <= t (same order, offset,
+ * camera and clip distances; tolerance as test_lambda0_is_solid_splat: at most 1 level in at
+ * most 0.5 % of the pixels). Then, on the same upload, lambda = 0.5 changes the frame, and
+ * field=uncertainty gives a different frame again (t, lambda and field are live). */
+static void test_field_height(void **state)
+{
+    (void)state;
+    char path[4096];
+    tu_data("bun000.ply", path, sizeof path);
+    sd_err err = {0};
+    pc_cloud cl;
+    if (pc_load(path, &cl, &err) < 0) fail_msg("%s", err.msg);
+    prep_desc pd = {0};
+    pc_prepared pc;
+    if (prep_run(&cl, &pd, &pc, &err) < 0) fail_msg("%s", err.msg);
+    pc_cloud_free(&cl);
+    const float t = 0.8f; /* the scan's points are mostly near the far end of its z range */
+    float zmin = INFINITY, zmax = -INFINITY;
+    for (uint64_t i = 0; i < pc.n; i++)
+        zmin = fminf(zmin, pc.pos[3 * i + 2]), zmax = fmaxf(zmax, pc.pos[3 * i + 2]);
+    uint64_t m = 0;
+    for (uint64_t i = 0; i < pc.n; i++) m += (pc.pos[3 * i + 2] - zmin) / (zmax - zmin) <= t;
+    pc_prepared solid;
+    tu_new_cloud(&solid, m, 0);
+    for (uint64_t i = 0, j = 0; i < pc.n; i++) {
+        if (!((pc.pos[3 * i + 2] - zmin) / (zmax - zmin) <= t)) continue;
+        memcpy(&solid.pos[3 * j], &pc.pos[3 * i], 12);
+        memcpy(&solid.normal[3 * j], &pc.normal[3 * i], 12);
+        if (pc.rgba) memcpy(&solid.rgba[4 * j], &pc.rgba[4 * i], 4);
+        solid.radius[j] = pc.radius[i], solid.F[j] = pc.F[i];
+        j++;
+    }
+    tu_finish_cloud(&solid, pc.offset);
+    rnd_camera cam;
+    rnd_camera_frame(pc.bmin, pc.bmax, 256, 256, &cam);
+    cam.znear = 0.01f, cam.zfar = 10.0f;
+    printf("bun000: %llu points, %llu with F <= t = 0.8 in z\n", (unsigned long long)pc.n,
+           (unsigned long long)m);
+    assert_true(m > pc.n / 10 && m < pc.n - pc.n / 10);
+    uint32_t id = tu_upload(g_ctx, &pc), sid = tu_upload(g_ctx, &solid);
+    pc_prepared_free(&pc);
+    pc_prepared_free(&solid);
+    sp_params p;
+    sp_params_defaults(&p);
+    rnd_frame ref = {0}, f0 = {0}, f1 = {0}, f2 = {0};
+    tu_render(g_ctx, sid, &cam, &p, 0, &ref);
+    p.pipeline = SP_PIPE_SOFT, p.field = SP_FIELD_HEIGHT, p.t = t, p.lambda = 0.0f;
+    tu_render(g_ctx, id, &cam, &p, 0, &f0);
+    int n0, m0 = max_diff(&ref, &f0, &n0);
+    p.lambda = 0.5f;
+    tu_render(g_ctx, id, &cam, &p, 0, &f1);
+    int n1;
+    max_diff(&f0, &f1, &n1);
+    p.field = SP_FIELD_UNCERTAINTY;
+    tu_render(g_ctx, id, &cam, &p, 0, &f2);
+    int n2;
+    max_diff(&f1, &f2, &n2);
+    printf("field=height: lambda 0 vs splat of the solid points: max %d (%d pixels); lambda 0.5 "
+           "changes %d pixels; field=uncertainty then changes %d\n", m0, n0, n1, n2);
+    assert_true(m0 <= 1 && n0 <= 256 * 256 / 200);
+    assert_true(n1 > 500);
+    assert_true(n2 > 500);
+    rnd_frame_free(&ref), rnd_frame_free(&f0), rnd_frame_free(&f1), rnd_frame_free(&f2);
+    rnd_release(g_ctx, id);
+    rnd_release(g_ctx, sid);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_t1_equals_splat),
+        cmocka_unit_test(test_lambda0_is_solid_splat),
+        cmocka_unit_test(test_disc_opacity_eq19),
+        cmocka_unit_test(test_two_layers_order),
+        cmocka_unit_test(test_modulation),
+        cmocka_unit_test(test_field_height),
+    };
+    return cmocka_run_group_tests(tests, setup, teardown);
+}
