@@ -1158,6 +1158,25 @@ static void test_error_texts(void **state)
     printf("binary file bytes, as sent back: %s\n", text);
     assert_true(clean_utf8(text));
     assert_null(strchr(text, 0x1b));
+    /* The same through `splatd prep` on a terminal's stderr: escaped, no ESC byte. */
+    char out[700];
+    snprintf(out, sizeof out, "%s/prep.out", f->root);
+    const char *argv[] = {tu_splatd_bin(), "prep", path, "--cache", f->cache, "--quiet", NULL};
+    double el;
+    assert_int_equal(run_cmd(argv, out, 30, &el, NULL, NULL), 1);
+    size_t olen;
+    char *o = (char *)tu_read_file(out, &olen);
+    assert_non_null(o);
+    assert_non_null(strstr(o, "bad number token"));
+    assert_null(memchr(o, 0x1b, olen));
+    assert_null(memchr(o, 0x80, olen));
+    free(o);
+    /* And in the daemon's log: one line per event, no raw byte of the file. */
+    o = (char *)tu_read_file(f->d.log, &olen);
+    assert_non_null(o);
+    assert_null(memchr(o, 0x1b, olen));
+    assert_null(memchr(o, 0x80, olen));
+    free(o);
 
     /* A CAMERA 1e308 away: out of range, not "eye and target are the same point". */
     assert_int_equal(proto_enc_open(&b, 5, "bunny"), 0);

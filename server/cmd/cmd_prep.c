@@ -7,6 +7,7 @@
 
 #include "cache.h"
 #include "commands.h"
+#include "srv.h"
 #include "prep.h"
 
 static void warn_stderr(void *user, const char *msg)
@@ -80,7 +81,10 @@ int cmd_prep(int argc, char **argv)
     if (swept) fprintf(stderr, "splatd prep: removed %d temporary file(s) of interrupted cache "
                        "writes from %s\n", swept, cdir);
     if (cache_open_cloud(file, &d, &p, &r, &err) < 0) {
-        fprintf(stderr, "splatd prep: %s\n", err.msg);
+        /* A parse error may quote the file's bytes: never raw to a terminal (escape codes). */
+        char clean[sizeof err.msg * 4];
+        srv_clean_text(err.msg, clean, sizeof clean);
+        fprintf(stderr, "splatd prep: %s\n", clean);
         return 1;
     }
     char attrs[128];

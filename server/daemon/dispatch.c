@@ -584,7 +584,9 @@ static void on_cloud_done(srv *sv, const rt_event *ev)
                 (unsigned long long)c->info.summary.points, c->info.cache_hit ? "from the cache" : "prepared",
                 (double)(ev_now_ms() - c->t_start_ms) / 1000.0);
     } else {
-        srv_log(sv, NULL, "cloud %s failed: %s", c->name, ev->err.msg);
+        char clean[sizeof ev->err.msg * 4];
+        srv_clean_text(ev->err.msg, clean, sizeof clean); /* it may quote the file's bytes */
+        srv_log(sv, NULL, "cloud %s failed: %s", c->name, clean);
     }
     /* Detach the waiters first: a waiter's buffered requests may OPEN this cloud again. */
     srv_waiter *w = c->waiters;
@@ -619,7 +621,9 @@ static void on_frame_ev(srv *sv, rt_event *ev)
     if (!s) return; /* its slot was already cleared by rt_client_close */
     if (ev->kind == RT_EV_FRAME_FAILED) {
         if (ev->meta.stream) {
-            srv_log(sv, s, "streamed frame failed: %s", ev->err.msg);
+            char clean[sizeof ev->err.msg * 4];
+            srv_clean_text(ev->err.msg, clean, sizeof clean);
+            srv_log(sv, s, "streamed frame failed: %s", clean);
             return;
         }
         /* The placeholder becomes the ERROR answer, in order. */
