@@ -1020,7 +1020,8 @@ static void test_cache_kill9(void **state)
 }
 
 /* `splatd prep` exits 1 when it prepared the cloud but could not write its cache (a cache
- * path under a regular file; a cache directory others may write), and 0 when it could. */
+ * path under a regular file; a cache directory others may write), and 0 when it could; the
+ * daemon serves the cloud without the cache and logs why. */
 static void test_prep_exit_status(void **state)
 {
     fx *f = *state;
@@ -1049,6 +1050,13 @@ static void test_prep_exit_status(void **state)
     free(o);
     const char *a3[] = {tu_splatd_bin(), "prep", src, "--cache", f->cache, "--quiet", NULL};
     assert_int_equal(run_cmd(a3, out, 60, &el, NULL, NULL), 0);
+    /* The daemon serves the cloud without a cache there, and says why in its log. */
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", open_dir, NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    assert_true(legit_session(f->d.port, 0) > 0);
+    assert_int_equal(log_count(&f->d, "cache: cache directory"), 1);
+    assert_int_equal(log_count(&f->d, "writable by others"), 1);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
 /* A FIFO where a cloud or a cache file is expected is refused at once: opening one for

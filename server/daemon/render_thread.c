@@ -15,6 +15,7 @@
 
 #include "encode.h"
 #include "ev.h"
+#include "srv.h"
 
 enum { RT_NFRAMES = 2 };
 
@@ -378,6 +379,17 @@ static void *enc_main(void *arg)
     return NULL;
 }
 
+/* on_cache_warn: a damaged cache being rebuilt, or a cache that cannot be written (the cloud
+ * is served without one): one line in the daemon's log, as clean text (prep thread; stdio
+ * serialises the line). */
+static void on_cache_warn(void *user, const char *msg)
+{
+    (void)user;
+    char clean[1200];
+    srv_clean_text(msg, clean, sizeof clean);
+    srv_log(NULL, NULL, "cache: %s", clean);
+}
+
 /* Progress of one prep job, throttled to one event per 100 ms per phase. */
 static void on_progress(void *user, int phase, double fraction)
 {
@@ -414,7 +426,7 @@ static void *prep_main(void *arg)
 
         prep_prog pp = {.rt = rt, .job = j->job, .phase = -1};
         cache_desc cd = {.dir = rt->d.cache_dir, .threads = rt->d.prep_threads,
-                         .progress = on_progress, .user = &pp};
+                         .progress = on_progress, .warn = on_cache_warn, .user = &pp};
         cache_result res;
         sd_err err = {0};
         pc_prepared *p = calloc(1, sizeof *p);
