@@ -34,7 +34,8 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(LAMBDA,       "lambda",       SP_T_FLOAT, lambda,       0,    1,        "0.5",    NULL)     \
     X(T,            "t",            SP_T_FLOAT, t,            0,    1,        "0.5",    NULL)     \
     X(L_M,          "l_m",          SP_T_FLOAT, l_m,          0,    1,        "0",      NULL)     \
-    X(FIELD,        "field",        SP_T_ENUM,  field,        0,    0,        "uncertainty", "uncertainty|height|intensity")
+    X(FIELD,        "field",        SP_T_ENUM,  field,        0,    0,        "uncertainty", "uncertainty|height|intensity") \
+    X(ORDER,        "order",        SP_T_ENUM,  order,        0,    0,        "axis",   "axis|tile")
 
 enum {
 #define SP_ID_(id, name, type, field, lo, hi, def, vals) SP_##id,
@@ -65,6 +66,10 @@ enum { SP_MODEL_EXPRESS = 0 };
  * zmin) over the cloud's local bounds; intensity = the file's intensity normalised by its range
  * at upload (render.c). */
 enum { SP_FIELD_UNCERTAINTY = 0, SP_FIELD_HEIGHT, SP_FIELD_INTENSITY };
+/* order: both composite the soft discs back to front in the order of the axis-sorted index
+ * arrays (pipe_soft.c); axis = as GL point sprites blended in primitive order, tile = a compute
+ * compositor that bins them into 16x16 pixel tiles keeping that order and blends per pixel. */
+enum { SP_ORDER_AXIS = 0, SP_ORDER_TILE };
 
 typedef struct sp_params {
     int32_t pipeline;
@@ -89,6 +94,7 @@ typedef struct sp_params {
     float t;                /* soft, olt: points with field value F <= t are solid */
     float l_m;              /* soft: transparency modulation range (eq. 22); <= t: off */
     int32_t field;          /* soft, olt: SP_FIELD_*, the source of F */
+    int32_t order;          /* soft: SP_ORDER_*, how the soft discs are composited */
 } sp_params;
 
 typedef struct sp_param_info {

@@ -25,15 +25,26 @@
  * sorted along x, y and z (a stable radix sort of the coordinates' order-preserving bits) on the
  * CPU; when `field` or `t` changes, the soft points of each sorted array are kept (the order
  * stays) and uploaded as one R32UI buffer texture of three arrays. Per frame the axis closest to
- * the view direction picks the array, read forwards or backwards by the vertex shader, so that
- * the first primitive drawn is the farthest: GL blends in primitive order, so the "over" is
- * applied back to front with no per-frame sort. Three arrays read both ways are the paper's six
- * (half its memory). Why this order and not a tile compositor on llvmpipe: it costs no sort
- * and no per-pixel lists per frame, only the soft points' sprites; the sprites are the slow
- * path on llvmpipe, but only soft points take it (see README's performance section for the
- * measured cost). The order is exact for discs separated along the chosen axis and the
- * paper's approximation otherwise; a cloud in several buffer sets draws its sets by their
- * centres along the axis, each set sorted within.
+ * the view direction picks the array, read forwards or backwards, so that the first disc is the
+ * farthest. Three arrays read both ways are the paper's six (half its memory). The order is
+ * exact for discs separated along the chosen axis and the paper's approximation otherwise; a
+ * cloud in several buffer sets draws its sets by their centres along the axis, each sorted
+ * within. Two ways to composite in that order (parameter `order`):
+ *   axis  (default) one GL point sprite per soft disc (soft.vert/.frag): GL blends in primitive
+ *         order, so the "over" runs back to front with no per-frame sort or list.
+ *   tile  a compute compositor (soft_bin.comp, soft_scan.comp, soft_blend.comp,
+ *         soft_resolve.frag): the ordered soft points are cut into 64 consecutive blocks whose
+ *         invocations walk them serially, count and then scatter each disc into the 16x16 pixel
+ *         tiles it touches (per (tile, block) cells in tile-major order, so each tile's list
+ *         stays in back-to-front order without a sort); one work group per tile blends its list
+ *         per pixel in float, and one blend puts the result over the target. Same order, one
+ *         rounding to 8 bits instead of one per disc (test_tile_matches_axis).
+ * Measured on llvmpipe (2 shared cores, Guanyin 1280x720, process CPU per frame): the sprites
+ * cost about 1 us a soft disc whatever its size (1-pixel sprites cost the same); the compositor
+ * more: t = 0.9: splat 47.9 ms, axis 59.9, tile 96.9; t = 0.7 (31k soft discs): splat 49.6,
+ * axis 83.5, tile 152.7, of which its per-pixel loop over the tile lists ~70 ms and the serial
+ * binning ~30 ms. So axis is the default; tile is kept as the measured alternative and the
+ * place to make faster (parallel projection, smaller tiles).
  *
  * Transparency modulation (eq. 22). For t < F < l_m the opacity is interpolated between the
  * model's Phi and a near-solid disc, with W = (F - t) / (l_m - t): Phi_f = (1 - d/r)(1 - W) +
@@ -73,6 +84,13 @@ enum {
     SU_COUNT
 };
 
+/* The compositor's programs. */
+enum { C_BIN1 = 0, C_BIN3, C_SCAN, C_BLEND, C_RESOLVE, C_COUNT };
+enum {
+    SOFT_TILE = 16,            /* tile side in pixels: one 16x16 work group of soft_blend */
+    SOFT_BLOCKS = 64,          /* binning blocks: invocations walking the order serially */
+};
+
 typedef struct soft_state {
     void *splat;               /* the splat passes' own state (splat__create) */
     GLuint prog;
@@ -82,6 +100,11 @@ typedef struct soft_state {
     float max_point;           /* GL_POINT_SIZE_RANGE's upper end */
     rnd_chunk *chunks;         /* the frame's solid chunks */
     uint64_t chunks_cap;
+    /* the compositor of order=tile (see the file comment) */
+    GLuint cprog[C_COUNT];
+    GLuint proj_buf, cells_buf, list_buf, layer_buf;
+    uint64_t proj_bytes, cells_bytes, list_bytes, layer_bytes;
+    GLuint proj_tex, cells_tex, list_tex, layer_tex;
 } soft_state;
 
 /* Per buffer set of a cloud: what the split needs on the CPU and the soft index arrays. */
@@ -115,6 +138,14 @@ static void soft_destroy(rnd_kit *k, void *state)
     if (s->vao) gl->DeleteVertexArrays(1, &s->vao);
     if (s->f_tex) gl->DeleteTextures(1, &s->f_tex);
     if (s->idx_tex) gl->DeleteTextures(1, &s->idx_tex);
+    for (int i = 0; i < C_COUNT; i++)
+        if (s->cprog[i]) gl->DeleteProgram(s->cprog[i]);
+    GLuint bufs[4] = {s->proj_buf, s->cells_buf, s->list_buf, s->layer_buf};
+    GLuint texs[4] = {s->proj_tex, s->cells_tex, s->list_tex, s->layer_tex};
+    for (int i = 0; i < 4; i++) {
+        if (bufs[i]) gl->DeleteBuffers(1, &bufs[i]);
+        if (texs[i]) gl->DeleteTextures(1, &texs[i]);
+    }
     free(s->chunks);
     memset(s, 0, sizeof *s);
     free(s);
@@ -143,6 +174,27 @@ static int soft_create(rnd_kit *k, void **state, sd_err *err)
 #undef SOFT_U_NAME_
     };
     for (int u = 0; u < SU_COUNT; u++) s->loc[u] = gl_uniform(gl, s->prog, unames[u]);
+    static const struct {
+        const char *files[2];
+        int n;
+        const char *defs;
+    } cp[C_COUNT] = {
+        [C_BIN1] = {{"soft_bin.comp"}, 1, "#define PASS 1\n"},
+        [C_BIN3] = {{"soft_bin.comp"}, 1, "#define PASS 3\n"},
+        [C_SCAN] = {{"soft_scan.comp"}, 1, ""},
+        [C_BLEND] = {{"soft_blend.comp"}, 1, ""},
+        [C_RESOLVE] = {{"soft_resolve.vert", "soft_resolve.frag"}, 2, ""},
+    };
+    for (int i = 0; i < C_COUNT; i++) {
+        s->cprog[i] = rnd_kit_program(k, cp[i].files, cp[i].n, cp[i].defs, err);
+        if (!s->cprog[i]) {
+            soft_destroy(k, s);
+            return err ? err->code : SD_EGL;
+        }
+    }
+    GLuint *texs[4] = {&s->proj_tex, &s->cells_tex, &s->list_tex, &s->layer_tex};
+    for (int i = 0; i < 4; i++) gl->GenTextures(1, texs[i]);
+
     gl->GenVertexArrays(1, &s->vao);
     gl->GenTextures(1, &s->f_tex);
     gl->GenTextures(1, &s->idx_tex);
@@ -472,6 +524,168 @@ static void draw_soft(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_c
     gl->Disable(GL_SCISSOR_TEST);
 }
 
+/* buf_tex: makes *buf hold at least bytes and *tex a buffer texture of format fmt over it. */
+static void buf_tex(const gl_api *gl, GLuint *buf, uint64_t *have, uint64_t bytes, GLuint tex,
+                    GLenum fmt)
+{
+    if (rnd_kit_ensure_ssbo(gl, buf, have, bytes) || bytes == 0) {
+        gl->BindTexture(GL_TEXTURE_BUFFER, tex);
+        gl->TexBuffer(GL_TEXTURE_BUFFER, fmt, *buf);
+        gl->BindTexture(GL_TEXTURE_BUFFER, 0);
+    }
+}
+
+/* set_view_uniforms: the uniforms soft.vert and soft_bin.comp share, in program prog. */
+static void set_view_uniforms(const gl_api *gl, GLuint prog, const rnd_draw *d, const soft_order *o,
+                              uint32_t nsoft)
+{
+    const rnd_view *v = d->view;
+    const sp_params *p = d->params;
+    float dz = d->cloud->bmax[2] - d->cloud->bmin[2];
+    gl->UseProgram(prog);
+    GLint l;
+    if ((l = gl_uniform(gl, prog, "u_view")) >= 0) gl->UniformMatrix4fv(l, 1, GL_FALSE, v->view);
+    if ((l = gl_uniform(gl, prog, "u_proj")) >= 0) gl->UniformMatrix4fv(l, 1, GL_FALSE, v->proj);
+    if ((l = gl_uniform(gl, prog, "u_size")) >= 0) gl->Uniform2i(l, v->width, v->height);
+    if ((l = gl_uniform(gl, prog, "u_scale")) >= 0) gl->Uniform1f(l, p->splat_scale);
+    if ((l = gl_uniform(gl, prog, "u_color")) >= 0) gl->Uniform1i(l, p->color);
+    if ((l = gl_uniform(gl, prog, "u_znear")) >= 0) gl->Uniform1f(l, v->znear);
+    if ((l = gl_uniform(gl, prog, "u_zfar")) >= 0) gl->Uniform1f(l, v->zfar);
+    if ((l = gl_uniform(gl, prog, "u_field")) >= 0) gl->Uniform1i(l, p->field);
+    if ((l = gl_uniform(gl, prog, "u_zrange")) >= 0)
+        gl->Uniform2f(l, d->cloud->bmin[2], dz > 0 ? 1.0f / dz : 0.0f);
+    if ((l = gl_uniform(gl, prog, "u_t")) >= 0) gl->Uniform1f(l, p->t);
+    if ((l = gl_uniform(gl, prog, "u_lm")) >= 0) gl->Uniform1f(l, p->l_m);
+    if ((l = gl_uniform(gl, prog, "u_rev")) >= 0) gl->Uniform1i(l, o->rev);
+    if ((l = gl_uniform(gl, prog, "u_base")) >= 0) gl->Uniform1ui(l, (GLuint)((uint64_t)o->axis * nsoft));
+    if ((l = gl_uniform(gl, prog, "u_n")) >= 0) gl->Uniform1ui(l, nsoft);
+    if ((l = gl_uniform(gl, prog, "u_nblocks")) >= 0) gl->Uniform1ui(l, SOFT_BLOCKS);
+    if ((l = gl_uniform(gl, prog, "u_tile")) >= 0) gl->Uniform1i(l, SOFT_TILE);
+    int ntx = (v->width + SOFT_TILE - 1) / SOFT_TILE, nty = (v->height + SOFT_TILE - 1) / SOFT_TILE;
+    if ((l = gl_uniform(gl, prog, "u_ntx")) >= 0) gl->Uniform1i(l, ntx);
+    if ((l = gl_uniform(gl, prog, "u_nty")) >= 0) gl->Uniform1i(l, nty);
+}
+
+/* bind_soft_set: set 0's buffers, its field source and its soft index arrays. */
+static void bind_soft_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
+                          uint32_t si)
+{
+    const gl_api *gl = k->gl;
+    const sp_params *p = d->params;
+    rnd_kit_bind_set(k, &d->cloud->sets[si], p->color);
+    gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_F);
+    gl->BindTexture(GL_TEXTURE_BUFFER, s->f_tex);
+    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI,
+                  d->cloud->sets[si].buf[p->field == SP_FIELD_INTENSITY ? RND_ATTR_INTENSITY
+                                                                         : RND_ATTR_FIELD]);
+    gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_IDX);
+    gl->BindTexture(GL_TEXTURE_BUFFER, s->idx_tex);
+    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, sc->sets[si].idx_buf);
+    gl->ActiveTexture(GL_TEXTURE0);
+}
+
+/* tile_bin: the compositor's binning of a one-set cloud's soft points for this frame
+ * (soft_bin.comp PASS 1, soft_scan.comp, the list's size read back, PASS 3). Returns 0 or
+ * SD_E*. */
+static int tile_bin(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
+                    const soft_order *o, sd_err *err)
+{
+    const gl_api *gl = k->gl;
+    const rnd_view *v = d->view;
+    uint32_t nsoft = sc->sets[0].nsoft;
+    int ntx = (v->width + SOFT_TILE - 1) / SOFT_TILE, nty = (v->height + SOFT_TILE - 1) / SOFT_TILE;
+    uint64_t ncells = (uint64_t)ntx * nty * SOFT_BLOCKS;
+    if ((ncells + 1) * 4 > (uint64_t)k->max_ssbo || (uint64_t)nsoft * 32 > (uint64_t)k->max_ssbo)
+        return sd_errf(err, SD_ELIMIT, "soft: %u soft points in a %dx%d frame exceed the "
+                       "compositor's storage blocks", nsoft, v->width, v->height);
+    buf_tex(gl, &s->proj_buf, &s->proj_bytes, (uint64_t)(nsoft ? nsoft : 1) * 32, s->proj_tex,
+            GL_RGBA32F);
+    buf_tex(gl, &s->cells_buf, &s->cells_bytes, (ncells + 1) * 4, s->cells_tex, GL_R32UI);
+    GLuint zero = 0;
+    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->cells_buf);
+    gl->ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
+    buf_tex(gl, &s->list_buf, &s->list_bytes, 4, s->list_tex, GL_R32UI);
+    bind_soft_set(k, s, d, sc, 0);
+    gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_PROJ, s->proj_buf);
+    gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_CELLS, s->cells_buf);
+    gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_LIST, s->list_buf);
+    const GLuint groups = SOFT_BLOCKS / 32;
+    set_view_uniforms(gl, s->cprog[C_BIN1], d, o, nsoft);
+    gl->DispatchCompute(groups, 1, 1);
+    gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+    gl->UseProgram(s->cprog[C_SCAN]);
+    gl->Uniform1ui(gl_uniform(gl, s->cprog[C_SCAN], "u_ncells"), (GLuint)ncells);
+    gl->DispatchCompute(1, 1, 1);
+    gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
+    GLuint total = 0;
+    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->cells_buf);
+    gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, (GLintptr)(ncells * 4), 4, &total);
+    if ((uint64_t)total * 4 > (uint64_t)k->max_ssbo)
+        return sd_errf(err, SD_ELIMIT, "soft: %u tile entries exceed the compositor's storage "
+                       "block", total);
+    buf_tex(gl, &s->list_buf, &s->list_bytes, (uint64_t)(total ? total : 1) * 4, s->list_tex,
+            GL_R32UI);
+    gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_LIST, s->list_buf);
+    set_view_uniforms(gl, s->cprog[C_BIN3], d, o, nsoft);
+    gl->DispatchCompute(groups, 1, 1);
+    gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
+    return 0;
+}
+
+/* tile_blend: the compositor over rows [y0, y0 + n): soft_blend.comp into the layer, then
+ * soft_resolve puts the layer over the target. keys, yb, nb as draw_soft. */
+static void tile_blend(rnd_kit *k, soft_state *s, const rnd_draw *d, int keys, int y0, int n,
+                       int yb, int nb)
+{
+    const gl_api *gl = k->gl;
+    const rnd_view *v = d->view;
+    int ntx = (v->width + SOFT_TILE - 1) / SOFT_TILE;
+    buf_tex(gl, &s->layer_buf, &s->layer_bytes, (uint64_t)v->width * n * 16, s->layer_tex,
+            GL_RGBA32F);
+    gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_LAYER, s->layer_buf);
+    const GLuint units[4] = {RND_T_SOFT_PROJ, RND_T_SOFT_LIST, RND_T_SOFT_CELLS, RND_T_SPLAT_KEYS};
+    const GLuint texs[4] = {s->proj_tex, s->list_tex, s->cells_tex, splat__keys_texture(s->splat)};
+    for (int i = 0; i < 4; i++) {
+        gl->ActiveTexture(GL_TEXTURE0 + units[i]);
+        gl->BindTexture(GL_TEXTURE_BUFFER, texs[i]);
+    }
+    gl->ActiveTexture(GL_TEXTURE0);
+    GLuint pb = s->cprog[C_BLEND];
+    gl->UseProgram(pb);
+    gl->Uniform2i(gl_uniform(gl, pb, "u_size"), v->width, v->height);
+    gl->Uniform2i(gl_uniform(gl, pb, "u_stripe"), yb, nb);
+    gl->Uniform2i(gl_uniform(gl, pb, "u_rows"), y0, n);
+    gl->Uniform1i(gl_uniform(gl, pb, "u_keys_on"), keys);
+    gl->Uniform1f(gl_uniform(gl, pb, "u_lambda"), d->params->lambda);
+    gl->Uniform1ui(gl_uniform(gl, pb, "u_nblocks"), SOFT_BLOCKS);
+    gl->Uniform1i(gl_uniform(gl, pb, "u_ntx"), ntx);
+    int ty0 = y0 / SOFT_TILE, ty1 = (y0 + n - 1) / SOFT_TILE;
+    gl->Uniform1i(gl_uniform(gl, pb, "u_ty0"), ty0);
+    gl->DispatchCompute((GLuint)ntx, (GLuint)(ty1 - ty0 + 1), 1);
+    gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
+    gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_LAYER);
+    gl->BindTexture(GL_TEXTURE_BUFFER, s->layer_tex);
+    gl->ActiveTexture(GL_TEXTURE0);
+    GLuint pr = s->cprog[C_RESOLVE];
+    gl->UseProgram(pr);
+    gl->Uniform2i(gl_uniform(gl, pr, "u_size"), v->width, v->height);
+    gl->Uniform2i(gl_uniform(gl, pr, "u_rows"), y0, n);
+    gl->BindFramebuffer(GL_FRAMEBUFFER, d->target->fbo);
+    gl->Viewport(0, 0, v->width, v->height);
+    gl->Enable(GL_SCISSOR_TEST);
+    gl->Scissor(0, y0, v->width, n);
+    gl->Disable(GL_DEPTH_TEST);
+    gl->Enable(GL_BLEND);
+    gl->BlendFuncSeparate(GL_ONE, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
+    gl->ColorMaski(1, GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE); /* no depth writes */
+    gl->BindVertexArray(s->vao);
+    gl->DrawArrays(GL_TRIANGLES, 0, 6);
+    gl->BindVertexArray(0);
+    gl->ColorMaski(1, GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+    gl->Disable(GL_BLEND);
+    gl->Disable(GL_SCISSOR_TEST);
+}
+
 /* render: the split (remade when field or t changed), the splat passes over the solid runs,
  * and per stripe the soft discs back to front over the resolved solid surface. */
 static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
@@ -491,6 +705,11 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     sd.view = &sv;
     soft_order o;
     order_sets(d->view, sc, &o);
+    int draw = p->lambda > 0.0f || p->l_m > p->t;
+    /* order=tile: the compositor, for one buffer set (the usual case); several take the
+     * sprites. */
+    int tile = draw && p->order == SP_ORDER_TILE && sc->nsets == 1 && sc->sets[0].nsoft > 0;
+    if (tile && (rc = tile_bin(k, s, d, sc, &o, err)) < 0) return rc;
 
     splat_frame f;
     int nstripes = splat__frame_begin(k, s->splat, &sd, &f, err);
@@ -503,14 +722,17 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
             int height = d->view->height;
             int yb = f.y0 > 0 ? f.y0 - 1 : 0; /* the keys' first row (splat's halo) */
             int nb = (f.y0 + f.n < height ? f.y0 + f.n + 1 : f.y0 + f.n) - yb;
-            if (p->lambda > 0.0f || p->l_m > p->t)
-                draw_soft(k, s, d, sc, &o, 1, f.y0, f.n, yb, nb);
+            if (tile) tile_blend(k, s, d, 1, f.y0, f.n, yb, nb);
+            else if (draw) draw_soft(k, s, d, sc, &o, 1, f.y0, f.n, yb, nb);
             /* draw_soft bound its sets' buffers; splat binds one set once per frame, so give
              * it back (several sets are rebound by the splat passes themselves). */
             if (f.one_set) rnd_kit_bind_set(k, &d->cloud->sets[0], p->color);
         }
     }
-    if (nstripes == 0 && (p->lambda > 0.0f || p->l_m > p->t))
+    int whole_fits = (uint64_t)d->view->width * d->view->height * 16 <= (uint64_t)k->max_ssbo;
+    if (nstripes == 0 && tile && whole_fits)
+        tile_blend(k, s, d, 0, 0, d->view->height, 0, d->view->height);
+    else if (nstripes == 0 && draw)
         draw_soft(k, s, d, sc, &o, 0, 0, d->view->height, 0, d->view->height);
     int end = splat__frame_end(k, s->splat, err);
     return rc < 0 ? rc : end;

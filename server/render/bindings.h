@@ -22,7 +22,11 @@
     X(KAWATA_FAR)    /* kawata: uint per buffer pixel, pass 2's key (depth step, index) */    \
     X(KAWATA_PTS)    /* kawata: 4 vec4 per buffer pixel: P1, P2 (eye, valid), their colours */ \
     X(KAWATA_SPLATS) /* kawata: 2 vec4 per buffer pixel: the splat (frame x, y, depth), colour */\
-    X(KAWATA_COUNT)  /* kawata: uint, the splats drawn */
+    X(KAWATA_COUNT)  /* kawata: uint, the splats drawn */                                     \
+    X(SOFT_PROJ)     /* soft: 2 vec4 per soft point in draw order: (x, y, r px, depth), (rgb, W) */\
+    X(SOFT_CELLS)    /* soft: uint per (tile, block): counts, then offsets; + the total */     \
+    X(SOFT_LIST)     /* soft: uint per tile entry: draw-order numbers, tile by tile */          \
+    X(SOFT_LAYER)    /* soft: vec4 per stripe pixel: the soft layer, premultiplied */
 
 #define RND_TEXTURE_UNITS(X)                                                                  \
     X(POS)           /* R32F: x y z per point (lib_fetch.glsl) */                              \
@@ -41,7 +45,11 @@
     X(KAWATA_SPLATS) /* kawata: KAWATA_SPLATS as RGBA32F, 2 texels a buffer pixel */          \
     X(EDL_DEPTH)     /* EDL: a copy of the target's depth_eye as R32F */                      \
     X(SOFT_F)        /* soft: R32UI float bits of the field source (FIELD or INTENSITY) */    \
-    X(SOFT_IDX)      /* soft: R32UI soft point indices sorted along the three axes */
+    X(SOFT_IDX)      /* soft: R32UI soft point indices sorted along the three axes */         \
+    X(SOFT_PROJ)     /* soft: SOFT_PROJ as RGBA32F */                                          \
+    X(SOFT_LIST)     /* soft: SOFT_LIST as R32UI */                                             \
+    X(SOFT_CELLS)    /* soft: SOFT_CELLS as R32UI */                                            \
+    X(SOFT_LAYER)    /* soft: SOFT_LAYER as RGBA32F */
 
 enum {
 #define RND_B_ENUM_(name) RND_B_##name,

@@ -1,0 +1,91 @@
+#version 430
+#include "lib_bindings.glsl"
+// soft_bin.comp — the soft compositor's binning (pipe_soft.c), order-preserving without a sort.
+// The soft points in back-to-front order (the sorted index array of the axis nearest the view
+// direction, read forwards or backwards) are cut into u_nblocks consecutive blocks, one
+// invocation each, which walks its block serially, so within a block the order is kept.
+//   PASS 1  projects each point (centre and radius in pixels, eye depth, colour, W of eq. 22)
+//           into the draw-order array u_proj, and counts per (tile, block) cell the points whose
+//           disc touches the tile's pixel centres; each cell belongs to one invocation (no
+//           atomics).
+//   PASS 3  (after soft_scan.comp turned the counts into tile-major offsets) writes each
+//           point's draw-order number into the tile lists at its cell's offset, incrementing it.
+// A tile's list is then its cells' ranges in block order, each in point order: back to front.
+layout(local_size_x = 32) in;
+
+layout(binding = T_POS) uniform samplerBuffer u_pos;
+layout(binding = T_RAD) uniform samplerBuffer u_rad;
+layout(binding = T_SRC) uniform usamplerBuffer u_src;
+layout(binding = T_SOFT_F) uniform usamplerBuffer u_f;
+layout(binding = T_SOFT_IDX) uniform usamplerBuffer u_idx;
+
+layout(std430, binding = B_SOFT_PROJ) buffer Proj { vec4 proj[]; };   // 2 per point, draw order
+layout(std430, binding = B_SOFT_CELLS) buffer Cells { uint cells[]; }; // (tile, block), tile-major
+layout(std430, binding = B_SOFT_LIST) buffer List { uint list[]; };
+
+#include "lib_fetch.glsl"
+#include "lib_colormap.glsl"
+
+uniform mat4 u_view, u_proj;
+uniform ivec2 u_size;
+uniform float u_scale;
+uniform int u_color;
+uniform float u_znear, u_zfar;
+uniform int u_field;
+uniform vec2 u_zrange;
+uniform float u_t, u_lm;
+uniform uint u_base, u_n;
+uniform int u_rev;
+uniform uint u_nblocks;
+uniform int u_tile, u_ntx, u_nty;
+
+void main()
+{
+    uint b = gl_GlobalInvocationID.x;
+    if (b >= u_nblocks) return;
+    uint per = (u_n + u_nblocks - 1u) / u_nblocks;
+    uint k0 = min(u_n, b * per), k1 = min(u_n, k0 + per);
+    for (uint k = k0; k < k1; k++) {
+#if PASS == 1
+        uint i = texelFetch(u_idx, int(u_base + (u_rev != 0 ? u_n - 1u - k : k))).x;
+        vec3 p = fetch3(u_pos, i);
+        vec4 e = u_view * vec4(p, 1.0);
+        float depth = -e.z;
+        float r = texelFetch(u_rad, int(i)).x * u_scale;
+        vec4 c = u_proj * e;
+        float rpx = depth > u_znear ? r * u_proj[1][1] * 0.5 * float(u_size.y) / depth : 0.0;
+        vec2 px = depth > u_znear ? (c.xy / c.w * 0.5 + 0.5) * vec2(u_size) : vec2(-1e9);
+        float f;
+        if (u_field == 1) f = clamp((p.z - u_zrange.x) * u_zrange.y, 0.0, 1.0);
+        else f = uintBitsToFloat(texelFetch(u_f, int(i)).x);
+        float w = u_lm > u_t ? clamp((f - u_t) / (u_lm - u_t), 0.0, 1.0) : 1.0;
+        vec3 col;
+        if (u_color == 0) col = unpackUnorm4x8(texelFetch(u_src, int(i)).x).rgb;
+        else if (u_color == 1) col = colormap(uintBitsToFloat(texelFetch(u_src, int(i)).x));
+        else if (u_color == 4) col = vec3(clamp(uintBitsToFloat(texelFetch(u_src, int(i)).x), 0.0, 1.0));
+        else if (u_color == 3) col = vec3(1.0 - clamp((depth - u_znear) / (u_zfar - u_znear), 0.0, 1.0));
+        else col = vec3(0.5, 0.5, 1.0);
+        proj[2u * k] = vec4(px, rpx, depth);
+        proj[2u * k + 1u] = vec4(col, w);
+#else
+        vec4 q = proj[2u * k];
+        vec2 px = q.xy;
+        float rpx = q.z;
+#endif
+        if (!(rpx > 0.0)) continue;
+        // Pixels whose centre x + 0.5 lies within rpx of the centre.
+        int x0 = max(0, int(ceil(px.x - rpx - 0.5))), x1 = min(u_size.x - 1, int(floor(px.x + rpx - 0.5)));
+        int y0 = max(0, int(ceil(px.y - rpx - 0.5))), y1 = min(u_size.y - 1, int(floor(px.y + rpx - 0.5)));
+        if (x1 < x0 || y1 < y0) continue;
+        for (int ty = y0 / u_tile; ty <= y1 / u_tile; ty++)
+            for (int tx = x0 / u_tile; tx <= x1 / u_tile; tx++) {
+                uint cell = uint(ty * u_ntx + tx) * u_nblocks + b;
+#if PASS == 1
+                cells[cell] += 1u;
+#else
+                list[cells[cell]] = k;
+                cells[cell] += 1u;
+#endif
+            }
+    }
+}
