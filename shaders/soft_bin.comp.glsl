@@ -1,13 +1,14 @@
 #version 430
 #include "lib_bindings.glsl"
 // soft_bin.comp — the soft compositor's binning (pipe_soft.c), order-preserving without a sort.
-// The soft points in back-to-front order (the sorted index array of the axis nearest the view
-// direction, read forwards or backwards) are cut into u_nblocks consecutive blocks, one
-// invocation each, which walks its block serially, so within a block the order is kept.
-//   PASS 1  projects each point (centre and radius in pixels, eye depth, colour, W of eq. 22)
-//           into the draw-order array u_proj, and counts per (tile, block) cell the points whose
-//           disc touches the tile's pixel centres; each cell belongs to one invocation (no
-//           atomics).
+//   PASS 0  one invocation per soft point in back-to-front order k (the sorted index array of
+//           the axis nearest the view direction, read forwards or backwards): projects it
+//           (centre and radius in pixels, eye depth, colour, W of eq. 22) into the draw-order
+//           array proj, which order=axis's sprites (soft.vert) and the passes below read.
+// The ordered points are cut into u_nblocks consecutive blocks, one invocation each, which walks
+// its block serially, so within a block the order is kept.
+//   PASS 1  counts per (tile, block) cell the points whose disc touches the tile's pixel
+//           centres; each cell belongs to one invocation (no atomics).
 //   PASS 3  (after soft_scan.comp turned the counts into tile-major offsets) writes each
 //           point's draw-order number into the tile lists at its cell's offset, incrementing it.
 // A tile's list is then its cells' ranges in block order, each in point order: back to front.
@@ -41,12 +42,10 @@ uniform int u_tile, u_ntx, u_nty;
 
 void main()
 {
-    uint b = gl_GlobalInvocationID.x;
-    if (b >= u_nblocks) return;
-    uint per = (u_n + u_nblocks - 1u) / u_nblocks;
-    uint k0 = min(u_n, b * per), k1 = min(u_n, k0 + per);
-    for (uint k = k0; k < k1; k++) {
-#if PASS == 1
+#if PASS == 0
+    uint k = gl_GlobalInvocationID.x;
+    if (k >= u_n) return;
+    {
         uint i = texelFetch(u_idx, int(u_base + (u_rev != 0 ? u_n - 1u - k : k))).x;
         vec3 p = fetch3(u_pos, i);
         vec4 e = u_view * vec4(p, 1.0);
@@ -67,11 +66,16 @@ void main()
         else col = vec3(0.5, 0.5, 1.0);
         proj[2u * k] = vec4(px, rpx, depth);
         proj[2u * k + 1u] = vec4(col, w);
+    }
 #else
+    uint b = gl_GlobalInvocationID.x;
+    if (b >= u_nblocks) return;
+    uint per = (u_n + u_nblocks - 1u) / u_nblocks;
+    uint k0 = min(u_n, b * per), k1 = min(u_n, k0 + per);
+    for (uint k = k0; k < k1; k++) {
         vec4 q = proj[2u * k];
         vec2 px = q.xy;
         float rpx = q.z;
-#endif
         if (!(rpx > 0.0)) continue;
         // Pixels whose centre x + 0.5 lies within rpx of the centre.
         int x0 = max(0, int(ceil(px.x - rpx - 0.5))), x1 = min(u_size.x - 1, int(floor(px.x + rpx - 0.5)));
@@ -88,4 +92,5 @@ void main()
 #endif
             }
     }
+#endif
 }

@@ -70,11 +70,9 @@
 #include "shaders.h"
 #include "splat_passes.h"
 
+/* Uniform slots of the sprite program (soft.vert/.frag), looked up by name. */
 #define SOFT_UNIFORMS(X)                                                                     \
-    X(VIEW, "u_view") X(PROJ, "u_proj") X(SIZE, "u_size") X(SCALE, "u_scale")                \
-    X(MAXSIZE, "u_maxsize") X(COLOR, "u_color") X(ZNEAR, "u_znear") X(ZFAR, "u_zfar")         \
-    X(FIELD, "u_field") X(ZRANGE, "u_zrange") X(T, "u_t") X(LM, "u_lm") X(BASE, "u_base")     \
-    X(N, "u_n") X(REV, "u_rev") X(STRIPE, "u_stripe") X(KEYS_ON, "u_keys_on")                 \
+    X(SIZE, "u_size") X(MAXSIZE, "u_maxsize") X(STRIPE, "u_stripe") X(KEYS_ON, "u_keys_on")    \
     X(LAMBDA, "u_lambda")
 
 enum {
@@ -85,7 +83,7 @@ enum {
 };
 
 /* The compositor's programs. */
-enum { C_BIN1 = 0, C_BIN3, C_SCAN, C_BLEND, C_RESOLVE, C_COUNT };
+enum { C_PROJ = 0, C_BIN1, C_BIN3, C_SCAN, C_BLEND, C_RESOLVE, C_COUNT };
 enum {
     SOFT_TILE = 16,            /* tile side in pixels: one 16x16 work group of soft_blend */
     SOFT_BLOCKS = 64,          /* binning blocks: invocations walking the order serially */
@@ -179,6 +177,7 @@ static int soft_create(rnd_kit *k, void **state, sd_err *err)
         int n;
         const char *defs;
     } cp[C_COUNT] = {
+        [C_PROJ] = {{"soft_bin.comp"}, 1, "#define PASS 0\n"},
         [C_BIN1] = {{"soft_bin.comp"}, 1, "#define PASS 1\n"},
         [C_BIN3] = {{"soft_bin.comp"}, 1, "#define PASS 3\n"},
         [C_SCAN] = {{"soft_scan.comp"}, 1, ""},
@@ -458,71 +457,6 @@ static void order_sets(const rnd_view *v, const soft_cloud *sc, soft_order *o)
         }
 }
 
-/* draw_soft: the soft discs of every set over rows [y0, y0 + n) (keys: whether the splat
- * passes left visibility keys for them, with halo row start yb). */
-static void draw_soft(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
-                      const soft_order *o, int keys, int y0, int n, int yb, int nb)
-{
-    const gl_api *gl = k->gl;
-    const rnd_view *v = d->view;
-    const sp_params *p = d->params;
-    const GLint *l = s->loc;
-    gl->UseProgram(s->prog);
-    gl->UniformMatrix4fv(l[SU_VIEW], 1, GL_FALSE, v->view);
-    gl->UniformMatrix4fv(l[SU_PROJ], 1, GL_FALSE, v->proj);
-    gl->Uniform2i(l[SU_SIZE], v->width, v->height);
-    if (l[SU_SCALE] >= 0) gl->Uniform1f(l[SU_SCALE], p->splat_scale);
-    if (l[SU_MAXSIZE] >= 0) gl->Uniform1f(l[SU_MAXSIZE], s->max_point);
-    if (l[SU_COLOR] >= 0) gl->Uniform1i(l[SU_COLOR], p->color);
-    if (l[SU_ZNEAR] >= 0) gl->Uniform1f(l[SU_ZNEAR], v->znear);
-    if (l[SU_ZFAR] >= 0) gl->Uniform1f(l[SU_ZFAR], v->zfar);
-    if (l[SU_FIELD] >= 0) gl->Uniform1i(l[SU_FIELD], p->field);
-    float dz = d->cloud->bmax[2] - d->cloud->bmin[2];
-    if (l[SU_ZRANGE] >= 0) gl->Uniform2f(l[SU_ZRANGE], d->cloud->bmin[2], dz > 0 ? 1.0f / dz : 0.0f);
-    if (l[SU_T] >= 0) gl->Uniform1f(l[SU_T], p->t);
-    if (l[SU_LM] >= 0) gl->Uniform1f(l[SU_LM], p->l_m);
-    if (l[SU_REV] >= 0) gl->Uniform1i(l[SU_REV], o->rev);
-    if (l[SU_STRIPE] >= 0) gl->Uniform2i(l[SU_STRIPE], yb, nb);
-    if (l[SU_KEYS_ON] >= 0) gl->Uniform1i(l[SU_KEYS_ON], keys);
-    if (l[SU_LAMBDA] >= 0) gl->Uniform1f(l[SU_LAMBDA], p->lambda);
-
-    gl->BindFramebuffer(GL_FRAMEBUFFER, d->target->fbo);
-    gl->Viewport(0, 0, v->width, v->height);
-    gl->Enable(GL_SCISSOR_TEST);
-    gl->Scissor(0, y0, v->width, n);
-    gl->Disable(GL_DEPTH_TEST);
-    gl->Enable(GL_BLEND);
-    gl->BlendFuncSeparate(GL_ONE, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
-    gl->ColorMaski(1, GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE); /* no depth writes */
-    gl->Enable(GL_PROGRAM_POINT_SIZE);
-    gl->ActiveTexture(GL_TEXTURE0 + RND_T_SPLAT_KEYS);
-    gl->BindTexture(GL_TEXTURE_BUFFER, splat__keys_texture(s->splat));
-    gl->BindVertexArray(s->vao);
-    uint32_t nsets = sc->nsets < 64 ? sc->nsets : 64;
-    for (uint32_t oi = 0; oi < sc->nsets; oi++) {
-        uint32_t si = oi < nsets ? o->set_order[oi] : oi;
-        const soft_set *ss = &sc->sets[si];
-        if (ss->nsoft == 0) continue;
-        rnd_kit_bind_set(k, &d->cloud->sets[si], p->color);
-        gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_F);
-        gl->BindTexture(GL_TEXTURE_BUFFER, s->f_tex);
-        gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI,
-                      d->cloud->sets[si].buf[p->field == SP_FIELD_INTENSITY ? RND_ATTR_INTENSITY
-                                                                             : RND_ATTR_FIELD]);
-        gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_IDX);
-        gl->BindTexture(GL_TEXTURE_BUFFER, s->idx_tex);
-        gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, ss->idx_buf);
-        gl->ActiveTexture(GL_TEXTURE0);
-        gl->Uniform1ui(l[SU_BASE], (GLuint)((uint64_t)o->axis * ss->nsoft));
-        gl->Uniform1ui(l[SU_N], ss->nsoft);
-        gl->DrawArrays(GL_POINTS, 0, (GLsizei)ss->nsoft);
-    }
-    gl->BindVertexArray(0);
-    gl->Disable(GL_PROGRAM_POINT_SIZE);
-    gl->ColorMaski(1, GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
-    gl->Disable(GL_BLEND);
-    gl->Disable(GL_SCISSOR_TEST);
-}
 
 /* buf_tex: makes *buf hold at least bytes and *tex a buffer texture of format fmt over it. */
 static void buf_tex(const gl_api *gl, GLuint *buf, uint64_t *have, uint64_t bytes, GLuint tex,
@@ -584,6 +518,75 @@ static void bind_soft_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const so
     gl->ActiveTexture(GL_TEXTURE0);
 }
 
+/* project_set: soft_bin.comp PASS 0 over set si's soft discs in back-to-front order into the
+ * proj buffer (2 texels a disc). Returns 0 or SD_ELIMIT. */
+static int project_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
+                       const soft_order *o, uint32_t si, sd_err *err)
+{
+    const gl_api *gl = k->gl;
+    uint32_t nsoft = sc->sets[si].nsoft;
+    if ((uint64_t)nsoft * 32 > (uint64_t)k->max_ssbo)
+        return sd_errf(err, SD_ELIMIT, "soft: %u soft points in one buffer set exceed a storage "
+                       "block", nsoft);
+    buf_tex(gl, &s->proj_buf, &s->proj_bytes, (uint64_t)(nsoft ? nsoft : 1) * 32, s->proj_tex,
+            GL_RGBA32F);
+    bind_soft_set(k, s, d, sc, si);
+    gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_PROJ, s->proj_buf);
+    set_view_uniforms(gl, s->cprog[C_PROJ], d, o, nsoft);
+    uint64_t groups = ((uint64_t)nsoft + 31) / 32;
+    gl->DispatchCompute((GLuint)(groups > 4096 ? 4096 : groups ? groups : 1), 1, 1);
+    gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
+    return 0;
+}
+
+/* draw_soft: order=axis, the soft discs of every set over rows [y0, y0 + n) as point sprites
+ * in primitive order (keys: whether the splat passes left visibility keys for these rows, with
+ * halo row start yb and nb rows). Returns 0 or SD_E*. */
+static int draw_soft(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
+                     const soft_order *o, int keys, int y0, int n, int yb, int nb, sd_err *err)
+{
+    const gl_api *gl = k->gl;
+    const rnd_view *v = d->view;
+    uint32_t nsets = sc->nsets < 64 ? sc->nsets : 64;
+    for (uint32_t oi = 0; oi < sc->nsets; oi++) {
+        uint32_t si = oi < nsets ? o->set_order[oi] : oi;
+        uint32_t nsoft = sc->sets[si].nsoft;
+        if (nsoft == 0) continue;
+        int rc = project_set(k, s, d, sc, o, si, err);
+        if (rc < 0) return rc;
+        const GLint *l = s->loc;
+        gl->UseProgram(s->prog);
+        gl->Uniform2i(l[SU_SIZE], v->width, v->height);
+        if (l[SU_MAXSIZE] >= 0) gl->Uniform1f(l[SU_MAXSIZE], s->max_point);
+        if (l[SU_STRIPE] >= 0) gl->Uniform2i(l[SU_STRIPE], yb, nb);
+        if (l[SU_KEYS_ON] >= 0) gl->Uniform1i(l[SU_KEYS_ON], keys);
+        if (l[SU_LAMBDA] >= 0) gl->Uniform1f(l[SU_LAMBDA], d->params->lambda);
+        gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_PROJ);
+        gl->BindTexture(GL_TEXTURE_BUFFER, s->proj_tex);
+        gl->ActiveTexture(GL_TEXTURE0 + RND_T_SPLAT_KEYS);
+        gl->BindTexture(GL_TEXTURE_BUFFER, splat__keys_texture(s->splat));
+        gl->ActiveTexture(GL_TEXTURE0);
+        gl->BindFramebuffer(GL_FRAMEBUFFER, d->target->fbo);
+        gl->Viewport(0, 0, v->width, v->height);
+        gl->Enable(GL_SCISSOR_TEST);
+        gl->Scissor(0, y0, v->width, n);
+        gl->Disable(GL_DEPTH_TEST);
+        gl->Enable(GL_BLEND);
+        gl->BlendFuncSeparate(GL_ONE, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
+        gl->ColorMaski(1, GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE); /* no depth writes */
+        gl->Enable(GL_PROGRAM_POINT_SIZE);
+        gl->BindVertexArray(s->vao);
+        gl->DrawArrays(GL_POINTS, 0, (GLsizei)nsoft);
+        gl->BindVertexArray(0);
+        gl->Disable(GL_PROGRAM_POINT_SIZE);
+        gl->ColorMaski(1, GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+        gl->Disable(GL_BLEND);
+        gl->Disable(GL_SCISSOR_TEST);
+        gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
+    }
+    return 0;
+}
+
 /* tile_bin: the compositor's binning of a one-set cloud's soft points for this frame
  * (soft_bin.comp PASS 1, soft_scan.comp, the list's size read back, PASS 3). Returns 0 or
  * SD_E*. */
@@ -595,18 +598,16 @@ static int tile_bin(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_clo
     uint32_t nsoft = sc->sets[0].nsoft;
     int ntx = (v->width + SOFT_TILE - 1) / SOFT_TILE, nty = (v->height + SOFT_TILE - 1) / SOFT_TILE;
     uint64_t ncells = (uint64_t)ntx * nty * SOFT_BLOCKS;
-    if ((ncells + 1) * 4 > (uint64_t)k->max_ssbo || (uint64_t)nsoft * 32 > (uint64_t)k->max_ssbo)
+    if ((ncells + 1) * 4 > (uint64_t)k->max_ssbo)
         return sd_errf(err, SD_ELIMIT, "soft: %u soft points in a %dx%d frame exceed the "
                        "compositor's storage blocks", nsoft, v->width, v->height);
-    buf_tex(gl, &s->proj_buf, &s->proj_bytes, (uint64_t)(nsoft ? nsoft : 1) * 32, s->proj_tex,
-            GL_RGBA32F);
+    int rc = project_set(k, s, d, sc, o, 0, err);
+    if (rc < 0) return rc;
     buf_tex(gl, &s->cells_buf, &s->cells_bytes, (ncells + 1) * 4, s->cells_tex, GL_R32UI);
     GLuint zero = 0;
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->cells_buf);
     gl->ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
     buf_tex(gl, &s->list_buf, &s->list_bytes, 4, s->list_tex, GL_R32UI);
-    bind_soft_set(k, s, d, sc, 0);
-    gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_PROJ, s->proj_buf);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_CELLS, s->cells_buf);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_LIST, s->list_buf);
     const GLuint groups = SOFT_BLOCKS / 32;
@@ -723,7 +724,7 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
             int yb = f.y0 > 0 ? f.y0 - 1 : 0; /* the keys' first row (splat's halo) */
             int nb = (f.y0 + f.n < height ? f.y0 + f.n + 1 : f.y0 + f.n) - yb;
             if (tile) tile_blend(k, s, d, 1, f.y0, f.n, yb, nb);
-            else if (draw) draw_soft(k, s, d, sc, &o, 1, f.y0, f.n, yb, nb);
+            else if (draw) rc = draw_soft(k, s, d, sc, &o, 1, f.y0, f.n, yb, nb, err);
             /* draw_soft bound its sets' buffers; splat binds one set once per frame, so give
              * it back (several sets are rebound by the splat passes themselves). */
             if (f.one_set) rnd_kit_bind_set(k, &d->cloud->sets[0], p->color);
@@ -733,7 +734,7 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     if (nstripes == 0 && tile && whole_fits)
         tile_blend(k, s, d, 0, 0, d->view->height, 0, d->view->height);
     else if (nstripes == 0 && draw)
-        draw_soft(k, s, d, sc, &o, 0, 0, d->view->height, 0, d->view->height);
+        rc = draw_soft(k, s, d, sc, &o, 0, 0, d->view->height, 0, d->view->height, err);
     int end = splat__frame_end(k, s->splat, err);
     return rc < 0 ? rc : end;
 }
