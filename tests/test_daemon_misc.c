@@ -162,7 +162,8 @@ static void test_token_modes(void **state)
     auth_token t;
     sd_err e = {0};
     static const struct { mode_t mode; int ok; } cases[] = {
-        {0600, 1}, {0400, 1}, {0640, 0}, {0604, 0}, {0644, 0}, {0660, 0}, {0610, 0}, {0601, 0},
+        {0600, 1}, {0400, 1}, {0700, 1}, {0640, 0}, {0604, 0}, {0644, 0}, {0660, 0}, {0610, 0},
+        {0601, 0}, {0620, 0}, {0602, 0}, {0670, 0}, {0607, 0},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         assert_int_equal(chmod(p, cases[i].mode), 0);
@@ -183,6 +184,51 @@ static void test_token_modes(void **state)
     assert_int_equal(auth_token_load(p, &t, &e), SD_EEMPTY);
     snprintf(p, sizeof p, "%s/none", dir);
     assert_int_equal(auth_token_load(p, &t, &e), SD_EIO);
+    tu_rm_rf(dir);
+}
+
+/* The token's edges: trailing CR and LF (any mix, as a Windows editor leaves them) are not part
+ * of the token but a CR inside it is; a token of exactly AUTH_TOKEN_MAX bytes loads, with or
+ * without a trailing CRLF, and one byte more is refused (SD_ELIMIT), as is a much larger file. */
+static void test_token_edges(void **state)
+{
+    (void)state;
+    char dir[512], p[700];
+    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    snprintf(p, sizeof p, "%s/token", dir);
+    auth_token t;
+    sd_err e = {0};
+    static const struct { const char *content; size_t len; } ends[] = {
+        {"s3cret\r\n", 6}, {"s3cret\n\r\n", 6}, {"s3cret\r", 6}, {"s3cret", 6}, {"s3\rcret\n", 7},
+    };
+    for (size_t i = 0; i < sizeof ends / sizeof ends[0]; i++) {
+        assert_int_equal(tu_write_file(p, ends[i].content, strlen(ends[i].content)), 0);
+        assert_int_equal(chmod(p, 0600), 0);
+        assert_int_equal(auth_token_load(p, &t, &e), 0);
+        if (t.len != ends[i].len)
+            fail_msg("token file case %zu: %zu bytes, want %zu", i, t.len, ends[i].len);
+    }
+    char *big = malloc(AUTH_TOKEN_MAX + 64);
+    assert_non_null(big);
+    memset(big, 'k', AUTH_TOKEN_MAX + 64);
+    static const struct { size_t n; const char *tail; int rc; } sizes[] = {
+        {AUTH_TOKEN_MAX, "", 0}, {AUTH_TOKEN_MAX, "\n", 0}, {AUTH_TOKEN_MAX, "\r\n", 0},
+        {AUTH_TOKEN_MAX + 1, "", SD_ELIMIT}, {AUTH_TOKEN_MAX + 1, "\n", SD_ELIMIT},
+        {AUTH_TOKEN_MAX + 40, "", SD_ELIMIT},
+    };
+    for (size_t i = 0; i < sizeof sizes / sizeof sizes[0]; i++) {
+        size_t tl = strlen(sizes[i].tail);
+        memcpy(big + sizes[i].n, sizes[i].tail, tl);
+        assert_int_equal(tu_write_file(p, big, sizes[i].n + tl), 0);
+        memset(big + sizes[i].n, 'k', tl);
+        assert_int_equal(chmod(p, 0600), 0);
+        int rc = auth_token_load(p, &t, &e);
+        if (rc != sizes[i].rc)
+            fail_msg("a token of %zu bytes + %zu: rc %d, want %d (%s)", sizes[i].n, tl, rc,
+                     sizes[i].rc, e.msg);
+        if (rc == 0) assert_int_equal(t.len, AUTH_TOKEN_MAX);
+    }
+    free(big);
     tu_rm_rf(dir);
 }
 
@@ -216,6 +262,72 @@ static void test_hmac(void **state)
     assert_int_equal(auth_challenge(c1, NULL), 0);
     assert_int_equal(auth_challenge(c2, NULL), 0);
     assert_memory_not_equal(c1, c2, AUTH_CHALLENGE_LEN);
+}
+
+/* auth_verify refuses a proof damaged ANYWHERE, not only where one example happens to look: each
+ * of the 32 bytes flipped in turn (with three different bit masks, so a comparison that ignores
+ * some bits of a byte is caught too), every wrong length with the right bytes as a prefix, an
+ * all-zero and an all-ones proof, and the right proof checked against a challenge or a token that
+ * differs in one byte (each challenge byte in turn: a proof must bind the whole challenge). The
+ * right proof is accepted before and after, so the refusals are not an always-0 verifier. */
+static void test_hmac_refuses_every_damage(void **state)
+{
+    (void)state;
+    auth_token t = {0};
+    memcpy(t.bytes, "correct horse battery staple", 28);
+    t.len = 28;
+    uint8_t c[AUTH_CHALLENGE_LEN];
+    for (int i = 0; i < AUTH_CHALLENGE_LEN; i++) c[i] = (uint8_t)(i * 37 + 11);
+    uint8_t good[AUTH_PROOF_LEN];
+    assert_int_equal(auth_proof(&t, c, good), 0);
+    assert_int_equal(auth_verify(&t, c, good, AUTH_PROOF_LEN), 1);
+
+    static const uint8_t masks[] = {0x01, 0x80, 0xff};
+    for (int i = 0; i < AUTH_PROOF_LEN; i++) {
+        for (size_t k = 0; k < sizeof masks; k++) {
+            uint8_t p[AUTH_PROOF_LEN];
+            memcpy(p, good, sizeof p);
+            p[i] ^= masks[k];
+            if (auth_verify(&t, c, p, sizeof p) != 0)
+                fail_msg("a proof with byte %d flipped (mask 0x%02x) was accepted", i, masks[k]);
+        }
+    }
+
+    /* Every wrong length, from 0 to twice the right one, over a buffer that starts with the
+     * right proof (so a verifier that compares only min(len, 32) bytes is caught). */
+    uint8_t longp[2 * AUTH_PROOF_LEN + 1];
+    memcpy(longp, good, AUTH_PROOF_LEN);
+    memcpy(longp + AUTH_PROOF_LEN, good, AUTH_PROOF_LEN);
+    longp[2 * AUTH_PROOF_LEN] = 0;
+    for (size_t len = 0; len <= sizeof longp; len++) {
+        if (len == AUTH_PROOF_LEN) continue;
+        if (auth_verify(&t, c, longp, len) != 0)
+            fail_msg("a proof of %zu bytes (the right bytes first) was accepted", len);
+    }
+    assert_int_equal(auth_verify(&t, c, NULL, 0), 0);
+
+    uint8_t zero[AUTH_PROOF_LEN] = {0}, ones[AUTH_PROOF_LEN];
+    memset(ones, 0xff, sizeof ones);
+    assert_int_equal(auth_verify(&t, c, zero, sizeof zero), 0);
+    assert_int_equal(auth_verify(&t, c, ones, sizeof ones), 0);
+
+    /* The right proof for another challenge (one byte different, at each position) or for a
+     * token that differs in its last byte, or is one byte shorter, is refused. */
+    for (int i = 0; i < AUTH_CHALLENGE_LEN; i++) {
+        uint8_t c2[AUTH_CHALLENGE_LEN];
+        memcpy(c2, c, sizeof c2);
+        c2[i] ^= 0x01;
+        if (auth_verify(&t, c2, good, AUTH_PROOF_LEN) != 0)
+            fail_msg("a proof was accepted for a challenge that differs in byte %d", i);
+    }
+    auth_token t2 = t;
+    t2.bytes[t2.len - 1] ^= 0x01;
+    assert_int_equal(auth_verify(&t2, c, good, AUTH_PROOF_LEN), 0);
+    t2 = t;
+    t2.len--;
+    assert_int_equal(auth_verify(&t2, c, good, AUTH_PROOF_LEN), 0);
+
+    assert_int_equal(auth_verify(&t, c, good, AUTH_PROOF_LEN), 1);
 }
 
 /* ---- timer heap ---- */
@@ -330,7 +442,9 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_resolve_refuses, dd_setup, dd_teardown),
         cmocka_unit_test_setup_teardown(test_list, dd_setup, dd_teardown),
         cmocka_unit_test(test_token_modes),
+        cmocka_unit_test(test_token_edges),
         cmocka_unit_test(test_hmac),
+        cmocka_unit_test(test_hmac_refuses_every_damage),
         cmocka_unit_test(test_theap_order),
         cmocka_unit_test(test_loop_timers),
         cmocka_unit_test(test_hostport),

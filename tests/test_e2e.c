@@ -1,6 +1,8 @@
 /* test_e2e.c — end-to-end tests of the real daemon binary ($SPLATD_BIN) on an ephemeral port:
  * malformed input (raw sockets with protocol/proto.h), lossless frames against `splatd render`,
- * JPEG frames, authentication, isolation of a client that stops reading, 20 concurrent
+ * JPEG frames, authentication (and forged proofs, wrong in each byte in turn), isolation of a
+ * client that stops reading, latest-wins streaming to a client whose socket is full, pipelined
+ * RENDERs answered in order, the output limit of a client that does not read, 20 concurrent
  * clients with a memory check, a client killed mid-frame, and SIGTERM.
  *
  * The data directory is a temporary directory holding a copy of tests/data/Guanyin.ply and a
@@ -30,6 +32,9 @@
 #include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
+
+#include <openssl/evp.h>
+#include <openssl/hmac.h>
 
 #include "common/testutil.h"
 #include "proto.h"
@@ -420,6 +425,16 @@ static int group_teardown(void **state)
     if (t->aux.pid > 0) daemon_stop(&t->aux);
     tu_rm_rf(t->root);
     free(t);
+    return 0;
+}
+
+/* stop_aux: per-test teardown of the tests that start a second daemon (t->aux): stops it when
+ * the test failed before it could, so it neither outlives the run nor is overwritten by the next
+ * test's daemon (holding the runner's stdout open). */
+static int stop_aux(void **state)
+{
+    e2e *t = *state;
+    if (t->aux.pid > 0) daemon_stop(&t->aux);
     return 0;
 }
 
@@ -856,6 +871,151 @@ static void test_auth(void **state)
     free(log);
 }
 
+/* ---- auth: a forged proof is refused wherever it is wrong ---- */
+
+/* auth_hello1: connects to port and sends the first HELLO (no proof); returns the challenge of
+ * the unauthenticated WELCOME in c. */
+static void auth_hello1(raw *r, int port, uint8_t c[PROTO_AUTH_LEN])
+{
+    assert_int_equal(raw_connect(r, port), 0);
+    proto_buf b = {0};
+    proto_hello h = {.min_version = 1, .max_version = 1};
+    assert_int_equal(proto_enc_hello(&b, ++r->seq, &h), 0);
+    raw_send_buf(r, &b);
+    assert_int_equal(raw_recv(r), PROTO_MSG_WELCOME);
+    proto_welcome w;
+    assert_int_equal(proto_parse_welcome(r->pl, r->h.len, &w, NULL), 0);
+    assert_int_equal(w.auth_required, 1);
+    assert_int_equal(w.authenticated, 0);
+    memcpy(c, w.challenge, PROTO_AUTH_LEN);
+}
+
+/* auth_mac: HMAC-SHA256(token, challenge), computed here with libcrypto (not the daemon's code). */
+static void auth_mac(const char *token, const uint8_t c[PROTO_AUTH_LEN], uint8_t mac[PROTO_AUTH_LEN])
+{
+    unsigned int len = 0;
+    assert_non_null(HMAC(EVP_sha256(), token, (int)strlen(token), c, PROTO_AUTH_LEN, mac, &len));
+    assert_int_equal(len, PROTO_AUTH_LEN);
+}
+
+/* auth_send_proof: the second HELLO with the given proof bytes (len 0 or 32). */
+static uint32_t auth_send_proof(raw *r, const uint8_t *proof, uint8_t len)
+{
+    proto_hello h = {.min_version = 1, .max_version = 1, .proof_len = len};
+    snprintf(h.client, sizeof h.client, "forger");
+    if (len) memcpy(h.proof, proof, len);
+    proto_buf b = {0};
+    assert_int_equal(proto_enc_hello(&b, ++r->seq, &h), 0);
+    raw_send_buf(r, &b);
+    return r->seq;
+}
+
+/* auth_refused: the next message is ERROR code for request seq, then the server closes: the
+ * connection never reached the authenticated state. */
+static void auth_refused(raw *r, int code, uint32_t seq)
+{
+    raw_expect_error(r, code, seq);
+    raw_expect_closed(r);
+    raw_close(r);
+}
+
+/* The daemon refuses a proof that is wrong in any one of its 32 bytes (each flipped in turn, on
+ * its own connection, with the connection's own challenge), an all-zero proof, an empty proof, a
+ * proof of 31 or 33 bytes, and the right proof of another connection's challenge (a replay); one
+ * attempt per connection: the right proof pipelined right behind a wrong one is not looked at.
+ * The right proof, computed the same way, is accepted (so the refusals are the proof's doing). */
+static void test_auth_forged_proofs(void **state)
+{
+    e2e *t = *state;
+    char tok[700];
+    static const char token[] = "forged proofs are refused";
+    snprintf(tok, sizeof tok, "%s/token-forged", t->root);
+    char content[64];
+    int clen = snprintf(content, sizeof content, "%s\n", token);
+    assert_int_equal(tu_write_file(tok, content, (size_t)clen), 0);
+    assert_int_equal(chmod(tok, 0600), 0);
+    daemon_proc *d = &t->aux;
+    assert_int_equal(daemon_start(t, d, NULL, "--listen", "127.0.0.1:0", "--data", t->data,
+                                  "--cache", t->cache, "--token-file", tok, (char *)NULL), 0);
+    raw r;
+    uint8_t c[PROTO_AUTH_LEN], mac[PROTO_AUTH_LEN];
+
+    /* The right proof: authenticated, and a request is then served. */
+    auth_hello1(&r, d->port, c);
+    auth_mac(token, c, mac);
+    uint32_t s = auth_send_proof(&r, mac, PROTO_AUTH_LEN);
+    assert_int_equal(raw_recv(&r), PROTO_MSG_WELCOME);
+    assert_int_equal(r.h.seq, s);
+    proto_welcome w;
+    assert_int_equal(proto_parse_welcome(r.pl, r.h.len, &w, NULL), 0);
+    assert_int_equal(w.authenticated, 1);
+    raw_ping(&r);
+    raw_close(&r);
+
+    /* Each byte position wrong in turn (alternating the low and the high bit). */
+    for (int i = 0; i < (int)PROTO_AUTH_LEN; i++) {
+        auth_hello1(&r, d->port, c);
+        auth_mac(token, c, mac);
+        mac[i] ^= (i & 1) ? 0x80 : 0x01;
+        s = auth_send_proof(&r, mac, PROTO_AUTH_LEN);
+        auth_refused(&r, PROTO_E_AUTH_FAILED, s);
+    }
+
+    /* All zero, and empty. */
+    auth_hello1(&r, d->port, c);
+    memset(mac, 0, sizeof mac);
+    s = auth_send_proof(&r, mac, PROTO_AUTH_LEN);
+    auth_refused(&r, PROTO_E_AUTH_FAILED, s);
+    auth_hello1(&r, d->port, c);
+    s = auth_send_proof(&r, NULL, 0);
+    auth_refused(&r, PROTO_E_AUTH_FAILED, s);
+
+    /* 31 and 33 bytes (the right bytes first): the encoder refuses those lengths, so the HELLO is
+     * written by hand; the daemon answers MALFORMED (proof_len must be 0 or 32) and closes. */
+    for (int len = 31; len <= 33; len += 2) {
+        auth_hello1(&r, d->port, c);
+        auth_mac(token, c, mac);
+        uint8_t pl[8 + 2 * PROTO_AUTH_LEN];
+        size_t n = 0;
+        proto_put_u16(pl + n, 1); n += 2;
+        proto_put_u16(pl + n, 1); n += 2;
+        pl[n++] = 0;                 /* client name: empty */
+        pl[n++] = (uint8_t)len;      /* proof_len */
+        for (int k = 0; k < len; k++) pl[n++] = k < (int)PROTO_AUTH_LEN ? mac[k] : 0;
+        s = raw_send_hdr(&r, PROTO_MAGIC, 1, PROTO_MSG_HELLO, (uint32_t)n, pl, n);
+        auth_refused(&r, PROTO_E_MALFORMED, s);
+    }
+
+    /* A replay: the right proof for connection A's challenge, sent on connection B. */
+    raw a;
+    uint8_t ca[PROTO_AUTH_LEN];
+    auth_hello1(&a, d->port, ca);
+    auth_hello1(&r, d->port, c);
+    assert_memory_not_equal(ca, c, PROTO_AUTH_LEN);
+    auth_mac(token, ca, mac);
+    s = auth_send_proof(&r, mac, PROTO_AUTH_LEN);
+    auth_refused(&r, PROTO_E_AUTH_FAILED, s);
+    raw_close(&a);
+
+    /* One attempt: a wrong proof, then (in the same write) the right one and a PING. Only the
+     * ERROR comes back, then the connection closes: no WELCOME, no PONG. */
+    auth_hello1(&r, d->port, c);
+    auth_mac(token, c, mac);
+    proto_hello h = {.min_version = 1, .max_version = 1, .proof_len = PROTO_AUTH_LEN};
+    memcpy(h.proof, mac, sizeof h.proof);
+    h.proof[0] ^= 0x01;
+    proto_buf b = {0};
+    uint32_t bad = ++r.seq;
+    assert_int_equal(proto_enc_hello(&b, bad, &h), 0);
+    h.proof[0] ^= 0x01;
+    assert_int_equal(proto_enc_hello(&b, ++r.seq, &h), 0);
+    assert_int_equal(proto_enc_ping(&b, ++r.seq, &(proto_ping){.token = 7}), 0);
+    raw_send_buf(&r, &b);
+    auth_refused(&r, PROTO_E_AUTH_FAILED, bad);
+
+    assert_int_equal(daemon_stop(d), 0);
+}
+
 /* ---- --max-clients: the connection over the limit gets ERROR BUSY and is closed ---- */
 
 static void test_max_clients(void **state)
@@ -1128,6 +1288,281 @@ static void test_stream(void **state)
     raw_close(&r);
 }
 
+/* ---- a slow reader that streams gets the NEWEST camera's frame, and few frames ---- */
+
+/* tcp_wmem_max: the ceiling of a TCP socket's send buffer, to which the daemon's (not set by
+ * it) is autotuned; 4 MiB when /proc does not say. */
+static long tcp_wmem_max(void)
+{
+    long lo, def, hi;
+    FILE *fp = fopen("/proc/sys/net/ipv4/tcp_wmem", "r");
+    if (!fp) return 4L << 20;
+    int n = fscanf(fp, "%ld %ld %ld", &lo, &def, &hi);
+    fclose(fp);
+    return n == 3 && hi > 0 ? hi : 4L << 20;
+}
+
+/* raw_connect_small: raw_connect with a small receive buffer (set before connecting, so the
+ * window is small from the start): a client that does not read fills its socket quickly. */
+static void raw_connect_small(raw *r, int port)
+{
+    memset(r, 0, sizeof *r);
+    r->fd = socket(AF_INET, SOCK_STREAM, 0);
+    assert_true(r->fd >= 0);
+    int rcv = 16384, one = 1;
+    assert_int_equal(setsockopt(r->fd, SOL_SOCKET, SO_RCVBUF, &rcv, sizeof rcv), 0);
+    setsockopt(r->fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    struct timeval tv = {20, 0};
+    setsockopt(r->fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    struct sockaddr_in a = {.sin_family = AF_INET, .sin_port = htons((uint16_t)port)};
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    assert_int_equal(connect(r->fd, (struct sockaddr *)&a, sizeof a), 0);
+}
+
+/* drain_stream: reads streamed FRAMEs until one answers camera `want` and nothing more comes
+ * for 300 ms, or until `secs` pass; writes their camera_seq, in arrival order, to cams (at most
+ * max kept) and returns how many came. Every message must be a streamed FRAME. */
+static int drain_stream(raw *r, uint32_t want, uint32_t *cams, int max, double secs)
+{
+    int n = 0, seen = 0;
+    double t0 = now_s();
+    for (;;) {
+        double left = secs - (now_s() - t0);
+        if (left <= 0) break;
+        int wait_ms = seen ? 300 : (int)(left * 1000) + 1;
+        if (!readable(r, wait_ms)) {
+            if (seen) break;
+            continue;
+        }
+        int ty = raw_recv(r);
+        if (ty != PROTO_MSG_FRAME) fail_msg("slow reader: message type %d instead of a FRAME", ty);
+        proto_frame f;
+        assert_int_equal(proto_parse_frame(r->pl, r->h.len, &f, NULL), 0);
+        assert_int_equal(r->h.seq, 0);
+        if (n < max) cams[n] = f.camera_seq;
+        n++;
+        if (f.camera_seq == want) seen = 1;
+    }
+    return n;
+}
+
+/* check_round: at most `most` frames came (n counts them all; cams holds at least min(n, most)
+ * of them), the first is the filler's, they came in camera order (latest wins never goes back),
+ * and the last answers the last camera sent. */
+static void check_round(const char *what, const uint32_t *cams, int n, uint32_t filler,
+                        uint32_t last, int most)
+{
+    char list[256];
+    int o = 0;
+    for (int i = 0; i < n && i < most && o < (int)sizeof list - 16; i++)
+        o += snprintf(list + o, sizeof list - (size_t)o, " %u", cams[i]);
+    print_message("slow reader, %s: %d frames, camera sequences%s (filler %u, last camera %u)\n",
+                  what, n, list, filler, last);
+    if (n > most)
+        fail_msg("%s: %d frames for a client that did not read; at most %d", what, n, most);
+    if (n < 1 || cams[0] != filler) fail_msg("%s: the first frame is not the filler's", what);
+    for (int i = 1; i < n; i++)
+        if (cams[i] <= cams[i - 1])
+            fail_msg("%s: frame %d answers camera %u after %u", what, i, cams[i], cams[i - 1]);
+    if (cams[n - 1] != last)
+        fail_msg("%s: the last frame answers camera %u, not the last camera %u (a stale view "
+                 "stays on the client's screen)", what, cams[n - 1], last);
+}
+
+/* A streaming client that stops reading (its socket full) and moves the camera must still end
+ * up with the NEWEST camera's frame, and get only a few frames, not one per camera. The socket is
+ * filled by a first "filler" frame larger than any send buffer the kernel allows (raw RGBA, sized
+ * from /proc/sys/net/ipv4/tcp_wmem) with a 16 KiB receive buffer, so the daemon is stuck in the
+ * middle of writing it; everything after must go through the session's one-frame pending slot.
+ *
+ * Round 1 (latest wins in the pending slot): a second large frame is rendering while a burst of
+ * 200 small cameras arrives in one write; the render thread then takes the last camera, so when
+ * the second frame lands in the pending slot the last camera's frame is already being rendered,
+ * and lands on top of it. A slot that kept the older frame (and dropped the newer) would leave
+ * the client with the second frame's view for good: no camera is left to render.
+ *
+ * Round 2 (bounded): with the socket full again, 60 cameras arrive over ~250 ms while the client
+ * still does not read: the daemon renders at most the frames already under way plus the last
+ * camera once the client reads (a queue of streamed frames would give one frame per camera). */
+static void test_stream_slow_reader(void **state)
+{
+    e2e *t = *state;
+    raw r;
+    raw_connect_small(&r, t->d.port);
+    raw_hello(&r);
+    proto_welcome w;
+    assert_int_equal(proto_parse_welcome(r.pl, r.h.len, &w, NULL), 0);
+    uint32_t s = raw_open(&r, "Guanyin");
+    assert_int_equal(raw_recv_skip(&r), PROTO_MSG_INFO);
+    const char *kv[] = {"pipeline=points", "format=raw"};
+    s = raw_params(&r, kv, 2);
+    assert_int_equal(raw_recv(&r), PROTO_MSG_OK);
+    assert_int_equal(r.h.seq, s);
+
+    /* The filler: more bytes than the daemon's send buffer and our receive buffer can hold. */
+    long need = tcp_wmem_max() + (1L << 20);
+    int fw = 2048, fh = (int)(need / (fw * 4L)) + 1;
+    if ((uint32_t)fw > w.max_width || (uint32_t)fh > w.max_height)
+        TU_SKIP("a %dx%d filler frame (tcp_wmem max %ld) is over the daemon's maximum %ux%u",
+                fw, fh, tcp_wmem_max(), w.max_width, w.max_height);
+    enum { BURST = 200, SPREAD = 60, MOST = 4, KEEP = 64 };
+    uint32_t cams[KEEP];
+
+    /* Round 1. */
+    uint32_t filler = raw_camera(&r, fw, fh, 0.0);
+    proto_buf b = {0};
+    s = ++r.seq;
+    assert_int_equal(proto_enc_stream(&b, s, &(proto_stream){.on = 1, .max_fps = 0}), 0);
+    raw_send_buf(&r, &b);
+    assert_int_equal(raw_recv(&r), PROTO_MSG_OK);
+    assert_int_equal(r.h.seq, s);
+    if (!readable(&r, 20000)) fail_msg("the filler frame did not come");
+    /* A second large camera: the render thread (idle since the filler) takes it at once, and
+     * it is still rendering when the burst below has been read, 3 ms later. */
+    raw_camera(&r, fw, fh, 0.1);
+    usleep(3000);
+
+    for (int i = 0; i < BURST; i++) {
+        proto_camera c = {.eye = {3 * cos(0.2 + 0.01 * i), 3 * sin(0.2 + 0.01 * i), 0.5},
+                          .up = {0, 0, 1}, .fov_deg = 45, .width = 64, .height = 64};
+        assert_int_equal(proto_enc_camera(&b, ++r.seq, &c), 0);
+    }
+    uint32_t last = r.seq;
+    raw_send_buf(&r, &b);
+    usleep(250000); /* still not reading: the frames under way land in the pending slot */
+    int n = drain_stream(&r, last, cams, KEEP, 10.0);
+    check_round("burst", cams, n, filler, last, MOST);
+
+    /* Round 2: stream still on, so the filler camera renders at once. */
+    filler = raw_camera(&r, fw, fh, 0.0);
+    if (!readable(&r, 20000)) fail_msg("the second filler frame did not come");
+    for (int i = 0; i < SPREAD; i++) {
+        last = raw_camera(&r, 64, 64, 0.3 + 0.01 * i);
+        usleep(4000);
+    }
+    n = drain_stream(&r, last, cams, KEEP, 10.0);
+    check_round("spread", cams, n, filler, last, MOST);
+    raw_close(&r);
+}
+
+/* ---- pipelined RENDERs are answered in order, each with the camera it was sent after ---- */
+
+/* Eight CAMERA + RENDER pairs in one write (camera i is 40 + i pixels wide): the FRAMEs come back
+ * in request order, FRAME i answering RENDER i with camera i's size and sequence, although
+ * several placeholders wait unfilled at once while the render thread works through them. */
+static void test_pipelined_renders(void **state)
+{
+    e2e *t = *state;
+    raw r;
+    raw_ready(&r, t->d.port, 64, 48, "raw");
+    enum { N = 8 };
+    uint32_t cam[N], req[N];
+    proto_buf b = {0};
+    for (int i = 0; i < N; i++) {
+        proto_camera c = {.eye = {3 * cos(0.1 * i), 3 * sin(0.1 * i), 0.5}, .up = {0, 0, 1},
+                          .fov_deg = 45, .width = (uint32_t)(40 + i), .height = 30};
+        cam[i] = ++r.seq;
+        assert_int_equal(proto_enc_camera(&b, cam[i], &c), 0);
+        req[i] = ++r.seq;
+        assert_int_equal(proto_enc_empty(&b, PROTO_MSG_RENDER, req[i]), 0);
+    }
+    raw_send_buf(&r, &b);
+    for (int i = 0; i < N; i++) {
+        assert_int_equal(raw_recv(&r), PROTO_MSG_FRAME);
+        proto_frame f;
+        assert_int_equal(proto_parse_frame(r.pl, r.h.len, &f, NULL), 0);
+        if (r.h.seq != req[i] || f.camera_seq != cam[i] || f.width != (uint32_t)(40 + i))
+            fail_msg("answer %d: FRAME seq %u camera %u width %u; want seq %u camera %u width %d",
+                     i, r.h.seq, f.camera_seq, f.width, req[i], cam[i], 40 + i);
+    }
+    raw_ping(&r);
+    raw_close(&r);
+}
+
+/* ---- the daemon bounds what it queues for a client that does not read ---- */
+
+/* send_lists: n LIST requests in one write; returns 0, or -1 once the daemon has closed the
+ * connection. */
+static int send_lists(raw *r, int n)
+{
+    proto_buf b = {0};
+    for (int i = 0; i < n; i++) assert_int_equal(proto_enc_empty(&b, PROTO_MSG_LIST, ++r->seq), 0);
+    int rc = write_all(r->fd, b.data, b.len);
+    proto_buf_free(&b);
+    return rc;
+}
+
+/* log_has: 1 when the daemon's log holds needle within secs seconds. */
+static int log_has(const daemon_proc *d, const char *needle, double secs)
+{
+    double t0 = now_s();
+    do {
+        size_t len;
+        char *log = (char *)tu_read_file(d->log, &len);
+        int found = log && strstr(log, needle);
+        free(log);
+        if (found) return 1;
+        usleep(10000);
+    } while (now_s() - t0 < secs);
+    return 0;
+}
+
+/* The daemon bounds the answers it queues for a client that does not read (SESS_OUT_MAX, 4 MiB),
+ * not what a client receives in total. A second daemon serves a directory of 200 files with
+ * 254-byte names, so each LIST (16 bytes) is answered with a 55 kB CLOUDS: a client that reads
+ * exchanges 5.5 MB that way and stays connected; a client that pipelines 300 LISTs (16 MB of
+ * answers) and never reads is disconnected once 4 MiB wait for it, and the log says why. */
+static void test_output_limit(void **state)
+{
+    e2e *t = *state;
+    enum { FILES = 200, READ_LISTS = 100, UNREAD_LISTS = 300 };
+    char dir[700];
+    snprintf(dir, sizeof dir, "%s/many", t->root);
+    assert_int_equal(mkdir(dir, 0755), 0);
+    for (int i = 0; i < FILES; i++) {
+        char name[256], path[1000];
+        memset(name, 'n', 246);
+        snprintf(name + 246, sizeof name - 246, "-%03d.ply", i);
+        snprintf(path, sizeof path, "%s/%s", dir, name);
+        assert_int_equal(tu_write_file(path, "ply\n", 4), 0);
+    }
+    daemon_proc *d = &t->aux;
+    assert_int_equal(daemon_start(t, d, NULL, "--listen", "127.0.0.1:0", "--data", dir,
+                                  "--cache", t->cache, (char *)NULL), 0);
+    raw r;
+    assert_int_equal(raw_connect(&r, d->port), 0);
+    raw_hello(&r);
+    size_t total = 0;
+    for (int k = 0; k < READ_LISTS; k++) {
+        uint32_t s = raw_simple(&r, PROTO_MSG_LIST);
+        assert_int_equal(raw_recv(&r), PROTO_MSG_CLOUDS);
+        assert_int_equal(r.h.seq, s);
+        total += PROTO_HEADER_LEN + r.h.len;
+    }
+    assert_true(total > (size_t)5 << 20);
+    raw_ping(&r);
+    raw_close(&r);
+
+    raw_connect_small(&r, d->port);
+    raw_hello(&r);
+    struct sockaddr_in la;
+    socklen_t ll = sizeof la;
+    assert_int_equal(getsockname(r.fd, (struct sockaddr *)&la, &ll), 0);
+    int sent = 0;
+    while (sent < UNREAD_LISTS && send_lists(&r, 10) == 0) sent += 10;
+    char needle[80];
+    snprintf(needle, sizeof needle, "127.0.0.1:%d closed: its output went over the limit",
+             ntohs(la.sin_port));
+    int found = log_has(d, needle, 20.0);
+    print_message("output limit: %zu bytes of CLOUDS to a reading client; a client that does not "
+                  "read was %s (%d LISTs written)\n", total,
+                  found ? "disconnected" : "NOT disconnected", sent);
+    if (!found)
+        fail_msg("the daemon queued the answers of %d LISTs for a client that does not read", sent);
+    raw_close(&r);
+    assert_int_equal(daemon_stop(d), 0);
+}
+
 /* ---- load: 20 clients x 20 frames at once; RSS steady ---- */
 
 typedef struct load_arg {
@@ -1275,11 +1710,15 @@ int main(void)
         cmocka_unit_test(test_open_progress),
         cmocka_unit_test(test_lossless_matches_render),
         cmocka_unit_test(test_jpeg_frame),
-        cmocka_unit_test(test_auth),
-        cmocka_unit_test(test_max_clients),
-        cmocka_unit_test(test_hangup_while_loading),
+        cmocka_unit_test_teardown(test_auth, stop_aux),
+        cmocka_unit_test_teardown(test_auth_forged_proofs, stop_aux),
+        cmocka_unit_test_teardown(test_max_clients, stop_aux),
+        cmocka_unit_test_teardown(test_hangup_while_loading, stop_aux),
         cmocka_unit_test(test_isolation),
         cmocka_unit_test(test_stream),
+        cmocka_unit_test(test_stream_slow_reader),
+        cmocka_unit_test(test_pipelined_renders),
+        cmocka_unit_test_teardown(test_output_limit, stop_aux),
         cmocka_unit_test(test_load),
         cmocka_unit_test(test_kill_mid_frame),
         cmocka_unit_test(test_sigterm),

@@ -1,5 +1,6 @@
 /* test_protocol.c — the wire format: byte layout, round trips of every message type, the
- * incremental decoder, rejection of malformed input, cloud-name validation, random input. */
+ * incremental decoder, rejection of malformed input, every limit on both sides of its boundary,
+ * cloud-name validation, random input. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -802,6 +803,167 @@ static void test_camera_validation(void **state)
     proto_buf_free(&b);
 }
 
+/* ---- every limit at its boundary ----------------------------------------------------------- */
+
+/* PAYLOAD: the payload of the one message encoded in proto_buf b, as (pointer, length). */
+#define PAYLOAD(b) ((b).data + PROTO_HEADER_LEN), ((uint32_t)(b).len - PROTO_HEADER_LEN)
+
+/* Each limit of PROTOCOL.md section 3 and section 5 is checked on both sides: the largest (or
+ * smallest) value allowed parses, the next one is refused with its code. One side alone lets a
+ * check that is off by one, or missing, pass; the limits below are each exercised in full, not
+ * through one example field (width and height both, each flag of WELCOME, each end of a range). */
+static void test_limits_at_the_boundary(void **state)
+{
+    (void)state;
+    proto_error e = {0};
+    uint8_t pl[2048];
+
+    /* HELLO client name: 64 bytes parse, 65 are MALFORMED (written by hand: the struct cannot
+     * hold a longer name for the encoder). */
+    for (unsigned n = PROTO_MAX_CLIENT; n <= PROTO_MAX_CLIENT + 1; n++) {
+        size_t o = 0;
+        proto_put_u16(pl + o, 1); o += 2;
+        proto_put_u16(pl + o, 1); o += 2;
+        pl[o++] = (uint8_t)n;
+        memset(pl + o, 'c', n); o += n;
+        pl[o++] = 0; /* proof_len */
+        proto_hello h;
+        int rc = proto_parse_hello(pl, (uint32_t)o, &h, &e);
+        if (n == PROTO_MAX_CLIENT) {
+            assert_int_equal(rc, 0);
+            assert_int_equal(strlen(h.client), PROTO_MAX_CLIENT);
+        } else {
+            assert_int_equal(rc, -PROTO_E_MALFORMED);
+            assert_non_null(strstr(e.msg, "client"));
+        }
+    }
+    proto_buf b = {0};
+    proto_hello hl = {.min_version = 1, .max_version = 1};
+    memset(hl.client, 'c', PROTO_MAX_CLIENT);
+    assert_int_equal(proto_enc_hello(&b, 1, &hl), 0); /* the encoder takes the longest name */
+
+    /* ERROR text: 1024 bytes parse, 1025 are MALFORMED. */
+    for (unsigned n = PROTO_MAX_ERRTEXT; n <= PROTO_MAX_ERRTEXT + 1; n++) {
+        uint8_t *ep = malloc(6 + n);
+        proto_put_u32(ep, PROTO_E_INTERNAL);
+        proto_put_u16(ep + 4, (uint16_t)n);
+        memset(ep + 6, 't', n);
+        proto_errmsg em;
+        int rc = proto_parse_error(ep, 6 + n, &em, &e);
+        if (n == PROTO_MAX_ERRTEXT) {
+            assert_int_equal(rc, 0);
+            assert_int_equal(strlen(em.text), PROTO_MAX_ERRTEXT);
+        } else {
+            assert_int_equal(rc, -PROTO_E_MALFORMED);
+            assert_non_null(strstr(e.msg, "text_len"));
+        }
+        free(ep);
+    }
+
+    /* CAMERA width and height: each 1 and 16384 are fine, 0 and 16385 are BAD_CAMERA. */
+    for (int which = 0; which < 2; which++) {
+        static const uint32_t vals[] = {0, 1, PROTO_MAX_DIM, PROTO_MAX_DIM + 1};
+        for (size_t k = 0; k < sizeof vals / sizeof vals[0]; k++) {
+            proto_camera c = {{0, 0, 5}, {0, 0, 0}, {0, 1, 0}, 60, 0, 0, 64, 48};
+            if (which) c.height = vals[k];
+            else c.width = vals[k];
+            b.len = 0;
+            assert_int_equal(proto_enc_camera(&b, 1, &c), 0);
+            proto_camera out;
+            int rc = proto_parse_camera(PAYLOAD(b), &out, &e);
+            int ok = vals[k] >= 1 && vals[k] <= PROTO_MAX_DIM;
+            if (rc != (ok ? 0 : -PROTO_E_BAD_CAMERA))
+                fail_msg("CAMERA %s %u: rc %d (%s)", which ? "height" : "width", vals[k], rc, e.msg);
+        }
+    }
+
+    /* FRAME width and height: the same range, MALFORMED outside it. */
+    for (int which = 0; which < 2; which++) {
+        static const uint32_t vals[] = {0, 1, PROTO_MAX_DIM, PROTO_MAX_DIM + 1};
+        for (size_t k = 0; k < sizeof vals / sizeof vals[0]; k++) {
+            uint8_t jpg[4] = {0xFF, 0xD8, 0xFF, 0xD9};
+            proto_frame f = {.format = SP_FMT_JPEG, .width = 8, .height = 8, .data = jpg, .data_len = 4};
+            if (which) f.height = vals[k];
+            else f.width = vals[k];
+            b.len = 0;
+            assert_int_equal(proto_enc_frame(&b, 1, &f), 0);
+            proto_frame out;
+            int rc = proto_parse_frame(PAYLOAD(b), &out, &e);
+            int ok = vals[k] >= 1 && vals[k] <= PROTO_MAX_DIM;
+            if (rc != (ok ? 0 : -PROTO_E_MALFORMED))
+                fail_msg("FRAME %s %u: rc %d (%s)", which ? "height" : "width", vals[k], rc, e.msg);
+        }
+    }
+
+    /* STREAM max_fps: 0 and 1000 are fine; just above 1000, below 0 and NaN are BAD_PARAM_VALUE. */
+    {
+        static const float fps[] = {0.0f, 1000.0f, 1000.0001f, -0.0001f, NAN, INFINITY};
+        static const int ok[] = {1, 1, 0, 0, 0, 0};
+        for (size_t k = 0; k < sizeof fps / sizeof fps[0]; k++) {
+            b.len = 0;
+            assert_int_equal(proto_enc_stream(&b, 1, &(proto_stream){.on = 1, .max_fps = fps[k]}), 0);
+            proto_stream out;
+            int rc = proto_parse_stream(PAYLOAD(b), &out, &e);
+            if (rc != (ok[k] ? 0 : -PROTO_E_BAD_PARAM_VALUE))
+                fail_msg("STREAM max_fps %g: rc %d (%s)", (double)fps[k], rc, e.msg);
+        }
+    }
+
+    /* PROGRESS: the last phase and fractions 0 and 1 are fine; the phase after it, a fraction
+     * below 0 or above 1, and NaN are MALFORMED. */
+    {
+        static const struct { uint8_t phase; float fraction; int ok; } cases[] = {
+            {PROTO_PHASE_COUNT - 1, 1.0f, 1}, {0, 0.0f, 1}, {PROTO_PHASE_COUNT, 0.5f, 0},
+            {0, 1.0001f, 0}, {0, -0.0001f, 0}, {0, NAN, 0},
+        };
+        for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+            b.len = 0;
+            proto_progress pr = {.phase = cases[k].phase, .fraction = cases[k].fraction};
+            assert_int_equal(proto_enc_progress(&b, 1, &pr), 0);
+            proto_progress out;
+            int rc = proto_parse_progress(PAYLOAD(b), &out, &e);
+            if (rc != (cases[k].ok ? 0 : -PROTO_E_MALFORMED))
+                fail_msg("PROGRESS phase %u fraction %g: rc %d (%s)", cases[k].phase,
+                         (double)cases[k].fraction, rc, e.msg);
+        }
+    }
+
+    /* WELCOME: auth_required and authenticated are each 0 or 1, the version is not 0. */
+    {
+        static const struct { uint16_t version; uint8_t req, authd; int ok; } cases[] = {
+            {1, 0, 0, 1}, {1, 1, 1, 1}, {1, 2, 0, 0}, {1, 0, 2, 0}, {0, 0, 1, 0},
+        };
+        for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+            b.len = 0;
+            proto_welcome w = {.version = cases[k].version, .auth_required = cases[k].req,
+                               .authenticated = cases[k].authd, .server = "s", .backend = "b",
+                               .renderer = "r"};
+            assert_int_equal(proto_enc_welcome(&b, 1, &w), 0);
+            proto_welcome out;
+            int rc = proto_parse_welcome(PAYLOAD(b), &out, &e);
+            if (rc != (cases[k].ok ? 0 : -PROTO_E_MALFORMED))
+                fail_msg("WELCOME version %u auth_required %u authenticated %u: rc %d (%s)",
+                         cases[k].version, cases[k].req, cases[k].authd, rc, e.msg);
+        }
+    }
+
+    /* PARAMS count: 64 records parse, a count of 65 is MALFORMED before any record is read. */
+    {
+        sp_params p;
+        sp_params_defaults(&p);
+        proto_param_rec recs[PROTO_MAX_PARAMS];
+        for (unsigned i = 0; i < PROTO_MAX_PARAMS; i++)
+            proto_param_rec_from(&p, sp_param_find("quality"), &recs[i]);
+        b.len = 0;
+        assert_int_equal(proto_enc_params(&b, 1, recs, PROTO_MAX_PARAMS), 0);
+        assert_int_equal(proto_parse_params(PAYLOAD(b), &p, NULL, &e), 0);
+        proto_put_u16(b.data + PROTO_HEADER_LEN, PROTO_MAX_PARAMS + 1);
+        assert_int_equal(proto_parse_params(PAYLOAD(b), &p, NULL, &e),
+                         -PROTO_E_MALFORMED);
+    }
+    proto_buf_free(&b);
+}
+
 /* ---- PARAMS validation --------------------------------------------------------------------- */
 
 static int params_rc(const proto_param_rec *recs, unsigned n, sp_params *p, proto_error *e)
@@ -1082,6 +1244,7 @@ int main(void)
         cmocka_unit_test(test_truncated_payloads),
         cmocka_unit_test(test_malformed_payloads),
         cmocka_unit_test(test_camera_validation),
+        cmocka_unit_test(test_limits_at_the_boundary),
         cmocka_unit_test(test_params_validation),
         cmocka_unit_test(test_cloud_names),
         cmocka_unit_test(test_fuzz),
