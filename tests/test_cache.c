@@ -445,18 +445,16 @@ static void test_every_header_byte(void **state)
             if (!same_block(&p, &good))
                 fail_msg("header byte %zu changed with a valid checksum: the cache was loaded with "
                          "another k or another block (k %u, asked 8)", i, p.k);
-            /* KNOWN BUG (issue 18, reported): the point and batch counts are checked only
-             * through the block length they imply, computed in uint64 with 64-byte aligned
-             * sections, so a count a little off (300 -> 301) or with its top bit set (the
-             * length wraps around to the same value) is loaded as it is. Such a cache needs a
-             * valid header checksum (a writer's bug or a crafted file), so the sweep lists these
-             * bytes instead of failing; once cache.c checks the counts, make this a fail_msg. */
+            /* The point and batch counts are bounded by the file and checked against the
+             * batches, which tile [0, n): a count a little off (300 -> 301, inside a section's
+             * alignment padding) or with its top bit set (the block length it implies wraps
+             * around to the same value) must not be loaded as it is. */
             if (p.n != good.p.n || p.nbatches != good.p.nbatches) {
                 counts_off++;
-                print_message("cache header byte %zu changed with a valid checksum was loaded with "
-                              "n = %llu, nbatches = %llu (real: %llu, %llu)\n", i,
-                              (unsigned long long)p.n, (unsigned long long)p.nbatches,
-                              (unsigned long long)good.p.n, (unsigned long long)good.p.nbatches);
+                fail_msg("cache header byte %zu changed with a valid checksum was loaded with "
+                         "n = %llu, nbatches = %llu (real: %llu, %llu)", i,
+                         (unsigned long long)p.n, (unsigned long long)p.nbatches,
+                         (unsigned long long)good.p.n, (unsigned long long)good.p.nbatches);
             }
             if (!data_differs(&p, &good) && i != fmt_end && i != sc_end)
                 fail_msg("header byte %zu changed with a valid checksum: the cache was loaded and "

@@ -283,6 +283,16 @@ static int check_header(int fd, const struct stat *st, const src_key *key, int c
         snprintf(why, whylen, "cache built with k = %u, k = %d asked", h->k, k);
         return 0;
     }
+    /* The counts are bounded by the file before the block length they imply is computed:
+     * that length is a 64-bit sum that a huge count would wrap around to a plausible value. */
+    uint64_t room = (uint64_t)st->st_size;
+    if (h->n == 0 || h->n > room / 12 || h->nbatches == 0 || h->nbatches > h->n ||
+        h->nbatches > room / sizeof(pc_batch)) {
+        snprintf(why, whylen, "its counts (%llu points, %llu batches) cannot fit its %lld bytes",
+                 (unsigned long long)h->n, (unsigned long long)h->nbatches,
+                 (long long)st->st_size);
+        return -1;
+    }
     uint64_t want = pc_prepared_block_len(h->n, h->attrs, h->nbatches);
     if (want != h->block_len || (uint64_t)st->st_size != CACHE_BLOCK_OFFSET + h->block_len) {
         snprintf(why, whylen, "it is truncated or has a wrong size (%lld bytes, %llu expected)",
@@ -331,6 +341,29 @@ static int try_load(const char *cpath, const char *src, src_key *key, int k, pc_
     if (sd_hash64(m + CACHE_BLOCK_OFFSET, h.block_len, 0) != h.block_hash) {
         munmap(m, maplen);
         snprintf(why, whylen, "its data is corrupt (checksum mismatch)");
+        goto out;
+    }
+    /* The batches must tile [0, n) in order, as prep writes them: the count in the header and
+     * the batches then agree (a count off by one within a section's alignment padding would
+     * otherwise be taken as it is, and the renderer trusts the batches). */
+    pc_prepared where = {.n = h.n, .attrs = h.attrs, .nbatches = h.nbatches};
+    pc_prepared_bind(&where, m + CACHE_BLOCK_OFFSET);
+    const pc_batch *bt = where.batches;
+    uint64_t next = 0;
+    for (uint64_t i = 0; i < h.nbatches; i++) {
+        if (bt[i].first != next || bt[i].count == 0 || bt[i].count > h.n - next) {
+            munmap(m, maplen);
+            snprintf(why, whylen, "batch %llu [%u, +%u) does not follow the previous one in its "
+                     "%llu points", (unsigned long long)i, bt[i].first, bt[i].count,
+                     (unsigned long long)h.n);
+            goto out;
+        }
+        next += bt[i].count;
+    }
+    if (next != h.n) {
+        munmap(m, maplen);
+        snprintf(why, whylen, "its batches hold %llu points, its header says %llu",
+                 (unsigned long long)next, (unsigned long long)h.n);
         goto out;
     }
     memset(out, 0, sizeof *out);
