@@ -61,6 +61,24 @@ layout(binding = T_RAD) uniform samplerBuffer u_rad;   // R32F
 layout(binding = T_SRC) uniform usamplerBuffer u_src;  // R32UI: rgba8 (u_color 0) or float bits of field/intensity
 #include "lib_fetch.glsl"
 
+#ifdef SOFT_FILTER
+// The `soft` pipeline's splat programs (splat__create_filtered) draw only its solid points:
+// a point whose field value F exceeds u_st is soft and skipped here, at the start of both
+// passes (the raster and big lists are made of points that passed). F comes from the field
+// source bound on T_SOFT_F (float bits) or, for u_sfield 1 (height), from z normalised by
+// u_szr = (z min, 1 / (z max - z min)). The `splat` pipeline's own programs do not have this.
+layout(binding = T_SOFT_F) uniform usamplerBuffer u_sf;
+uniform int u_sfield;
+uniform float u_st;
+uniform vec2 u_szr;
+bool soft_point(uint i)
+{
+    float f = u_sfield == 1 ? clamp((texelFetch(u_pos, 3 * int(i) + 2).x - u_szr.x) * u_szr.y, 0.0, 1.0)
+                            : uintBitsToFloat(texelFetch(u_sf, int(i)).x);
+    return f > u_st;
+}
+#endif
+
 // One pixel of the stripe: accumulated attributes (32 bytes, one cache-line half), and apart
 // from them, in a compact array that pass 1's many reads keep in cache, the visibility key:
 // ~floatBitsToUint(depth). Positive floats order like their bits, so the nearest depth has the
@@ -317,6 +335,9 @@ void main()
     uint first = texelFetch(u_ranges, 0).x; // read once, as the uniforms
     for (uint g = gl_GlobalInvocationID.x; g < U.total; g += stride) {
         uint i = U.nranges == 1u ? first + g : point_of(u_ranges, U.nranges, g);
+#ifdef SOFT_FILTER
+        if (soft_point(i)) continue;
+#endif
         Splat s;
         if (!setup_core(U, i, s)) continue;
         if (s.dep) {

@@ -549,6 +549,52 @@ static void test_tile_matches_axis(void **state)
     rnd_release(g_ctx, id);
 }
 
+/* A cloud in several buffer sets (rnd_desc.max_set_points, as the renderer splits clouds over
+ * GL_MAX_TEXTURE_BUFFER_SIZE / 3 points): the solid points then go through the splat passes as
+ * runs of the view's chunks instead of the one-set filter, and the soft discs set by set (sets
+ * back to front by their centres along the axis, each sorted within). With lambda = 0 the frame
+ * must equal the one-set frame bit for bit (tolerance 0: the same splats); with lambda = 0.5,
+ * where the soft discs of neighbouring sets overlap on screen in an order that may differ from
+ * the one-set order, at most the tolerance of test_tile_matches_axis's layering (4 levels) in
+ * at most 2 % of the pixels. */
+static void test_buffer_sets(void **state)
+{
+    (void)state;
+    rnd_desc dd = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS"),
+                   .max_set_points = 2000};
+    sd_err err = {0};
+    rnd_ctx *r4 = rnd_create(&dd, &err);
+    if (!r4) fail_msg("rnd_create: %s", err.msg);
+    pc_prepared pc;
+    random_plane(&pc, 90, 90, 0.02f, 4);
+    for (uint64_t i = 0; i < pc.n; i++)
+        if (pc.F[i] > 0.6f) pc.pos[3 * i + 2] = 0.1f;
+    tu_finish_cloud(&pc, OFF);
+    uint32_t id1 = tu_upload(g_ctx, &pc), id4 = tu_upload(r4, &pc);
+    pc_prepared_free(&pc);
+    rnd_camera cam = cam_z(3.0);
+    sp_params p;
+    sp_params_defaults(&p);
+    p.pipeline = SP_PIPE_SOFT, p.t = 0.6f;
+    const float lambdas[2] = {0.0f, 0.5f};
+    for (int l = 0; l < 2; l++) {
+        p.lambda = lambdas[l];
+        rnd_frame a = {0}, b = {0};
+        tu_render(g_ctx, id1, &cam, &p, 0, &a);
+        tu_render(r4, id4, &cam, &p, 0, &b);
+        int n, m = max_diff(&a, &b, &n);
+        printf("buffer sets, lambda %.1f: max difference to one set %d levels (%d pixels)\n",
+               lambdas[l], m, n);
+        if (l == 0) assert_int_equal(m, 0);
+        else assert_true(m <= 4 && n <= W * H / 50);
+        rnd_frame_free(&a);
+        rnd_frame_free(&b);
+    }
+    rnd_release(g_ctx, id1);
+    rnd_release(r4, id4);
+    rnd_destroy(r4);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -559,6 +605,7 @@ int main(void)
         cmocka_unit_test(test_modulation),
         cmocka_unit_test(test_field_height),
         cmocka_unit_test(test_tile_matches_axis),
+        cmocka_unit_test(test_buffer_sets),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }

@@ -4,16 +4,17 @@
  * (uncertainty: prep's eq. 21, already normalised by the cloud's 99th percentile; height:
  * (z - zmin) / (zmax - zmin) over the cloud's local bounds; intensity: the file's intensity,
  * normalised by its range at upload). Points with F <= t are solid and are drawn by the `splat`
- * pipeline's own passes (splat_passes.h), given a view whose chunks are the runs of solid points
- * of the frame's visible chunks: the splat shaders are unchanged and read only solid points
- * through their range table. Points with F > t are soft.
- *
- * Why runs and not a per-point filter in a splat shader variant: no splat program changes
- * (t = 1 gives the frame's own chunks back, so exactly the splat image), and the split costs
- * nothing per point beyond lib_ranges' binary search over more ranges, which grows with the
- * log of the runs. The runs are made on the CPU when the cloud attaches and again only when
- * `field` or `t` changes (one pass over the points), and intersected with the view's chunks per
- * frame (a merge of two sorted lists).
+ * pipeline's own passes (splat_passes.h), F > t are soft. Two forms of the split, measured:
+ *   filter  (a cloud in one buffer set, the usual case) splat__create_filtered's raster
+ *           programs skip soft points at the start of both passes (one texel fetch a point);
+ *           lambda = 0 costs what splat costs.
+ *   runs    (several buffer sets, whose field buffers the splat passes do not rebind) a view
+ *           whose chunks are the runs of solid points within the frame's visible chunks,
+ *           through the unchanged programs; the runs are made on the CPU when the cloud
+ *           attaches and when `field` or `t` change. Scattered soft points make many runs and
+ *           lib_ranges' binary search pays for them: 42 ms CPU a frame on the 1M cloud at
+ *           t = 0.9 (15k soft points), which is why one set takes the filter.
+ * Both give t = 1 the splat image exactly (test_t1_equals_splat, test_buffer_sets).
  *
  * The soft points (Express-Model, eq. 19). Each is a view-facing disc of the splat radius times
  * splat_scale, drawn as one GL point sprite (soft.vert/.frag) whose fragments get the opacity
@@ -155,7 +156,7 @@ static int soft_create(rnd_kit *k, void **state, sd_err *err)
     const gl_api *gl = k->gl;
     soft_state *s = calloc(1, sizeof *s);
     if (!s) return sd_errf(err, SD_ENOMEM, "out of memory creating the soft pipeline");
-    int rc = splat__create(k, &s->splat, err);
+    int rc = splat__create_filtered(k, &s->splat, err);
     if (rc < 0) {
         soft_destroy(k, s);
         return rc;
@@ -700,8 +701,11 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     int rc = 0;
     if (!sc->have_split || sc->field != p->field || sc->t != p->t)
         if ((rc = make_split(k->gl, d->cloud, sc, p->field, p->t, err)) < 0) return rc;
-    rnd_view sv;
-    if ((rc = solid_view(s, d->view, sc, &sv, err)) < 0) return rc;
+    /* The split (see the file comment): one buffer set, the splat programs' filter; several,
+     * the solid runs. */
+    int one = sc->nsets == 1;
+    rnd_view sv = *d->view;
+    if (!one && (rc = solid_view(s, d->view, sc, &sv, err)) < 0) return rc;
     rnd_draw sd = *d;
     sd.view = &sv;
     soft_order o;
@@ -715,6 +719,19 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     splat_frame f;
     int nstripes = splat__frame_begin(k, s->splat, &sd, &f, err);
     rc = nstripes < 0 ? nstripes : 0;
+    if (nstripes > 0) {
+        float dz = d->cloud->bmax[2] - d->cloud->bmin[2];
+        splat__set_filter(k, s->splat, p->field, one ? p->t : 2.0f, d->cloud->bmin[2],
+                          dz > 0.0f ? 1.0f / dz : 0.0f);
+        if (one) {
+            k->gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_F);
+            k->gl->BindTexture(GL_TEXTURE_BUFFER, s->f_tex);
+            k->gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI,
+                             d->cloud->sets[0].buf[p->field == SP_FIELD_INTENSITY
+                                                       ? RND_ATTR_INTENSITY : RND_ATTR_FIELD]);
+            k->gl->ActiveTexture(GL_TEXTURE0);
+        }
+    }
     for (int i = 0; i < nstripes && rc == 0; i++) {
         splat__stripe_begin(k, s->splat, &f, i);
         if ((rc = splat__visibility(k, s->splat, &f, err)) == 0 &&

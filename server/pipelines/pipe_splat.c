@@ -137,6 +137,7 @@ typedef struct splat_state {
     GLuint rect_buf;           /* ivec4: the pixels pass 1 touched in the stripe (the resolve's
                                   rectangle) */
     uint64_t rect_bytes;
+    GLint floc[P_COUNT][3];    /* splat__create_filtered: u_sfield, u_st, u_szr */
 } splat_state;
 
 static void splat_destroy(rnd_kit *k, void *state)
@@ -158,7 +159,7 @@ static void splat_destroy(rnd_kit *k, void *state)
 
 /* create: compiles the programs (float or fixed-point atomics, chosen by the extension string;
  * rnd_pipe_opts.splat_fixed forces fixed point, for tests). */
-static int splat_create(rnd_kit *k, void **state, sd_err *err)
+static int splat_create_with(rnd_kit *k, void **state, int filtered, sd_err *err)
 {
     *state = NULL;
     const gl_api *gl = k->gl;
@@ -190,13 +191,19 @@ static int splat_create(rnd_kit *k, void **state, sd_err *err)
     };
     for (int p = 0; p < P_COUNT; p++) {
         char defs[256];
-        snprintf(defs, sizeof defs, "%s%s", fa, progs[p].defs);
+        snprintf(defs, sizeof defs, "%s%s%s", fa, progs[p].defs,
+                 filtered && p != P_RESOLVE ? "#define SOFT_FILTER 1\n" : "");
         s->prog[p] = rnd_kit_program(k, progs[p].files, progs[p].n, defs, err);
         if (!s->prog[p]) {
             splat_destroy(k, s);
             return err ? err->code : SD_EGL;
         }
         for (int u = 0; u < U_COUNT; u++) s->loc[p][u] = gl_uniform(gl, s->prog[p], unames[u]);
+    }
+    for (int p = 0; p < P_COUNT; p++) {
+        s->floc[p][0] = filtered && p != P_RESOLVE ? gl_uniform(gl, s->prog[p], "u_sfield") : -1;
+        s->floc[p][1] = filtered && p != P_RESOLVE ? gl_uniform(gl, s->prog[p], "u_st") : -1;
+        s->floc[p][2] = filtered && p != P_RESOLVE ? gl_uniform(gl, s->prog[p], "u_szr") : -1;
     }
     gl->GenVertexArrays(1, &s->vao);
     s->max_rows = k->opts.splat_stripe_rows;
@@ -493,9 +500,31 @@ static int splat_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     return rc < 0 ? rc : end;
 }
 
+static int splat_create(rnd_kit *k, void **state, sd_err *err)
+{
+    return splat_create_with(k, state, 0, err);
+}
+
 int splat__create(rnd_kit *k, void **state, sd_err *err)
 {
-    return splat_create(k, state, err);
+    return splat_create_with(k, state, 0, err);
+}
+
+int splat__create_filtered(rnd_kit *k, void **state, sd_err *err)
+{
+    return splat_create_with(k, state, 1, err);
+}
+
+void splat__set_filter(rnd_kit *k, void *state, int field, float t, float z0, float zinv)
+{
+    splat_state *s = state;
+    for (int p = 0; p < P_RESOLVE; p++) {
+        if (s->floc[p][1] < 0) continue;
+        k->gl->UseProgram(s->prog[p]);
+        if (s->floc[p][0] >= 0) k->gl->Uniform1i(s->floc[p][0], field);
+        k->gl->Uniform1f(s->floc[p][1], t);
+        if (s->floc[p][2] >= 0) k->gl->Uniform2f(s->floc[p][2], z0, zinv);
+    }
 }
 
 void splat__destroy(rnd_kit *k, void *state)

@@ -30,6 +30,14 @@ typedef struct splat_frame {
 } splat_frame;
 
 int splat__create(rnd_kit *k, void **state, sd_err *err);
+/* splat__create_filtered: the same passes, whose raster programs skip soft points (field value
+ * F > t, see splat__set_filter; the field source bound on RND_T_SOFT_F): the `soft` pipeline's
+ * solid points. The resolve is the same program as splat's. */
+int splat__create_filtered(rnd_kit *k, void **state, sd_err *err);
+/* splat__set_filter: after splat__frame_begin, the filter of a splat__create_filtered state:
+ * points whose F (SP_FIELD_* field: the float bits on RND_T_SOFT_F, or for height (z - z0) *
+ * zinv clamped to [0, 1]) exceeds t are skipped; t >= 1 skips none. */
+void splat__set_filter(rnd_kit *k, void *state, int field, float t, float z0, float zinv);
 void splat__destroy(rnd_kit *k, void *state);
 
 /* splat__frame_begin: sizes the buffers and sets the frame's uniforms. Returns the number of
