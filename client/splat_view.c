@@ -407,8 +407,8 @@ static int do_save(shared *s, spc_client *c, sp_params *applied, const save_req 
 static void on_progress(void *user, const char *phase, float fraction, const char *text)
 {
     shared *s = user;
-    set_status(s, "preparing %s: %s %.0f%%", s->name, text && text[0] ? text : phase,
-               100.0 * fraction);
+    if (text && text[0]) set_status(s, "preparing %s: %s", s->name, text);
+    else set_status(s, "preparing %s: %s %.0f%%", s->name, phase, 100.0 * fraction);
 }
 
 /* session: one connection's life, until the window quits (returns 0) or the connection fails
@@ -1144,6 +1144,11 @@ int main(int argc, char **argv)
     int nsc = 0;
     if (script && script_load(script, &sc, &nsc) < 0) return EXIT_USAGE;
 
+    /* SDL's software renderer by default (the environment's SDL_RENDER_DRIVER prevails): the
+     * window's work is one texture upload and one scaled copy per frame, which needs no GL
+     * driver in this process (no GPU on a render client, and none for Xvfb). */
+    SDL_SetHintWithPriority(SDL_HINT_RENDER_DRIVER, "software", SDL_HINT_DEFAULT);
+    SDL_SetHintWithPriority(SDL_HINT_FRAMEBUFFER_ACCELERATION, "0", SDL_HINT_DEFAULT);
     if (SDL_Init(SDL_INIT_VIDEO | SDL_INIT_EVENTS) < 0) {
         fprintf(stderr, "splat view: cannot start SDL video (is DISPLAY set?): %s\n",
                 SDL_GetError());
@@ -1172,6 +1177,7 @@ int main(int argc, char **argv)
     }
     show_frame(&v);
 
+    static char last_status[sizeof s.status];
     uint64_t info_seen = 0;
     int sci = 0, quit = 0, rc = 0, quit_asked = 0;
     double script_due = now_s();
@@ -1209,6 +1215,14 @@ int main(int argc, char **argv)
             update_camera(&v, t); /* a new session needs the camera again */
         }
         if (new_frame) show_frame(&v);
+        if (verbose) {
+            /* Status changes (a refused parameter, a save, a disconnection) as log lines. */
+            pthread_mutex_lock(&s.mu);
+            int changed = strcmp(s.status, last_status) != 0;
+            if (changed) snprintf(last_status, sizeof last_status, "%s", s.status);
+            pthread_mutex_unlock(&s.mu);
+            if (changed && last_status[0]) printf("status %s\n", last_status), fflush(stdout);
+        }
         settle(&v, t);
         /* The script runs once the cloud is open, each line when the previous wait is over. */
         while (sc && v.have_cam && !quit && sci < nsc && t >= script_due) {

@@ -1,0 +1,382 @@
+/* test_viewer.c — `splat view` end to end: a daemon, a virtual X server (Xvfb) and the viewer
+ * driven by --script. The saved view must equal `splat render` of the camera the viewer prints
+ * at quit, a pipeline key must reach the server (the frames' pipeline), keys the server lacks
+ * must not be errors, a continuous drag must give reduced-resolution frames and the rest a full
+ * one, and a bad script must be refused naming its line. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <math.h>
+#include <png.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "daemonproc.h"
+#include "testutil.h"
+
+/* The saved view and `splat render` of the same camera come from the same renderer and the
+ * same PNG encoder: they are expected to be equal; 40 dB leaves room for a renderer whose
+ * output varies slightly between two runs, and still fails for a camera off by a degree. */
+#define MIN_PSNR_DB 40.0
+
+static pid_t xvfb_pid;
+static char display[32];
+
+/* start_xvfb: a virtual X server on a free display number; 0, or -1 when there is none. */
+static int start_xvfb(void)
+{
+    if (access("/usr/bin/Xvfb", X_OK) != 0) return -1;
+    for (int n = 90 + (int)(getpid() % 50); n < 190; n++) {
+        char lock[64], sock[64];
+        snprintf(lock, sizeof lock, "/tmp/.X%d-lock", n);
+        snprintf(sock, sizeof sock, "/tmp/.X11-unix/X%d", n);
+        if (access(lock, F_OK) == 0 || access(sock, F_OK) == 0) continue;
+        char dn[16];
+        snprintf(dn, sizeof dn, ":%d", n);
+        pid_t pid = fork();
+        if (pid < 0) return -1;
+        if (pid == 0) {
+            freopen("/dev/null", "w", stderr);
+            freopen("/dev/null", "w", stdout);
+            execl("/usr/bin/Xvfb", "Xvfb", dn, "-screen", "0", "1280x1024x24", "-nolisten",
+                  "tcp", (char *)NULL);
+            _exit(127);
+        }
+        for (int i = 0; i < 500; i++) {
+            int st;
+            if (waitpid(pid, &st, WNOHANG) == pid) break; /* taken meanwhile: try the next */
+            if (access(sock, F_OK) == 0) {
+                xvfb_pid = pid;
+                snprintf(display, sizeof display, "%s", dn);
+                setenv("DISPLAY", display, 1);
+                return 0;
+            }
+            usleep(10000);
+        }
+        if (xvfb_pid == 0) {
+            kill(pid, SIGKILL);
+            waitpid(pid, NULL, 0);
+        }
+    }
+    return -1;
+}
+
+static int group_setup(void **state)
+{
+    (void)state;
+    if (start_xvfb() < 0) xvfb_pid = 0;
+    return 0;
+}
+
+static int group_teardown(void **state)
+{
+    (void)state;
+    if (xvfb_pid > 0) {
+        kill(xvfb_pid, SIGTERM);
+        waitpid(xvfb_pid, NULL, 0);
+    }
+    return 0;
+}
+
+typedef struct fx {
+    char *root;
+    char data[700], cache[700];
+    tu_daemon d;
+} fx;
+
+static int setup(void **state)
+{
+    fx *f = calloc(1, sizeof *f);
+    if (!f || tu_tmpdir_setup((void **)&f->root) != 0) return -1;
+    snprintf(f->data, sizeof f->data, "%s/data", f->root);
+    snprintf(f->cache, sizeof f->cache, "%s/cache", f->root);
+    mkdir(f->data, 0755);
+    mkdir(f->cache, 0700);
+    *state = f;
+    return 0;
+}
+
+static int teardown(void **state)
+{
+    fx *f = *state;
+    if (f->d.pid) tu_daemon_stop(&f->d);
+    tu_tmpdir_teardown((void **)&f->root);
+    free(f);
+    return 0;
+}
+
+/* start_daemon: splatd on the bunny (tests/data/bun000.ply) as "bun.ply". */
+static void start_daemon(fx *f)
+{
+    char src[700], dst[800];
+    tu_data("bun000.ply", src, sizeof src);
+    snprintf(dst, sizeof dst, "%s/bun.ply", f->data);
+    assert_int_equal(tu_copy_file(src, dst), 0);
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
+                          NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+}
+
+/* run_cmd: runs argv (NULL-terminated) with stdout to out_path and stderr to err_path, killed
+ * after limit_s seconds; returns the exit status (-1: died of a signal or was killed). */
+static int run_cmd(const char *const *argv, const char *out_path, const char *err_path,
+                   int limit_s)
+{
+    fflush(stdout); /* the child's freopen would write what is buffered a second time */
+    pid_t pid = fork();
+    if (pid < 0) return -1;
+    if (pid == 0) {
+        if (!freopen(out_path, "w", stdout) || !freopen(err_path, "w", stderr)) _exit(126);
+        execv(argv[0], (char *const *)argv);
+        _exit(127);
+    }
+    for (int i = 0; i < limit_s * 100; i++) {
+        int st;
+        if (waitpid(pid, &st, WNOHANG) == pid) return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+        usleep(10000);
+    }
+    kill(pid, SIGKILL);
+    waitpid(pid, NULL, 0);
+    return -1;
+}
+
+/* slurp: a whole text file (malloc'd, NUL-terminated), failing the test when unreadable. */
+static char *slurp(const char *path)
+{
+    size_t len;
+    uint8_t *b = tu_read_file(path, &len);
+    if (!b) fail_msg("cannot read %s", path);
+    char *s = realloc(b, len + 1);
+    assert_non_null(s);
+    s[len] = 0;
+    return s;
+}
+
+/* run_view: `splat view bun --script FILE --verbose` at 320x240; its stdout in a malloc'd
+ * string. Fails the test on a non-zero exit, showing stderr. */
+static char *run_view(fx *f, const char *script_text, const char *tag)
+{
+    char script[800], out[800], err[800], port[16];
+    snprintf(script, sizeof script, "%s/%s.script", f->root, tag);
+    snprintf(out, sizeof out, "%s/%s.out", f->root, tag);
+    snprintf(err, sizeof err, "%s/%s.err", f->root, tag);
+    snprintf(port, sizeof port, "%d", f->d.port);
+    assert_int_equal(tu_write_file(script, script_text, strlen(script_text)), 0);
+    const char *argv[] = {tu_splat_bin(), "--port", port, "view", "bun", "--size", "320x240",
+                          "--script", script, "--verbose", NULL};
+    struct timespec t0, t1;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    int rc = run_cmd(argv, out, err, 30);
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    char *e = slurp(err);
+    if (rc != 0) fail_msg("splat view exited %d:\n%s", rc, e);
+    free(e);
+    printf("splat view (%s) ran %.2f s\n", tag,
+           (t1.tv_sec - t0.tv_sec) + (t1.tv_nsec - t0.tv_nsec) * 1e-9);
+    return slurp(out);
+}
+
+/* read_png: RGBA8 pixels of a PNG file (malloc'd). */
+static uint8_t *read_png(const char *path, uint32_t *w, uint32_t *h)
+{
+    png_image im;
+    memset(&im, 0, sizeof im);
+    im.version = PNG_IMAGE_VERSION;
+    if (!png_image_begin_read_from_file(&im, path)) fail_msg("%s: %s", path, im.message);
+    im.format = PNG_FORMAT_RGBA;
+    uint8_t *px = malloc(PNG_IMAGE_SIZE(im));
+    assert_non_null(px);
+    if (!png_image_finish_read(&im, NULL, px, 0, NULL)) fail_msg("%s: %s", path, im.message);
+    *w = im.width;
+    *h = im.height;
+    return px;
+}
+
+static void skip_without_x(void)
+{
+    if (xvfb_pid <= 0)
+        TU_SKIP("no X server for the window: /usr/bin/Xvfb is missing or found no free display "
+                "(deploy/deps.sh installs the package xvfb)");
+}
+
+/* An orbit, a pipeline change (key 1: points), keys for things this server may lack, and a
+ * save: the saved PNG equals `splat render` of the final camera. */
+static void test_view_save_matches_render(void **state)
+{
+    skip_without_x();
+    fx *f = *state;
+    start_daemon(f);
+    char png[800], ref[800], script[2400];
+    snprintf(png, sizeof png, "%s/view.png", f->root);
+    snprintf(ref, sizeof ref, "%s/ref.png", f->root);
+    snprintf(script, sizeof script,
+             "# orbit a little, switch to points, press keys that may be unavailable\n"
+             "wait 200\n"
+             "drag 40 0\n"
+             "wait 50\n"
+             "drag 30 -20   # and up\n"
+             "wheel 2\n"
+             "wait 300\n"
+             "key 1\n"
+             "wait 300\n"
+             "key 9\n"
+             "wait 100\n"
+             "key U\n"
+             "wait 100\n"
+             "key J\n"
+             "wait 100\n"
+             "save %s\n"
+             "quit\n", png);
+    char *out = run_view(f, script, "save");
+    /* The pipeline key reached the server: a frame rendered by `points` came back. */
+    if (!strstr(out, "pipeline=points")) fail_msg("no frame from pipeline points:\n%s", out);
+    if (!strstr(out, "pipeline=splat")) fail_msg("no frame before the key (splat):\n%s", out);
+    /* A digit past the server's pipelines is a status line, not an error. */
+    if (!strstr(out, "status no pipeline 9")) fail_msg("key 9 gave no status:\n%s", out);
+    const char *cam = strstr(out, "\ncamera --eye ");
+    if (!cam) fail_msg("no final camera in the output:\n%s", out);
+    double e[3], t[3], u[3], fov;
+    unsigned w, h;
+    assert_int_equal(sscanf(cam, "\ncamera --eye %lf,%lf,%lf --target %lf,%lf,%lf --up %lf,%lf,%lf "
+                            "--fov %lf --size %ux%u", &e[0], &e[1], &e[2], &t[0], &t[1], &t[2],
+                            &u[0], &u[1], &u[2], &fov, &w, &h), 12);
+    assert_int_equal(w, 320);
+    assert_int_equal(h, 240);
+
+    /* The same camera through `splat render`. */
+    char eye[200], target[200], up[200], fovs[40], size[40], port[16];
+    snprintf(eye, sizeof eye, "%.17g,%.17g,%.17g", e[0], e[1], e[2]);
+    snprintf(target, sizeof target, "%.17g,%.17g,%.17g", t[0], t[1], t[2]);
+    snprintf(up, sizeof up, "%.17g,%.17g,%.17g", u[0], u[1], u[2]);
+    snprintf(fovs, sizeof fovs, "%.9g", fov);
+    snprintf(size, sizeof size, "%ux%u", w, h);
+    snprintf(port, sizeof port, "%d", f->d.port);
+    char rout[800], rerr[800];
+    snprintf(rout, sizeof rout, "%s/render.out", f->root);
+    snprintf(rerr, sizeof rerr, "%s/render.err", f->root);
+    /* At rest the viewer asks for what `splat render` gets by default but for the pipeline
+     * (U then J leave lambda where it was, and lambda does not touch `points`). */
+    const char *argv[] = {tu_splat_bin(), "--port", port, "render", "bun", "-o", ref, "--eye",
+                          eye, "--target", target, "--up", up, "--fov", fovs, "--size", size,
+                          "--set", "pipeline=points", NULL};
+    int rc = run_cmd(argv, rout, rerr, 30);
+    if (rc != 0) {
+        char *m = slurp(rerr);
+        fail_msg("splat render exited %d: %s", rc, m);
+    }
+
+    uint32_t vw, vh, rw, rh;
+    uint8_t *a = read_png(png, &vw, &vh), *b = read_png(ref, &rw, &rh);
+    assert_int_equal(vw, 320);
+    assert_int_equal(vh, 240);
+    assert_int_equal(rw, vw);
+    assert_int_equal(rh, vh);
+    size_t n = (size_t)vw * vh, lit = 0;
+    double se = 0;
+    for (size_t i = 0; i < n; i++) {
+        const uint8_t *p = a + 4 * i, *q = b + 4 * i;
+        lit += p[0] > 8 || p[1] > 8 || p[2] > 8;
+        for (int c = 0; c < 3; c++) se += (double)(p[c] - q[c]) * (p[c] - q[c]);
+    }
+    double mse = se / (3.0 * n);
+    double psnr = mse > 0 ? 10 * log10(255.0 * 255.0 / mse) : INFINITY;
+    printf("saved view: %zu of %zu pixels lit; PSNR against splat render %.2f dB (bound %.0f)\n",
+           lit, n, psnr, MIN_PSNR_DB);
+    if (lit < n / 50) fail_msg("the saved view is blank: %zu of %zu pixels lit", lit, n);
+    if (psnr < MIN_PSNR_DB) fail_msg("PSNR %.2f dB < %.0f dB", psnr, MIN_PSNR_DB);
+    free(a);
+    free(b);
+    free(out);
+}
+
+/* parse_frames: the sizes of the frames in a --verbose log, in order (*n of them). */
+static int parse_frames(const char *out, unsigned *ws, unsigned *hs, int *moving, int cap)
+{
+    int n = 0;
+    for (const char *p = out; (p = strstr(p, "frame ")) && n < cap; p++) {
+        if (p != out && p[-1] != '\n') continue;
+        const char *m = strstr(p, "moving=");
+        if (sscanf(p, "frame %ux%u", &ws[n], &hs[n]) == 2 && m) {
+            moving[n] = m[7] == '1';
+            n++;
+        }
+    }
+    return n;
+}
+
+/* A continuous drag of 2 s: reduced-resolution frames (160x120) during it, the full frame
+ * (320x240) after it. */
+static void test_view_progressive_drag(void **state)
+{
+    skip_without_x();
+    fx *f = *state;
+    start_daemon(f);
+    char script[4096] = "wait 300\n";
+    for (int i = 0; i < 40; i++) strcat(script, "drag 6 1\nwait 50\n"); /* 40 x 50 ms = 2 s */
+    strcat(script, "wait 700\nquit\n");
+    char *out = run_view(f, script, "drag");
+    unsigned ws[4096], hs[4096];
+    int mv[4096];
+    int n = parse_frames(out, ws, hs, mv, 4096);
+    int reduced = 0, last_reduced = -1;
+    for (int i = 0; i < n; i++)
+        if (ws[i] == 160 && hs[i] == 120) reduced++, last_reduced = i;
+    const char *st = strstr(out, "stats ");
+    printf("drag: %d frames, %d at 160x120; %.*s\n", n, reduced,
+           st ? (int)strcspn(st, "\n") : 0, st ? st : "");
+    if (reduced < 5) fail_msg("only %d reduced frames during a 2 s drag:\n%s", reduced, out);
+    assert_true(n > 0);
+    if (ws[n - 1] != 320 || hs[n - 1] != 240)
+        fail_msg("the last frame is %ux%u, not the full 320x240:\n%s", ws[n - 1], hs[n - 1], out);
+    if (last_reduced >= n - 1) fail_msg("no full frame after the drag:\n%s", out);
+    /* Reduced frames arrive while the viewer is moving; the full one at rest. */
+    assert_int_equal(mv[n - 1], 0);
+    free(out);
+}
+
+/* A bad script is refused before any window opens, naming file and line. */
+static void test_view_script_errors(void **state)
+{
+    fx *f = *state;
+    static const struct { const char *text; const char *needle; } bad[] = {
+        {"wait 10\n# fine\nfly 1 2\n", ":3: unknown command"},
+        {"drag 1\n", ":1: wrong number of arguments"},
+        {"wait ten\n", ":1: not a number"},
+        {"\n\nkey NoSuchKey\n", ":3: unknown SDL key name"},
+        {"resize 0 10\n", ":1: resize needs"},
+        {"quit now\n", ":1: wrong number"},
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        char script[800], out[800], err[800];
+        snprintf(script, sizeof script, "%s/bad%zu.script", f->root, i);
+        snprintf(out, sizeof out, "%s/bad.out", f->root);
+        snprintf(err, sizeof err, "%s/bad.err", f->root);
+        assert_int_equal(tu_write_file(script, bad[i].text, strlen(bad[i].text)), 0);
+        const char *argv[] = {tu_splat_bin(), "--port", "1", "view", "bun", "--script", script,
+                              NULL};
+        int rc = run_cmd(argv, out, err, 20);
+        char *e = slurp(err);
+        if (rc != 2 || !strstr(e, bad[i].needle) || !strstr(e, script))
+            fail_msg("case %zu: exit %d, expected 2 and '%s' in: %s", i, rc, bad[i].needle, e);
+        free(e);
+    }
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test_setup_teardown(test_view_save_matches_render, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_view_progressive_drag, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_view_script_errors, setup, teardown),
+    };
+    return cmocka_run_group_tests(tests, group_setup, group_teardown);
+}
