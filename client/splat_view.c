@@ -197,6 +197,7 @@ typedef struct shared {
     spc_camera cam;              /* the camera to show */
     uint64_t cam_gen;            /* +1 per change */
     double cam_t;                /* when the input that made it happened */
+    int cam_first;               /* send the camera before the parameters (a drag began) */
     sp_params want;              /* the parameters to show */
     uint64_t want_gen;
     save_req saves[MAX_SAVES];
@@ -447,6 +448,7 @@ static int session(shared *s, spc_client *c, char *err, size_t errlen)
         uint64_t want_gen = s->want_gen, cam_gen = s->cam_gen;
         spc_camera cam = s->cam;
         double cam_t = s->cam_t;
+        int cam_first = s->cam_first;
         pthread_mutex_unlock(&s->mu);
         if (nsaves) {
             if ((rc = do_save(s, c, &applied, &save, streaming)) < 0) goto fail;
@@ -454,28 +456,35 @@ static int session(shared *s, spc_client *c, char *err, size_t errlen)
             continue;
         }
         if (quit) return 0;
-        if (want_gen != want_sent) {
-            if ((rc = apply_params(s, c, &applied, &want, NULL)) < 0) goto fail;
-            want_sent = want_gen;
-        }
-        if (cam_gen && cam_gen != cam_sent) {
-            uint32_t seq = 0;
-            rc = spc_set_camera(c, &cam, &seq);
-            if (rc < 0 && is_conn_error(rc)) goto fail;
-            if (rc < 0) set_status(s, "camera: %s", spc_errmsg(c));
-            cam_sent = cam_gen;
-            pthread_mutex_lock(&s->mu);
-            if (s->nsent == (int)(sizeof s->sent / sizeof s->sent[0])) {
-                memmove(&s->sent[0], &s->sent[1], (size_t)(s->nsent - 1) * sizeof s->sent[0]);
-                s->nsent--;
-            }
-            s->sent[s->nsent].seq = seq;
-            s->sent[s->nsent].t = cam_t;
-            s->nsent++;
-            pthread_mutex_unlock(&s->mu);
-            if (!streaming) {
-                if ((rc = spc_stream(c, 1, 0)) < 0) goto fail;
-                streaming = 1;
+        /* Entering a drag, the camera goes first: the server renders the moved view at once
+         * (at half size), and the lower quality follows. Settling, the full quality goes
+         * first and the full-size camera after it, so no full-size frame renders with the
+         * drag's quality. */
+        for (int step = 0; step < 2; step++) {
+            if ((step == 0) != cam_first) {
+                if (want_gen != want_sent) {
+                    if ((rc = apply_params(s, c, &applied, &want, NULL)) < 0) goto fail;
+                    want_sent = want_gen;
+                }
+            } else if (cam_gen && cam_gen != cam_sent) {
+                uint32_t seq = 0;
+                rc = spc_set_camera(c, &cam, &seq);
+                if (rc < 0 && is_conn_error(rc)) goto fail;
+                if (rc < 0) set_status(s, "camera: %s", spc_errmsg(c));
+                cam_sent = cam_gen;
+                pthread_mutex_lock(&s->mu);
+                if (s->nsent == (int)(sizeof s->sent / sizeof s->sent[0])) {
+                    memmove(&s->sent[0], &s->sent[1], (size_t)(s->nsent - 1) * sizeof s->sent[0]);
+                    s->nsent--;
+                }
+                s->sent[s->nsent].seq = seq;
+                s->sent[s->nsent].t = cam_t;
+                s->nsent++;
+                pthread_mutex_unlock(&s->mu);
+                if (!streaming) {
+                    if ((rc = spc_stream(c, 1, 0)) < 0) goto fail;
+                    streaming = 1;
+                }
             }
         }
         /* Wait for a frame or a wish of the window; bytes the library holds already count as
@@ -707,6 +716,7 @@ static void set_quality(view *v)
         b = v->drag_budget;
     v->s->want.point_budget = b;
     v->s->want_gen++;
+    v->s->cam_first = drag;
     pthread_mutex_unlock(&v->s->mu);
     wake(v->s);
 }
