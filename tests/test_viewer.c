@@ -314,7 +314,7 @@ static int parse_frames(const char *out, unsigned *ws, unsigned *hs, int *moving
 }
 
 /* A continuous drag of 2 s: reduced-resolution frames (160x120) during it, the full frame
- * (320x240) after it. */
+ * (320x240) after it; then a resize to 400x300 gives frames of that size. */
 static void test_view_progressive_drag(void **state)
 {
     skip_without_x();
@@ -322,7 +322,7 @@ static void test_view_progressive_drag(void **state)
     start_daemon(f);
     char script[4096] = "wait 300\n";
     for (int i = 0; i < 40; i++) strcat(script, "drag 6 1\nwait 50\n"); /* 40 x 50 ms = 2 s */
-    strcat(script, "wait 700\nquit\n");
+    strcat(script, "wait 700\nresize 400 300\nwait 700\nquit\n");
     char *out = run_view(f, script, "drag");
     unsigned ws[4096], hs[4096];
     int mv[4096];
@@ -335,12 +335,84 @@ static void test_view_progressive_drag(void **state)
            st ? (int)strcspn(st, "\n") : 0, st ? st : "");
     if (reduced < 5) fail_msg("only %d reduced frames during a 2 s drag:\n%s", reduced, out);
     assert_true(n > 0);
-    if (ws[n - 1] != 320 || hs[n - 1] != 240)
-        fail_msg("the last frame is %ux%u, not the full 320x240:\n%s", ws[n - 1], hs[n - 1], out);
-    if (last_reduced >= n - 1) fail_msg("no full frame after the drag:\n%s", out);
-    /* Reduced frames arrive while the viewer is moving; the full one at rest. */
-    assert_int_equal(mv[n - 1], 0);
+    int full_after = 0;
+    for (int i = last_reduced + 1; i < n; i++) full_after += ws[i] == 320 && hs[i] == 240;
+    if (!full_after) fail_msg("no full 320x240 frame after the drag:\n%s", out);
+    /* The resize after the drag: the frame size follows the window, full at rest. */
+    if (ws[n - 1] != 400 || hs[n - 1] != 300 || mv[n - 1])
+        fail_msg("the last frame is %ux%u (moving %d), not 400x300 at rest:\n%s", ws[n - 1],
+                 hs[n - 1], mv[n - 1], out);
     free(out);
+}
+
+/* The daemon stops and comes back on the same port: the viewer reports the disconnection,
+ * reconnects by itself, and renders (and saves) again. */
+static void test_view_reconnects(void **state)
+{
+    skip_without_x();
+    fx *f = *state;
+    start_daemon(f);
+    int port_n = f->d.port;
+    char script[800], out[800], err[800], png[800], port[16];
+    snprintf(script, sizeof script, "%s/re.script", f->root);
+    snprintf(out, sizeof out, "%s/re.out", f->root);
+    snprintf(err, sizeof err, "%s/re.err", f->root);
+    snprintf(png, sizeof png, "%s/after.png", f->root);
+    snprintf(port, sizeof port, "%d", port_n);
+    char text[1200];
+    snprintf(text, sizeof text, "wait 300\ndrag 10 0\nwait 3500\ndrag 10 0\nwait 500\n"
+             "save %s\nquit\n", png);
+    assert_int_equal(tu_write_file(script, text, strlen(text)), 0);
+    const char *argv[] = {tu_splat_bin(), "--port", port, "view", "bun", "--size", "160x120",
+                          "--script", script, "--verbose", NULL};
+    fflush(stdout);
+    pid_t pid = fork();
+    assert_true(pid >= 0);
+    if (pid == 0) {
+        if (!freopen(out, "w", stdout) || !freopen(err, "w", stderr)) _exit(126);
+        execv(argv[0], (char *const *)argv);
+        _exit(127);
+    }
+    /* Stop the daemon once the viewer has its first frame; restart it on the same port. */
+    for (int i = 0; i < 1000; i++) {
+        size_t len;
+        uint8_t *b = tu_read_file(out, &len); /* NULL until the child has created it */
+        int has = b && memmem(b, len, "frame ", 6) != NULL;
+        free(b);
+        if (has) break;
+        usleep(10000);
+    }
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+    usleep(600000);
+    char listen[64];
+    snprintf(listen, sizeof listen, "127.0.0.1:%d", port_n);
+    const char *args[] = {"--listen", listen, "--data", f->data, "--cache", f->cache, NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    int st = 0, rc = -1;
+    for (int i = 0; i < 2000; i++) {
+        if (waitpid(pid, &st, WNOHANG) == pid) {
+            rc = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+            break;
+        }
+        usleep(10000);
+    }
+    if (rc == -1) {
+        kill(pid, SIGKILL);
+        waitpid(pid, NULL, 0);
+    }
+    char *o = slurp(out), *e = slurp(err);
+    if (rc != 0) fail_msg("splat view exited %d: %s\n%s", rc, e, o);
+    const char *dis = strstr(o, "status disconnected");
+    if (!dis) fail_msg("no disconnection reported:\n%s", o);
+    if (!strstr(dis, "\nframe ")) fail_msg("no frame after reconnecting:\n%s", o);
+    if (!strstr(o, "saved ")) fail_msg("no save after reconnecting:\n%s", o);
+    uint32_t w, h;
+    uint8_t *px = read_png(png, &w, &h);
+    assert_int_equal(w, 160);
+    assert_int_equal(h, 120);
+    free(px);
+    free(o);
+    free(e);
 }
 
 /* A bad script is refused before any window opens, naming file and line. */
@@ -376,6 +448,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test_setup_teardown(test_view_save_matches_render, setup, teardown),
         cmocka_unit_test_setup_teardown(test_view_progressive_drag, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_view_reconnects, setup, teardown),
         cmocka_unit_test_setup_teardown(test_view_script_errors, setup, teardown),
     };
     return cmocka_run_group_tests(tests, group_setup, group_teardown);
