@@ -33,6 +33,7 @@ pc:libcrypto=libssl-dev
 pc:cmocka=libcmocka-dev
 pc:sdl2=libsdl2-dev
 file:/usr/bin/Xvfb=xvfb
+file:/usr/bin/xwd=x11-apps
 "
 
 # present ENTRY: 0 when the thing the entry names is on this machine.

@@ -47,8 +47,10 @@ static int start_xvfb(void)
         if (pid == 0) {
             freopen("/dev/null", "w", stderr);
             freopen("/dev/null", "w", stdout);
-            execl("/usr/bin/Xvfb", "Xvfb", dn, "-screen", "0", "1280x1024x24", "-nolisten",
-                  "tcp", (char *)NULL);
+            /* -br: a black root window, so that every lit pixel on the screen is the
+             * viewer's. */
+            execl("/usr/bin/Xvfb", "Xvfb", dn, "-screen", "0", "1280x1024x24", "-br",
+                  "-nolisten", "tcp", (char *)NULL);
             _exit(127);
         }
         for (int i = 0; i < 500; i++) {
@@ -415,6 +417,117 @@ static void test_view_reconnects(void **state)
     free(e);
 }
 
+static uint32_t be32(const uint8_t *p)
+{
+    return (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3];
+}
+
+/* xwd_lit: the pixels brighter than 8 in any channel in an xwd dump of the screen (4 bytes
+ * per pixel, TrueColor), or -1 when the file is not one. */
+static long xwd_lit(const char *path)
+{
+    size_t len;
+    uint8_t *b = tu_read_file(path, &len);
+    if (!b || len < 100) return free(b), -1;
+    uint32_t hsize = be32(b), w = be32(b + 16), h = be32(b + 20), order = be32(b + 28);
+    uint32_t bpp = be32(b + 44), bpl = be32(b + 48), ncolors = be32(b + 76);
+    uint32_t masks[3] = {be32(b + 56), be32(b + 60), be32(b + 64)};
+    size_t off = (size_t)hsize + (size_t)ncolors * 12;
+    /* Xvfb's depth-24 dumps say 24 bits per pixel but store 4 bytes each. */
+    if ((bpp != 24 && bpp != 32) || w == 0 || bpl / w != 4 || off + (size_t)bpl * h > len)
+        return free(b), -1;
+    long lit = 0;
+    for (uint32_t y = 0; y < h; y++)
+        for (uint32_t x = 0; x < w; x++) {
+            const uint8_t *q = b + off + (size_t)y * bpl + 4 * x;
+            uint32_t v = order ? be32(q) : (uint32_t)q[3] << 24 | (uint32_t)q[2] << 16 |
+                                               (uint32_t)q[1] << 8 | q[0];
+            int bright = 0;
+            for (int c = 0; c < 3; c++) {
+                uint32_t m = masks[c], val = v & m;
+                while (m && !(m & 1)) m >>= 1, val >>= 1;
+                bright |= val > 8;
+            }
+            lit += bright;
+        }
+    free(b);
+    return lit;
+}
+
+/* The window shows the frames: a dump of the virtual screen while the viewer rests holds
+ * about as many lit pixels as the saved view of the same camera (JPEG q95 on screen against
+ * the lossless save: within a factor 1.5). Needs xwd (Debian package x11-apps). */
+static void test_view_window_shows_frames(void **state)
+{
+    skip_without_x();
+    if (access("/usr/bin/xwd", X_OK) != 0)
+        TU_SKIP("no /usr/bin/xwd to capture the screen (Debian package x11-apps)");
+    fx *f = *state;
+    start_daemon(f);
+    char script[800], out[800], err[800], png[800], dump[800], port[16], text[1200];
+    snprintf(script, sizeof script, "%s/win.script", f->root);
+    snprintf(out, sizeof out, "%s/win.out", f->root);
+    snprintf(err, sizeof err, "%s/win.err", f->root);
+    snprintf(png, sizeof png, "%s/win.png", f->root);
+    snprintf(dump, sizeof dump, "%s/screen.xwd", f->root);
+    snprintf(port, sizeof port, "%d", f->d.port);
+    snprintf(text, sizeof text, "wait 300\ndrag 30 0\nwait 2500\nsave %s\nquit\n", png);
+    assert_int_equal(tu_write_file(script, text, strlen(text)), 0);
+    const char *argv[] = {tu_splat_bin(), "--port", port, "view", "bun", "--size", "320x240",
+                          "--script", script, "--verbose", NULL};
+    fflush(stdout);
+    pid_t pid = fork();
+    assert_true(pid >= 0);
+    if (pid == 0) {
+        if (!freopen(out, "w", stdout) || !freopen(err, "w", stderr)) _exit(126);
+        execv(argv[0], (char *const *)argv);
+        _exit(127);
+    }
+    /* Wait for the full frame after the drag, then dump the screen. */
+    int rest = 0;
+    for (int i = 0; i < 1000 && !rest; i++) {
+        size_t len;
+        uint8_t *b = tu_read_file(out, &len);
+        const uint8_t *moved = b ? memmem(b, len, "frame 160x120", 13) : NULL;
+        rest = moved && memmem(moved, len - (size_t)(moved - b), "frame 320x240", 13);
+        free(b);
+        usleep(10000);
+    }
+    usleep(500000);
+    char dout[800], derr[800];
+    snprintf(dout, sizeof dout, "%s/xwd.out", f->root);
+    snprintf(derr, sizeof derr, "%s/xwd.err", f->root);
+    const char *xargv[] = {"/usr/bin/xwd", "-root", "-silent", "-display", display, "-out", dump,
+                           NULL};
+    int xrc = run_cmd(xargv, dout, derr, 20);
+    int st = 0, rc = -1;
+    for (int i = 0; i < 2000; i++) {
+        if (waitpid(pid, &st, WNOHANG) == pid) {
+            rc = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+            break;
+        }
+        usleep(10000);
+    }
+    if (rc == -1) {
+        kill(pid, SIGKILL);
+        waitpid(pid, NULL, 0);
+    }
+    assert_true(rest);
+    assert_int_equal(xrc, 0);
+    assert_int_equal(rc, 0);
+    long screen = xwd_lit(dump);
+    uint32_t w, h;
+    uint8_t *px = read_png(png, &w, &h);
+    long saved = 0;
+    for (size_t i = 0; i < (size_t)w * h; i++)
+        saved += px[4 * i] > 8 || px[4 * i + 1] > 8 || px[4 * i + 2] > 8;
+    free(px);
+    printf("window: %ld lit pixels on the screen, %ld in the saved view\n", screen, saved);
+    assert_true(saved > 1000);
+    if (screen < saved / 1.5 || screen > saved * 1.5)
+        fail_msg("the screen has %ld lit pixels, the saved view %ld", screen, saved);
+}
+
 /* A bad script is refused before any window opens, naming file and line. */
 static void test_view_script_errors(void **state)
 {
@@ -449,6 +562,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_view_save_matches_render, setup, teardown),
         cmocka_unit_test_setup_teardown(test_view_progressive_drag, setup, teardown),
         cmocka_unit_test_setup_teardown(test_view_reconnects, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_view_window_shows_frames, setup, teardown),
         cmocka_unit_test_setup_teardown(test_view_script_errors, setup, teardown),
     };
     return cmocka_run_group_tests(tests, group_setup, group_teardown);
