@@ -1,6 +1,6 @@
 # splatd — build, test, bench, run, install.
 #
-#   make            build bin/splatd, bin/splat, libsplatclient.{a,so}
+#   make            build bin/splatd, bin/splat, bin/splat-view, libsplatclient.{a,so}
 #   make test       unit, rendering, protocol and end-to-end tests, then the same under ASan+UBSan
 #   make asan       only the AddressSanitizer + UBSan test run
 #   make bench      measured numbers (see README.md)

@@ -434,13 +434,20 @@ static int exec_view(int argc, char **argv, int view_at)
 }
 
 /* view_command: the index of the word "view" when it is the command (the first operand,
- * after any connection options and their values), else 0. */
+ * after any options and their values), else 0. */
 static int view_command(int argc, char **argv)
 {
+    static const char *const with_value[] = {
+        "--host", "--port", "--token-file", "--timeout", "--set", "-o", "--path", "--orbit",
+        "--inflight", "--eye", "--target", "--up", "--fov", "--size", "--script",
+        "--drag-budget"};
     for (int i = 1; i < argc; i++) {
         const char *s = argv[i];
-        if (!strcmp(s, "--host") || !strcmp(s, "--port") || !strcmp(s, "--token-file") ||
-            !strcmp(s, "--timeout")) {
+        if (!strcmp(s, "--")) return i + 1 < argc && !strcmp(argv[i + 1], "view") ? i + 1 : 0;
+        int takes = 0;
+        for (size_t k = 0; k < sizeof with_value / sizeof with_value[0]; k++)
+            takes |= !strcmp(s, with_value[k]);
+        if (takes) {
             i++;
             continue;
         }

@@ -697,6 +697,12 @@ static void update_camera(view *v, double t_input)
     spc_camera c;
     orbit_camera(&v->cam, w, h, &c);
     pthread_mutex_lock(&v->s->mu);
+    /* An unchanged camera brings no new frame: sending it would only leave its latency clock
+     * running until some later frame. */
+    if (v->s->cam_gen && !memcmp(&c, &v->s->cam, sizeof c)) {
+        pthread_mutex_unlock(&v->s->mu);
+        return;
+    }
     v->s->cam = c;
     v->s->cam_gen++;
     v->s->cam_t = t_input;
@@ -811,7 +817,6 @@ static int key(view *v, SDL_Keycode k)
         }
         pthread_mutex_unlock(&s->mu);
         wake(s);
-        update_camera(v, t); /* the latency clock starts at this key */
         return 0;
     }
     switch (k) {
@@ -1162,6 +1167,13 @@ int main(int argc, char **argv)
     if (SDL_Init(SDL_INIT_VIDEO | SDL_INIT_EVENTS) < 0) {
         fprintf(stderr, "splat view: cannot start SDL video (is DISPLAY set?): %s\n",
                 SDL_GetError());
+        return EXIT_FAIL;
+    }
+    const char *drv = SDL_GetCurrentVideoDriver();
+    if (!script && drv && (!strcmp(drv, "offscreen") || !strcmp(drv, "dummy"))) {
+        fprintf(stderr, "splat view: no display to show a window on (SDL video driver %s; is "
+                "DISPLAY set?)\n", drv);
+        SDL_Quit();
         return EXIT_FAIL;
     }
     s.server_event = SDL_RegisterEvents(1);
