@@ -1216,7 +1216,8 @@ int main(int argc, char **argv)
         }
         double t = now_s();
         pthread_mutex_lock(&s.mu);
-        int fatal = s.fatal, new_info = s.info_gen != info_seen, new_frame = s.frame_gen != v.shown_gen;
+        int fatal = s.fatal, new_info = s.info_gen != info_seen;
+        int new_frame = s.frame_gen != v.shown_gen;
         spc_info info = s.info;
         info_seen = s.info_gen;
         pthread_mutex_unlock(&s.mu);

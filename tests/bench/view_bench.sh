@@ -25,7 +25,8 @@ while [ ! -e /tmp/.X11-unix/X$n ]; do sleep 0.1; done
 port=$(cat "$dir/port")
 { echo "wait 1500"; for k in 1 2 3 4 5 6 7 8 9 10; do echo "drag 8 0"; echo "wait 600"; done
   echo "quit"; } > "$dir/latency"
-{ echo "wait 1500"; k=0; while [ $k -lt 150 ]; do echo "drag 3 0"; echo "wait 20"; k=$((k + 1)); done
+{ echo "wait 1500"; k=0
+  while [ $k -lt 150 ]; do echo "drag 3 0"; echo "wait 20"; k=$((k + 1)); done
   echo "wait 1500"; echo "quit"; } > "$dir/drag"
 echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
 echo "cloud: $name"
@@ -43,14 +44,16 @@ for p in $pipes; do
             { cat "$dir/err"; exit 1; }
         case $s in
         latency)
-            echo "$p latency: input -> first (reduced) frame $(grep 'moving=1' "$dir/out" | median);" \
+            echo "$p latency: input -> first (reduced) frame" \
+                 "$(grep 'moving=1' "$dir/out" | median);" \
                  "settle -> full frame $(grep '^frame 1280x720.*moving=0' "$dir/out" | median)" ;;
         drag)
             echo "$p drag: $(grep '^stats' "$dir/out" | sed 's/ latency.*//')"
             echo "$p   last moving frame: $(grep 'moving=1' "$dir/out" | tail -1)"
             echo "$p   rest frame:        $(grep '^frame 1280x720' "$dir/out" | tail -1)" ;;
         drag-full)
-            echo "$p drag without progressive quality: $(grep '^stats' "$dir/out" | sed 's/ latency.*//')" ;;
+            echo "$p drag without progressive quality:" \
+                 "$(grep '^stats' "$dir/out" | sed 's/ latency.*//')" ;;
         esac
     done
 done
