@@ -18,7 +18,7 @@ enum { MAX_SIDE = 8192 };
 
 static const char USAGE[] =
     "usage: splatd render FILE -o OUT.jpg|png|exr [options]\n"
-    "  --pipeline points|splat     the pipeline (default splat)\n"
+    "  --pipeline NAME             the pipeline, one of %s (default splat)\n"
     "  --eye x,y,z --target x,y,z --up x,y,z\n"
     "                              camera in the file's coordinates (default: frames the cloud)\n"
     "  --fov DEG                   vertical field of view (default 45)\n"
@@ -190,8 +190,8 @@ static int parse_args(int argc, char **argv, render_opts *o, sp_params *p)
         }
     }
     if (!o->file || !o->out) {
-        fprintf(stderr, "splatd render: %s\n%s", !o->file ? "no FILE given" : "no -o OUT given",
-                USAGE);
+        fprintf(stderr, "splatd render: %s\n", !o->file ? "no FILE given" : "no -o OUT given");
+        fprintf(stderr, USAGE, SP_PIPELINE_VALUES);
         return 2;
     }
     if (o->znear > 0 && o->zfar > 0 && o->zfar <= o->znear) {
@@ -231,7 +231,7 @@ int cmd_render(int argc, char **argv)
     sp_params_defaults(&p);
     int rc = parse_args(argc, argv, &o, &p);
     if (rc == -1) {
-        fputs(USAGE, stdout);
+        printf(USAGE, SP_PIPELINE_VALUES);
         return 0;
     }
     if (rc) return rc;
