@@ -137,11 +137,14 @@ static srv_cloud *cloud_by_path(srv *sv, const char *path)
     return NULL;
 }
 
-static srv_cloud *cloud_by_job(srv *sv, uint32_t job)
+/* cloud_by_key: the loading entry an event's key names, or NULL (a stale key: the entry was
+ * freed and started another load since). */
+static srv_cloud *cloud_by_key(srv *sv, uint32_t key)
 {
-    for (int i = 0; i < sv->nclouds; i++)
-        if (sv->clouds[i].state == SRV_CLOUD_LOADING && sv->clouds[i].job == job) return &sv->clouds[i];
-    return NULL;
+    uint32_t i = (key & 0xffffu) - 1;
+    if ((key & 0xffffu) == 0 || i >= (uint32_t)sv->nclouds) return NULL;
+    srv_cloud *c = &sv->clouds[i];
+    return c->state == SRV_CLOUD_LOADING && c->key == key ? c : NULL;
 }
 
 /* cloud_start: a new LOADING entry for path with its prep job queued, or NULL when out of
@@ -152,17 +155,22 @@ static srv_cloud *cloud_start(srv *sv, const char *path)
     for (int i = 0; i < sv->nclouds; i++)
         if (sv->clouds[i].state == SRV_CLOUD_FREE) { c = &sv->clouds[i]; break; }
     if (!c) {
+        if (sv->nclouds >= 0xffff) return NULL; /* keys hold the index in 16 bits */
         srv_cloud *nc = realloc(sv->clouds, (size_t)(sv->nclouds + 1) * sizeof *nc);
         if (!nc) return NULL;
         sv->clouds = nc;
         c = &sv->clouds[sv->nclouds++];
+        c->gen = 0;
     }
+    uint16_t gen = (uint16_t)(c->gen + 1);
+    if (gen == 0) gen = 1; /* 0 never names a live load */
     memset(c, 0, sizeof *c);
+    c->gen = gen;
+    c->key = ((uint32_t)gen << 16) | (uint32_t)(c - sv->clouds + 1);
     snprintf(c->path, sizeof c->path, "%s", path);
     const char *slash = strrchr(path, '/');
     snprintf(c->name, sizeof c->name, "%s", slash ? slash + 1 : path);
-    c->job = rt_prepare(sv->rt, path);
-    if (!c->job) return NULL;
+    if (rt_prepare(sv->rt, path, c->key) != 0) return NULL;
     c->state = SRV_CLOUD_LOADING;
     c->t_start_ms = ev_now_ms();
     return c;
@@ -534,7 +542,7 @@ void srv_decode_error(void *owner, sess *s, int code, const char *text)
 
 static void on_progress_ev(srv *sv, const rt_event *ev)
 {
-    srv_cloud *c = cloud_by_job(sv, ev->job);
+    srv_cloud *c = cloud_by_key(sv, ev->job);
     if (!c) return;
     proto_progress p = {0};
     p.phase = (uint8_t)(ev->phase >= 0 && ev->phase < PROTO_PHASE_COUNT ? ev->phase
@@ -572,7 +580,7 @@ static void client_message(const srv_cloud *c, const char *msg, char *out, size_
 
 static void on_cloud_done(srv *sv, const rt_event *ev)
 {
-    srv_cloud *c = cloud_by_job(sv, ev->job);
+    srv_cloud *c = cloud_by_key(sv, ev->job);
     if (!c) return;
     int idx = (int)(c - sv->clouds);
     int ok = ev->kind == RT_EV_CLOUD_READY;

@@ -62,7 +62,6 @@ struct rt_ctx {
     rt_prepjob *prep_head, *prep_tail;   /* waiting for prep */
     rt_prepjob *up_head, *up_tail;       /* prepared, waiting for upload */
     int prepping;
-    uint32_t next_job;
     rt_event *ev_head, *ev_tail;
     int stop, render_done;
     int init_state;                      /* 0 pending, 1 ok, -1 failed */
@@ -676,21 +675,20 @@ int rt_pending(rt_ctx *rt, uint32_t id)
     return n;
 }
 
-uint32_t rt_prepare(rt_ctx *rt, const char *path)
+int rt_prepare(rt_ctx *rt, const char *path, uint32_t key)
 {
     rt_prepjob *j = calloc(1, sizeof *j);
     char *p = strdup(path);
-    if (!j || !p) { free(j); free(p); return 0; }
+    if (!j || !p) { free(j); free(p); return -1; }
     j->path = p;
+    j->job = key;
     pthread_mutex_lock(&rt->mu);
-    j->job = ++rt->next_job;
     if (rt->prep_tail) rt->prep_tail->next = j;
     else rt->prep_head = j;
     rt->prep_tail = j;
     pthread_cond_signal(&rt->cv_prep);
-    uint32_t id = j->job;
     pthread_mutex_unlock(&rt->mu);
-    return id;
+    return 0;
 }
 
 rt_event *rt_take_events(rt_ctx *rt)

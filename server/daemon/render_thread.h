@@ -83,7 +83,7 @@ typedef struct rt_event {
     rt_frame_meta meta;
     uint8_t *msg;           /* RT_EV_FRAME: owned by the event until rt_event_free */
     size_t msglen;
-    uint32_t job;           /* prep events: the job id rt_prepare returned */
+    uint32_t job;           /* prep events: the key given to rt_prepare */
     int phase;                  /* PROGRESS: PROTO_PHASE_* */
     double fraction;
     uint32_t cloud_id;
@@ -143,8 +143,10 @@ void rt_set_stream_blocked(rt_ctx *rt, uint32_t id, int blocked);
 int rt_pending(rt_ctx *rt, uint32_t id);
 
 /* rt_prepare: queues the preparation + upload of the cloud file path (resolved, inside the
- * data dir). Returns the job id (> 0); its progress and result arrive as events. */
-uint32_t rt_prepare(rt_ctx *rt, const char *path);
+ * data dir); its progress and result arrive as events carrying key, the caller's identity of
+ * the cloud (the daemon's cloud table owns it; the workers keep no registry of their own).
+ * Returns 0, or -1 when out of memory. */
+int rt_prepare(rt_ctx *rt, const char *path, uint32_t key);
 
 /* rt_take_events: the posted events, oldest first, as a list the caller now owns. */
 rt_event *rt_take_events(rt_ctx *rt);

@@ -44,12 +44,15 @@ typedef struct srv_waiter {
     uint32_t sess, seq;
 } srv_waiter;
 
-/* One cloud known to the daemon, keyed by its real path. Loaded once, shared by all clients. */
+/* One cloud known to the daemon, keyed by its real path. Loaded once, shared by all clients.
+ * The table is the one owner of a cloud's identity: its key, (gen << 16) | (index + 1), is
+ * what the workers' events carry; cloud_id is only the renderer's handle for its buffers. */
 typedef struct srv_cloud {
     char path[PATH_MAX];
     char name[256];
     int state;                   /* SRV_CLOUD_* */
-    uint32_t job, cloud_id;
+    uint16_t gen;                /* bumped each time the entry starts a load; kept when freed */
+    uint32_t key, cloud_id;
     rt_cloud_info info;
     srv_waiter *waiters;
     int nwait, capwait;
