@@ -714,6 +714,29 @@ static void test_guarded_truncation(void **state)
     pc_cloud_free(&c);
 }
 
+/* sd_hash64 gives the values of the implementation that wrote the caches in use (recorded from
+ * it before the one-shot form became init + update + final): a change of hash would make every
+ * cache look stale, or worse, collide. Lengths around the 8- and 32-byte boundaries and a seed. */
+static void test_hash_known_answers(void **state)
+{
+    (void)state;
+    static const struct { size_t len; uint64_t h; } kat[] = {
+        {0, 0x9090306c6e91ed59ull},   {1, 0x390be085fb2f3d4bull},   {7, 0xb26519947b0a8a8cull},
+        {8, 0xbc3e80b69cd430c4ull},   {31, 0xb55dac899fd96b5aull},  {32, 0xa926fd50fcb207c6ull},
+        {33, 0x288404429b577c14ull},  {63, 0x505d27f43d8c3b1aull},  {64, 0x45104aec612e6f4dull},
+        {100, 0xd03fbbb4d168e521ull}, {999, 0x79dd0662c5787f31ull}, {1000, 0xe45933e445682a44ull},
+    };
+    static uint8_t b[1000];
+    for (int i = 0; i < 1000; i++) b[i] = (uint8_t)(i * 37 + 11);
+    size_t n = sizeof kat / sizeof kat[0];
+    for (size_t k = 0; k < n; k++) {
+        uint64_t got = sd_hash64(b, kat[k].len, k == n - 1 ? 42 : 0);
+        if (got != kat[k].h)
+            fail_msg("sd_hash64 of %zu bytes: %016llx, expected %016llx", kat[k].len,
+                     (unsigned long long)got, (unsigned long long)kat[k].h);
+    }
+}
+
 /* The streamed hash (a source file hashed in 1 MiB pieces by pread) equals sd_hash64 of the
  * whole buffer, whatever the piece sizes: cache keys written before stay valid. */
 static void test_hash_stream(void **state)
@@ -1397,6 +1420,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_auth_fail_delay, setup, teardown),
         cmocka_unit_test_setup_teardown(test_write_timeout, setup, teardown),
         cmocka_unit_test_setup_teardown(test_guarded_truncation, setup, teardown),
+        cmocka_unit_test(test_hash_known_answers),
         cmocka_unit_test(test_hash_stream),
         cmocka_unit_test_setup_teardown(test_truncate_during_prep, setup, teardown),
         cmocka_unit_test_setup_teardown(test_cache_symlinks, setup, teardown),

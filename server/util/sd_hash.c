@@ -25,34 +25,12 @@ static inline uint64_t rd64(const uint8_t *p)
 
 uint64_t sd_hash64(const void *data, size_t len, uint64_t seed)
 {
-    const uint8_t *p = data;
-    size_t n = len;
-    uint64_t a = seed + P1 + P2, b = seed + P2, c = seed, d = seed - P1;
-    while (n >= 32) {
-        a = lane(a, rd64(p));
-        b = lane(b, rd64(p + 8));
-        c = lane(c, rd64(p + 16));
-        d = lane(d, rd64(p + 24));
-        p += 32;
-        n -= 32;
-    }
-    uint64_t h = rotl(a, 1) + rotl(b, 7) + rotl(c, 12) + rotl(d, 18) + (uint64_t)len;
-    while (n >= 8) {
-        h ^= lane(0, rd64(p));
-        h = rotl(h, 27) * P1 + P3;
-        p += 8;
-        n -= 8;
-    }
-    while (n--) {
-        h ^= (*p++) * P3;
-        h = rotl(h, 11) * P1;
-    }
-    h ^= h >> 33;
-    h *= P2;
-    h ^= h >> 29;
-    h *= P3;
-    h ^= h >> 32;
-    return h;
+    /* One pass of the streaming form: update hashes whole stripes straight from data and
+     * copies only the last (< 32) bytes, so the one-shot costs the same. */
+    sd_hash_state s;
+    sd_hash64_init(&s, seed);
+    sd_hash64_update(&s, data, len);
+    return sd_hash64_final(&s);
 }
 
 void sd_hash64_init(sd_hash_state *s, uint64_t seed)
