@@ -20,7 +20,6 @@
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <arpa/inet.h>
-#include <png.h>
 #include <poll.h>
 #include <pthread.h>
 #include <signal.h>
@@ -37,6 +36,7 @@
 #include <openssl/hmac.h>
 
 #include "common/daemonproc.h"
+#include "common/imgtest.h"
 #include "common/testutil.h"
 #include "proto.h"
 #include "splat_client.h"
@@ -596,25 +596,6 @@ static void test_open_progress(void **state)
 
 /* ---- end to end: lossless frame equals `splatd render` of the same camera ---- */
 
-/* read_png_rgba: decodes a PNG file to top-down RGBA8 (malloc'd). */
-static uint8_t *read_png_rgba(const char *path, uint32_t *w, uint32_t *h)
-{
-    png_image im;
-    memset(&im, 0, sizeof im);
-    im.version = PNG_IMAGE_VERSION;
-    if (!png_image_begin_read_from_file(&im, path)) return NULL;
-    im.format = PNG_FORMAT_RGBA;
-    uint8_t *buf = malloc(PNG_IMAGE_SIZE(im));
-    if (!buf || !png_image_finish_read(&im, NULL, buf, 0, NULL)) {
-        free(buf);
-        png_image_free(&im);
-        return NULL;
-    }
-    *w = im.width;
-    *h = im.height;
-    return buf;
-}
-
 static void test_lossless_matches_render(void **state)
 {
     e2e *t = *state;
@@ -658,7 +639,8 @@ static void test_lossless_matches_render(void **state)
         fail_msg("splatd render failed (%d): %s", rc, log ? log : "");
     }
     uint32_t rw, rh;
-    uint8_t *ref = read_png_rgba(out, &rw, &rh);
+    uint8_t *ref = NULL;
+    if (tu_png_read(out, 0, &rw, &rh, &ref) < 0) ref = NULL;
     assert_non_null(ref);
     assert_int_equal(rw, W);
     assert_int_equal(rh, H);

@@ -16,7 +16,6 @@
 #include <setjmp.h>
 #include <cmocka.h>
 #include <math.h>
-#include <png.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -27,6 +26,7 @@
 #include "render.h"
 #include "rndtest.h"
 #include "rng.h"
+#include "imgtest.h"
 #include "testutil.h"
 
 enum { W = 256, H = 256 };
@@ -386,53 +386,6 @@ static void test_osmesa(void **state)
 
 /* ---- a real scan ---- */
 
-static int png_read_rgba(const char *path, int *w, int *h, uint8_t **rgba)
-{
-    png_image im;
-    memset(&im, 0, sizeof im);
-    im.version = PNG_IMAGE_VERSION;
-    if (!png_image_begin_read_from_file(&im, path)) return -1;
-    im.format = PNG_FORMAT_RGBA;
-    *w = (int)im.width, *h = (int)im.height;
-    *rgba = malloc(PNG_IMAGE_SIZE(im));
-    if (!*rgba) return -1;
-    /* Negative stride: the first row in memory is the bottom one (GL order, like rnd_frame). */
-    if (!png_image_finish_read(&im, NULL, *rgba, -(png_int_32)PNG_IMAGE_ROW_STRIDE(im), NULL)) {
-        free(*rgba);
-        return -1;
-    }
-    return 0;
-}
-
-static int png_write_rgba(const char *path, int w, int h, const uint8_t *rgba)
-{
-    png_image im;
-    memset(&im, 0, sizeof im);
-    im.version = PNG_IMAGE_VERSION;
-    im.width = (png_uint_32)w, im.height = (png_uint_32)h;
-    im.format = PNG_FORMAT_RGBA;
-    return png_image_write_to_file(&im, path, 0, rgba, -(png_int_32)(w * 4), NULL) ? 0 : -1;
-}
-
-/* PSNR (dB, R G B) of a against g over the pixels covered in either; INFINITY when equal. */
-static double psnr_covered(const uint8_t *a, const uint8_t *g, size_t npx, size_t *ncov)
-{
-    double se = 0;
-    size_t n = 0;
-    for (size_t i = 0; i < npx; i++) {
-        if (is_bg(a + 4 * i) && is_bg(g + 4 * i)) continue;
-        n++;
-        for (int c = 0; c < 3; c++) {
-            double d = (double)a[4 * i + c] - g[4 * i + c];
-            se += d * d;
-        }
-    }
-    *ncov = n;
-    if (n == 0) return INFINITY;
-    double mse = se / (3.0 * n);
-    return mse > 0 ? 10 * log10(255.0 * 255.0 / mse) : INFINITY;
-}
-
 /* The lowest PSNR over covered pixels accepted against golden_bunny_kawata.png. The golden was
  * made by this pipeline (SPLATD_WRITE_GOLDEN=1 rewrites it) and guards against regressions; the
  * analytic tests above check correctness. Float atomics play no part in kawata's colours
@@ -487,19 +440,19 @@ static void test_bunny(void **state)
     tu_data("golden_bunny_kawata.png", gpath, sizeof gpath);
     const char *wg = getenv("SPLATD_WRITE_GOLDEN");
     if (wg && *wg == '1') {
-        assert_int_equal(png_write_rgba(gpath, BW, BH, f[0].rgba8), 0);
+        assert_int_equal(tu_png_write(gpath, BW, BH, f[0].rgba8, 1), 0);
         printf("wrote %s\n", gpath);
     }
     int llvmpipe = strstr(rnd_renderer_string(r), "llvmpipe") != NULL;
     double db = INFINITY;
     size_t ncov = 0;
     if (llvmpipe) {
-        int gw, gh;
+        uint32_t gw, gh;
         uint8_t *g = NULL;
-        if (png_read_rgba(gpath, &gw, &gh, &g) < 0) fail_msg("cannot read %s", gpath);
+        if (tu_png_read(gpath, 1, &gw, &gh, &g) < 0) fail_msg("cannot read %s", gpath);
         assert_int_equal(gw, BW);
         assert_int_equal(gh, BH);
-        db = psnr_covered(f[0].rgba8, g, (size_t)BW * BH, &ncov);
+        db = tu_psnr_covered(f[0].rgba8, g, (size_t)BW * BH, &ncov);
         free(g);
         printf("bunny: PSNR against the golden over %zu covered pixels %.2f dB\n", ncov, db);
     }

@@ -17,7 +17,6 @@
 #include <setjmp.h>
 #include <cmocka.h>
 #include <math.h>
-#include <png.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -29,6 +28,7 @@
 #include "render.h"
 #include "rndtest.h"
 #include "splat_math.h"
+#include "imgtest.h"
 #include "testutil.h"
 
 enum { W = 256, H = 256 };
@@ -1020,35 +1020,6 @@ static void test_ewa_auto(void **state)
 
 /* ---- a real scan ---- */
 
-/* Reads an 8-bit RGB or RGBA PNG into rgba (bottom-up rows, like rnd_frame). Returns 0. */
-static int png_read_rgba(const char *path, int *w, int *h, uint8_t **rgba)
-{
-    png_image im;
-    memset(&im, 0, sizeof im);
-    im.version = PNG_IMAGE_VERSION;
-    if (!png_image_begin_read_from_file(&im, path)) return -1;
-    im.format = PNG_FORMAT_RGBA;
-    *w = (int)im.width, *h = (int)im.height;
-    *rgba = malloc(PNG_IMAGE_SIZE(im));
-    if (!*rgba) return -1;
-    /* Negative stride: the first row in memory is the bottom one. */
-    if (!png_image_finish_read(&im, NULL, *rgba, -(png_int_32)PNG_IMAGE_ROW_STRIDE(im), NULL)) {
-        free(*rgba);
-        return -1;
-    }
-    return 0;
-}
-
-static int png_write_rgba(const char *path, int w, int h, const uint8_t *rgba)
-{
-    png_image im;
-    memset(&im, 0, sizeof im);
-    im.version = PNG_IMAGE_VERSION;
-    im.width = (png_uint_32)w, im.height = (png_uint_32)h;
-    im.format = PNG_FORMAT_RGBA;
-    return png_image_write_to_file(&im, path, 0, rgba, -(png_int_32)(w * 4), NULL) ? 0 : -1;
-}
-
 /* Culling that leaves several ranges: five batches of 64 x 64 points, three plane patches in
  * view (batches 0, 2, 4) and two far outside it (1, 3), so the visible points are three
  * separate ranges and the shaders map visible indices to points through the range table
@@ -1117,28 +1088,6 @@ static void test_culled_ranges(void **state)
     }
     pc_prepared_free(&both[0]);
     pc_prepared_free(&both[1]);
-}
-
-/* PSNR (dB, over R, G, B) of frame a against image g, both npx pixels, over the pixels covered
- * in either (the background, (0, 0, 0) in both, is left out: it matches trivially and would
- * inflate the figure by 10 log10(npx / covered)). INFINITY when they are equal; *ncov gets the
- * number of pixels compared. */
-static double psnr_covered(const uint8_t *a, const uint8_t *g, size_t npx, size_t *ncov)
-{
-    double se = 0;
-    size_t n = 0;
-    for (size_t i = 0; i < npx; i++) {
-        if (is_bg(a + 4 * i) && is_bg(g + 4 * i)) continue;
-        n++;
-        for (int c = 0; c < 3; c++) {
-            double d = (double)a[4 * i + c] - g[4 * i + c];
-            se += d * d;
-        }
-    }
-    *ncov = n;
-    if (n == 0) return INFINITY;
-    double mse = se / (3.0 * n);
-    return mse > 0 ? 10 * log10(255.0 * 255.0 / mse) : INFINITY;
 }
 
 /* Golden images: the lowest PSNR over covered pixels accepted. Measured on llvmpipe (LLVM 15,
@@ -1240,7 +1189,7 @@ static void test_guanyin(void **state)
         for (int v = 0; v < 2; v++) {
             char gpath[4096];
             tu_data(views[v].golden, gpath, sizeof gpath);
-            assert_int_equal(png_write_rgba(gpath, views[v].w, views[v].h, f[v][0].rgba8), 0);
+            assert_int_equal(tu_png_write(gpath, (uint32_t)views[v].w, (uint32_t)views[v].h, f[v][0].rgba8, 1), 0);
             printf("wrote %s\n", gpath);
         }
     int llvmpipe = strstr(rnd_renderer_string(fx->egl), "llvmpipe") != NULL;
@@ -1248,15 +1197,15 @@ static void test_guanyin(void **state)
     for (int v = 0; v < 2 && llvmpipe; v++) {
         char gpath[4096];
         tu_data(views[v].golden, gpath, sizeof gpath);
-        int gw, gh;
+        uint32_t gw, gh;
         uint8_t *g = NULL;
-        if (png_read_rgba(gpath, &gw, &gh, &g) < 0)
+        if (tu_png_read(gpath, 1, &gw, &gh, &g) < 0)
             fail_msg("cannot read the golden image %s", gpath);
         assert_int_equal(gw, views[v].w);
         assert_int_equal(gh, views[v].h);
         size_t npx = (size_t)gw * gh, ncov = 0;
         for (int k = 0; k < views[v].nframes; k++) {
-            double db = psnr_covered(f[v][k].rgba8, g, npx, &ncov);
+            double db = tu_psnr_covered(f[v][k].rgba8, g, npx, &ncov);
             printf("guanyin, %s, frame %d (%s): PSNR against %s over %zu covered pixels %.2f dB\n",
                    views[v].name, k, k < views[v].nframes / 2 ? "8-bit" : "float", views[v].golden,
                    ncov, db);

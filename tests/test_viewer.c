@@ -10,7 +10,6 @@
 #include <cmocka.h>
 
 #include <math.h>
-#include <png.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -21,6 +20,7 @@
 #include <unistd.h>
 
 #include "daemonproc.h"
+#include "imgtest.h"
 #include "testutil.h"
 
 /* The saved view and `splat render` of the same camera come from the same renderer and the
@@ -188,19 +188,11 @@ static char *run_view(fx *f, const char *script_text, const char *tag)
     return slurp(out);
 }
 
-/* read_png: RGBA8 pixels of a PNG file (malloc'd). */
+/* read_png: the top-down RGBA8 pixels of a PNG file (malloc'd); fails the test when it cannot. */
 static uint8_t *read_png(const char *path, uint32_t *w, uint32_t *h)
 {
-    png_image im;
-    memset(&im, 0, sizeof im);
-    im.version = PNG_IMAGE_VERSION;
-    if (!png_image_begin_read_from_file(&im, path)) fail_msg("%s: %s", path, im.message);
-    im.format = PNG_FORMAT_RGBA;
-    uint8_t *px = malloc(PNG_IMAGE_SIZE(im));
-    assert_non_null(px);
-    if (!png_image_finish_read(&im, NULL, px, 0, NULL)) fail_msg("%s: %s", path, im.message);
-    *w = im.width;
-    *h = im.height;
+    uint8_t *px = NULL;
+    if (tu_png_read(path, 0, w, h, &px) < 0) fail_msg("%s: not a readable PNG", path);
     return px;
 }
 
