@@ -121,19 +121,6 @@ static void raw_close(raw *r)
     r->fd = -1;
 }
 
-static int write_all(int fd, const void *p, size_t n)
-{
-    const uint8_t *b = p;
-    while (n) {
-        ssize_t w = send(fd, b, n, MSG_NOSIGNAL);
-        if (w < 0 && errno == EINTR) continue;
-        if (w <= 0) return -1;
-        b += w;
-        n -= (size_t)w;
-    }
-    return 0;
-}
-
 /* raw_send_hdr: a header with explicit fields and len payload bytes from pl. */
 static uint32_t raw_send_hdr(raw *r, uint32_t magic, uint16_t version, uint16_t type, uint32_t len,
                              const void *pl, size_t pllen)
@@ -141,43 +128,30 @@ static uint32_t raw_send_hdr(raw *r, uint32_t magic, uint16_t version, uint16_t 
     uint8_t h[PROTO_HEADER_LEN];
     proto_header hd = {magic, version, type, ++r->seq, len};
     proto_put_header(h, &hd);
-    assert_int_equal(write_all(r->fd, h, sizeof h), 0);
-    if (pllen) assert_int_equal(write_all(r->fd, pl, pllen), 0);
+    assert_int_equal(tu_send_all(r->fd, h, sizeof h), 0);
+    if (pllen) assert_int_equal(tu_send_all(r->fd, pl, pllen), 0);
     return r->seq;
 }
 
 /* raw_send_buf: sends the message(s) encoded in b. */
 static void raw_send_buf(raw *r, proto_buf *b)
 {
-    assert_int_equal(write_all(r->fd, b->data, b->len), 0);
+    assert_int_equal(tu_send_all(r->fd, b->data, b->len), 0);
     proto_buf_free(b);
-}
-
-static int read_all(int fd, void *p, size_t n)
-{
-    uint8_t *b = p;
-    while (n) {
-        ssize_t g = recv(fd, b, n, 0);
-        if (g < 0 && errno == EINTR) continue;
-        if (g <= 0) return -1;
-        b += g;
-        n -= (size_t)g;
-    }
-    return 0;
 }
 
 /* raw_recv: the next message; returns its type, or -1 on EOF/timeout. */
 static int raw_recv(raw *r)
 {
     uint8_t h[PROTO_HEADER_LEN];
-    if (read_all(r->fd, h, sizeof h) != 0) return -1;
+    if (tu_recv_all(r->fd, h, sizeof h) != 0) return -1;
     proto_get_header(h, &r->h);
     assert_int_equal(r->h.magic, PROTO_MAGIC);
     assert_true(r->h.len <= PROTO_MAX_FRAME);
     free(r->pl);
     r->pl = malloc(r->h.len + 1);
     assert_non_null(r->pl);
-    if (read_all(r->fd, r->pl, r->h.len) != 0) return -1;
+    if (tu_recv_all(r->fd, r->pl, r->h.len) != 0) return -1;
     return r->h.type;
 }
 
@@ -1406,7 +1380,7 @@ static int send_lists(raw *r, int n)
 {
     proto_buf b = {0};
     for (int i = 0; i < n; i++) assert_int_equal(proto_enc_empty(&b, PROTO_MSG_LIST, ++r->seq), 0);
-    int rc = write_all(r->fd, b.data, b.len);
+    int rc = tu_send_all(r->fd, b.data, b.len);
     proto_buf_free(&b);
     return rc;
 }

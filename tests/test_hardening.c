@@ -144,32 +144,6 @@ static int connect_from(int src, int port, int nonblock)
     return fd;
 }
 
-static int write_all(int fd, const void *p, size_t n)
-{
-    const uint8_t *b = p;
-    while (n) {
-        ssize_t w = send(fd, b, n, MSG_NOSIGNAL);
-        if (w < 0 && errno == EINTR) continue;
-        if (w <= 0) return -1;
-        b += w;
-        n -= (size_t)w;
-    }
-    return 0;
-}
-
-static int read_all(int fd, void *p, size_t n)
-{
-    uint8_t *b = p;
-    while (n) {
-        ssize_t g = recv(fd, b, n, 0);
-        if (g < 0 && errno == EINTR) continue;
-        if (g <= 0) return -1;
-        b += g;
-        n -= (size_t)g;
-    }
-    return 0;
-}
-
 /* A message received by recv_msg. */
 typedef struct msg {
     proto_header h;
@@ -180,12 +154,12 @@ typedef struct msg {
 static int recv_msg(int fd, msg *m)
 {
     uint8_t h[PROTO_HEADER_LEN];
-    if (read_all(fd, h, sizeof h) != 0) return -1;
+    if (tu_recv_all(fd, h, sizeof h) != 0) return -1;
     proto_get_header(h, &m->h);
     if (m->h.magic != PROTO_MAGIC || m->h.len > PROTO_MAX_FRAME) return -1;
     free(m->pl);
     m->pl = malloc(m->h.len + 1u);
-    if (!m->pl || read_all(fd, m->pl, m->h.len) != 0) return -1;
+    if (!m->pl || tu_recv_all(fd, m->pl, m->h.len) != 0) return -1;
     return m->h.type;
 }
 
@@ -208,7 +182,7 @@ static int error_code(const msg *m, char *text, size_t len)
 
 static int send_buf(int fd, proto_buf *b)
 {
-    int rc = write_all(fd, b->data, b->len);
+    int rc = tu_send_all(fd, b->data, b->len);
     proto_buf_free(b);
     return rc;
 }
@@ -368,21 +342,21 @@ static void attacker_start(attack *k, attacker *a)
     if (a->fd < 0) { proto_buf_free(&b); return; }
     switch (a->kind) {
     case A_IDLE: break;
-    case A_HALF: write_all(a->fd, b.data, 10); break;
-    case A_SLOW: write_all(a->fd, b.data, 1); a->stage = 1; break;
-    case A_AUTH_IDLE: write_all(a->fd, b.data, b.len); break;
+    case A_HALF: tu_send_all(a->fd, b.data, 10); break;
+    case A_SLOW: tu_send_all(a->fd, b.data, 1); a->stage = 1; break;
+    case A_AUTH_IDLE: tu_send_all(a->fd, b.data, b.len); break;
     case A_AUTH_HALF:
-        write_all(a->fd, b.data, b.len);
-        write_all(a->fd, ping, 10);
+        tu_send_all(a->fd, b.data, b.len);
+        tu_send_all(a->fd, ping, 10);
         break;
     case A_AUTH_SLOW:
-        write_all(a->fd, b.data, b.len);
+        tu_send_all(a->fd, b.data, b.len);
         memcpy(a->script, ping, ping_len);
         a->script_len = ping_len;
-        write_all(a->fd, ping, 1);
+        tu_send_all(a->fd, ping, 1);
         a->stage = 1;
         break;
-    case A_BADPROOF: write_all(a->fd, b.data, b.len); break;
+    case A_BADPROOF: tu_send_all(a->fd, b.data, b.len); break;
     }
     proto_buf_free(&b);
     /* Non-blocking from here on: the thread only polls. */
@@ -406,7 +380,7 @@ static int attacker_read(attack *k, attacker *a)
                 memset(wrong, 0x5a, sizeof wrong);
                 proto_buf b = {0};
                 hello_bytes(&b, 2, wrong);
-                write_all(a->fd, b.data, b.len);
+                tu_send_all(a->fd, b.data, b.len);
                 proto_buf_free(&b);
                 a->stage = 1;
             }

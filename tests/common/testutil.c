@@ -1,10 +1,12 @@
 /* testutil.c — see testutil.h. */
 #include "testutil.h"
 
+#include <errno.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
 const char *tu_env(const char *name, const char *def)
@@ -93,4 +95,30 @@ int tu_copy_file(const char *src, const char *dst)
     int rc = tu_write_file(dst, b, len);
     free(b);
     return rc;
+}
+
+int tu_send_all(int fd, const void *p, size_t n)
+{
+    const uint8_t *b = p;
+    while (n) {
+        ssize_t w = send(fd, b, n, MSG_NOSIGNAL);
+        if (w < 0 && errno == EINTR) continue;
+        if (w <= 0) return -1;
+        b += w;
+        n -= (size_t)w;
+    }
+    return 0;
+}
+
+int tu_recv_all(int fd, void *p, size_t n)
+{
+    uint8_t *b = p;
+    while (n) {
+        ssize_t g = recv(fd, b, n, 0);
+        if (g < 0 && errno == EINTR) continue;
+        if (g <= 0) return -1;
+        b += g;
+        n -= (size_t)g;
+    }
+    return 0;
 }

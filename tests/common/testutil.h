@@ -40,3 +40,8 @@ int tu_tmpdir_teardown(void **state);
         skip();                                                        \
     } while (0)
 void tu_skip_reason(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+
+/* tu_send_all, tu_recv_all: send or receive exactly n bytes on socket fd, retrying after
+ * EINTR (send with MSG_NOSIGNAL). 0, or -1 on an error, EOF or the socket's timeout. */
+int tu_send_all(int fd, const void *p, size_t n);
+int tu_recv_all(int fd, void *p, size_t n);
