@@ -46,7 +46,7 @@ enum { EXIT_FAIL = 1, EXIT_USAGE = 2 };
 static const char usage_text[] =
     "usage: splat view NAME [--host H] [--port P] [--token-file F] [--size WxH]\n"
     "                  [--set key=value ...] [--script FILE] [--verbose] [--drag-budget N]\n"
-    "                  [--no-progressive] [--timeout S]\n"
+    "                  [--no-progressive] [--timeout S] [--keepalive S]\n"
     "\n"
     "Opens cloud NAME on a splatd server and shows it in a window; the server streams a new\n"
     "frame whenever the camera or a parameter changes.\n"
@@ -60,6 +60,8 @@ static const char usage_text[] =
     "  --drag-budget N    point budget while dragging (default 300000; 0: every point)\n"
     "  --no-progressive   always full resolution and quality (for measurements)\n"
     "  --timeout S        seconds one request may take (default 30)\n"
+    "  --keepalive S      send PING after S seconds with nothing sent, so a resting viewer\n"
+    "                     outlives the server's --idle-timeout (default 60; 0: never)\n"
     "\n";
 
 static const char keys_text[] =
@@ -192,6 +194,7 @@ typedef struct shared {
     spc_options opt;
     const char *name;
     int verbose;
+    int keepalive_s;             /* PING after this long with nothing sent; 0: never */
     /* window -> network */
     int quit;
     spc_camera cam;              /* the camera to show */
@@ -435,6 +438,7 @@ static int session(shared *s, spc_client *c, char *err, size_t errlen)
      * default camera first. */
     int streaming = 0;
     uint64_t cam_sent = 0, want_sent = 0;
+    double last_sent = now_s(); /* the last request of ours: the server's idle clock */
     for (;;) {
         pthread_mutex_lock(&s->mu);
         int quit = s->quit, nsaves = s->nsaves;
@@ -465,11 +469,13 @@ static int session(shared *s, spc_client *c, char *err, size_t errlen)
                 if (want_gen != want_sent) {
                     if ((rc = apply_params(s, c, &applied, &want, NULL)) < 0) goto fail;
                     want_sent = want_gen;
+                    last_sent = now_s();
                 }
             } else if (cam_gen && cam_gen != cam_sent) {
                 uint32_t seq = 0;
                 rc = spc_set_camera(c, &cam, &seq);
                 if (rc < 0 && is_conn_error(rc)) goto fail;
+                last_sent = now_s();
                 if (rc < 0) set_status(s, "camera: %s", spc_errmsg(c));
                 cam_sent = cam_gen;
                 pthread_mutex_lock(&s->mu);
@@ -485,6 +491,17 @@ static int session(shared *s, spc_client *c, char *err, size_t errlen)
                     if ((rc = spc_stream(c, 1, 0)) < 0) goto fail;
                     streaming = 1;
                 }
+            }
+        }
+        /* A viewer at rest sends nothing, and the server closes clients silent for its
+         * --idle-timeout (300 s by default): a PING now and then keeps the connection. Frames
+         * streamed meanwhile are skipped by the wait; the camera is still, so none is due. */
+        if (s->keepalive_s > 0 && now_s() - last_sent >= s->keepalive_s) {
+            if ((rc = spc_ping(c, NULL)) < 0) goto fail;
+            last_sent = now_s();
+            if (s->verbose) {
+                printf("ping\n");
+                fflush(stdout);
             }
         }
         /* Wait for a frame or a wish of the window; bytes the library holds already count as
@@ -1064,7 +1081,7 @@ static int run_script_event(view *v, const script_ev *e)
 int main(int argc, char **argv)
 {
     const char *name = NULL, *script = NULL, *sets[CLI_MAX_SETS];
-    int nsets = 0, verbose = 0, progressive = 1, timeout_s = 30;
+    int nsets = 0, verbose = 0, progressive = 1, timeout_s = 30, keepalive_s = 60;
     long long drag_budget = 300000;
     spc_options opt = {.host = "127.0.0.1", .port = SPC_DEFAULT_PORT, .client_name = "splat view"};
     uint32_t w = 1280, h = 720;
@@ -1075,7 +1092,8 @@ int main(int argc, char **argv)
         const char *val = i + 1 < argc ? argv[i + 1] : NULL;
         int takes = !strcmp(a, "--host") || !strcmp(a, "--port") || !strcmp(a, "--token-file") ||
                     !strcmp(a, "--size") || !strcmp(a, "--set") || !strcmp(a, "--script") ||
-                    !strcmp(a, "--drag-budget") || !strcmp(a, "--timeout");
+                    !strcmp(a, "--drag-budget") || !strcmp(a, "--timeout") ||
+                    !strcmp(a, "--keepalive");
         if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
             fputs(usage_text, stdout);
             fputs(keys_text, stdout);
@@ -1120,6 +1138,13 @@ int main(int argc, char **argv)
                 return EXIT_USAGE;
             }
             timeout_s = (int)tt;
+        } else if (!strcmp(a, "--keepalive")) {
+            long k = strtol(val, &end, 10);
+            if (*end || k < 0 || k > 86400) {
+                fprintf(stderr, "splat view: --keepalive needs 0 to 86400 seconds, not '%s'\n", val);
+                return EXIT_USAGE;
+            }
+            keepalive_s = (int)k;
         } else if (!strcmp(a, "--verbose") || !strcmp(a, "-v")) verbose = 1;
         else if (!strcmp(a, "--no-progressive")) progressive = 0;
         else if (a[0] == '-' && a[1]) {
@@ -1143,6 +1168,7 @@ int main(int argc, char **argv)
     s.opt = opt;
     s.name = name;
     s.verbose = verbose;
+    s.keepalive_s = keepalive_s;
     sp_params_defaults(&s.want);
     char err[600];
     for (int k = 0; k < nsets; k++)

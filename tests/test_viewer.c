@@ -117,16 +117,24 @@ static int teardown(void **state)
     return 0;
 }
 
-/* start_daemon: splatd on the bunny (tests/data/bun000.ply) as "bun.ply". */
-static void start_daemon(fx *f)
+/* start_daemon_with: splatd on the bunny (tests/data/bun000.ply) as "bun.ply", with the
+ * options in extra (NULL-terminated; may be NULL) besides. */
+static void start_daemon_with(fx *f, const char *const *extra)
 {
     char src[700], dst[800];
     tu_data("bun000.ply", src, sizeof src);
     snprintf(dst, sizeof dst, "%s/bun.ply", f->data);
     assert_int_equal(tu_copy_file(src, dst), 0);
-    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
-                          NULL};
+    const char *args[16] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache};
+    int n = 6;
+    for (; extra && *extra && n < 15; extra++) args[n++] = *extra;
+    args[n] = NULL;
     assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+}
+
+static void start_daemon(fx *f)
+{
+    start_daemon_with(f, NULL);
 }
 
 /* run_cmd: runs argv (NULL-terminated) with stdout to out_path and stderr to err_path, killed
@@ -164,9 +172,11 @@ static char *slurp(const char *path)
     return s;
 }
 
-/* run_view: `splat view bun --script FILE --verbose` at 320x240; its stdout in a malloc'd
- * string. Fails the test on a non-zero exit, showing stderr. */
-static char *run_view(fx *f, const char *script_text, const char *tag)
+/* run_view_with: `splat view bun --script FILE --verbose` at 320x240 with the options in extra
+ * (NULL-terminated; may be NULL) besides; its stdout in a malloc'd string. Fails the test on a
+ * non-zero exit, showing stderr. */
+static char *run_view_with(fx *f, const char *script_text, const char *tag,
+                           const char *const *extra)
 {
     char script[800], out[800], err[800], port[16];
     snprintf(script, sizeof script, "%s/%s.script", f->root, tag);
@@ -174,8 +184,11 @@ static char *run_view(fx *f, const char *script_text, const char *tag)
     snprintf(err, sizeof err, "%s/%s.err", f->root, tag);
     snprintf(port, sizeof port, "%d", f->d.port);
     assert_int_equal(tu_write_file(script, script_text, strlen(script_text)), 0);
-    const char *argv[] = {tu_splat_bin(), "--port", port, "view", "bun", "--size", "320x240",
-                          "--script", script, "--verbose", NULL};
+    const char *argv[16] = {tu_splat_bin(), "--port", port, "view", "bun", "--size", "320x240",
+                            "--script", script, "--verbose"};
+    int n = 10;
+    for (; extra && *extra && n < 15; extra++) argv[n++] = *extra;
+    argv[n] = NULL;
     struct timespec t0, t1;
     clock_gettime(CLOCK_MONOTONIC, &t0);
     int rc = run_cmd(argv, out, err, 30);
@@ -186,6 +199,11 @@ static char *run_view(fx *f, const char *script_text, const char *tag)
     printf("splat view (%s) ran %.2f s\n", tag,
            (t1.tv_sec - t0.tv_sec) + (t1.tv_nsec - t0.tv_nsec) * 1e-9);
     return slurp(out);
+}
+
+static char *run_view(fx *f, const char *script_text, const char *tag)
+{
+    return run_view_with(f, script_text, tag, NULL);
 }
 
 /* read_png: the top-down RGBA8 pixels of a PNG file (malloc'd); fails the test when it cannot. */
@@ -414,6 +432,37 @@ static void test_view_reconnects(void **state)
     free(e);
 }
 
+/* A viewer at rest outlives the server's idle timeout by sending PING (--keepalive): with a
+ * 2 s --idle-timeout and 4.5 s of rest, the viewer without keep-alive is closed by the server
+ * (the defect: it reports the disconnection), the one with --keepalive 1 is not and saves. */
+static void test_view_keepalive(void **state)
+{
+    skip_without_x();
+    fx *f = *state;
+    const char *const dargs[] = {"--idle-timeout", "2", NULL};
+    start_daemon_with(f, dargs);
+    char png[800], text[1200];
+    snprintf(png, sizeof png, "%s/rest.png", f->root);
+    snprintf(text, sizeof text, "wait 300\ndrag 10 0\nwait 4500\nsave %s\nquit\n", png);
+    const char *const off[] = {"--keepalive", "0", NULL};
+    char *o = run_view_with(f, text, "nokeep", off);
+    if (!strstr(o, "status disconnected"))
+        fail_msg("without keep-alive the server's 2 s idle timeout did not close the viewer:\n%s",
+                 o);
+    if (strstr(o, "\nping\n")) fail_msg("--keepalive 0 sent PING:\n%s", o);
+    free(o);
+    const char *const on[] = {"--keepalive", "1", NULL};
+    o = run_view_with(f, text, "keep", on);
+    if (strstr(o, "status disconnected"))
+        fail_msg("with --keepalive 1 the viewer was disconnected:\n%s", o);
+    int pings = 0;
+    for (const char *q = o; (q = strstr(q, "\nping\n")); q++) pings++;
+    if (pings < 3) fail_msg("%d PINGs in 4.5 s of rest with --keepalive 1 (expected >= 3):\n%s",
+                            pings, o);
+    if (!strstr(o, "saved ")) fail_msg("no save after the rest:\n%s", o);
+    free(o);
+}
+
 static uint32_t be32(const uint8_t *p)
 {
     return (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3];
@@ -559,6 +608,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_view_save_matches_render, setup, teardown),
         cmocka_unit_test_setup_teardown(test_view_progressive_drag, setup, teardown),
         cmocka_unit_test_setup_teardown(test_view_reconnects, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_view_keepalive, setup, teardown),
         cmocka_unit_test_setup_teardown(test_view_window_shows_frames, setup, teardown),
         cmocka_unit_test_setup_teardown(test_view_script_errors, setup, teardown),
     };
