@@ -35,12 +35,7 @@ static int setup(void **state)
 {
     fx *f = calloc(1, sizeof *f);
     if (!f || !tu_tmpdir(f->root, sizeof f->root)) return -1;
-    snprintf(f->data, sizeof f->data, "%s/data", f->root);
-    if (mkdir(f->data, 0755) != 0) return -1;
-    char src[600], dst[700];
-    tu_data("bun000.ply", src, sizeof src);
-    snprintf(dst, sizeof dst, "%s/bunny.ply", f->data);
-    if (tu_copy_file(src, dst) != 0) return -1;
+    if (tu_data_dir(f->root, "bun000.ply", "bunny.ply", f->data, sizeof f->data) != 0) return -1;
     signal(SIGPIPE, SIG_IGN);
     *state = f;
     return 0;

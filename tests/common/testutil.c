@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -140,4 +141,14 @@ int tu_run(char *out, size_t len, const char *fmt, ...)
     while (fgetc(p) != EOF) {}
     int st = pclose(p);
     return st != -1 && WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+}
+
+int tu_data_dir(const char *root, const char *src, const char *dst, char *buf, size_t len)
+{
+    char from[1024], to[1024];
+    snprintf(buf, len, "%s/data", root);
+    if (mkdir(buf, 0755) != 0) return -1;
+    tu_data(src, from, sizeof from);
+    snprintf(to, sizeof to, "%s/%s", buf, dst);
+    return tu_copy_file(from, to);
 }
