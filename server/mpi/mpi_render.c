@@ -44,6 +44,9 @@ struct mr_ctx {
     rnd_frame frame;           /* workers' frame */
     uint8_t *img, *scratch, *out;
     size_t img_cap;
+    rnd_exchange xchg;         /* splat's sort-last exchange (render.h) */
+    double xchg_ms;            /* time in the exchange this frame */
+    int xchg_calls;            /* exchanges this frame took part in */
     /* statistics: compositing time per frame (rank 0), bytes sent (every rank) */
     uint64_t frames, bytes_sent;
     double comp_ms[MR_MAX_TIMES];
@@ -72,13 +75,12 @@ static double rss_mib(void)
 
 int mr_supported(const sp_params *params, sd_err *err)
 {
-    if (params->pipeline != SP_PIPE_POINTS)
+    if (params->pipeline != SP_PIPE_POINTS && params->pipeline != SP_PIPE_SPLAT)
         return sd_errf(err, SD_EUNSUP, "pipeline %s is not available with splatd --mpi: only "
-                       "points composites exactly from the ranks' images (splat's visibility "
-                       "and weighted sums span the ranks' borders, kawata and soft need every "
-                       "point in one place)",
-                       params->pipeline == SP_PIPE_SPLAT ? "splat"
-                       : params->pipeline == SP_PIPE_KAWATA ? "kawata" : "soft");
+                       "points and splat composite from the ranks' parts (kawata fits planes "
+                       "to each pixel's points of the whole cloud and soft sorts every "
+                       "transparent disc back to front)",
+                       params->pipeline == SP_PIPE_KAWATA ? "kawata" : "soft");
     if (params->shading == SP_SHADING_EDL)
         return sd_errf(err, SD_EUNSUP, "shading=edl is not available with splatd --mpi (it "
                        "needs the composited depth on one GL context)");
@@ -152,6 +154,9 @@ static int load(mr_ctx *m, const mr_cmd *c, pc_prepared *full, sd_err *err)
         if (rc == 0) full = &own;
     }
     uint64_t total = full ? full->n : 0;
+    if (rc == 0 && total < (uint64_t)m->size)
+        rc = sd_errf(err, SD_EINVAL, "the cloud has %llu points, fewer than the %d ranks",
+                     (unsigned long long)total, m->size);
     if (rc == 0) {
         part = malloc((size_t)(full->n ? full->n : 1) * sizeof *part);
         rc = part ? pc_partition(full->pos, full->n, m->size, part, err)
@@ -249,6 +254,67 @@ static int empty_frame(rnd_frame *f, int w, int h, const sp_params *p, sd_err *e
     return 0;
 }
 
+/* op_sum: adds splat's per-pixel sums (8 words: 7 sums, float or wrapping integers, a pad). */
+static void op_sum(const uint8_t *lo, const uint8_t *hi, uint8_t *dst, size_t npix,
+                   size_t stride, void *user)
+{
+    int is_float = *(const int *)user;
+    for (size_t i = 0; i < npix * stride / 32; i++) {
+        for (int w = 0; w < 7; w++) {
+            size_t o = 32 * i + 4 * (size_t)w;
+            if (is_float) {
+                float a, b;
+                memcpy(&a, lo + o, 4);
+                memcpy(&b, hi + o, 4);
+                a += b;
+                memcpy(dst + o, &a, 4);
+            } else {
+                uint32_t a, b;
+                memcpy(&a, lo + o, 4);
+                memcpy(&b, hi + o, 4);
+                a += b;
+                memcpy(dst + o, &a, 4);
+            }
+        }
+    }
+}
+
+/* xchg_keys: splat's visibility keys of all ranks (the nearest surface per pixel). */
+static int xchg_keys(void *user, int rc, uint32_t *keys, size_t n, int32_t rect[4], sd_err *err)
+{
+    mr_ctx *m = user;
+    double t0 = now_ms();
+    m->xchg_calls++;
+    if ((rc = agree(m, rc, err)) < 0) return rc;
+    if (n > INT_MAX) return sd_errf(err, SD_ELIMIT, "frame too large to exchange");
+    int32_t r[4] = {rect[0], rect[1], -rect[2], -rect[3]};
+    if (MPI_Allreduce(MPI_IN_PLACE, keys, (int)n, MPI_UINT32_T, MPI_MAX, m->comm) != MPI_SUCCESS ||
+        MPI_Allreduce(MPI_IN_PLACE, r, 4, MPI_INT32_T, MPI_MIN, m->comm) != MPI_SUCCESS)
+        return sd_errf(err, SD_EIO, "MPI: exchanging the visibility keys failed");
+    rect[0] = r[0], rect[1] = r[1], rect[2] = -r[2], rect[3] = -r[3];
+    /* a ring allreduce sends about 2 (N - 1) / N of the array from each rank */
+    m->bytes_sent += (uint64_t)(2.0 * (m->size - 1) / m->size * (double)n * 4);
+    m->xchg_ms += now_ms() - t0;
+    return 0;
+}
+
+/* xchg_sums: splat's weighted sums of all ranks, added up by binary swap, at rank 0. */
+static int xchg_sums(void *user, int rc, uint32_t *px, size_t n, int is_float, sd_err *err)
+{
+    mr_ctx *m = user;
+    double t0 = now_ms();
+    if ((rc = agree(m, rc, err)) < 0) return rc;
+    if ((rc = agree(m, ensure_img(m, n * 32, err), err)) < 0) return rc;
+    cmp_stats st;
+    int mrc = cmp_composite(m->comm, (uint8_t *)px, m->scratch, m->out, n, 32, op_sum, &is_float,
+                            &st);
+    m->bytes_sent += st.bytes_sent;
+    if (mrc != MPI_SUCCESS) return sd_errf(err, SD_EIO, "MPI: adding up the splat sums failed");
+    if (m->rank == 0) memcpy(px, m->out, n * 32);
+    m->xchg_ms += now_ms() - t0;
+    return m->rank == 0;
+}
+
 /* frame: every rank renders its part and the ranks composite; rank 0 gets the result in f. */
 static int frame(mr_ctx *m, const mr_cmd *c, rnd_frame *f, sd_err *err)
 {
@@ -257,6 +323,33 @@ static int frame(mr_ctx *m, const mr_cmd *c, rnd_frame *f, sd_err *err)
     mr_cloud *cl = find_cloud(m, c->key);
     sp_params p = c->params;
     if (p.point_budget > 0) p.point_budget = (p.point_budget + m->size - 1) / m->size;
+    int splat = p.pipeline == SP_PIPE_SPLAT;
+    m->xchg_ms = 0;
+    m->xchg_calls = 0;
+    if (splat) {
+        /* the ranks exchange splat's per-pixel state inside the pipeline (render_sortlast in
+         * pipe_splat.c); rank 0 resolves the frame, so nothing is composited afterwards */
+        rnd_set_exchange(m->rnd, &m->xchg);
+        if (!cl) rc = sd_errf(err, SD_EINVAL, "cloud %u is not loaded on this rank", c->key);
+        else if (!cl->local_id) rc = sd_errf(err, SD_EINVAL, "this rank holds no point");
+        else rc = rnd_render(m->rnd, cl->local_id, &c->cam, &p, c->want_float, f, err);
+        rnd_set_exchange(m->rnd, NULL);
+        if (rc < 0 && !m->xchg_calls) {
+            /* failed before the exchange: take part in its first step (which then fails on
+             * every rank), so that the others do not wait */
+            sd_err e2 = *err;
+            xchg_keys(m, rc, NULL, 0, NULL, &e2);
+        }
+        if ((rc = agree(m, rc, err)) < 0) return rc;
+        m->frames++;
+        if (m->rank == 0) {
+            if (m->ncomp < MR_MAX_TIMES) m->comp_ms[m->ncomp++] = m->xchg_ms;
+            f->render_us = (uint64_t)((now_ms() - t0 - m->xchg_ms) * 1e3);
+            f->readback_us = (uint64_t)(m->xchg_ms * 1e3);
+            f->points_drawn = cl->n_total;
+        }
+        return 0;
+    }
     if (!cl) rc = sd_errf(err, SD_EINVAL, "cloud %u is not loaded on this rank", c->key);
     else if (cl->local_id)
         rc = rnd_render(m->rnd, cl->local_id, &c->cam, &p, 1, f, err);
@@ -322,6 +415,7 @@ mr_ctx *mr_create(MPI_Comm comm, int argc, char **argv)
     MPI_Comm_size(comm, &m->size);
     m->hooks = (rt_hooks){.user = m, .configure = configure, .adopt = hook_adopt,
                           .render = hook_render};
+    m->xchg = (rnd_exchange){.user = m, .keys = xchg_keys, .sums = xchg_sums};
     m->cache_dir = opt_value(argc, argv, "--cache");
     m->shader_dir = opt_value(argc, argv, "--shader-dir");
     const char *be = opt_value(argc, argv, "--backend");
