@@ -253,6 +253,7 @@ run: all
 install: all
 	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/lib/pkgconfig $(DESTDIR)$(PREFIX)/include
 	install -m 755 $(BUILD)/bin/splatd $(BUILD)/bin/splat $(BUILD)/bin/splat-view $(DESTDIR)$(PREFIX)/bin/
+	if [ -x $(BUILD)/bin/splatd-mpi ]; then install -m 755 $(BUILD)/bin/splatd-mpi $(DESTDIR)$(PREFIX)/bin/; fi
 	install -m 644 $(BUILD)/libsplatclient.a $(DESTDIR)$(PREFIX)/lib/
 	install -m 755 $(BUILD)/libsplatclient.so $(DESTDIR)$(PREFIX)/lib/libsplatclient.so.0
 	ln -sf libsplatclient.so.0 $(DESTDIR)$(PREFIX)/lib/libsplatclient.so

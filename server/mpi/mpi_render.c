@@ -47,6 +47,7 @@ struct mr_ctx {
     rnd_exchange xchg;         /* splat's sort-last exchange (render.h) */
     double xchg_ms;            /* time in the exchange this frame */
     int xchg_calls;            /* exchanges this frame took part in */
+    size_t xchg_first, xchg_count; /* the pixels exchanged: the rows of the union's rect */
     /* statistics: compositing time per frame (rank 0), bytes sent (every rank) */
     uint64_t frames, bytes_sent;
     double comp_ms[MR_MAX_TIMES];
@@ -280,20 +281,33 @@ static void op_sum(const uint8_t *lo, const uint8_t *hi, uint8_t *dst, size_t np
 }
 
 /* xchg_keys: splat's visibility keys of all ranks (the nearest surface per pixel). */
-static int xchg_keys(void *user, int rc, uint32_t *keys, size_t n, int32_t rect[4], sd_err *err)
+static int xchg_keys(void *user, int rc, uint32_t *keys, size_t n, int width, int32_t rect[4],
+                     sd_err *err)
 {
     mr_ctx *m = user;
     double t0 = now_ms();
     m->xchg_calls++;
+    m->xchg_first = m->xchg_count = 0;
     if ((rc = agree(m, rc, err)) < 0) return rc;
-    if (n > INT_MAX) return sd_errf(err, SD_ELIMIT, "frame too large to exchange");
+    if (n > INT_MAX || width < 1) return sd_errf(err, SD_ELIMIT, "frame too large to exchange");
+    /* the union of the rectangles first: only its rows are exchanged */
     int32_t r[4] = {rect[0], rect[1], -rect[2], -rect[3]};
-    if (MPI_Allreduce(MPI_IN_PLACE, keys, (int)n, MPI_UINT32_T, MPI_MAX, m->comm) != MPI_SUCCESS ||
-        MPI_Allreduce(MPI_IN_PLACE, r, 4, MPI_INT32_T, MPI_MIN, m->comm) != MPI_SUCCESS)
-        return sd_errf(err, SD_EIO, "MPI: exchanging the visibility keys failed");
+    if (MPI_Allreduce(MPI_IN_PLACE, r, 4, MPI_INT32_T, MPI_MIN, m->comm) != MPI_SUCCESS)
+        return sd_errf(err, SD_EIO, "MPI: exchanging the visibility rectangle failed");
     rect[0] = r[0], rect[1] = r[1], rect[2] = -r[2], rect[3] = -r[3];
+    int64_t rows = (int64_t)(n / (size_t)width);
+    int64_t y0 = rect[1] < 0 ? 0 : rect[1], y1 = rect[3] >= rows ? rows - 1 : rect[3];
+    if (rect[0] > rect[2] || y0 > y1) {
+        m->xchg_ms += now_ms() - t0;
+        return 0; /* nothing drawn anywhere */
+    }
+    m->xchg_first = (size_t)y0 * (size_t)width;
+    m->xchg_count = (size_t)(y1 - y0 + 1) * (size_t)width;
+    if (MPI_Allreduce(MPI_IN_PLACE, keys + m->xchg_first, (int)m->xchg_count, MPI_UINT32_T,
+                      MPI_MAX, m->comm) != MPI_SUCCESS)
+        return sd_errf(err, SD_EIO, "MPI: exchanging the visibility keys failed");
     /* a ring allreduce sends about 2 (N - 1) / N of the array from each rank */
-    m->bytes_sent += (uint64_t)(2.0 * (m->size - 1) / m->size * (double)n * 4);
+    m->bytes_sent += (uint64_t)(2.0 * (m->size - 1) / m->size * (double)m->xchg_count * 4);
     m->xchg_ms += now_ms() - t0;
     return 0;
 }
@@ -304,13 +318,18 @@ static int xchg_sums(void *user, int rc, uint32_t *px, size_t n, int is_float, s
     mr_ctx *m = user;
     double t0 = now_ms();
     if ((rc = agree(m, rc, err)) < 0) return rc;
-    if ((rc = agree(m, ensure_img(m, n * 32, err), err)) < 0) return rc;
-    cmp_stats st;
-    int mrc = cmp_composite(m->comm, (uint8_t *)px, m->scratch, m->out, n, 32, op_sum, &is_float,
-                            &st);
-    m->bytes_sent += st.bytes_sent;
-    if (mrc != MPI_SUCCESS) return sd_errf(err, SD_EIO, "MPI: adding up the splat sums failed");
-    if (m->rank == 0) memcpy(px, m->out, n * 32);
+    size_t first = m->xchg_first, count = m->xchg_count;
+    if (first + count > n) return sd_errf(err, SD_EINVAL, "splat sums: %zu pixels", n);
+    if ((rc = agree(m, ensure_img(m, count * 32, err), err)) < 0) return rc;
+    if (count) {
+        cmp_stats st;
+        int mrc = cmp_composite(m->comm, (uint8_t *)(px + 8 * first), m->scratch, m->out, count,
+                                32, op_sum, &is_float, &st);
+        m->bytes_sent += st.bytes_sent;
+        if (mrc != MPI_SUCCESS)
+            return sd_errf(err, SD_EIO, "MPI: adding up the splat sums failed");
+        if (m->rank == 0) memcpy(px + 8 * first, m->out, count * 32);
+    }
     m->xchg_ms += now_ms() - t0;
     return m->rank == 0;
 }
@@ -338,7 +357,7 @@ static int frame(mr_ctx *m, const mr_cmd *c, rnd_frame *f, sd_err *err)
             /* failed before the exchange: take part in its first step (which then fails on
              * every rank), so that the others do not wait */
             sd_err e2 = *err;
-            xchg_keys(m, rc, NULL, 0, NULL, &e2);
+            xchg_keys(m, rc, NULL, 0, 0, NULL, &e2);
         }
         if ((rc = agree(m, rc, err)) < 0) return rc;
         m->frames++;
@@ -360,6 +379,14 @@ static int frame(mr_ctx *m, const mr_cmd *c, rnd_frame *f, sd_err *err)
     if (rc == 0) rc = ensure_img(m, npix * stride, err);
     if ((rc = agree(m, rc, err)) < 0) return rc;
     double t1 = now_ms();
+    if (m->size == 1) { /* nothing to composite */
+        m->frames++;
+        if (m->ncomp < MR_MAX_TIMES) m->comp_ms[m->ncomp++] = 0;
+        f->render_us = (uint64_t)((t1 - t0) * 1e3);
+        f->readback_us = 0;
+        f->points_drawn = cl->n_total;
+        return 0;
+    }
     for (size_t i = 0; i < npix; i++) {
         uint8_t *px = m->img + i * stride;
         memcpy(px, &f->depth[i], 4);

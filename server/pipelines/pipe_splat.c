@@ -528,7 +528,7 @@ static int render_sortlast(rnd_kit *k, void *state, const rnd_draw *d, sd_err *e
             gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, sizeof rect, rect);
         }
     }
-    int xr = x->keys(x->user, rc, rc == 0 ? buf : NULL, npix, rect, err);
+    int xr = x->keys(x->user, rc, rc == 0 ? buf : NULL, npix, v->width, rect, err);
     if (xr == 0) {
         gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->key_buf);
         gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)(npix * 4), buf);

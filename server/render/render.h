@@ -113,10 +113,12 @@ int rnd_cloud_resident(const rnd_ctx *r, uint32_t cloud_id);
  * nothing to draw (data all zero), so that no rank waits for one that will not come. */
 typedef struct rnd_exchange {
     void *user;
-    /* keys: after the visibility pass: keys[n] (per pixel, larger = nearer, 0 = empty) and
-     * rect (x0, y0, x1, y1 of the pixels touched; x0 > x1: none) become those of all ranks
-     * (the maximum, the union). Returns 0, or SD_E* when any rank failed (err says which). */
-    int (*keys)(void *user, int rc, uint32_t *keys, size_t n, int32_t rect[4], sd_err *err);
+    /* keys: after the visibility pass: keys[n] (per pixel, rows of width, larger = nearer,
+     * 0 = empty) and rect (x0, y0, x1, y1 of the pixels touched, inclusive; x0 > x1: none)
+     * become those of all ranks (the maximum, the union; keys and sums outside the union's
+     * rows are zero on every rank, so an exchange may leave them out). Returns 0, or SD_E* when any rank failed (err says which). */
+    int (*keys)(void *user, int rc, uint32_t *keys, size_t n, int width, int32_t rect[4],
+                sd_err *err);
     /* sums: after the attribute pass: px[8 n] (per pixel 7 sums, floats when is_float, else
      * 32-bit integers that wrap, then a pad word) become the sums of all ranks on the rank
      * that resolves the frame. Returns 1 on that rank, 0 on the others, or SD_E*. */
