@@ -3,7 +3,8 @@
  * byte for byte, to the single-process `splatd render` of the same camera (PNG, and EXR with its
  * float colour and depth); each rank holds its spatial part (the parts add up to the cloud, each
  * within a point of 1/N); pipelines that cannot be composited are refused with a reason; and
- * the spatial partition itself (pc_partition, pc_prepared_subset) is checked in-process. */
+ * a rank that dies makes rank 0 answer with an error instead of hanging; and the spatial
+ * partition itself (pc_partition, pc_prepared_subset) is checked in-process. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -134,10 +135,12 @@ static int have_mpi(char *why, size_t len)
     return 1;
 }
 
-/* start: mpirun -np n splatd --mpi on loopback; waits up to 60 s for the port. */
-static void start(fx *f, int n)
+/* start: mpirun -np n splatd --mpi on loopback; waits up to 60 s for the port. With
+ * recovery, mpirun keeps the job when a rank dies (--enable-recovery) and rank 0 waits
+ * SPLATD_MPI_TIMEOUT = 3 s for the others. */
+static void start_job(fx *f, int n, int recovery)
 {
-    char np[8], portfile[700];
+    char np[16], portfile[700];
     snprintf(np, sizeof np, "%d", n);
     snprintf(portfile, sizeof portfile, "%s/port%d", f->root, n);
     snprintf(f->log, sizeof f->log, "%s/mpi%d.log", f->root, n);
@@ -163,6 +166,12 @@ static void start(fx *f, int n)
         argv[k++] = "mpirun";
         argv[k++] = "--oversubscribe";
         if (geteuid() == 0) argv[k++] = "--allow-run-as-root";
+        if (recovery) {
+            setenv("SPLATD_MPI_TIMEOUT", "3", 1);
+            argv[k++] = "--enable-recovery";
+            argv[k++] = "-x";
+            argv[k++] = "SPLATD_MPI_TIMEOUT";
+        }
         argv[k++] = "-np";
         argv[k++] = np;
         argv[k++] = tu_splatd_bin();
@@ -201,6 +210,63 @@ static void start(fx *f, int n)
         usleep(10000);
     }
     fail_msg("mpirun -np %d did not start listening in 60 s", n);
+}
+
+static void start(fx *f, int n)
+{
+    start_job(f, n, 0);
+}
+
+static double now_s(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return t.tv_sec + t.tv_nsec / 1e9;
+}
+
+/* A rank killed (SIGKILL) under mpirun --enable-recovery: rank 0 answers the next frame with
+ * an error naming the timeout after about 3 s (SPLATD_MPI_TIMEOUT), and every later one at
+ * once; it keeps serving its connections, and a SIGTERM then ends the whole job. */
+static void test_rank_dies(void **state)
+{
+    fx *f = *state;
+    char why[800], out[16384];
+    if (!have_mpi(why, sizeof why)) TU_SKIP("%s", why);
+    start_job(f, 3, 1);
+    int rc = tu_run(out, sizeof out, "'%s' --port %d -q render bunny --set pipeline=points "
+                    "--size 160x120 -o '%s/ok.png' 2>&1", tu_splat_bin(), f->port, f->root);
+    if (rc) fail_msg("render before: %s", out);
+    pid_t r1 = rank_pid(f->mpirun, 1);
+    assert_true(r1 > 0);
+    kill(r1, SIGKILL);
+    usleep(200000);
+    for (int i = 0; i < 2; i++) {
+        double t0 = now_s();
+        rc = tu_run(out, sizeof out, "'%s' --port %d --timeout 30 render bunny --set "
+                    "pipeline=%s --size 160x120 -o '%s/x.png' 2>&1", tu_splat_bin(), f->port,
+                    i ? "splat" : "points", f->root);
+        double dt = now_s() - t0;
+        assert_int_equal(rc, 1);
+        if (!strstr(out, "did not answer within 3 s")) fail_msg("frame %d: %s", i, out);
+        /* the first waits out the timeout, the next is refused at once */
+        if (i == 0 && (dt < 2.5 || dt > 15)) fail_msg("first error after %.1f s", dt);
+        if (i == 1 && dt > 2.0) fail_msg("second error after %.1f s", dt);
+    }
+    pid_t r0 = rank_pid(f->mpirun, 0);
+    assert_true(r0 > 0);
+    kill(r0, SIGTERM);
+    int st;
+    for (int t = 0; t < 3000; t++) {
+        if (waitpid(f->mpirun, &st, WNOHANG) == f->mpirun) {
+            f->mpirun = 0;
+            break;
+        }
+        usleep(10000);
+    }
+    if (f->mpirun) fail_msg("the job did not end within 30 s of SIGTERM to rank 0");
+    /* rank 0 ended the job with MPI_Abort (mpirun --enable-recovery still exits 0) */
+    tu_run(out, sizeof out, "grep -c 'MPI_ABORT was invoked on rank 0' '%s'", f->log);
+    if (atoi(out) < 1) fail_msg("rank 0 did not abort the job (mpirun status %d)", st);
 }
 
 /* same_file: 1 when both files hold the same bytes (and at least one). */
@@ -391,6 +457,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_partition),
         cmocka_unit_test_setup_teardown(test_points_identical_1_to_4, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_rank_dies, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -39,8 +39,10 @@ void cmp_op_nearest(const uint8_t *lo, const uint8_t *hi, uint8_t *dst, size_t n
 }
 
 int cmp_composite(MPI_Comm comm, uint8_t *img, uint8_t *scratch, uint8_t *out, size_t npix,
-                  size_t stride, cmp_op op, void *user, cmp_stats *st)
+                  size_t stride, cmp_op op, void *user, cmp_wait wait, void *wait_user,
+                  cmp_stats *st)
 {
+    MPI_Request rq, rq2;
     double t0 = now_ms();
     int rank, size, rc;
     MPI_Comm_rank(comm, &rank);
@@ -52,16 +54,18 @@ int cmp_composite(MPI_Comm comm, uint8_t *img, uint8_t *scratch, uint8_t *out, s
     enum { TAG_FOLD = 71, TAG_SWAP = 72 };
     /* fold: ranks beyond p2 hand their image to rank - p2 and are done */
     if (rank >= p2) {
-        rc = MPI_Send(img, (int)(npix * stride), MPI_BYTE, rank - p2, TAG_FOLD, comm);
+        rc = MPI_Isend(img, (int)(npix * stride), MPI_BYTE, rank - p2, TAG_FOLD, comm, &rq);
+        if (rc == MPI_SUCCESS) rc = wait(wait_user, &rq);
         st->bytes_sent += npix * stride;
         if (rc == MPI_SUCCESS)
-            rc = MPI_Gatherv(NULL, 0, MPI_BYTE, NULL, NULL, NULL, MPI_BYTE, 0, comm);
+            rc = MPI_Igatherv(NULL, 0, MPI_BYTE, NULL, NULL, NULL, MPI_BYTE, 0, comm, &rq);
+        if (rc == MPI_SUCCESS) rc = wait(wait_user, &rq);
         st->ms = now_ms() - t0;
         return rc;
     }
     if (rank + p2 < size) {
-        rc = MPI_Recv(scratch, (int)(npix * stride), MPI_BYTE, rank + p2, TAG_FOLD, comm,
-                      MPI_STATUS_IGNORE);
+        rc = MPI_Irecv(scratch, (int)(npix * stride), MPI_BYTE, rank + p2, TAG_FOLD, comm, &rq);
+        if (rc == MPI_SUCCESS) rc = wait(wait_user, &rq);
         if (rc != MPI_SUCCESS) return rc;
         op(img, scratch, img, npix, stride, user);
     }
@@ -73,9 +77,13 @@ int cmp_composite(MPI_Comm comm, uint8_t *img, uint8_t *scratch, uint8_t *out, s
         int low = !(rank & bit);
         size_t keep_a = low ? a : mid, keep_b = low ? mid : b;
         size_t give_a = low ? mid : a, give_b = low ? b : mid;
-        rc = MPI_Sendrecv(img + give_a * stride, (int)((give_b - give_a) * stride), MPI_BYTE,
-                          partner, TAG_SWAP, scratch, (int)((keep_b - keep_a) * stride), MPI_BYTE,
-                          partner, TAG_SWAP, comm, MPI_STATUS_IGNORE);
+        rc = MPI_Irecv(scratch, (int)((keep_b - keep_a) * stride), MPI_BYTE, partner, TAG_SWAP,
+                       comm, &rq);
+        if (rc == MPI_SUCCESS)
+            rc = MPI_Isend(img + give_a * stride, (int)((give_b - give_a) * stride), MPI_BYTE,
+                           partner, TAG_SWAP, comm, &rq2);
+        if (rc == MPI_SUCCESS) rc = wait(wait_user, &rq2);
+        if (rc == MPI_SUCCESS) rc = wait(wait_user, &rq);
         if (rc != MPI_SUCCESS) return rc;
         st->bytes_sent += (give_b - give_a) * stride;
         uint8_t *mine = img + keep_a * stride;
@@ -104,8 +112,9 @@ int cmp_composite(MPI_Comm comm, uint8_t *img, uint8_t *scratch, uint8_t *out, s
     } else {
         st->bytes_sent += (b - a) * stride;
     }
-    rc = MPI_Gatherv(rank == 0 ? MPI_IN_PLACE : img + a * stride, (int)((b - a) * stride),
-                     MPI_BYTE, out, counts, displs, MPI_BYTE, 0, comm);
+    rc = MPI_Igatherv(rank == 0 ? MPI_IN_PLACE : img + a * stride, (int)((b - a) * stride),
+                      MPI_BYTE, out, counts, displs, MPI_BYTE, 0, comm, &rq);
+    if (rc == MPI_SUCCESS) rc = wait(wait_user, &rq);
     free(counts);
     free(displs);
     st->ms = now_ms() - t0;

@@ -21,6 +21,11 @@
 typedef void (*cmp_op)(const uint8_t *lo, const uint8_t *hi, uint8_t *dst, size_t npix,
                        size_t stride, void *user);
 
+/* How a rank waits for one request to complete: MPI_Wait, or a wait with a deadline (rank 0,
+ * so that a rank that died makes a frame fail instead of hanging). Returns MPI_SUCCESS or an
+ * error code. */
+typedef int (*cmp_wait)(void *user, MPI_Request *rq);
+
 typedef struct cmp_stats {
     uint64_t bytes_sent;       /* by this rank in this composite (fold, swap and gather) */
     double ms;                 /* wall time of the composite on this rank */
@@ -28,11 +33,13 @@ typedef struct cmp_stats {
 
 /* cmp_composite: composites img (npix * stride bytes, overwritten) across comm with op; rank
  * 0 receives the whole composite in out (npix * stride bytes; others may pass NULL). scratch
- * holds npix * stride bytes. Returns MPI_SUCCESS, MPI_ERR_COUNT for an image of 2 GiB or more
+ * holds npix * stride bytes. Every transfer is non-blocking and completed through wait.
+ * Returns MPI_SUCCESS, MPI_ERR_COUNT for an image of 2 GiB or more
  * or more than 65536 ranks, MPI_ERR_NO_MEM, or the MPI error code (the communicator's
  * error handler must return errors for that to reach the caller). */
 int cmp_composite(MPI_Comm comm, uint8_t *img, uint8_t *scratch, uint8_t *out, size_t npix,
-                  size_t stride, cmp_op op, void *user, cmp_stats *st);
+                  size_t stride, cmp_op op, void *user, cmp_wait wait, void *wait_user,
+                  cmp_stats *st);
 
 /* cmp_range: the pixel range [*lo, *hi) rank r keeps after the swap among p2 ranks. */
 void cmp_range(int r, int p2, size_t npix, size_t *lo, size_t *hi);

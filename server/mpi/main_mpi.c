@@ -43,6 +43,12 @@ int main(int argc, char **argv)
     if (rank == 0) {
         rc = daemon_run(argc, argv, mr_hooks(m));
         mr_quit(m);
+        if (mr_broken(m)) {
+            /* a rank is gone: MPI_Finalize would wait for it, and the ranks left wait for
+             * rank 0's next command; end the whole job */
+            fflush(NULL);
+            MPI_Abort(MPI_COMM_WORLD, rc ? rc : 1);
+        }
     } else {
         rc = mr_worker(m);
     }

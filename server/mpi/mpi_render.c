@@ -48,6 +48,10 @@ struct mr_ctx {
     double xchg_ms;            /* time in the exchange this frame */
     int xchg_calls;            /* exchanges this frame took part in */
     size_t xchg_first, xchg_count; /* the pixels exchanged: the rows of the union's rect */
+    /* rank 0: how long it waits for the other ranks (ms, 0: forever) and whether one failed
+     * to answer in time; the job cannot render after that */
+    double timeout_ms;
+    int broken;
     /* statistics: compositing time per frame (rank 0), bytes sent (every rank) */
     uint64_t frames, bytes_sent;
     double comp_ms[MR_MAX_TIMES];
@@ -72,6 +76,55 @@ static double rss_mib(void)
         if (!strncmp(line, "VmRSS:", 6)) v = atof(line + 6) / 1024.0;
     fclose(f);
     return v;
+}
+
+/* wait: completes rq; on rank 0 (timeout_ms > 0) gives up after timeout_ms and marks the job
+ * broken (a rank died or hangs). Returns MPI_SUCCESS or an error code (MPI_ERR_OTHER for the
+ * timeout). */
+static int wait_rq(void *user, MPI_Request *rq)
+{
+    mr_ctx *m = user;
+    if (m->timeout_ms <= 0) return MPI_Wait(rq, MPI_STATUS_IGNORE);
+    double end = now_ms() + m->timeout_ms;
+    for (;;) {
+        int done = 0;
+        int rc = MPI_Test(rq, &done, MPI_STATUS_IGNORE);
+        if (rc != MPI_SUCCESS || done) return rc;
+        if (now_ms() > end) {
+            m->broken = 1;
+            return MPI_ERR_OTHER;
+        }
+        struct timespec ts = {0, 100000}; /* 0.1 ms: the other ranks run meanwhile */
+        nanosleep(&ts, NULL);
+    }
+}
+
+/* mpi_err: err for a failed MPI call of what; the timeout names the likely cause. */
+static int mpi_err(mr_ctx *m, int rc, const char *what, sd_err *err)
+{
+    if (m->broken)
+        return sd_errf(err, SD_EIO, "MPI: %s: the other ranks did not answer within %.0f s (a "
+                       "rank died or hangs); splatd --mpi cannot render until the job is "
+                       "restarted", what, m->timeout_ms / 1e3);
+    char msg[MPI_MAX_ERROR_STRING] = "";
+    int len = 0;
+    MPI_Error_string(rc, msg, &len);
+    return sd_errf(err, SD_EIO, "MPI: %s: %s", what, msg);
+}
+
+/* bcast, allreduce: the collectives, completed through wait. */
+static int bcast(mr_ctx *m, void *buf, int bytes, int root)
+{
+    MPI_Request rq;
+    int rc = MPI_Ibcast(buf, bytes, MPI_BYTE, root, m->comm, &rq);
+    return rc == MPI_SUCCESS ? wait_rq(m, &rq) : rc;
+}
+
+static int allreduce(mr_ctx *m, const void *in, void *out, int count, MPI_Datatype t, MPI_Op op)
+{
+    MPI_Request rq;
+    int rc = MPI_Iallreduce(in, out, count, t, op, m->comm, &rq);
+    return rc == MPI_SUCCESS ? wait_rq(m, &rq) : rc;
 }
 
 int mr_supported(const sp_params *params, sd_err *err)
@@ -121,8 +174,8 @@ static int agree(mr_ctx *m, int rc, sd_err *err)
 {
     struct { int v, r; } mine = {rc < 0 ? 1 : 0, m->rank}, worst;
     /* MAXLOC picks a failing rank (v = 1) and, among several, the lowest */
-    if (MPI_Allreduce(&mine, &worst, 1, MPI_2INT, MPI_MAXLOC, m->comm) != MPI_SUCCESS)
-        return sd_errf(err, SD_EIO, "MPI: the ranks could not agree");
+    int mrc = allreduce(m, &mine, &worst, 1, MPI_2INT, MPI_MAXLOC);
+    if (mrc != MPI_SUCCESS) return mpi_err(m, mrc, "the ranks could not agree", err);
     if (!worst.v) return 0;
     struct { int code; char msg[sizeof err->msg]; } e = {0};
     if (m->rank == worst.r) {
@@ -131,7 +184,8 @@ static int agree(mr_ctx *m, int rc, sd_err *err)
         if (l > 0 && (size_t)l < sizeof e.msg)
             memcpy(e.msg + l, err->msg, strnlen(err->msg, sizeof e.msg - (size_t)l - 1));
     }
-    MPI_Bcast(&e, (int)sizeof e, MPI_BYTE, worst.r, m->comm);
+    if ((mrc = bcast(m, &e, (int)sizeof e, worst.r)) != MPI_SUCCESS)
+        return mpi_err(m, mrc, "the ranks could not agree", err);
     sd_errf(err, e.code ? e.code : SD_EIO, "%s", e.msg);
     return e.code ? e.code : SD_EIO;
 }
@@ -204,7 +258,12 @@ static int64_t hook_adopt(void *user, rnd_ctx *rnd, const char *path, pc_prepare
         free(p);
         return sd_errf(err, SD_ELIMIT, "path too long for the ranks: %.80s...", path);
     }
-    MPI_Bcast(&c, (int)sizeof c, MPI_BYTE, 0, m->comm);
+    int mrc = m->broken ? MPI_ERR_OTHER : bcast(m, &c, (int)sizeof c, 0);
+    if (mrc != MPI_SUCCESS) {
+        pc_prepared_free(p);
+        free(p);
+        return mpi_err(m, mrc, "loading the cloud", err);
+    }
     int rc = load(m, &c, p, err);
     free(p);
     return rc < 0 ? rc : (int64_t)c.key;
@@ -292,8 +351,8 @@ static int xchg_keys(void *user, int rc, uint32_t *keys, size_t n, int width, in
     if (n > INT_MAX || width < 1) return sd_errf(err, SD_ELIMIT, "frame too large to exchange");
     /* the union of the rectangles first: only its rows are exchanged */
     int32_t r[4] = {rect[0], rect[1], -rect[2], -rect[3]};
-    if (MPI_Allreduce(MPI_IN_PLACE, r, 4, MPI_INT32_T, MPI_MIN, m->comm) != MPI_SUCCESS)
-        return sd_errf(err, SD_EIO, "MPI: exchanging the visibility rectangle failed");
+    int mrc = allreduce(m, MPI_IN_PLACE, r, 4, MPI_INT32_T, MPI_MIN);
+    if (mrc != MPI_SUCCESS) return mpi_err(m, mrc, "exchanging the visibility rectangle", err);
     rect[0] = r[0], rect[1] = r[1], rect[2] = -r[2], rect[3] = -r[3];
     int64_t rows = (int64_t)(n / (size_t)width);
     int64_t y0 = rect[1] < 0 ? 0 : rect[1], y1 = rect[3] >= rows ? rows - 1 : rect[3];
@@ -303,9 +362,9 @@ static int xchg_keys(void *user, int rc, uint32_t *keys, size_t n, int width, in
     }
     m->xchg_first = (size_t)y0 * (size_t)width;
     m->xchg_count = (size_t)(y1 - y0 + 1) * (size_t)width;
-    if (MPI_Allreduce(MPI_IN_PLACE, keys + m->xchg_first, (int)m->xchg_count, MPI_UINT32_T,
-                      MPI_MAX, m->comm) != MPI_SUCCESS)
-        return sd_errf(err, SD_EIO, "MPI: exchanging the visibility keys failed");
+    mrc = allreduce(m, MPI_IN_PLACE, keys + m->xchg_first, (int)m->xchg_count, MPI_UINT32_T,
+                    MPI_MAX);
+    if (mrc != MPI_SUCCESS) return mpi_err(m, mrc, "exchanging the visibility keys", err);
     /* a ring allreduce sends about 2 (N - 1) / N of the array from each rank */
     m->bytes_sent += (uint64_t)(2.0 * (m->size - 1) / m->size * (double)m->xchg_count * 4);
     m->xchg_ms += now_ms() - t0;
@@ -324,10 +383,9 @@ static int xchg_sums(void *user, int rc, uint32_t *px, size_t n, int is_float, s
     if (count) {
         cmp_stats st;
         int mrc = cmp_composite(m->comm, (uint8_t *)(px + 8 * first), m->scratch, m->out, count,
-                                32, op_sum, &is_float, &st);
+                                32, op_sum, &is_float, wait_rq, m, &st);
         m->bytes_sent += st.bytes_sent;
-        if (mrc != MPI_SUCCESS)
-            return sd_errf(err, SD_EIO, "MPI: adding up the splat sums failed");
+        if (mrc != MPI_SUCCESS) return mpi_err(m, mrc, "adding up the splat sums", err);
         if (m->rank == 0) memcpy(px + 8 * first, m->out, count * 32);
     }
     m->xchg_ms += now_ms() - t0;
@@ -395,15 +453,10 @@ static int frame(mr_ctx *m, const mr_cmd *c, rnd_frame *f, sd_err *err)
     }
     cmp_stats st;
     int mrc = cmp_composite(m->comm, m->img, m->scratch, m->out, npix, stride, cmp_op_nearest,
-                            NULL, &st);
+                            NULL, wait_rq, m, &st);
     m->bytes_sent += st.bytes_sent;
     m->frames++;
-    if (mrc != MPI_SUCCESS) {
-        char msg[MPI_MAX_ERROR_STRING];
-        int len = 0;
-        MPI_Error_string(mrc, msg, &len);
-        return sd_errf(err, SD_EIO, "compositing failed: %s", msg);
-    }
+    if (mrc != MPI_SUCCESS) return mpi_err(m, mrc, "compositing", err);
     if (m->rank == 0) {
         for (size_t i = 0; i < npix; i++) {
             const uint8_t *px = m->out + i * stride;
@@ -429,7 +482,8 @@ static int hook_render(void *user, rnd_ctx *rnd, uint32_t key, const rnd_camera 
     if (rc < 0) return rc;
     mr_cmd c = {.op = MR_RENDER, .key = key, .want_float = want_float, .cam = *cam,
                 .params = *params};
-    MPI_Bcast(&c, (int)sizeof c, MPI_BYTE, 0, m->comm);
+    int mrc = m->broken ? MPI_ERR_OTHER : bcast(m, &c, (int)sizeof c, 0);
+    if (mrc != MPI_SUCCESS) return mpi_err(m, mrc, "starting the frame", err);
     return frame(m, &c, f, err);
 }
 
@@ -443,12 +497,21 @@ mr_ctx *mr_create(MPI_Comm comm, int argc, char **argv)
     m->hooks = (rt_hooks){.user = m, .configure = configure, .adopt = hook_adopt,
                           .render = hook_render};
     m->xchg = (rnd_exchange){.user = m, .keys = xchg_keys, .sums = xchg_sums};
+    /* rank 0 waits at most $SPLATD_MPI_TIMEOUT seconds (default 60) for the others */
+    const char *to = getenv("SPLATD_MPI_TIMEOUT");
+    double sec = to && *to ? atof(to) : 60;
+    m->timeout_ms = m->rank == 0 && sec > 0 ? sec * 1e3 : 0;
     m->cache_dir = opt_value(argc, argv, "--cache");
     m->shader_dir = opt_value(argc, argv, "--shader-dir");
     const char *be = opt_value(argc, argv, "--backend");
     m->backend = be && !strcmp(be, "egl") ? RND_BACKEND_EGL
                : be && !strcmp(be, "osmesa") ? RND_BACKEND_OSMESA : RND_BACKEND_AUTO;
     return m;
+}
+
+int mr_broken(const mr_ctx *m)
+{
+    return m->broken;
 }
 
 const rt_hooks *mr_hooks(mr_ctx *m)
@@ -481,7 +544,7 @@ int mr_worker(mr_ctx *m)
         fprintf(stderr, "splatd-mpi: rank %d: cannot start the renderer: %s\n", m->rank, err.msg);
     for (;;) {
         mr_cmd c;
-        if (MPI_Bcast(&c, (int)sizeof c, MPI_BYTE, 0, m->comm) != MPI_SUCCESS) break;
+        if (bcast(m, &c, (int)sizeof c, 0) != MPI_SUCCESS) break;
         if (c.op == MR_QUIT) break;
         sd_err e = {0};
         int rc = m->rnd ? 0 : sd_errf(&e, SD_EGL, "no renderer: %s", err.msg);
@@ -511,7 +574,7 @@ static int cmp_double(const void *a, const void *b)
 void mr_quit(mr_ctx *m)
 {
     mr_cmd c = {.op = MR_QUIT};
-    MPI_Bcast(&c, (int)sizeof c, MPI_BYTE, 0, m->comm);
+    if (!m->broken) bcast(m, &c, (int)sizeof c, 0);
     double med = 0;
     if (m->ncomp) {
         qsort(m->comp_ms, (size_t)m->ncomp, sizeof m->comp_ms[0], cmp_double);

@@ -7,6 +7,10 @@
  * every rank renders its part with the frame's pipeline and camera, and the ranks composite
  * (compose.h: binary swap with folding, then a gather to rank 0), which encodes and sends.
  *
+ * Rank 0 waits for the others at most $SPLATD_MPI_TIMEOUT seconds (default 60) per step: a
+ * rank that died (under mpirun --enable-recovery, which keeps the others running) makes the
+ * frame fail with an error naming the timeout, and every later request fail at once.
+ *
  * Supported pipelines: points (per pixel the nearest depth wins: exact, because every rank
  * renders with the exact raster form and the whole cloud's near and far planes, see
  * partition.h). The others are refused with an error naming why (mr_supported). */
@@ -32,6 +36,10 @@ int mr_worker(mr_ctx *m);
 /* mr_quit: rank 0, after daemon_run returned: tells the workers to stop and logs the
  * compositing statistics. */
 void mr_quit(mr_ctx *m);
+
+/* mr_broken: 1 when rank 0 gave up waiting for the other ranks (then MPI_Finalize would wait
+ * for them too: the job should end with MPI_Abort). */
+int mr_broken(const mr_ctx *m);
 
 /* mr_supported: 0 when a frame with params can be rendered sort-last, else SD_EUNSUP with err
  * saying why. */
