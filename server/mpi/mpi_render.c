@@ -221,6 +221,7 @@ static int load(mr_ctx *m, const mr_cmd *c, pc_prepared *full, sd_err *err)
     free(part);
     if (full) pc_prepared_free(full);
     int64_t id = 0;
+    uint64_t n_local = rc == 0 ? mine.n : 0;
     if (rc == 0 && mine.n > 0) {
         heap = malloc(sizeof *heap);
         if (!heap) {
@@ -239,7 +240,7 @@ static int load(mr_ctx *m, const mr_cmd *c, pc_prepared *full, sd_err *err)
         if (id > 0) rnd_release(m->rnd, (uint32_t)id);
         return all;
     }
-    *slot = (mr_cloud){.key = c->key, .local_id = (uint32_t)id, .n_local = heap ? heap->n : 0,
+    *slot = (mr_cloud){.key = c->key, .local_id = (uint32_t)id, .n_local = n_local,
                        .n_total = total};
     const char *name = strrchr(c->path, '/');
     fprintf(stderr, "splatd-mpi: rank %d of %d: %s: %llu of %llu points, resident %.0f MiB\n",
