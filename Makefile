@@ -77,11 +77,13 @@ INC_server/render += $(INC_render_gen)
 INC_protocol   := -Iprotocol
 INC_client     := -Iprotocol -Iclient
 INC_ALL        := -Iprotocol $(addprefix -Iserver/,$(SERVER_DIRS)) -Iclient -Itests -Itests/common $(INC_render_gen)
+# server/mpi (splatd-mpi, `splatd --mpi`) sits on top of everything, like cmd; nothing sees it.
+INC_server/mpi := -Iprotocol $(addprefix -Iserver/,$(SERVER_DIRS) mpi)
 # inc_of SRC: the include flags of the directory SRC is in (tests/, tools/: all of them).
 inc_of = $(or $(INC_$(patsubst %/,%,$(dir $(1)))),$(INC_ALL))
 
 PROTO_SRC  := $(wildcard protocol/*.c)
-SERVER_SRC := $(filter-out server/cmd/main.c,$(wildcard server/*/*.c))
+SERVER_SRC := $(filter-out server/cmd/main.c server/mpi/%,$(wildcard server/*/*.c))
 CLIENT_LIB_SRC := $(filter-out client/splat_main.c client/splat_view.c,$(wildcard client/*.c))
 SHADERS    := $(sort $(wildcard shaders/*.glsl))
 TEST_SRC   := $(wildcard tests/test_*.c)
@@ -167,9 +169,30 @@ $(1)/bench/%: $(1)/obj/tests/bench/%.o $(1)/libtestcommon.a $(1)/libsplatd.a $(1
 	$$(CC) $(2) -o $$@ $$^ $$(TEST_LIBS)
 endef
 
+# ---- splatd-mpi: sort-last rendering over MPI (server/mpi/), built only where mpicc is (Open
+# MPI: deploy/deps.sh installs it for the tests); splatd itself never links MPI.
+MPICC := $(shell command -v mpicc 2>/dev/null)
+ifneq ($(MPICC),)
+MPI_SRC    := $(wildcard server/mpi/*.c)
+MPI_CFLAGS := $(shell mpicc --showme:compile 2>/dev/null)
+MPI_LIBS   := $(shell mpicc --showme:link 2>/dev/null)
+define MPI_FLAVOUR
+$(1)/obj/server/mpi/%.o: BASE_CFLAGS += $(MPI_CFLAGS)
+$(1)/bin/splatd-mpi: $(call obj,$(1),$(MPI_SRC)) $(1)/libsplatd.a $(1)/libsplatproto.a
+	@mkdir -p $$(dir $$@)
+	$$(CC) $(2) -o $$@ $$^ $$(SERVER_LIBS) $(MPI_LIBS)
+endef
+MPI_BIN      := $(BUILD)/bin/splatd-mpi
+MPI_ASAN_BIN := $(BUILD)/asan/bin/splatd-mpi
+endif
+
 ASAN_FLAGS := -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
 $(eval $(call FLAVOUR,$(BUILD),))
 $(eval $(call FLAVOUR,$(BUILD)/asan,$(ASAN_FLAGS)))
+ifneq ($(MPICC),)
+$(eval $(call MPI_FLAVOUR,$(BUILD),))
+$(eval $(call MPI_FLAVOUR,$(BUILD)/asan,$(ASAN_FLAGS)))
+endif
 
 TESTS       := $(patsubst tests/%.c,$(BUILD)/tests/%,$(TEST_SRC))
 ASAN_TESTS  := $(patsubst tests/%.c,$(BUILD)/asan/tests/%,$(TEST_SRC))
@@ -187,7 +210,8 @@ $(BUILD)/gen/shaders_gen.c $(BUILD)/gen/shaders_gen.h &: $(BUILD)/embed_shaders 
 	$(BUILD)/embed_shaders $(BUILD)/gen/shaders_gen $(SHADERS)
 
 .PHONY: all test asan bench fuzz run install clean
-all: $(BUILD)/bin/splatd $(BUILD)/bin/splat $(BUILD)/bin/splat-view $(BUILD)/libsplatclient.a $(BUILD)/libsplatclient.so $(TOOLS)
+all: $(BUILD)/bin/splatd $(BUILD)/bin/splat $(BUILD)/bin/splat-view $(BUILD)/libsplatclient.a $(BUILD)/libsplatclient.so $(TOOLS) \
+     $(MPI_BIN)
 
 $(BUILD)/libsplatclient.so: $(call obj,$(BUILD),$(CLIENT_LIB_SRC) $(PROTO_SRC))
 	$(CC) -shared -Wl,-soname,libsplatclient.so.0 -Wl,--version-script=client/libsplatclient.map \
@@ -204,7 +228,7 @@ ASAN_ENV = ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stac
 
 # make test: the plain run, the sanitizer run, and one closing line counting the tests of both.
 test: all $(TESTS) $(ASAN_TESTS) $(BUILD)/asan/bin/splatd $(BUILD)/asan/bin/splat \
-      $(BUILD)/asan/bin/splat-view $(ASAN_TOOLS)
+      $(BUILD)/asan/bin/splat-view $(ASAN_TOOLS) $(MPI_ASAN_BIN)
 	@rm -f $(BUILD)/test-totals
 	@$(call TEST_ENV,$(BUILD)) TEST_TOTALS=$(abspath $(BUILD)/test-totals) sh tests/run.sh "plain" $(TESTS)
 	@$(call TEST_ENV,$(BUILD)/asan) $(ASAN_ENV) TEST_TOTALS=$(abspath $(BUILD)/test-totals) \
@@ -213,7 +237,7 @@ test: all $(TESTS) $(ASAN_TESTS) $(BUILD)/asan/bin/splatd $(BUILD)/asan/bin/spla
 	  $(BUILD)/test-totals
 
 asan: $(ASAN_TESTS) $(BUILD)/asan/bin/splatd $(BUILD)/asan/bin/splat $(BUILD)/asan/bin/splat-view \
-      $(ASAN_TOOLS)
+      $(ASAN_TOOLS) $(MPI_ASAN_BIN)
 	@$(call TEST_ENV,$(BUILD)/asan) $(ASAN_ENV) sh tests/run.sh "asan" $(ASAN_TESTS)
 
 bench: all $(BENCHES)
@@ -229,6 +253,7 @@ run: all
 install: all
 	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/lib/pkgconfig $(DESTDIR)$(PREFIX)/include
 	install -m 755 $(BUILD)/bin/splatd $(BUILD)/bin/splat $(BUILD)/bin/splat-view $(DESTDIR)$(PREFIX)/bin/
+	if [ -x $(BUILD)/bin/splatd-mpi ]; then install -m 755 $(BUILD)/bin/splatd-mpi $(DESTDIR)$(PREFIX)/bin/; fi
 	install -m 644 $(BUILD)/libsplatclient.a $(DESTDIR)$(PREFIX)/lib/
 	install -m 755 $(BUILD)/libsplatclient.so $(DESTDIR)$(PREFIX)/lib/libsplatclient.so.0
 	ln -sf libsplatclient.so.0 $(DESTDIR)$(PREFIX)/lib/libsplatclient.so

@@ -117,7 +117,7 @@ int cli_parse(int argc, char **argv, cli_args *a, char *err, size_t errlen)
         static const char *with_value[] = {"--host", "--port", "--token-file", "-o", "--output",
                                            "--path", "--orbit", "--inflight", "--set", "--eye",
                                            "--target", "--up", "--fov", "--size", "--timeout",
-                                           NULL};
+                                           "--shard", "--shards", NULL};
         int known = 0;
         for (int k = 0; with_value[k]; k++) known |= !strcmp(opt, with_value[k]);
         if (!known) {
@@ -143,6 +143,10 @@ int cli_parse(int argc, char **argv, cli_args *a, char *err, size_t errlen)
             a->output = val;
         } else if (!strcmp(opt, "--path")) {
             a->path_file = val;
+        } else if (!strcmp(opt, "--shard")) {
+            a->shard = val;
+        } else if (!strcmp(opt, "--shards")) {
+            a->shards = val;
         } else if (!strcmp(opt, "--orbit")) {
             if (parse_long(val, 1, 10000000, &l) < 0) goto bad_value;
             a->orbit = l;

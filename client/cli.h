@@ -17,6 +17,8 @@ typedef struct cli_args {
     long orbit;                /* --orbit N (0: none) */
     int inflight;              /* --inflight K, default 2 */
     int force;                 /* --force */
+    const char *shard;         /* --shard I/N, or NULL */
+    const char *shards;        /* --shards N (count for an index from the environment) */
     int quiet;                 /* -q: no progress */
     int help;                  /* --help/-h: command is the command named, or NULL */
     int version;               /* --version */

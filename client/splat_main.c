@@ -13,6 +13,7 @@
 #include "cli.h"
 #include "params.h"
 #include "proto.h"
+#include "shard.h"
 #include "splat_client.h"
 
 enum { EXIT_FAIL = 1, EXIT_USAGE = 2 };
@@ -111,6 +112,11 @@ static void usage(FILE *f, const char *cmd)
             "                    the up axis the default camera guesses from the bounds)\n"
             "  --inflight K      frames in flight (default 2, 1..64)\n"
             "  --force           re-render frames that already exist\n"
+            "  --shard I/N       render only frames i with i %% N == I (a farm's worker I of N);\n"
+            "                    without it: $JOB_COMPLETION_INDEX (Kubernetes Indexed Job) of\n"
+            "                    --shards N or $SPLAT_SHARD_COUNT, else $SLURM_ARRAY_TASK_ID\n"
+            "                    (minus $SLURM_ARRAY_TASK_MIN) of $SLURM_ARRAY_TASK_COUNT\n"
+            "  --shards N        the shard count when the index comes from the environment\n"
             "  --size WxH, --fov DEG, --up x,y,z  as for render\n"
             "\n");
         fputs(conn_opts, f);
@@ -289,6 +295,15 @@ static int cmd_path(spc_client *c, const cli_args *a)
         fprintf(stderr, "splat: %s\n", err);
         return EXIT_USAGE;
     }
+    shard_env se = {a->shard, a->shards, getenv("JOB_COMPLETION_INDEX"),
+                    getenv("SPLAT_SHARD_COUNT"), getenv("SLURM_ARRAY_TASK_ID"),
+                    getenv("SLURM_ARRAY_TASK_COUNT"), getenv("SLURM_ARRAY_TASK_MIN")};
+    shard sh;
+    if (shard_resolve(&se, &sh, err, sizeof err) < 0) {
+        fprintf(stderr, "splat: %s\n", err);
+        free(cams);
+        return EXIT_USAGE;
+    }
     long n = a->path_file ? (long)ncams : a->orbit;
     long *todo = malloc((size_t)n * sizeof *todo);
     long ntodo = todo ? cp_todo(a->output, n, a->force, todo) : -1;
@@ -298,10 +313,16 @@ static int cmd_path(spc_client *c, const cli_args *a)
         rc = EXIT_FAIL;
         goto out;
     }
+    ntodo = shard_filter(&sh, todo, ntodo);
+    /* the frames of this shard: a resumed shard counts only its own as existing */
+    long nmine = sh.count > 1 ? (n - sh.index + sh.count - 1) / sh.count : n;
+    if (sh.count > 1 && !a->quiet)
+        fprintf(stderr, "shard %ld of %ld (from %s): frames i with i %% %ld == %ld, %ld of %ld\n",
+                sh.index, sh.count, sh.source, sh.count, sh.index, nmine, n);
     if (ntodo == 0) {
         if (!a->quiet)
             fprintf(stderr, "all %ld frames of %s exist already (--force renders them again)\n",
-                    n, a->output);
+                    nmine, a->output);
         goto out;
     }
     char first[4096];
@@ -313,8 +334,9 @@ static int cmd_path(spc_client *c, const cli_args *a)
     }
     spc_info in;
     if ((rc = open_cloud(c, a, fmt, &in)) != 0) goto out;
-    if (!a->quiet && ntodo < n)
-        fprintf(stderr, "resuming: %ld of %ld frames exist, %ld to render\n", n - ntodo, n, ntodo);
+    if (!a->quiet && ntodo < nmine)
+        fprintf(stderr, "resuming: %ld of %ld frames exist, %ld to render\n", nmine - ntodo,
+                nmine, ntodo);
 
     inflight fl[64];
     int nfl = 0;
@@ -440,7 +462,7 @@ static int view_command(int argc, char **argv)
     static const char *const with_value[] = {
         "--host", "--port", "--token-file", "--timeout", "--set", "-o", "--path", "--orbit",
         "--inflight", "--eye", "--target", "--up", "--fov", "--size", "--script",
-        "--drag-budget"};
+        "--drag-budget", "--shard", "--shards"};
     for (int i = 1; i < argc; i++) {
         const char *s = argv[i];
         if (!strcmp(s, "--")) return i + 1 < argc && !strcmp(argv[i + 1], "view") ? i + 1 : 0;

@@ -34,6 +34,9 @@ pc:cmocka=libcmocka-dev
 pc:sdl2=libsdl2-dev
 file:/usr/bin/Xvfb=xvfb
 file:/usr/bin/xwd=x11-apps
+file:/usr/lib/python3/dist-packages/yaml/__init__.py=python3-yaml
+tool:mpicc=libopenmpi-dev
+tool:mpirun=openmpi-bin
 "
 
 # present ENTRY: 0 when the thing the entry names is on this machine.

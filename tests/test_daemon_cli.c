@@ -59,24 +59,6 @@ static int teardown(void **state)
     return 0;
 }
 
-/* run: runs a shell command, its stdout and stderr into out (NUL-terminated, truncated to
- * len). Returns the exit status, or -1 when it did not exit normally. */
-static int run(char *out, size_t len, const char *fmt, ...)
-{
-    char cmd[4096];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(cmd, sizeof cmd, fmt, ap);
-    va_end(ap);
-    FILE *p = popen(cmd, "r");
-    assert_non_null(p);
-    size_t n = fread(out, 1, len - 1, p);
-    out[n] = 0;
-    while (fgetc(p) != EOF) {}
-    int st = pclose(p);
-    return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-}
-
 static spc_client *connect_to(const fx *f)
 {
     spc_options o = {.host = "127.0.0.1", .port = f->d.port, .timeout_ms = 60000,
@@ -130,7 +112,7 @@ static void test_preload_several_names(void **state)
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 
     char out[4096];
-    int rc = run(out, sizeof out, "'%s' --data '%s' stray 2>&1", tu_splatd_bin(), f->data);
+    int rc = tu_run(out, sizeof out, "'%s' --data '%s' stray 2>&1", tu_splatd_bin(), f->data);
     assert_int_equal(rc, 2);
     assert_non_null(strstr(out, "unexpected argument 'stray'"));
 }
@@ -143,7 +125,7 @@ static void test_list_prepared_counts(void **state)
     add_bunny(f, "prepped.ply");
     add_bunny(f, "raw.ply");
     char out[8192];
-    int rc = run(out, sizeof out, "'%s' prep '%s/prepped.ply' --cache '%s' --quiet 2>&1",
+    int rc = tu_run(out, sizeof out, "'%s' prep '%s/prepped.ply' --cache '%s' --quiet 2>&1",
                  tu_splatd_bin(), f->data, f->cache);
     if (rc != 0) fail_msg("splatd prep failed (%d): %s", rc, out);
     const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache, NULL};
@@ -162,7 +144,7 @@ static void test_list_prepared_counts(void **state)
     spc_free_list(l);
 
     /* the CLI shows the same */
-    rc = run(out, sizeof out, "'%s' --port %d list 2>&1", tu_splat_bin(), f->d.port);
+    rc = tu_run(out, sizeof out, "'%s' --port %d list 2>&1", tu_splat_bin(), f->d.port);
     assert_int_equal(rc, 0);
     char want[128];
     snprintf(want, sizeof want, "%d  prepared", BUNNY_POINTS);
@@ -237,10 +219,10 @@ static void test_help_and_version(void **state)
 {
     (void)state;
     char out[16384];
-    assert_int_equal(run(out, sizeof out, "'%s' --version", tu_splat_bin()), 0);
+    assert_int_equal(tu_run(out, sizeof out, "'%s' --version", tu_splat_bin()), 0);
     assert_int_equal(strncmp(out, "splat ", 6), 0);
     assert_non_null(strstr(out, "protocol version 1"));
-    assert_int_equal(run(out, sizeof out, "'%s' --version", tu_splatd_bin()), 0);
+    assert_int_equal(tu_run(out, sizeof out, "'%s' --version", tu_splatd_bin()), 0);
     assert_int_equal(strncmp(out, "splatd ", 7), 0);
 
     static const struct { const char *args, *want, *unwanted; } h[] = {
@@ -252,13 +234,13 @@ static void test_help_and_version(void **state)
         {"info --help", "usage: splat info NAME", "--orbit"},
     };
     for (size_t i = 0; i < sizeof h / sizeof h[0]; i++) {
-        int rc = run(out, sizeof out, "'%s' %s", tu_splat_bin(), h[i].args);
+        int rc = tu_run(out, sizeof out, "'%s' %s", tu_splat_bin(), h[i].args);
         if (rc != 0 || !strstr(out, h[i].want) || (h[i].unwanted && strstr(out, h[i].unwanted)))
             fail_msg("splat %s: exit %d, wanted '%s'%s%s, got:\n%s", h[i].args, rc, h[i].want,
                      h[i].unwanted ? " and not " : "", h[i].unwanted ? h[i].unwanted : "", out);
     }
     /* render's help lists the parameters; list's does not */
-    assert_int_equal(run(out, sizeof out, "'%s' render --help", tu_splat_bin()), 0);
+    assert_int_equal(tu_run(out, sizeof out, "'%s' render --help", tu_splat_bin()), 0);
     assert_non_null(strstr(out, "pipeline"));
 }
 
@@ -271,17 +253,17 @@ static void test_progress_lines_off_terminal(void **state)
     const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache, NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
     char out[65536];
-    int rc = run(out, sizeof out, "'%s' --port %d info bunny 2>&1 >/dev/null", tu_splat_bin(),
+    int rc = tu_run(out, sizeof out, "'%s' --port %d info bunny 2>&1 >/dev/null", tu_splat_bin(),
                  f->d.port);
     assert_int_equal(rc, 0);
     if (!strstr(out, "preparing bunny")) fail_msg("no progress lines: %s", out);
     assert_null(strchr(out, '\r'));
-    rc = run(out, sizeof out, "'%s' --port %d path bunny --orbit 3 --size 64x48 -o '%s/o/%%d.jpg' "
-             "2>&1 >/dev/null", tu_splat_bin(), f->d.port, f->root);
+    rc = tu_run(out, sizeof out, "'%s' --port %d path bunny --orbit 3 --size 64x48 "
+                "-o '%s/o/%%d.jpg' 2>&1 >/dev/null", tu_splat_bin(), f->d.port, f->root);
     assert_int_equal(rc, 0);
     if (!strstr(out, "3 frames")) fail_msg("no summary: %s", out);
     assert_null(strchr(out, '\r'));
-    rc = run(out, sizeof out, "'%s' render '%s/bunny.ply' -o '%s/r.png' --size 64x48 --cache "
+    rc = tu_run(out, sizeof out, "'%s' render '%s/bunny.ply' -o '%s/r.png' --size 64x48 --cache "
              "'%s/c2' 2>&1 >/dev/null", tu_splatd_bin(), f->data, f->root, f->root);
     if (rc != 0) fail_msg("splatd render failed (%d): %s", rc, out);
     if (!strstr(out, "100%")) fail_msg("no progress lines: %s", out);
@@ -310,7 +292,7 @@ static void test_thin_client_links(void **state)
     for (int b = 0; b < 2; b++) {
         if (b == 1 && access(lib, F_OK) != 0) continue; /* the ASan flavour builds no .so */
         char out[16384];
-        int rc = run(out, sizeof out, "readelf -d '%s' | grep NEEDED", bins[b]);
+        int rc = tu_run(out, sizeof out, "readelf -d '%s' | grep NEEDED", bins[b]);
         if (rc != 0) fail_msg("readelf -d %s failed (%d): %s", bins[b], rc, out);
         assert_non_null(strstr(out, "libcrypto"));
         for (size_t i = 0; i < sizeof forbidden / sizeof forbidden[0]; i++)
@@ -375,7 +357,7 @@ static void test_gpu_memory_budget(void **state)
     free(log);
 
     char out[4096];
-    int rc = run(out, sizeof out, "'%s' --data '%s' --gpu-memory 12Q 2>&1", tu_splatd_bin(), f->data);
+    int rc = tu_run(out, sizeof out, "'%s' --data '%s' --gpu-memory 12Q 2>&1", tu_splatd_bin(), f->data);
     assert_int_equal(rc, 2);
     assert_non_null(strstr(out, "--gpu-memory '12Q'"));
 }

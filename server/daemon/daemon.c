@@ -20,6 +20,7 @@
 
 #include "cache.h"
 #include "commands.h"
+#include "daemon.h"
 #include "datadir.h"
 #include "srv.h"
 
@@ -647,7 +648,7 @@ static int start(srv *sv)
                 .max_width = sv->max_w, .max_height = sv->max_h, .gpu_memory = sv->o.gpu_memory},
         .max_clients = sv->nslots, .cache_dir = sv->o.cache_dir,
         .frame_budget = sv->o.max_frame_bytes,
-        .pack = srv_pack_frame, .pack_user = sv,
+        .pack = srv_pack_frame, .pack_user = sv, .hooks = sv->hooks,
     };
     sv->rt = rt_create(&rd, sv->loop, &err);
     if (!sv->rt) {
@@ -713,7 +714,12 @@ static int teardown(srv *sv)
 
 int cmd_daemon(int argc, char **argv)
 {
-    srv sv = {.lfd = -1, .sigfd = -1};
+    return daemon_run(argc, argv, NULL);
+}
+
+int daemon_run(int argc, char **argv, const rt_hooks *hooks)
+{
+    srv sv = {.lfd = -1, .sigfd = -1, .hooks = hooks};
     int rc = parse_opts(argc, argv, &sv.o);
     if (rc != 0) return rc > 0 ? 0 : 2;
     rc = start(&sv);

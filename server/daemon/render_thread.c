@@ -210,7 +210,10 @@ static void do_upload(rt_ctx *rt, rnd_ctx *rnd, rt_prepjob *j)
 {
     rt_event *ev = calloc(1, sizeof *ev);
     sd_err err = {0};
-    int64_t id = rnd_adopt(rnd, j->prep, &err); /* the renderer owns it now, even on failure */
+    const rt_hooks *h = rt->d.hooks;
+    /* the renderer (or the hook) owns it now, even on failure */
+    int64_t id = h && h->adopt ? h->adopt(h->user, rnd, j->path, j->prep, &err)
+                               : rnd_adopt(rnd, j->prep, &err);
     j->prep = NULL;
     if (id > 0) {
         prep_prog pp = {.rt = rt, .job = j->job, .phase = -1};
@@ -288,8 +291,12 @@ static void *render_main(void *arg)
         pthread_mutex_unlock(&rt->mu);
 
         rnd_frame *f = &rt->frames[fi];
-        int rc = rnd_render(rnd, rq.cloud_id, &rq.cam, &rq.params, rq.params.format == SP_FMT_EXR,
-                            f, &err);
+        const rt_hooks *h = rt->d.hooks;
+        int want_float = rq.params.format == SP_FMT_EXR;
+        int rc = h && h->render ? h->render(h->user, rnd, rq.cloud_id, &rq.cam, &rq.params,
+                                            want_float, f, &err)
+                                : rnd_render(rnd, rq.cloud_id, &rq.cam, &rq.params, want_float,
+                                             f, &err);
         pthread_mutex_lock(&rt->mu);
         rt->rendering = 0;
         if (rc != 0) {
@@ -476,6 +483,7 @@ rt_ctx *rt_create(const rt_desc *d, ev_loop *loop, sd_err *err)
     rt_ctx *rt = calloc(1, sizeof *rt);
     if (!rt) { sd_errf(err, SD_ENOMEM, "out of memory"); return NULL; }
     rt->d = *d;
+    if (d->hooks && d->hooks->configure) d->hooks->configure(d->hooks->user, &rt->d.rnd);
     rt->loop = loop;
     rt->nslots = d->max_clients > 0 ? d->max_clients : 64;
     rt->frame_budget = d->frame_budget;

@@ -50,6 +50,21 @@ typedef struct rt_request {
 typedef int (*rt_pack_fn)(void *user, const rt_frame_meta *m, const uint8_t *data, size_t len,
                           uint8_t **msg, size_t *msglen);
 
+/* A distributed renderer (server/mpi/, `splatd --mpi`) in place of the local one: its
+ * functions run on the render thread, which owns rnd. NULL members keep the local renderer's
+ * behaviour. */
+typedef struct rt_hooks {
+    void *user;
+    /* configure: adjusts the renderer's options before the render thread creates it. */
+    void (*configure)(void *user, rnd_desc *d);
+    /* adopt: takes the prepared cloud of the file at path (heap or mapped, the hook's to free)
+     * and makes it renderable; returns the cloud id for render, or a negative SD_E* code. */
+    int64_t (*adopt)(void *user, rnd_ctx *rnd, const char *path, pc_prepared *p, sd_err *err);
+    /* render: rnd_render's contract, for the cloud id adopt returned. */
+    int (*render)(void *user, rnd_ctx *rnd, uint32_t cloud_id, const rnd_camera *cam,
+                  const sp_params *params, int want_float, rnd_frame *f, sd_err *err);
+} rt_hooks;
+
 typedef struct rt_desc {
     rnd_desc rnd;           /* renderer options (back end, shader dir) */
     int max_clients;        /* slots; client ids must be < 2^16 in their low bits (index) */
@@ -60,6 +75,7 @@ typedef struct rt_desc {
                              * default 0: a quarter of RAM, at least 256 MiB */
     rt_pack_fn pack;        /* required */
     void *pack_user;
+    const rt_hooks *hooks;  /* default NULL: the local renderer */
 } rt_desc;
 
 typedef enum {

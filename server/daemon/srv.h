@@ -80,6 +80,7 @@ typedef struct srv {
     srv_opts o;
     ev_loop *loop;
     rt_ctx *rt;
+    const rt_hooks *hooks;       /* a distributed renderer (daemon_run), or NULL */
     auth_token token;
     int lfd, sigfd;
     int bound_port;

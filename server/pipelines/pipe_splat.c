@@ -307,7 +307,19 @@ static GLuint groups_for(const splat_state *s, int64_t total)
     return groups64 > s->groups_cap ? s->groups_cap : (GLuint)groups64;
 }
 
+/* frame_begin: splat__frame_begin; with even_empty, a frame with no visible point is set up
+ * too (buffers, uniforms, one stripe or more) with f->total 0, for sort-last frames, where a
+ * rank that draws nothing may still resolve the others' sums. */
+static int frame_begin(rnd_kit *k, void *state, const rnd_draw *d, splat_frame *f,
+                       int even_empty, sd_err *err);
+
 int splat__frame_begin(rnd_kit *k, void *state, const rnd_draw *d, splat_frame *f, sd_err *err)
+{
+    return frame_begin(k, state, d, f, 0, err);
+}
+
+static int frame_begin(rnd_kit *k, void *state, const rnd_draw *d, splat_frame *f,
+                       int even_empty, sd_err *err)
 {
     splat_state *s = state;
     const gl_api *gl = k->gl;
@@ -316,7 +328,7 @@ int splat__frame_begin(rnd_kit *k, void *state, const rnd_draw *d, splat_frame *
     const sp_params *p = d->params;
     memset(f, 0, sizeof *f);
     f->d = d;
-    if (v->nchunks == 0 || v->points_visible == 0) return 0;
+    if (!even_empty && (v->nchunks == 0 || v->points_visible == 0)) return 0;
     if (v->width <= 0 || v->height <= 0) return sd_errf(err, SD_EINVAL, "bad frame size");
     /* The largest set's visible points size the splat lists. */
     uint64_t most = 0;
@@ -380,7 +392,7 @@ int splat__frame_begin(rnd_kit *k, void *state, const rnd_draw *d, splat_frame *
         int64_t total = set_points(k, s, d, 0, err);
         if (total < 0) return (int)total;
         f->total = total;
-        if (total == 0) return 0;
+        if (total == 0 && !even_empty) return 0;
     }
     f->rows = rows;
     f->nstripes = (v->height + rows - 1) / rows;
@@ -484,9 +496,71 @@ GLuint splat__keys_texture(const void *state)
     return ((const splat_state *)state)->key_tex;
 }
 
+/* render_sortlast: one rank's part of a sort-last frame (render.h, rnd_exchange): pass 1 over
+ * this rank's points, the keys and rectangle replaced by every rank's (the nearest surface of
+ * the whole cloud), pass 2 against those, so that each rank adds exactly the fragments a single
+ * process would add of its points; the sums added up across the ranks, and the resolve on the
+ * rank the exchange names. One stripe only (a frame up to the accumulation buffer's rows). */
+static int render_sortlast(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
+{
+    splat_state *s = state;
+    const gl_api *gl = k->gl;
+    const rnd_exchange *x = k->exchange;
+    const rnd_view *v = d->view;
+    splat_frame f;
+    int n = frame_begin(k, state, d, &f, 1, err);
+    int rc = n < 0 ? n : 0;
+    if (rc == 0 && n != 1)
+        rc = sd_errf(err, SD_ELIMIT, "a %dx%d splat frame needs %d stripes of %d rows; sort-last "
+                     "rendering takes one", v->width, v->height, n, f.rows);
+    size_t npix = (size_t)v->width * (size_t)v->height;
+    uint32_t *buf = rc == 0 ? calloc(npix, SPLAT_PX_BYTES) : NULL;
+    if (rc == 0 && !buf) rc = sd_errf(err, SD_ENOMEM, "out of memory for a sort-last frame");
+    int draw = rc == 0 && v->points_visible > 0 && (!f.one_set || f.total > 0);
+    int32_t rect[4] = {INT32_MAX, INT32_MAX, -1, -1};
+    if (rc == 0) {
+        splat__stripe_begin(k, state, &f, 0);
+        if (draw && (rc = splat__visibility(k, state, &f, err)) == 0) {
+            gl->MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT | GL_SHADER_STORAGE_BARRIER_BIT);
+            gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->key_buf);
+            gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)(npix * 4), buf);
+            gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->rect_buf);
+            gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, sizeof rect, rect);
+        }
+    }
+    int xr = x->keys(x->user, rc, rc == 0 ? buf : NULL, npix, v->width, rect, err);
+    if (xr == 0) {
+        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->key_buf);
+        gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)(npix * 4), buf);
+        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->rect_buf);
+        gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, sizeof rect, rect);
+        gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
+        memset(buf, 0, npix * SPLAT_PX_BYTES);
+        if (draw && (rc = splat__attributes(k, state, &f, err)) == 0) {
+            gl->MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT | GL_SHADER_STORAGE_BARRIER_BIT);
+            gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->frame_buf);
+            gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0,
+                                 (GLsizeiptr)(npix * SPLAT_PX_BYTES), buf);
+        }
+        xr = x->sums(x->user, rc, rc == 0 ? buf : NULL, npix, s->float_atomics, err);
+        if (xr == 1) {
+            gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->frame_buf);
+            gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)(npix * SPLAT_PX_BYTES),
+                              buf);
+            gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
+            splat__resolve(k, state, &f);
+        }
+    }
+    free(buf);
+    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+    int end = splat__frame_end(k, state, err);
+    return xr < 0 ? xr : rc < 0 ? rc : end;
+}
+
 /* render: the three passes, per stripe of rows; see the file comment. */
 static int splat_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
 {
+    if (k->exchange) return render_sortlast(k, state, d, err);
     splat_frame f;
     int nstripes = splat__frame_begin(k, state, d, &f, err);
     int rc = nstripes < 0 ? nstripes : 0;

@@ -126,6 +126,7 @@ typedef struct rnd_kit {
     int float_atomics;         /* GL_NV_shader_atomic_float is there */
     GLint64 max_ssbo;          /* GL_MAX_SHADER_STORAGE_BLOCK_SIZE */
     GLint64 max_texels;        /* GL_MAX_TEXTURE_BUFFER_SIZE */
+    const rnd_exchange *exchange; /* sort-last frames (render.h), or NULL */
     /* private to pipe_kit.c */
     GLuint cloud_tex[4];       /* buffer textures on RND_T_POS, NRM, RAD, SRC */
     GLuint range_buf, range_tex;

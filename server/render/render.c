@@ -768,6 +768,11 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     return gl_check(gl, "rendering a frame", err);
 }
 
+void rnd_set_exchange(rnd_ctx *r, const rnd_exchange *x)
+{
+    r->kit.exchange = x;
+}
+
 void rnd_frame_free(rnd_frame *f)
 {
     if (!f) return;

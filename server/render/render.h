@@ -106,6 +106,29 @@ typedef struct rnd_stats {
 void rnd_get_stats(const rnd_ctx *r, rnd_stats *st);
 int rnd_cloud_resident(const rnd_ctx *r, uint32_t cloud_id);
 
+/* Sort-last rendering (splatd --mpi, server/mpi/): a pipeline whose per-pixel state must see
+ * every rank's points before it resolves (splat: the nearest depth of pass 1, the weighted sums
+ * of pass 2) hands that state over between its passes. Each callback is a collective over the
+ * ranks: every rank calls it once per frame, also when it failed (rc < 0, data NULL) or has
+ * nothing to draw (data all zero), so that no rank waits for one that will not come. */
+typedef struct rnd_exchange {
+    void *user;
+    /* keys: after the visibility pass: keys[n] (per pixel, rows of width, larger = nearer,
+     * 0 = empty) and rect (x0, y0, x1, y1 of the pixels touched, inclusive; x0 > x1: none)
+     * become those of all ranks (the maximum, the union; keys and sums outside the union's
+     * rows are zero on every rank, so an exchange may leave them out). Returns 0, or SD_E* when any rank failed (err says which). */
+    int (*keys)(void *user, int rc, uint32_t *keys, size_t n, int width, int32_t rect[4],
+                sd_err *err);
+    /* sums: after the attribute pass: px[8 n] (per pixel 7 sums, floats when is_float, else
+     * 32-bit integers that wrap, then a pad word) become the sums of all ranks on the rank
+     * that resolves the frame. Returns 1 on that rank, 0 on the others, or SD_E*. */
+    int (*sums)(void *user, int rc, uint32_t *px, size_t n, int is_float, sd_err *err);
+} rnd_exchange;
+
+/* rnd_set_exchange: makes the following frames sort-last (x stays the caller's; NULL: back to
+ * a single process). Pipelines without per-pixel state to exchange (points) ignore it. */
+void rnd_set_exchange(rnd_ctx *r, const rnd_exchange *x);
+
 /* rnd_render: renders cloud_id through params->pipeline into frame (buffers allocated or
  * resized by the renderer; free with rnd_frame_free). want_float also fills rgba16f and depth.
  * Returns 0 or a negative SD_E* code. */

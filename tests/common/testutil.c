@@ -7,6 +7,8 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 const char *tu_env(const char *name, const char *def)
@@ -121,4 +123,32 @@ int tu_recv_all(int fd, void *p, size_t n)
         n -= (size_t)g;
     }
     return 0;
+}
+
+int tu_run(char *out, size_t len, const char *fmt, ...)
+{
+    char cmd[8192];
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(cmd, sizeof cmd, fmt, ap);
+    va_end(ap);
+    out[0] = 0;
+    if (n < 0 || (size_t)n >= sizeof cmd) return -1;
+    FILE *p = popen(cmd, "r");
+    if (!p) return -1;
+    size_t got = fread(out, 1, len - 1, p);
+    out[got] = 0;
+    while (fgetc(p) != EOF) {}
+    int st = pclose(p);
+    return st != -1 && WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+}
+
+int tu_data_dir(const char *root, const char *src, const char *dst, char *buf, size_t len)
+{
+    char from[1024], to[1024];
+    snprintf(buf, len, "%s/data", root);
+    if (mkdir(buf, 0755) != 0) return -1;
+    tu_data(src, from, sizeof from);
+    snprintf(to, sizeof to, "%s/%s", buf, dst);
+    return tu_copy_file(from, to);
 }

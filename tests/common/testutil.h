@@ -45,3 +45,12 @@ void tu_skip_reason(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
  * EINTR (send with MSG_NOSIGNAL). 0, or -1 on an error, EOF or the socket's timeout. */
 int tu_send_all(int fd, const void *p, size_t n);
 int tu_recv_all(int fd, void *p, size_t n);
+
+/* tu_run: runs a shell command (printf-style), its stdout and stderr (as the command redirects
+ * them) into out, NUL-terminated and truncated to len. Returns the exit status, or -1 when it
+ * did not exit normally or could not start. */
+int tu_run(char *out, size_t len, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+
+/* tu_data_dir: makes root/data holding tests/data/src as dst (a daemon's data directory with one
+ * cloud), its path in buf. Returns 0, or -1 when it could not. */
+int tu_data_dir(const char *root, const char *src, const char *dst, char *buf, size_t len);

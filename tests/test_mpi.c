@@ -1,0 +1,463 @@
+/* test_mpi.c — sort-last rendering over MPI (issue 17, part 2): `splatd --mpi` under
+ * `mpirun --oversubscribe -np N` for N = 1..4 on loopback renders `points` frames identical,
+ * byte for byte, to the single-process `splatd render` of the same camera (PNG, and EXR with its
+ * float colour and depth); each rank holds its spatial part (the parts add up to the cloud, each
+ * within a point of 1/N); pipelines that cannot be composited are refused with a reason; and
+ * a rank that dies makes rank 0 answer with an error instead of hanging; and the spatial
+ * partition itself (pc_partition, pc_prepared_subset) is checked in-process. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <dirent.h>
+#include <fcntl.h>
+#include <math.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "common/daemonproc.h"
+#include "common/imgtest.h"
+#include "common/testutil.h"
+#include "partition.h"
+
+enum { BUNNY_POINTS = 40256 }; /* "element vertex 40256" in tests/data/bun000.ply */
+
+typedef struct fx {
+    char root[512], data[600], cache[600];
+    pid_t mpirun;
+    int port;
+    char log[700];
+} fx;
+
+static int setup(void **state)
+{
+    fx *f = calloc(1, sizeof *f);
+    if (!f || !tu_tmpdir(f->root, sizeof f->root)) return -1;
+    snprintf(f->cache, sizeof f->cache, "%s/cache", f->root);
+    if (tu_data_dir(f->root, "bun000.ply", "bunny.ply", f->data, sizeof f->data) != 0) return -1;
+    signal(SIGPIPE, SIG_IGN);
+    *state = f;
+    return 0;
+}
+
+/* rank_pid: the process of MPI rank r among mpirun's children (OMPI_COMM_WORLD_RANK in its
+ * environment), or 0. */
+static pid_t rank_pid(pid_t mpirun, int r)
+{
+    char want[48];
+    int wl = snprintf(want, sizeof want, "OMPI_COMM_WORLD_RANK=%d", r) + 1; /* with its NUL */
+    DIR *d = opendir("/proc");
+    if (!d) return 0;
+    pid_t found = 0;
+    struct dirent *e;
+    while (!found && (e = readdir(d))) {
+        pid_t pid = (pid_t)atoi(e->d_name);
+        if (pid <= 0) continue;
+        char path[64], buf[512];
+        snprintf(path, sizeof path, "/proc/%d/stat", (int)pid);
+        FILE *fs = fopen(path, "r");
+        if (!fs) continue;
+        int ppid = 0;
+        size_t n = fread(buf, 1, sizeof buf - 1, fs);
+        fclose(fs);
+        buf[n] = 0;
+        const char *rp = strrchr(buf, ')');
+        if (!rp || sscanf(rp + 2, "%*c %d", &ppid) != 1 || ppid != mpirun) continue;
+        snprintf(path, sizeof path, "/proc/%d/environ", (int)pid);
+        /* /proc files have no size: read until EOF */
+        static char env[65536];
+        FILE *fe = fopen(path, "r");
+        if (!fe) continue;
+        size_t len = fread(env, 1, sizeof env - 1, fe);
+        fclose(fe);
+        env[len] = 0;
+        for (size_t i = 0; i < len; i += strlen(env + i) + 1)
+            if (len - i >= (size_t)wl && !memcmp(env + i, want, (size_t)wl)) found = pid;
+    }
+    closedir(d);
+    return found;
+}
+
+/* stop: SIGTERM to rank 0, the daemon, which stops gracefully and then stops the workers, so
+ * mpirun exits 0 (mpirun itself, given SIGTERM, kills every rank at once and exits 1).
+ * Returns mpirun's exit status (-1: killed after 30 s or by a signal). */
+static int stop(fx *f)
+{
+    if (f->mpirun <= 0) return -1;
+    pid_t r0 = rank_pid(f->mpirun, 0);
+    kill(r0 > 0 ? r0 : f->mpirun, SIGTERM);
+    int st = 0;
+    for (int i = 0; i < 3000; i++) {
+        if (waitpid(f->mpirun, &st, WNOHANG) == f->mpirun) {
+            f->mpirun = 0;
+            return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+        }
+        usleep(10000);
+    }
+    kill(f->mpirun, SIGKILL);
+    waitpid(f->mpirun, &st, 0);
+    f->mpirun = 0;
+    return -1;
+}
+
+static int teardown(void **state)
+{
+    fx *f = *state;
+    stop(f);
+    tu_rm_rf(f->root);
+    free(f);
+    return 0;
+}
+
+/* mpi_bin: the splatd-mpi next to the splatd under test, when it was built (needs mpicc). */
+static int have_mpi(char *why, size_t len)
+{
+    if (system("command -v mpirun >/dev/null 2>&1") != 0) {
+        snprintf(why, len, "mpirun is not installed (Debian openmpi-bin)");
+        return 0;
+    }
+    char p[700];
+    snprintf(p, sizeof p, "%s", tu_splatd_bin());
+    char *slash = strrchr(p, '/');
+    snprintf(slash ? slash + 1 : p, sizeof p - (size_t)(slash ? slash + 1 - p : 0), "splatd-mpi");
+    if (access(p, X_OK) != 0) {
+        snprintf(why, len, "%s was not built (make builds it where mpicc is)", p);
+        return 0;
+    }
+    return 1;
+}
+
+/* start: mpirun -np n splatd --mpi on loopback; waits up to 60 s for the port. With
+ * recovery, mpirun keeps the job when a rank dies (--enable-recovery) and rank 0 waits
+ * SPLATD_MPI_TIMEOUT = 3 s for the others. */
+static void start_job(fx *f, int n, int recovery)
+{
+    char np[16], portfile[700];
+    snprintf(np, sizeof np, "%d", n);
+    snprintf(portfile, sizeof portfile, "%s/port%d", f->root, n);
+    snprintf(f->log, sizeof f->log, "%s/mpi%d.log", f->root, n);
+    unlink(portfile);
+    pid_t pid = fork();
+    assert_true(pid >= 0);
+    if (pid == 0) {
+        int fd = open(f->log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        dup2(fd, 1);
+        dup2(fd, 2);
+        /* Under ASan, LeakSanitizer stays off in the ranks: Open MPI's components are
+         * dlclose'd by MPI_Finalize and their process-lifetime allocations are reported from
+         * "<unknown module>" frames that no suppression can name (memory errors are still
+         * caught). */
+        const char *asan = getenv("ASAN_OPTIONS");
+        if (asan) {
+            char opts[1024];
+            snprintf(opts, sizeof opts, "%s:detect_leaks=0", asan);
+            setenv("ASAN_OPTIONS", opts, 1);
+        }
+        const char *argv[24];
+        int k = 0;
+        argv[k++] = "mpirun";
+        argv[k++] = "--oversubscribe";
+        if (geteuid() == 0) argv[k++] = "--allow-run-as-root";
+        if (recovery) {
+            setenv("SPLATD_MPI_TIMEOUT", "3", 1);
+            argv[k++] = "--enable-recovery";
+            argv[k++] = "-x";
+            argv[k++] = "SPLATD_MPI_TIMEOUT";
+        }
+        argv[k++] = "-np";
+        argv[k++] = np;
+        argv[k++] = tu_splatd_bin();
+        argv[k++] = "--mpi";
+        argv[k++] = "--listen";
+        argv[k++] = "127.0.0.1:0";
+        argv[k++] = "--data";
+        argv[k++] = f->data;
+        argv[k++] = "--cache";
+        argv[k++] = f->cache;
+        argv[k++] = "--port-file";
+        argv[k++] = portfile;
+        argv[k] = NULL;
+        execvp("mpirun", (char *const *)argv);
+        _exit(127);
+    }
+    f->mpirun = pid;
+    for (int i = 0; i < 6000; i++) {
+        size_t len = 0;
+        uint8_t *b = tu_read_file(portfile, &len);
+        if (b && len > 0) {
+            char t[16] = {0};
+            memcpy(t, b, len < 15 ? len : 15);
+            f->port = atoi(t);
+            free(b);
+            if (f->port > 0) return;
+        }
+        free(b);
+        int st;
+        if (waitpid(pid, &st, WNOHANG) == pid) {
+            f->mpirun = 0;
+            char out[8192];
+            tu_run(out, sizeof out, "cat '%s'", f->log);
+            fail_msg("mpirun -np %d exited at start-up: %s", n, out);
+        }
+        usleep(10000);
+    }
+    fail_msg("mpirun -np %d did not start listening in 60 s", n);
+}
+
+static void start(fx *f, int n)
+{
+    start_job(f, n, 0);
+}
+
+static double now_s(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return t.tv_sec + t.tv_nsec / 1e9;
+}
+
+/* A rank killed (SIGKILL) under mpirun --enable-recovery: rank 0 answers the next frame with
+ * an error naming the timeout after about 3 s (SPLATD_MPI_TIMEOUT), and every later one at
+ * once; it keeps serving its connections, and a SIGTERM then ends the whole job. */
+static void test_rank_dies(void **state)
+{
+    fx *f = *state;
+    char why[800], out[16384];
+    if (!have_mpi(why, sizeof why)) TU_SKIP("%s", why);
+    start_job(f, 3, 1);
+    int rc = tu_run(out, sizeof out, "'%s' --port %d -q render bunny --set pipeline=points "
+                    "--size 160x120 -o '%s/ok.png' 2>&1", tu_splat_bin(), f->port, f->root);
+    if (rc) fail_msg("render before: %s", out);
+    pid_t r1 = rank_pid(f->mpirun, 1);
+    assert_true(r1 > 0);
+    kill(r1, SIGKILL);
+    usleep(200000);
+    for (int i = 0; i < 2; i++) {
+        double t0 = now_s();
+        rc = tu_run(out, sizeof out, "'%s' --port %d --timeout 30 render bunny --set "
+                    "pipeline=%s --size 160x120 -o '%s/x.png' 2>&1", tu_splat_bin(), f->port,
+                    i ? "splat" : "points", f->root);
+        double dt = now_s() - t0;
+        assert_int_equal(rc, 1);
+        if (!strstr(out, "did not answer within 3 s")) fail_msg("frame %d: %s", i, out);
+        /* the first waits out the timeout, the next is refused at once */
+        if (i == 0 && (dt < 2.5 || dt > 15)) fail_msg("first error after %.1f s", dt);
+        if (i == 1 && dt > 2.0) fail_msg("second error after %.1f s", dt);
+    }
+    pid_t r0 = rank_pid(f->mpirun, 0);
+    assert_true(r0 > 0);
+    kill(r0, SIGTERM);
+    int st;
+    for (int t = 0; t < 3000; t++) {
+        if (waitpid(f->mpirun, &st, WNOHANG) == f->mpirun) {
+            f->mpirun = 0;
+            break;
+        }
+        usleep(10000);
+    }
+    if (f->mpirun) fail_msg("the job did not end within 30 s of SIGTERM to rank 0");
+    /* rank 0 ended the job with MPI_Abort (mpirun --enable-recovery still exits 0) */
+    tu_run(out, sizeof out, "grep -c 'MPI_ABORT was invoked on rank 0' '%s'", f->log);
+    if (atoi(out) < 1) fail_msg("rank 0 did not abort the job (mpirun status %d)", st);
+}
+
+/* same_file: 1 when both files hold the same bytes (and at least one). */
+static int same_file(const char *a, const char *b)
+{
+    size_t la, lb;
+    uint8_t *da = tu_read_file(a, &la), *db = tu_read_file(b, &lb);
+    int same = da && db && la == lb && la > 0 && !memcmp(da, db, la);
+    free(da);
+    free(db);
+    return same;
+}
+
+/* The frames compared: points at the default framing, a close-up from another side with
+ * 3-pixel points and a background, and an EXR frame (float colour with coverage, and eye
+ * depth), which must be byte-identical; splat (EWA, ewa=split on llvmpipe) at the default
+ * framing and a close-up, which must be within 50 dB PSNR (the issue's bound: the sums are
+ * added in another order when the GL adds floats; on llvmpipe they are identical too). */
+static const struct {
+    const char *name, *args;
+    int exact;
+} views[] = {
+    {"default.png", "--size 320x240 --set pipeline=points", 1},
+    {"close.png", "--size 300x200 --eye 0.05,0.2,0.12 --target -0.02,0.11,0.0 --up 0,1,0 "
+                  "--fov 40 --set pipeline=points --set point_size=3 "
+                  "--set background=0.2,0.3,0.4", 1},
+    {"frame.exr", "--size 160x120 --set pipeline=points --set color=normal", 1},
+    {"splat.png", "--size 320x240 --set pipeline=splat", 0},
+    {"splat-close.png", "--size 300x200 --eye 0.05,0.2,0.12 --target -0.02,0.11,0.0 "
+                        "--up 0,1,0 --fov 40 --set pipeline=splat --set color=normal", 0},
+};
+enum { NVIEWS = sizeof views / sizeof views[0] };
+
+/* For N = 1..4 ranks: every view identical to the single-process render, the parts of the
+ * cloud one per rank adding up to it, and a clean stop. */
+static void test_points_identical_1_to_4(void **state)
+{
+    fx *f = *state;
+    char why[800], out[65536];
+    if (!have_mpi(why, sizeof why)) TU_SKIP("%s", why);
+    /* the single-process references (the cache is made here, once) */
+    for (int v = 0; v < NVIEWS; v++) {
+        int rc = tu_run(out, sizeof out, "'%s' render '%s/bunny.ply' -o '%s/ref-%s' %s "
+                        "--cache '%s' 2>&1", tu_splatd_bin(), f->data, f->root, views[v].name,
+                        views[v].args, f->cache);
+        if (rc) fail_msg("splatd render %s: %s", views[v].name, out);
+    }
+    for (int n = 1; n <= 4; n++) {
+        start(f, n);
+        for (int v = 0; v < NVIEWS; v++) {
+            char got[800], ref[800];
+            snprintf(got, sizeof got, "%s/np%d-%s", f->root, n, views[v].name);
+            snprintf(ref, sizeof ref, "%s/ref-%s", f->root, views[v].name);
+            int rc = tu_run(out, sizeof out, "'%s' --port %d -q render bunny -o '%s' %s 2>&1",
+                            tu_splat_bin(), f->port, got, views[v].args);
+            if (rc) fail_msg("np %d, %s: %s", n, views[v].name, out);
+            if (views[v].exact) {
+                if (!same_file(got, ref))
+                    fail_msg("np %d: %s differs from splatd render's", n, views[v].name);
+                continue;
+            }
+            uint32_t w1, h1, w2, h2;
+            uint8_t *a = NULL, *b = NULL;
+            assert_int_equal(tu_png_read(got, 0, &w1, &h1, &a), 0);
+            assert_int_equal(tu_png_read(ref, 0, &w2, &h2, &b), 0);
+            assert_true(w1 == w2 && h1 == h2);
+            size_t ncov = 0;
+            double db = tu_psnr_covered(a, b, (size_t)w1 * h1, &ncov);
+            print_message("np %d %s: PSNR %.2f dB over %zu covered pixels%s\n", n,
+                          views[v].name, db, ncov, same_file(got, ref) ? " (identical)" : "");
+            if (!(db >= 50.0) || ncov < 1000)
+                fail_msg("np %d: %s: %.2f dB over %zu pixels", n, views[v].name, db, ncov);
+            free(a);
+            free(b);
+        }
+        /* kawata cannot be composited from the ranks' parts: refused, naming why */
+        int rc = tu_run(out, sizeof out, "'%s' --port %d render bunny -o '%s/s.png' --size "
+                        "64x48 --set pipeline=kawata 2>&1", tu_splat_bin(), f->port, f->root);
+        assert_int_equal(rc, 1);
+        if (!strstr(out, "pipeline kawata is not available with splatd --mpi"))
+            fail_msg("np %d: kawata: %s", n, out);
+        int src = stop(f);
+        if (src != 0) {
+            tu_run(out, sizeof out, "tail -c 1200 '%s'", f->log);
+            fail_msg("np %d: mpirun exited %d: %s", n, src, out);
+        }
+        /* every rank logged its part: they add up to the cloud, each within a point of 1/N */
+        char *log = (char *)tu_read_file(f->log, &(size_t){0});
+        assert_non_null(log);
+        long sum = 0;
+        for (int r = 0; r < n; r++) {
+            char key[80];
+            snprintf(key, sizeof key, "rank %d of %d: bunny.ply: ", r, n);
+            const char *at = strstr(log, key);
+            if (!at) fail_msg("np %d: no line for rank %d in %s", n, r, log);
+            long part = atol(at + strlen(key));
+            double share = (double)BUNNY_POINTS / n;
+            if (fabs(part - share) > 1.0) fail_msg("np %d rank %d: %ld points", n, r, part);
+            sum += part;
+            snprintf(key, sizeof key, "rank %d of %d: %d frames", r, n, NVIEWS);
+            if (!strstr(log, key)) fail_msg("np %d: rank %d did not stop cleanly: %s", n, r, log);
+        }
+        assert_int_equal(sum, BUNNY_POINTS);
+        free(log);
+    }
+}
+
+/* pc_partition on a known layout: 8 clusters at the corners of a long box split into 2, 3 and
+ * 4 parts by recursive median cuts along the longest axis; pc_prepared_subset keeps the
+ * whole cloud's summary. */
+static void test_partition(void **state)
+{
+    (void)state;
+    enum { N = 1200 };
+    float *pos = malloc(3 * N * sizeof *pos);
+    uint16_t part[N];
+    assert_non_null(pos);
+    /* x in [0, 12) (the longest axis), y in [0, 2), z in [0, 1): x = i / 100 */
+    for (int i = 0; i < N; i++) {
+        pos[3 * i] = i / 100.0f;
+        pos[3 * i + 1] = (i % 7) / 3.5f;
+        pos[3 * i + 2] = (i % 5) / 5.0f;
+    }
+    sd_err err = {0};
+    for (int k = 1; k <= 4; k++) {
+        assert_int_equal(pc_partition(pos, N, k, part, &err), 0);
+        int count[4] = {0};
+        for (int i = 0; i < N; i++) {
+            assert_true(part[i] < k);
+            count[part[i]]++;
+        }
+        for (int p = 0; p < k; p++) assert_int_equal(count[p], N / k);
+        /* cut along x (the longest axis and, for 3 and 4 parts, still the longest of each
+         * half): part p holds the p-th slab of x */
+        for (int i = 0; i < N; i++) assert_int_equal(part[i], i / (N / k));
+    }
+    assert_int_equal(pc_partition(pos, N, 0, part, &err), SD_EINVAL);
+
+    /* a cube of 8 points in 2 parts: the longest axis is a tie, x (the first) is cut */
+    float cube[24];
+    for (int i = 0; i < 8; i++) {
+        cube[3 * i] = (float)(i & 1);
+        cube[3 * i + 1] = (float)(i >> 1 & 1);
+        cube[3 * i + 2] = (float)(i >> 2 & 1);
+    }
+    uint16_t cp[8];
+    assert_int_equal(pc_partition(cube, 8, 2, cp, &err), 0);
+    for (int i = 0; i < 8; i++) assert_int_equal(cp[i], i & 1);
+
+    /* subset: the points of part 1 of 3, batches re-cut, summary kept */
+    pc_prepared src = {.n = N, .attrs = PC_ATTR_NORMAL | PC_ATTR_RADIUS | PC_ATTR_F | PC_ATTR_RGB,
+                       .k = 24, .nbatches = 1};
+    assert_int_equal(pc_prepared_alloc(&src, &err), 0);
+    memcpy(src.pos, pos, 3 * N * sizeof *pos);
+    for (int i = 0; i < N; i++) {
+        src.radius[i] = (float)i;
+        src.rgba[4 * i] = (uint8_t)i;
+        src.F[i] = i / (float)N;
+    }
+    pc_prepared_make_batches(&src, N);
+    src.bmin[0] = -5;
+    src.bmax[0] = 17;
+    src.offset[1] = 1e6;
+    src.sigma = 0.25f;
+    assert_int_equal(pc_partition(pos, N, 3, part, &err), 0);
+    pc_prepared sub;
+    assert_int_equal(pc_prepared_subset(&src, part, 1, &sub, &err), 0);
+    assert_int_equal(sub.n, N / 3);
+    assert_int_equal(sub.nbatches, 1);
+    assert_int_equal(sub.batches[0].count, N / 3);
+    assert_true(sub.batches[0].bmin[0] == 4.0f && sub.batches[0].bmax[0] == 7.99f);
+    for (uint64_t j = 0; j < sub.n; j++) {
+        uint64_t i = N / 3 + j;
+        assert_true(sub.pos[3 * j] == pos[3 * i]);
+        assert_true(sub.radius[j] == (float)i);
+        assert_int_equal(sub.rgba[4 * j], (uint8_t)i);
+        assert_true(sub.F[j] == i / (float)N);
+    }
+    assert_true(sub.bmin[0] == -5 && sub.bmax[0] == 17 && sub.offset[1] == 1e6);
+    assert_true(sub.sigma == 0.25f && sub.k == 24);
+    pc_prepared_free(&sub);
+    pc_prepared_free(&src);
+    free(pos);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_partition),
+        cmocka_unit_test_setup_teardown(test_points_identical_1_to_4, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_rank_dies, setup, teardown),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
