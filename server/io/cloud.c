@@ -152,6 +152,7 @@ static reader_fn reader_for(const char *path)
     if (!strcasecmp(e, "ply")) return pc_read_ply;
     if (!strcasecmp(e, "pcd")) return pc_read_pcd;
     if (!strcasecmp(e, "las")) return pc_read_las;
+    if (!strcasecmp(e, "laz")) return pc_read_laz; /* also .copc.laz */
     if (!strcasecmp(e, "xyz") || !strcasecmp(e, "pts") || !strcasecmp(e, "txt")) return pc_read_xyz;
     return NULL;
 }
@@ -167,7 +168,8 @@ int pc_load(const char *path, pc_cloud *out, sd_err *err)
     memset(out, 0, sizeof *out);
     if (!rd)
         return sd_errf(err, SD_EUNSUP,
-                       "%s: unknown extension '.%s' (supported: ply, pcd, las, xyz, pts, txt)",
+                       "%s: unknown extension '.%s' (supported: ply, pcd, las, laz, copc.laz, "
+                       "xyz, pts, txt)",
                        path, ext_of(path));
     pc_raw raw = {0};
     int rc = rd(path, &raw, err);

@@ -103,6 +103,10 @@ int pc_read_ply(const char *path, pc_raw *raw, sd_err *err);
 int pc_read_pcd(const char *path, pc_raw *raw, sd_err *err);
 int pc_read_las(const char *path, pc_raw *raw, sd_err *err);
 int pc_read_xyz(const char *path, pc_raw *raw, sd_err *err); /* .xyz, .pts, .txt */
+/* pc_read_laz: LAZ and COPC (.laz, .copc.laz; also a .las whose format byte marks LAZ), chunks
+ * decoded on threads threads (pc_read_laz: one per online CPU). io_laz.c. */
+int pc_read_laz(const char *path, pc_raw *raw, sd_err *err);
+int pc_read_laz_threads(const char *path, pc_raw *raw, int threads, sd_err *err);
 
 /* pc_load: picks the reader from the file's extension (ply, pcd, las, xyz, pts, txt; any case),
  * reads and finalizes. Returns 0 or a negative SD_E* code with err filled. */
