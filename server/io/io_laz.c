@@ -87,8 +87,11 @@ static int append(laz_run *r, pc_raw *raw, uint16_t **rgb16, size_t *rgb_cap, in
     size_t add = 0;
     for (int t = 0; t < r->threads; t++) add += r->s[t].chunk == SIZE_MAX ? 0 : r->s[t].npts;
     if (raw->n + add > raw->cap) {
-        size_t want = raw->cap ? raw->cap : 65536;
-        while (want < raw->n + add) want *= 2;
+        /* grow by half what is held, never past twice what decoded (the chunk table's
+         * count is only a claim until the points decode) */
+        size_t need = raw->n + add, want = raw->cap + raw->cap / 2;
+        if (want < need) want = need;
+        if (want > 2 * need) want = 2 * need;
         if (want > r->lf.h.count) want = (size_t)r->lf.h.count;
         int rc = pc_raw_reserve(raw, want, err);
         if (rc) return rc;
