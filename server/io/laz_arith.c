@@ -3,12 +3,10 @@
 
 #include <stdlib.h>
 
-#define AC_MIN_LENGTH 0x01000000u /* renormalise below 2^24 */
 #define AC_MAX_LENGTH 0xFFFFFFFFu
 #define BM_SHIFT 13               /* bit model probability bits */
 #define BM_MAX_COUNT (1u << BM_SHIFT)
-#define DM_SHIFT 15               /* symbol model distribution bits */
-#define DM_MAX_COUNT (1u << DM_SHIFT)
+#define DM_MAX_COUNT (1u << LAZ_DM_SHIFT)
 
 static inline uint32_t next_byte(laz_dec *d)
 {
@@ -28,12 +26,12 @@ void laz_dec_init(laz_dec *d, const uint8_t *p, const uint8_t *end)
     d->value = v;
 }
 
-static inline void renorm(laz_dec *d)
+void laz__renorm(laz_dec *d)
 {
     do {
         d->value = (d->value << 8) | next_byte(d);
         d->length <<= 8;
-    } while (d->length < AC_MIN_LENGTH);
+    } while (d->length < LAZ_AC_MIN_LENGTH);
 }
 
 /* ---- bit model ---- */
@@ -71,14 +69,14 @@ uint32_t laz_decode_bit(laz_dec *d, laz_bitmodel *m)
         d->value -= x;
         d->length -= x;
     }
-    if (d->length < AC_MIN_LENGTH) renorm(d);
+    if (d->length < LAZ_AC_MIN_LENGTH) laz__renorm(d);
     if (--m->until == 0) bitmodel_update(m);
     return sym;
 }
 
 /* ---- symbol model ---- */
 
-static void model_update(laz_model *m)
+void laz__model_update(laz_model *m)
 {
     if ((m->total += m->cycle) > DM_MAX_COUNT) {
         m->total = 0;
@@ -87,13 +85,13 @@ static void model_update(laz_model *m)
     uint32_t scale = 0x80000000u / m->total, sum = 0;
     if (!m->table) {
         for (uint32_t k = 0; k < m->n; k++) {
-            m->dist[k] = (scale * sum) >> (31 - DM_SHIFT);
+            m->dist[k] = (scale * sum) >> (31 - LAZ_DM_SHIFT);
             sum += m->count[k];
         }
     } else {
         uint32_t s = 0;
         for (uint32_t k = 0; k < m->n; k++) {
-            m->dist[k] = (scale * sum) >> (31 - DM_SHIFT);
+            m->dist[k] = (scale * sum) >> (31 - LAZ_DM_SHIFT);
             sum += m->count[k];
             uint32_t w = m->dist[k] >> m->table_shift;
             while (s < w) m->table[++s] = k - 1;
@@ -121,14 +119,14 @@ int laz_model_init(laz_model *m, uint32_t n)
         m->count = m->dist + n;
         m->table = tsize ? m->dist + 2 * n : NULL;
         m->table_size = tsize;
-        m->table_shift = tsize ? DM_SHIFT - tbits : 0;
+        m->table_shift = tsize ? LAZ_DM_SHIFT - tbits : 0;
         m->n = n;
         m->last = n - 1;
     }
     for (uint32_t k = 0; k < n; k++) m->count[k] = 1;
     m->total = 0;
     m->cycle = n;
-    model_update(m);
+    laz__model_update(m);
     m->cycle = m->until = (n + 6) >> 1;
     return 0;
 }
@@ -139,52 +137,13 @@ void laz_model_free(laz_model *m)
     m->dist = m->count = m->table = NULL;
 }
 
-uint32_t laz_decode_symbol(laz_dec *d, laz_model *m)
-{
-    uint32_t n, sym, x, y = d->length;
-    if (m->table) {
-        uint32_t dv = d->value / (d->length >>= DM_SHIFT);
-        uint32_t t = dv >> m->table_shift;
-        sym = m->table[t];
-        n = m->table[t + 1] + 1;
-        while (n > sym + 1) {
-            uint32_t k = (sym + n) >> 1;
-            if (m->dist[k] > dv) n = k;
-            else sym = k;
-        }
-        x = m->dist[sym] * d->length;
-        if (sym != m->last) y = m->dist[sym + 1] * d->length;
-    } else {
-        x = sym = 0;
-        d->length >>= DM_SHIFT;
-        n = m->n;
-        uint32_t k = n >> 1;
-        do {
-            uint32_t z = d->length * m->dist[k];
-            if (z > d->value) {
-                n = k;
-                y = z;
-            } else {
-                sym = k;
-                x = z;
-            }
-        } while ((k = (sym + n) >> 1) != sym);
-    }
-    d->value -= x;
-    d->length = y - x;
-    if (d->length < AC_MIN_LENGTH) renorm(d);
-    ++m->count[sym];
-    if (--m->until == 0) model_update(m);
-    return sym;
-}
-
 /* ---- raw bits ---- */
 
 static uint32_t read_short(laz_dec *d)
 {
     uint32_t sym = d->value / (d->length >>= 16);
     d->value -= d->length * sym;
-    if (d->length < AC_MIN_LENGTH) renorm(d);
+    if (d->length < LAZ_AC_MIN_LENGTH) laz__renorm(d);
     return sym & 0xFFFFu;
 }
 
@@ -197,7 +156,7 @@ uint32_t laz_read_bits(laz_dec *d, unsigned bits)
     }
     uint32_t sym = d->value / (d->length >>= bits);
     d->value -= d->length * sym;
-    if (d->length < AC_MIN_LENGTH) renorm(d);
+    if (d->length < LAZ_AC_MIN_LENGTH) laz__renorm(d);
     return sym;
 }
 

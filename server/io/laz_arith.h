@@ -53,7 +53,6 @@ int laz_model_init(laz_model *m, uint32_t n);
 void laz_model_free(laz_model *m);
 void laz_bitmodel_init(laz_bitmodel *m);
 
-uint32_t laz_decode_symbol(laz_dec *d, laz_model *m);
 uint32_t laz_decode_bit(laz_dec *d, laz_bitmodel *m);
 uint32_t laz_read_bits(laz_dec *d, unsigned bits);   /* 1 .. 32 raw bits */
 uint32_t laz_read_int(laz_dec *d);                   /* 32 raw bits */
@@ -66,6 +65,54 @@ int laz_ic_init(laz_ic *ic);
 void laz_ic_free(laz_ic *ic);
 /* laz_ic_decompress: pred plus the decoded correction, wrapped into the corrector's range. */
 int32_t laz_ic_decompress(laz_ic *ic, laz_dec *d, int32_t pred, unsigned context);
+
+#define LAZ_AC_MIN_LENGTH 0x01000000u /* renormalise below 2^24 */
+#define LAZ_DM_SHIFT 15               /* symbol model distribution bits */
+
+/* Internal to laz_arith.c, called from the inline decoder below. */
+void laz__renorm(laz_dec *d);
+void laz__model_update(laz_model *m);
+
+/* laz_decode_symbol: the next symbol of model m (inline: most of the decoding time). */
+static inline uint32_t laz_decode_symbol(laz_dec *d, laz_model *m)
+{
+    uint32_t n, sym, x, y = d->length;
+    if (m->table) {
+        uint32_t dv = d->value / (d->length >>= LAZ_DM_SHIFT);
+        uint32_t t = dv >> m->table_shift;
+        sym = m->table[t];
+        n = m->table[t + 1] + 1;
+        while (n > sym + 1) {
+            uint32_t k = (sym + n) >> 1;
+            if (m->dist[k] > dv) n = k;
+            else sym = k;
+        }
+        x = m->dist[sym] * d->length;
+        if (sym != m->last) y = m->dist[sym + 1] * d->length;
+    } else {
+        x = sym = 0;
+        d->length >>= LAZ_DM_SHIFT;
+        n = m->n;
+        uint32_t k = n >> 1;
+        do {
+            uint32_t z = d->length * m->dist[k];
+            if (z > d->value) {
+                n = k;
+                y = z;
+            } else {
+                sym = k;
+                x = z;
+            }
+        } while ((k = (sym + n) >> 1) != sym);
+    }
+    d->value -= x;
+    d->length = y - x;
+    if (d->length < LAZ_AC_MIN_LENGTH) laz__renorm(d);
+    ++m->count[sym];
+    if (--m->until == 0) laz__model_update(m);
+    return sym;
+}
+
 
 /* The arithmetic of the item decoders, as LASzip defines it. */
 static inline uint8_t laz_u8_fold(int32_t n)
