@@ -455,7 +455,7 @@ static void test_copc_hierarchy_and_nodes(void **state)
 
     /* the counts add up to the header's, and the nodes are the chunk table's chunks */
     node_acc acc = {0};
-    assert_int_equal(copc_visit(&lf, collect, &acc, &e), 0);
+    assert_int_equal(copc_visit(&lf, INT32_MAX, collect, &acc, &e), 0);
     assert_int_equal(acc.points, lf.h.count);
     assert_int_equal(acc.points, 100000);
     size_t nonempty = 0;
@@ -509,6 +509,72 @@ static void test_copc_hierarchy_and_nodes(void **state)
     free(d);
 }
 
+/* The top levels alone: the counts of exactly those nodes, read without the deeper pages,
+ * spread over the whole extent (a COPC level is a subsample of all of it). */
+static void test_copc_top_levels(void **state)
+{
+    (void)state;
+    size_t len;
+    uint8_t *d = load("ellipsoid.copc.laz", &len);
+    laz_file lf;
+    sd_err e = {0};
+    assert_int_equal(laz_open(&lf, "ellipsoid.copc.laz", d, len, &e), 0);
+    node_acc acc = {0};
+    assert_int_equal(copc_visit(&lf, INT32_MAX, collect, &acc, &e), 0);
+    int32_t deepest = 0;
+    for (size_t i = 0; i < acc.nodes; i++)
+        if (acc.e[i].level > deepest) deepest = acc.e[i].level;
+    assert_true(deepest >= 1); /* the file has more than a root */
+    char p[1024];
+    tu_data("ellipsoid.copc.laz", p, sizeof p);
+    pc_raw full = {0};
+    assert_int_equal(pc_read_laz(p, &full, &e), 0);
+    double fmin[3], fmax[3];
+    for (int k = 0; k < 3; k++) fmin[k] = 1e300, fmax[k] = -1e300;
+    for (size_t i = 0; i < full.n; i++)
+        for (int k = 0; k < 3; k++) {
+            double v = full.xyz[3 * i + k];
+            if (v < fmin[k]) fmin[k] = v;
+            if (v > fmax[k]) fmax[k] = v;
+        }
+    for (int32_t L = 0; L <= deepest; L++) {
+        uint64_t want = 0;
+        for (size_t i = 0; i < acc.nodes; i++)
+            if (acc.e[i].level <= L) want += (uint64_t)acc.e[i].count;
+        pc_raw r = {0};
+        assert_int_equal(pc_read_copc_levels(p, L, &r, &e), 0);
+        assert_int_equal(r.n, want);
+        assert_non_null(strstr(r.format, "COPC LAZ 1.4 format 7, levels 0-"));
+        if (L == 0) {
+            assert_true(r.n < full.n);
+            for (int k = 0; k < 3; k++) {
+                double lo = 1e300, hi = -1e300;
+                for (size_t i = 0; i < r.n; i++) {
+                    double v = r.xyz[3 * i + k];
+                    if (v < lo) lo = v;
+                    if (v > hi) hi = v;
+                }
+                assert_true(lo >= fmin[k] && hi <= fmax[k]);
+                assert_true(hi - lo >= 0.5 * (fmax[k] - fmin[k]));
+            }
+        }
+        pc_raw_free(&r);
+    }
+    /* all levels: the whole cloud */
+    pc_raw r = {0};
+    assert_int_equal(pc_read_copc_levels(p, INT32_MAX, &r, &e), 0);
+    assert_int_equal(r.n, 100000);
+    pc_raw_free(&r);
+    pc_raw_free(&full);
+    /* not COPC */
+    assert_int_equal(pc_read_copc_levels(tu_data("ellipsoid-1.4.laz", p, sizeof p), 0, &r, &e),
+                     SD_EFORMAT);
+    assert_non_null(strstr(e.msg, "not a COPC file"));
+    pc_raw_free(&r);
+    laz_close(&lf);
+    free(d);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -522,6 +588,7 @@ int main(void)
         cmocka_unit_test(test_malformed),
         cmocka_unit_test(test_truncated_chunk),
         cmocka_unit_test(test_copc_hierarchy_and_nodes),
+        cmocka_unit_test(test_copc_top_levels),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }

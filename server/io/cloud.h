@@ -107,6 +107,10 @@ int pc_read_xyz(const char *path, pc_raw *raw, sd_err *err); /* .xyz, .pts, .txt
  * decoded on threads threads (pc_read_laz: one per online CPU). io_laz.c. */
 int pc_read_laz(const char *path, pc_raw *raw, sd_err *err);
 int pc_read_laz_threads(const char *path, pc_raw *raw, int threads, sd_err *err);
+/* pc_read_copc_levels: only the octree nodes of level max_level or less of a COPC file (its
+ * hierarchy read page by page, deeper pages left unread): a uniform preview of the whole
+ * extent for a first image. SD_EFORMAT when the file is not COPC. io_copc.c. */
+int pc_read_copc_levels(const char *path, int max_level, pc_raw *raw, sd_err *err);
 
 /* pc_load: picks the reader from the file's extension (ply, pcd, las, xyz, pts, txt; any case),
  * reads and finalizes. Returns 0 or a negative SD_E* code with err filled. */

@@ -99,8 +99,8 @@ typedef struct page_ref {
     uint64_t off, size;
 } page_ref;
 
-int copc_visit(const laz_file *lf, int (*fn)(void *ctx, const copc_entry *e), void *ctx,
-               sd_err *err)
+int copc_visit(const laz_file *lf, int32_t max_level, int (*fn)(void *ctx, const copc_entry *e),
+               void *ctx, sd_err *err)
 {
     copc_info info;
     int rc = copc_info_read(lf, &info, err);
@@ -120,6 +120,7 @@ int copc_visit(const laz_file *lf, int (*fn)(void *ctx, const copc_entry *e), vo
         size_t n;
         rc = copc_page_read(lf, pg.off, pg.size, &e, &n, err);
         for (size_t i = 0; i < n && !rc; i++) {
+            if (e[i].level > max_level) continue; /* and a deeper page stays unread */
             if (e[i].count >= 0) {
                 rc = fn(ctx, &e[i]);
                 continue;

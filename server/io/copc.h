@@ -44,8 +44,10 @@ int copc_node_read(const laz_file *lf, laz_chunk_dec *cd, const copc_entry *e, u
                    size_t *cap, sd_err *err);
 
 /* copc_visit: walks the hierarchy from the root page, depth first, page by page, calling fn
- * for every node entry (count >= 0); fn returns nonzero to stop (copc_visit returns that
- * value). At most size / 32 pages are read, so a page that links back to an ancestor ends
- * with an error instead of a loop. Returns 0, fn's stop value, or a negative code. */
-int copc_visit(const laz_file *lf, int (*fn)(void *ctx, const copc_entry *e), void *ctx,
-               sd_err *err);
+ * for every node entry (count >= 0) of level max_level or less; a linked page whose node lies
+ * deeper than max_level is not read at all (pass INT32_MAX for the whole tree). fn returns
+ * nonzero to stop (copc_visit returns that value). At most size / 32 pages are read, so a page
+ * that links back to an ancestor ends with an error instead of a loop. Returns 0, fn's stop
+ * value, or a negative code. */
+int copc_visit(const laz_file *lf, int32_t max_level, int (*fn)(void *ctx, const copc_entry *e),
+               void *ctx, sd_err *err);

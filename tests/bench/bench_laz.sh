@@ -23,6 +23,8 @@ echo
     | tee "$tmp/splatd.md"
 "$lb" "$data/ellipsoid-1.4.laz" --runs "$runs" | tee -a "$tmp/splatd.md"
 "$lb" "$data/ellipsoid.copc.laz" --runs "$runs" | tee -a "$tmp/splatd.md"
+echo
+"$lb" "$data/ellipsoid.copc.laz" --levels --runs "$runs"
 
 echo
 lp=${LAZPERF_DIR:-}

@@ -1,12 +1,15 @@
 /* laz_bench — LAZ decode throughput of splatd's decoder; prints one Markdown table row per file.
  *
  *   laz_bench FILE.laz [--twin FILE.las] [--runs R] [--header]
+ *   laz_bench FILE.copc.laz --levels [--runs R]
  *
  * Figures are medians of R runs (default 9), the file already in memory (read once):
  *   decode 1 thread   laz_open + every chunk decoded into records (no conversion): the decoder
  *   reader 1 / 2      pc_read_laz_threads with 1 and 2 threads: decode + conversion into the
  *                     cloud's arrays (what pc_load does before finalizing), file mapped
  *   .las read         pc_read_las on the uncompressed twin (when given): the same cloud
+ * With --levels: for each octree depth L, pc_read_copc_levels (hierarchy pages down to L,
+ * then those nodes) against the whole file, one row per L.
  * and the FNV-1a 64 hash of all decoded records in file order (lazperf_bench.js prints the
  * same hash for laz-perf's decoder, so equal hashes mean equal output). */
 #include <stdio.h>
@@ -103,20 +106,60 @@ static double read_las(const char *path)
     return t;
 }
 
+static double read_levels(const char *path, int level, size_t *n)
+{
+    pc_raw r = {0};
+    sd_err e = {0};
+    double t0 = now_s();
+    if (pc_read_copc_levels(path, level, &r, &e)) {
+        fprintf(stderr, "laz_bench: %s\n", e.msg);
+        exit(1);
+    }
+    double t = now_s() - t0;
+    *n = r.n;
+    pc_raw_free(&r);
+    return t;
+}
+
+/* levels: one row per octree depth, until a depth gives the whole cloud. */
+static int levels(const char *file, int runs)
+{
+    double *t = calloc((size_t)runs, sizeof *t), *tf = calloc((size_t)runs, sizeof *tf);
+    for (int r = 0; r < runs; r++) tf[r] = read_laz(file, 1);
+    double full = median(tf, runs);
+    const char *base = strrchr(file, '/') ? strrchr(file, '/') + 1 : file;
+    printf("| %s: levels read | points | ms (1 thread) | share of the full read (%.1f ms) |\n",
+           base, full * 1e3);
+    printf("|---|---|---|---|\n");
+    size_t n = 0, prev = (size_t)-1;
+    for (int L = 0; L < 31; L++) {
+        for (int r = 0; r < runs; r++) t[r] = read_levels(file, L, &n);
+        if (n == prev) break;
+        double m = median(t, runs);
+        printf("| 0-%d | %zu | %.2f | %.0f%% |\n", L, n, m * 1e3, 100 * m / full);
+        prev = n;
+    }
+    free(t);
+    free(tf);
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     const char *file = NULL, *twin = NULL;
-    int runs = 9, header = 0;
+    int runs = 9, header = 0, lv = 0;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--runs") && i + 1 < argc) runs = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--twin") && i + 1 < argc) twin = argv[++i];
         else if (!strcmp(argv[i], "--header")) header = 1;
+        else if (!strcmp(argv[i], "--levels")) lv = 1;
         else if (!file) file = argv[i];
     }
     if (!file || runs < 1 || runs > 1000) {
         fprintf(stderr, "usage: laz_bench FILE.laz [--twin FILE.las] [--runs R] [--header]\n");
         return 2;
     }
+    if (lv) return levels(file, runs);
     size_t len;
     uint8_t *d = tu_read_file(file, &len);
     if (!d) {

@@ -43,7 +43,7 @@ int fuzz_one_copc(const uint8_t *data, size_t len)
     walk w = {len, 0};
     sd_err err;
     memset(&err, 0, sizeof err);
-    int rc = copc_visit(&lf, on_node, &w, &err);
+    int rc = copc_visit(&lf, INT32_MAX, on_node, &w, &err);
     if (rc < 0 && (!err.msg[0] || !strstr(err.msg, lf.path))) {
         fprintf(stderr, "fuzz oracle failed (copc): code %d without a message naming the file: "
                 "'%s'\n", rc, err.msg);
