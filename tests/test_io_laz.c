@@ -45,6 +45,15 @@ static uint8_t *load(const char *name, size_t *len)
     return d;
 }
 
+/* open_laz: the test file name read and opened as LAZ into lf (kept in memory: returned). */
+static uint8_t *open_laz(const char *name, size_t *len, laz_file *lf)
+{
+    uint8_t *d = load(name, len);
+    sd_err e = {0};
+    if (laz_open(lf, name, d, *len, &e)) fail_msg("%s: %s", name, e.msg);
+    return d;
+}
+
 /* decode_all: every record of the LAZ file in d (chunk by chunk) into one malloc'd buffer. */
 static uint8_t *decode_all(const char *name, const uint8_t *d, size_t len, laz_file *lf)
 {
@@ -112,10 +121,8 @@ static void test_twin_autzen_three_chunks(void **state)
 {
     (void)state;
     size_t zl;
-    uint8_t *z = load("autzen_trim.laz", &zl);
     laz_file lf;
-    sd_err e = {0};
-    assert_int_equal(laz_open(&lf, "autzen_trim.laz", z, zl, &e), 0);
+    uint8_t *z = open_laz("autzen_trim.laz", &zl, &lf);
     assert_int_equal(lf.nchunks, 3); /* 110,000 points in fixed chunks of 50,000 */
     assert_int_equal(lf.chunk_size, 50000);
     assert_int_equal(lf.chunk_first[2], 100000);
@@ -377,10 +384,9 @@ static void test_truncated_chunk(void **state)
 {
     (void)state;
     size_t len;
-    uint8_t *d = load("point-color-time.las.laz", &len);
     laz_file lf;
+    uint8_t *d = open_laz("point-color-time.las.laz", &len, &lf);
     sd_err e = {0};
-    assert_int_equal(laz_open(&lf, "pct.laz", d, len, &e), 0);
     laz_chunk_dec *cd = laz_chunk_dec_create(lf.items, lf.nitems);
     uint8_t *buf = NULL;
     size_t cap = 0;
@@ -388,7 +394,7 @@ static void test_truncated_chunk(void **state)
     int rc = laz_read_span(&lf, cd, lf.chunk_start[0], bytes / 2, lf.h.count, "chunk 0 of 1",
                            &buf, &cap, &e);
     assert_int_equal(rc, SD_EFORMAT);
-    assert_non_null(strstr(e.msg, "pct.laz: chunk 0 of 1"));
+    assert_non_null(strstr(e.msg, "point-color-time.las.laz: chunk 0 of 1"));
     assert_non_null(strstr(e.msg, "end before"));
     /* the buffer grew only in 64Ki-point steps up to what the chunk holds */
     assert_true(cap <= (size_t)lf.h.count * lf.h.rec_len);
@@ -423,10 +429,9 @@ static void test_copc_hierarchy_and_nodes(void **state)
 {
     (void)state;
     size_t len;
-    uint8_t *d = load("ellipsoid.copc.laz", &len);
     laz_file lf;
+    uint8_t *d = open_laz("ellipsoid.copc.laz", &len, &lf);
     sd_err e = {0};
-    assert_int_equal(laz_open(&lf, "ellipsoid.copc.laz", d, len, &e), 0);
     copc_info info;
     assert_int_equal(copc_info_read(&lf, &info, &e), 0);
     assert_true(info.halfsize > 0 && info.spacing > 0);
@@ -499,9 +504,8 @@ static void test_copc_hierarchy_and_nodes(void **state)
 
     /* not COPC */
     size_t l2;
-    uint8_t *d2 = load("ellipsoid-1.4.laz", &l2);
     laz_file l14;
-    assert_int_equal(laz_open(&l14, "e14.laz", d2, l2, &e), 0);
+    uint8_t *d2 = open_laz("ellipsoid-1.4.laz", &l2, &l14);
     assert_int_equal(copc_info_read(&l14, &info, &e), SD_EFORMAT);
     laz_close(&l14);
     free(d2);
@@ -515,10 +519,9 @@ static void test_copc_top_levels(void **state)
 {
     (void)state;
     size_t len;
-    uint8_t *d = load("ellipsoid.copc.laz", &len);
     laz_file lf;
+    uint8_t *d = open_laz("ellipsoid.copc.laz", &len, &lf);
     sd_err e = {0};
-    assert_int_equal(laz_open(&lf, "ellipsoid.copc.laz", d, len, &e), 0);
     node_acc acc = {0};
     assert_int_equal(copc_visit(&lf, INT32_MAX, collect, &acc, &e), 0);
     int32_t deepest = 0;
