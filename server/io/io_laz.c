@@ -36,7 +36,9 @@ typedef struct laz_run {
     int threads;
     slot s[LAZ_MAX_THREADS];
     pthread_barrier_t start, done;
-    int quit;
+    pthread_mutex_t gate_mu;     /* the gate: workers wait here until every one started */
+    pthread_cond_t gate_cv;
+    int gate, quit;
 } laz_run;
 
 typedef struct one_job {
@@ -67,6 +69,10 @@ static void *worker_main(void *arg)
 {
     worker *w = arg;
     laz_run *r = w->r;
+    pthread_mutex_lock(&r->gate_mu);
+    while (!r->gate) pthread_cond_wait(&r->gate_cv, &r->gate_mu);
+    pthread_mutex_unlock(&r->gate_mu);
+    if (r->quit) return NULL; /* not every thread started: leave before any barrier */
     for (;;) {
         pthread_barrier_wait(&r->start);
         if (r->quit) break;
@@ -131,27 +137,27 @@ static int decode_all(laz_run *r, pc_raw *raw, sd_err *err)
             goto out;
         }
     }
-    /* the barriers count the decoding threads and this one */
+    /* the barriers count the decoding threads and this one; the workers pass them only once
+     * the gate opens with every thread started */
     pthread_barrier_init(&r->start, NULL, (unsigned)r->threads + 1);
     pthread_barrier_init(&r->done, NULL, (unsigned)r->threads + 1);
+    pthread_mutex_init(&r->gate_mu, NULL);
+    pthread_cond_init(&r->gate_cv, NULL);
     for (int t = 0; t < r->threads; t++) {
         w[t] = (worker){r, t};
         if (pthread_create(&th[t], NULL, worker_main, &w[t]) != 0) break;
         started++;
     }
-    if (started < r->threads) {
-        /* the barrier would wait for threads that do not exist: let the started ones quit
-         * through a barrier of their own count */
-        pthread_barrier_destroy(&r->start);
-        pthread_barrier_init(&r->start, NULL, (unsigned)started + 1);
-        r->quit = 1;
-        pthread_barrier_wait(&r->start);
+    pthread_mutex_lock(&r->gate_mu);
+    r->quit = started < r->threads;
+    r->gate = 1;
+    pthread_cond_broadcast(&r->gate_cv);
+    pthread_mutex_unlock(&r->gate_mu);
+    if (r->quit) {
         for (int t = 0; t < started; t++) pthread_join(th[t], NULL);
-        pthread_barrier_destroy(&r->start);
-        pthread_barrier_destroy(&r->done);
         rc = sd_errf(err, SD_ENOMEM, "%s: could not start %d decoding threads", r->path,
                      r->threads);
-        goto out;
+        goto done_threads;
     }
     for (size_t c0 = 0; c0 < lf->nchunks && !rc; c0 += (size_t)r->threads) {
         for (int t = 0; t < r->threads; t++) {
@@ -171,8 +177,11 @@ static int decode_all(laz_run *r, pc_raw *raw, sd_err *err)
     r->quit = 1;
     pthread_barrier_wait(&r->start);
     for (int t = 0; t < r->threads; t++) pthread_join(th[t], NULL);
+done_threads:
     pthread_barrier_destroy(&r->start);
     pthread_barrier_destroy(&r->done);
+    pthread_mutex_destroy(&r->gate_mu);
+    pthread_cond_destroy(&r->gate_cv);
     if (!rc && has_rgb) pc__las_rgb16(rgb16, raw->n, raw);
 out:
     free(rgb16);
