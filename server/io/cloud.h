@@ -112,8 +112,8 @@ int pc_read_laz_threads(const char *path, pc_raw *raw, int threads, sd_err *err)
  * extent for a first image. SD_EFORMAT when the file is not COPC. io_copc.c. */
 int pc_read_copc_levels(const char *path, int max_level, pc_raw *raw, sd_err *err);
 
-/* pc_load: picks the reader from the file's extension (ply, pcd, las, xyz, pts, txt; any case),
- * reads and finalizes. Returns 0 or a negative SD_E* code with err filled. */
+/* pc_load: picks the reader from the file's extension (ply, pcd, las, laz, xyz, pts, txt; any
+ * case; .copc.laz is laz), reads and finalizes. Returns 0 or a negative SD_E* code with err filled. */
 int pc_load(const char *path, pc_cloud *out, sd_err *err);
 
 /* pc_supported_ext: 1 when the file name has an extension pc_load reads. */
