@@ -53,9 +53,9 @@ int cmd_prep(int argc, char **argv)
             d.progress = NULL;
         } else if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
             printf("usage: splatd prep FILE [--k N] [--cache DIR] [--threads N] [--force] [--quiet]\n"
-                   "  Loads FILE (ply, pcd, las, laz, copc.laz, xyz, pts, txt), computes normals,\n"
-                   "  splat radii, the uncertainty field F and point spacing with k nearest\n"
-                   "  neighbours (default k = 24), caches the result and prints a summary.\n");
+                   "  Loads FILE (ply, pcd, las, laz, xyz, pts, txt), computes normals, splat radii,\n"
+                   "  the uncertainty field F and point spacing with k nearest neighbours\n"
+                   "  (default k = 24), caches the result and prints a summary.\n");
             return 0;
         } else if (a[0] == '-') {
             fprintf(stderr, "splatd prep: unknown option '%s' (see splatd prep --help)\n", a);
