@@ -39,7 +39,7 @@ objs=""
 for s in $SRCS; do
     o="$out/obj/$(echo "$s" | tr / _ | sed 's/\.c$/.o/')"
     # shellcheck disable=SC2046
-    if [ ! -f "$o" ] || [ -n "$(find "$s" tests/fuzz/run.sh $(ls server/*.h protocol/*.h \
+    if [ ! -f "$o" ] || [ -n "$(find "$s" tests/fuzz/run.sh $(ls server/*/*.h protocol/*.h client/*.h \
             tests/common/*.h) -newer "$o" 2>/dev/null | head -n 1)" ]; then
         # shellcheck disable=SC2086
         $CLANG $CFLAGS -c "$s" -o "$o" || { echo "fuzz: compiling $s failed" >&2; exit 2; }
