@@ -261,6 +261,26 @@ static void test_pc_load_equals_twin(void **state)
     pc_cloud_free(&a);
 }
 
+/* A LAZ file named .las: the LAS reader sees the compression bits and hands it over. */
+static void test_laz_named_las(void **state)
+{
+    (void)state;
+    char src[1024], dst[1200], twin_path[1024];
+    snprintf(dst, sizeof dst, "%s/renamed.las", g_tmp);
+    assert_int_equal(tu_copy_file(tu_data("point-color.las.laz", src, sizeof src), dst), 0);
+    pc_cloud a, b;
+    sd_err e = {0};
+    assert_int_equal(pc_load(dst, &a, &e), 0);
+    assert_int_equal(pc_load(tu_data("point-color.las", twin_path, sizeof twin_path), &b, &e), 0);
+    assert_int_equal(a.n, 1065);
+    assert_int_equal(a.n, b.n);
+    assert_memory_equal(a.pos, b.pos, 3 * sizeof(float) * a.n);
+    assert_memory_equal(a.rgba, b.rgba, 4 * a.n);
+    assert_non_null(strstr(a.format, "LAZ 1.2 format 2"));
+    pc_cloud_free(&a);
+    pc_cloud_free(&b);
+}
+
 static void test_empty(void **state)
 {
     (void)state;
@@ -587,6 +607,7 @@ int main(void)
         cmocka_unit_test(test_las14_format1),
         cmocka_unit_test(test_ellipsoid_three_encodings),
         cmocka_unit_test(test_pc_load_equals_twin),
+        cmocka_unit_test(test_laz_named_las),
         cmocka_unit_test(test_empty),
         cmocka_unit_test(test_malformed),
         cmocka_unit_test(test_truncated_chunk),
