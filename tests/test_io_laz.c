@@ -241,6 +241,11 @@ static void test_pc_load_equals_twin(void **state)
     assert_memory_equal(a.cls, b.cls, a.n);
     assert_memory_equal(a.offset, b.offset, sizeof a.offset);
     assert_non_null(strstr(a.format, "LAZ 1.2 format 3"));
+    pc_cloud_free(&b);
+    /* the loader with an explicit thread count (what the prep cache passes) gives the same */
+    assert_int_equal(pc_load_threads(p1, 1, &b, &e), 0);
+    assert_int_equal(b.n, a.n);
+    assert_memory_equal(a.pos, b.pos, 3 * sizeof(float) * a.n);
     pc_cloud_free(&a);
     pc_cloud_free(&b);
 

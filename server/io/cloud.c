@@ -162,7 +162,7 @@ int pc_supported_ext(const char *name)
     return reader_for(name) != NULL;
 }
 
-int pc_load(const char *path, pc_cloud *out, sd_err *err)
+int pc_load_threads(const char *path, int threads, pc_cloud *out, sd_err *err)
 {
     reader_fn rd = reader_for(path);
     memset(out, 0, sizeof *out);
@@ -172,7 +172,9 @@ int pc_load(const char *path, pc_cloud *out, sd_err *err)
                        "xyz, pts, txt)",
                        path, ext_of(path));
     pc_raw raw = {0};
-    int rc = rd(path, &raw, err);
+    /* the LAZ reader decodes chunks on threads; every other reader is single-threaded */
+    int rc = rd == pc_read_laz ? pc_read_laz_threads(path, &raw, threads, err)
+                               : rd(path, &raw, err);
     if (rc < 0) {
         pc_raw_free(&raw);
         return rc;
@@ -180,4 +182,9 @@ int pc_load(const char *path, pc_cloud *out, sd_err *err)
     rc = pc_finalize(&raw, out, path, err);
     pc_raw_free(&raw); /* pc_finalize empties raw on success but leaves it on failure */
     return rc;
+}
+
+int pc_load(const char *path, pc_cloud *out, sd_err *err)
+{
+    return pc_load_threads(path, 0, out, err);
 }

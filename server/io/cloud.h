@@ -115,6 +115,9 @@ int pc_read_copc_levels(const char *path, int max_level, pc_raw *raw, sd_err *er
 /* pc_load: picks the reader from the file's extension (ply, pcd, las, laz, xyz, pts, txt; any
  * case; .copc.laz is laz), reads and finalizes. Returns 0 or a negative SD_E* code with err filled. */
 int pc_load(const char *path, pc_cloud *out, sd_err *err);
+/* pc_load_threads: pc_load with threads threads for the readers that use them (LAZ: chunks in
+ * parallel); 0: one per online CPU, as pc_load. */
+int pc_load_threads(const char *path, int threads, pc_cloud *out, sd_err *err);
 
 /* pc_supported_ext: 1 when the file name has an extension pc_load reads. */
 int pc_supported_ext(const char *name);
