@@ -36,18 +36,21 @@ if [ -z "$lp" ] || [ ! -d "$lp/node_modules/laz-perf" ]; then
     echo "laz-perf: not available (no node/npm, or the npm registry unreachable): no comparison."
     exit 0
 fi
-echo "| file | laz-perf $(node -p "require('$lp/node_modules/laz-perf/package.json').version") WASM (Node $(node --version)) Mpts/s | splatd decode 1 thread / laz-perf | splatd reader 2 threads / laz-perf | same records (FNV-1a) |"
-echo "|---|---|---|---|---|"
+echo "| file | laz-perf $(node -p "require('$lp/node_modules/laz-perf/package.json').version") WASM (Node $(node --version)) Mpts/s | per CPU second | splatd decode 1 thread / laz-perf, wall | same, per CPU second | splatd reader 2 threads / laz-perf | same records (FNV-1a) |"
+echo "|---|---|---|---|---|---|---|"
 NODE_PATH="$lp/node_modules" node "$here/lazperf_bench.js" "$runs" "$data/autzen_trim.laz" \
     "$data/ellipsoid-1.4.laz" "$data/ellipsoid.copc.laz" |
-while read -r f n t h; do
+while read -r f n t c h; do
     base=$(basename "$f")
     row=$(grep "^| $base |" "$tmp/splatd.md")
     dec=$(echo "$row" | awk -F'|' '{gsub(/ /,"",$4); print $4}')
-    rd2=$(echo "$row" | awk -F'|' '{gsub(/ /,"",$6); print $6}')
-    ours=$(echo "$row" | awk -F'|' '{gsub(/ /,"",$9); print $9}')
-    awk -v b="$base" -v n="$n" -v t="$t" -v d="$dec" -v r="$rd2" -v h="$h" -v o="$ours" 'BEGIN {
-        lp = n / t / 1e6
-        printf "| %s | %.2f | %.2fx | %.2fx | %s |\n", b, lp, d / lp, r / lp, (h == o ? "yes" : "NO (" h ")")
+    cpu=$(echo "$row" | awk -F'|' '{gsub(/ /,"",$5); print $5}')
+    rd2=$(echo "$row" | awk -F'|' '{gsub(/ /,"",$7); print $7}')
+    ours=$(echo "$row" | awk -F'|' '{gsub(/ /,"",$10); print $10}')
+    awk -v b="$base" -v n="$n" -v t="$t" -v c="$c" -v d="$dec" -v u="$cpu" -v r="$rd2" -v h="$h" \
+        -v o="$ours" 'BEGIN {
+        lp = n / t / 1e6; lc = n / c / 1e6
+        printf "| %s | %.2f | %.2f | %.2fx | %.2fx | %.2fx | %s |\n", b, lp, lc, d / lp, u / lc,
+               r / lp, (h == o ? "yes" : "NO (" h ")")
     }'
 done

@@ -5,7 +5,8 @@
 //   node lazperf_bench.js RUNS FILE...      (NODE_PATH must hold laz-perf)
 //
 // For each file: every point decoded with LASZip.getPoint, RUNS times; prints
-// "FILE POINTS MEDIAN_SECONDS FNV1A64" (the hash over all point records, in file order, the
+// "FILE POINTS MEDIAN_SECONDS MEDIAN_CPU_SECONDS FNV1A64" (CPU: process.cpuUsage, user +
+// system, of this single-threaded decode; the hash over all point records, in file order, the
 // same hash laz_bench prints for splatd's decoder).
 'use strict';
 const fs = require('fs');
@@ -30,12 +31,12 @@ function fnv(h, bytes) {
   const LazPerf = await createLazPerf();
   for (const file of process.argv.slice(3)) {
     const bytes = fs.readFileSync(file);
-    const times = [];
+    const times = [], cpus = [];
     let count = 0, hash = '';
     for (let r = 0; r < runs; r++) {
       const filePtr = LazPerf._malloc(bytes.length);
       LazPerf.HEAPU8.set(bytes, filePtr);
-      const t0 = process.hrtime.bigint();
+      const t0 = process.hrtime.bigint(), c0 = process.cpuUsage();
       const laszip = new LazPerf.LASZip();
       laszip.open(filePtr, bytes.length);
       count = laszip.getCount();
@@ -46,14 +47,19 @@ function fnv(h, bytes) {
         laszip.getPoint(dataPtr);
         if (r === 0) fnv(h, LazPerf.HEAPU8.subarray(dataPtr, dataPtr + len));
       }
-      const t1 = process.hrtime.bigint();
+      const t1 = process.hrtime.bigint(), c1 = process.cpuUsage(c0);
       if (r === 0) hash = (h[1] >>> 0).toString(16).padStart(8, '0') + (h[0] >>> 0).toString(16).padStart(8, '0');
-      else times.push(Number(t1 - t0) / 1e9);
+      else {
+        times.push(Number(t1 - t0) / 1e9);
+        cpus.push((c1.user + c1.system) / 1e6);
+      }
       laszip.delete();
       LazPerf._free(dataPtr);
       LazPerf._free(filePtr);
     }
     times.sort((a, b) => a - b);
-    console.log(`${file} ${count} ${times[Math.floor(times.length / 2)].toFixed(6)} ${hash}`);
+    cpus.sort((a, b) => a - b);
+    const mid = Math.floor(times.length / 2);
+    console.log(`${file} ${count} ${times[mid].toFixed(6)} ${cpus[mid].toFixed(6)} ${hash}`);
   }
 })();
