@@ -387,12 +387,12 @@ static void test_header_errors(void **state)
     b[104] = 11;
     expect_fail_bytes("fmt11.las", b, len, SD_EUNSUP);
     memcpy(b, orig, len);
-    b[104] = 0x83; /* LAZ: format 3 with the compression bit */
-    msg = expect_fail_bytes("laz.las", b, len, SD_EUNSUP);
-    assert_non_null(strstr(msg, "LAZ"));
+    b[104] = 0x83; /* LAZ: format 3 with the compression bit, read by the LAZ reader */
+    msg = expect_fail_bytes("laz.las", b, len, SD_EFORMAT);
+    assert_non_null(strstr(msg, "laszip encoded"));
     memcpy(b, orig, len);
     b[104] = 0x43;
-    expect_fail_bytes("laz6.las", b, len, SD_EUNSUP);
+    expect_fail_bytes("laz6.las", b, len, SD_EFORMAT);
 
     memcpy(b, orig, len);
     set16(b, 105, 33); /* shorter than format 3's 34 bytes */

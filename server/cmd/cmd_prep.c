@@ -53,7 +53,7 @@ int cmd_prep(int argc, char **argv)
             d.progress = NULL;
         } else if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
             printf("usage: splatd prep FILE [--k N] [--cache DIR] [--threads N] [--force] [--quiet]\n"
-                   "  Loads FILE (ply, pcd, las, xyz, pts, txt), computes normals, splat radii,\n"
+                   "  Loads FILE (ply, pcd, las, laz, xyz, pts, txt), computes normals, splat radii,\n"
                    "  the uncertainty field F and point spacing with k nearest neighbours\n"
                    "  (default k = 24), caches the result and prints a summary.\n");
             return 0;

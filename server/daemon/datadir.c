@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -102,7 +103,11 @@ int dd_resolve(const char *dir, const char *name, char *path, size_t pathlen, dd
     struct dirent *de;
     while ((de = readdir(d))) {
         if (strncmp(de->d_name, name, nl) != 0 || de->d_name[nl] != '.') continue;
-        if (strchr(de->d_name + nl + 1, '.') || !pc_supported_ext(de->d_name)) continue;
+        /* one extension after the name; ".copc.laz" counts as one */
+        const char *ext = de->d_name + nl + 1;
+        if ((strchr(ext, '.') && strcasecmp(ext, "copc.laz") != 0) ||
+            !pc_supported_ext(de->d_name))
+            continue;
         if (found == 0) snprintf(first, sizeof first, "%s", de->d_name);
         else if (found == 1) snprintf(second, sizeof second, "%s", de->d_name);
         found++;

@@ -152,6 +152,7 @@ static reader_fn reader_for(const char *path)
     if (!strcasecmp(e, "ply")) return pc_read_ply;
     if (!strcasecmp(e, "pcd")) return pc_read_pcd;
     if (!strcasecmp(e, "las")) return pc_read_las;
+    if (!strcasecmp(e, "laz")) return pc_read_laz; /* also .copc.laz */
     if (!strcasecmp(e, "xyz") || !strcasecmp(e, "pts") || !strcasecmp(e, "txt")) return pc_read_xyz;
     return NULL;
 }
@@ -161,16 +162,19 @@ int pc_supported_ext(const char *name)
     return reader_for(name) != NULL;
 }
 
-int pc_load(const char *path, pc_cloud *out, sd_err *err)
+int pc_load_threads(const char *path, int threads, pc_cloud *out, sd_err *err)
 {
     reader_fn rd = reader_for(path);
     memset(out, 0, sizeof *out);
     if (!rd)
         return sd_errf(err, SD_EUNSUP,
-                       "%s: unknown extension '.%s' (supported: ply, pcd, las, xyz, pts, txt)",
+                       "%s: unknown extension '.%s' (supported: ply, pcd, las, laz, copc.laz, "
+                       "xyz, pts, txt)",
                        path, ext_of(path));
     pc_raw raw = {0};
-    int rc = rd(path, &raw, err);
+    /* the LAZ reader decodes chunks on threads; every other reader is single-threaded */
+    int rc = rd == pc_read_laz ? pc_read_laz_threads(path, &raw, threads, err)
+                               : rd(path, &raw, err);
     if (rc < 0) {
         pc_raw_free(&raw);
         return rc;
@@ -178,4 +182,9 @@ int pc_load(const char *path, pc_cloud *out, sd_err *err)
     rc = pc_finalize(&raw, out, path, err);
     pc_raw_free(&raw); /* pc_finalize empties raw on success but leaves it on failure */
     return rc;
+}
+
+int pc_load(const char *path, pc_cloud *out, sd_err *err)
+{
+    return pc_load_threads(path, 0, out, err);
 }

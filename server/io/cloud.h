@@ -103,10 +103,21 @@ int pc_read_ply(const char *path, pc_raw *raw, sd_err *err);
 int pc_read_pcd(const char *path, pc_raw *raw, sd_err *err);
 int pc_read_las(const char *path, pc_raw *raw, sd_err *err);
 int pc_read_xyz(const char *path, pc_raw *raw, sd_err *err); /* .xyz, .pts, .txt */
+/* pc_read_laz: LAZ and COPC (.laz, .copc.laz; also a .las whose format byte marks LAZ), chunks
+ * decoded on threads threads (pc_read_laz: one per online CPU). io_laz.c. */
+int pc_read_laz(const char *path, pc_raw *raw, sd_err *err);
+int pc_read_laz_threads(const char *path, pc_raw *raw, int threads, sd_err *err);
+/* pc_read_copc_levels: only the octree nodes of level max_level or less of a COPC file (its
+ * hierarchy read page by page, deeper pages left unread): a uniform preview of the whole
+ * extent for a first image. SD_EFORMAT when the file is not COPC. io_copc.c. */
+int pc_read_copc_levels(const char *path, int max_level, pc_raw *raw, sd_err *err);
 
-/* pc_load: picks the reader from the file's extension (ply, pcd, las, xyz, pts, txt; any case),
- * reads and finalizes. Returns 0 or a negative SD_E* code with err filled. */
+/* pc_load: picks the reader from the file's extension (ply, pcd, las, laz, xyz, pts, txt; any
+ * case; .copc.laz is laz), reads and finalizes. Returns 0 or a negative SD_E* code with err filled. */
 int pc_load(const char *path, pc_cloud *out, sd_err *err);
+/* pc_load_threads: pc_load with threads threads for the readers that use them (LAZ: chunks in
+ * parallel); 0: one per online CPU, as pc_load. */
+int pc_load_threads(const char *path, int threads, pc_cloud *out, sd_err *err);
 
 /* pc_supported_ext: 1 when the file name has an extension pc_load reads. */
 int pc_supported_ext(const char *name);

@@ -584,7 +584,7 @@ int cache_open_cloud(const char *src, const cache_desc *d, pc_prepared *out, cac
      * fails at once; the content hash for the new cache's key is taken after a successful
      * parse (the bytes are then in the page cache), from a file of the same size and time. */
     pc_cloud cloud;
-    if ((rc = pc_load(src, &cloud, err)) < 0) return rc;
+    if ((rc = pc_load_threads(src, dd.threads, &cloud, err)) < 0) return rc;
     if ((rc = source_key(src, &key, 1, err)) < 0) {
         pc_cloud_free(&cloud);
         return rc;

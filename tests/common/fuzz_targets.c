@@ -458,6 +458,7 @@ int fuzz_one_ply(const uint8_t *data, size_t len) { return fuzz_reader(pc_read_p
 int fuzz_one_pcd(const uint8_t *data, size_t len) { return fuzz_reader(pc_read_pcd, "pcd", data, len); }
 int fuzz_one_las(const uint8_t *data, size_t len) { return fuzz_reader(pc_read_las, "las", data, len); }
 int fuzz_one_xyz(const uint8_t *data, size_t len) { return fuzz_reader(pc_read_xyz, "xyz", data, len); }
+int fuzz_one_laz(const uint8_t *data, size_t len) { return fuzz_reader(pc_read_laz, "laz", data, len); }
 
 /* ---- LZF --------------------------------------------------------------------------------- */
 
@@ -635,6 +636,7 @@ fuzz_fn fuzz_target_find(const char *name)
         {"proto", fuzz_one_proto}, {"ply", fuzz_one_ply}, {"pcd", fuzz_one_pcd},
         {"las", fuzz_one_las},     {"xyz", fuzz_one_xyz}, {"lzf", fuzz_one_lzf},
         {"params", fuzz_one_params},
+        {"laz", fuzz_one_laz},     {"copc", fuzz_one_copc},
     };
     for (size_t i = 0; i < sizeof targets / sizeof targets[0]; i++)
         if (!strcmp(targets[i].name, name)) return targets[i].fn;

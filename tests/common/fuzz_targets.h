@@ -44,7 +44,16 @@ int fuzz_one_lzf(const uint8_t *data, size_t len);
  * parameters must be unchanged and the message non-empty. Returns 0 or -1. */
 int fuzz_one_params(const uint8_t *data, size_t len);
 
+/* fuzz_one_laz: as fuzz_one_las, through pc_read_laz (LAZ and COPC; chunks on threads). */
+int fuzz_one_laz(const uint8_t *data, size_t len);
+
+/* fuzz_one_copc: the COPC hierarchy reader (tests/common/fuzz_copc.c): bytes 0-159 are the
+ * COPC info VLR payload, the whole input the file its offsets point into. copc_visit walks
+ * every page; the nodes' counts must be >= 0 and each page entry inside the input. Returns
+ * 0 or copc_visit's negative code. */
+int fuzz_one_copc(const uint8_t *data, size_t len);
+
 /* fuzz_target_find: the fuzz_one_* function of a target name ("proto", "ply", "pcd", "las",
- * "xyz", "lzf", "params"), or NULL. */
+ * "xyz", "lzf", "params", "laz", "copc"), or NULL. */
 typedef int (*fuzz_fn)(const uint8_t *data, size_t len);
 fuzz_fn fuzz_target_find(const char *name);

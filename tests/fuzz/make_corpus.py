@@ -335,6 +335,53 @@ def params():
         put("params", "bad_%02d" % i, kv)
 
 
+# ---------------------------------------------------------------- LAZ and COPC
+
+DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "data")
+
+
+def laz():
+    """Real LAZ files (tests/data) under 64 KiB, and broken copies of one."""
+    for name in ["point10.las.laz", "point-time.las.laz", "point-color.las.laz",
+                 "point-color-time.las.laz", "extrabytes.laz"]:
+        with open(os.path.join(DATA, name), "rb") as f:
+            put("laz", name, f.read())
+    with open(os.path.join(DATA, "point10.las.laz"), "rb") as f:
+        b = bytearray(f.read())
+    put("laz", "bad_cut_in_chunk.laz", bytes(b[:len(b) // 2]))
+    w = bytearray(b)
+    w[104] = 0x84  # waveform format 4
+    w[105:107] = struct.pack("<H", 57)
+    put("laz", "bad_waveform.laz", bytes(w))
+
+
+def copc_info(root_off, root_size):
+    # centre, half size, spacing, root page offset/size, gps min/max, 11 reserved
+    return struct.pack("<5d2Q2d11Q", 0, 0, 0, 100, 1, root_off, root_size, 0, 1, *([0] * 11))
+
+
+def copc_entry(level, x, y, z, off, size, count):
+    return struct.pack("<4iQii", level, x, y, z, off, size, count)
+
+
+def copc():
+    """COPC hierarchies for the copc target: the info payload, then pages at offset 160."""
+    # one page: the root with data (pointing at the info bytes), an empty child
+    page = copc_entry(0, 0, 0, 0, 0, 64, 10) + copc_entry(1, 1, 0, 1, 0, 0, 0)
+    put("copc", "one_page.bin", copc_info(160, len(page)) + page)
+    # a root page linking to a child page
+    child = copc_entry(2, 3, 1, 0, 8, 16, 5)
+    root = copc_entry(0, 0, 0, 0, 0, 32, 7) + copc_entry(1, 1, 1, 1, 160 + 64, 32, -1)
+    put("copc", "two_pages.bin", copc_info(160, len(root)) + root + child)
+    # an empty root page
+    put("copc", "empty_page.bin", copc_info(160, 0))
+    # bad: a page that links to itself, a key outside its level, a page cut mid-entry
+    loop = copc_entry(0, 0, 0, 0, 160, 32, -1)
+    put("copc", "bad_self_link.bin", copc_info(160, 32) + loop)
+    put("copc", "bad_key.bin", copc_info(160, 32) + copc_entry(1, 2, 0, 0, 0, 0, 0))
+    put("copc", "bad_page_size.bin", copc_info(160, 40) + page)
+
+
 def main():
     proto()
     ply()
@@ -343,6 +390,8 @@ def main():
     xyz()
     lzf()
     params()
+    laz()
+    copc()
     total = sum(os.path.getsize(os.path.join(dp, f))
                 for dp, _, fs in os.walk(ROOT) for f in fs)
     print("corpus: %d bytes under %s" % (total, ROOT))

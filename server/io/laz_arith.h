@@ -1,0 +1,136 @@
+/* laz_arith.h — the entropy decoder of LASzip-compressed LAS (LAZ): an arithmetic decoder with
+ * adaptive bit and symbol models, raw-bit reads, and the integer decompressor built on them.
+ *
+ * The coder is the one LASzip uses (after Amir Said's FastAC): 32-bit interval, renormalised a
+ * byte at a time below 2^24; symbol models keep counts that are rescaled into a 15-bit
+ * cumulative distribution every update cycle (cycle starts at (n+6)/2, grows by 5/4, capped at
+ * 8(n+6)); bit models use 13-bit probabilities with a cycle capped at 64. Models over 16
+ * symbols carry a lookup table that narrows the search for the decoded symbol. Every constant
+ * below is a fact of the format: a different value decodes different points.
+ *
+ * The integer decompressor reads a correction to a prediction: a symbol k (the number of bits
+ * of the correction, per context), then the correction itself from a model of 2^k symbols (k up
+ * to 8) or a model of 256 symbols plus k-8 raw bits, and maps it back to a signed value.
+ *
+ * Reading past the end of the compressed bytes gives zeros and sets dec->overrun: the caller
+ * reports the chunk as truncated. Internal to the LAZ reader (laz_ prefix). */
+#pragma once
+#include <stddef.h>
+#include <stdint.h>
+
+typedef struct laz_dec {
+    const uint8_t *p, *end; /* the compressed bytes still to read */
+    uint32_t value, length;
+    int overrun;            /* set when a read went past end */
+} laz_dec;
+
+typedef struct laz_bitmodel {
+    uint32_t bit0_prob, bit0_count, bit_count, cycle, until;
+} laz_bitmodel;
+
+typedef struct laz_model {
+    uint32_t *dist;         /* n cumulative probabilities (15 bits), then n counts, then table */
+    uint32_t *count;
+    uint32_t *table;        /* NULL for 16 symbols or fewer */
+    uint32_t n, last, table_size, table_shift, total, cycle, until;
+} laz_model;
+
+typedef struct laz_ic {
+    uint32_t contexts, bits_high, corr_bits, corr_range;
+    int32_t corr_min;
+    unsigned k;             /* the bit count of the last correction (LASzip's getK) */
+    laz_model *mbits;       /* contexts models of corr_bits + 1 symbols */
+    laz_bitmodel corr0;     /* the correction when k is 0 */
+    laz_model *corr;        /* corr[k] for k = 1 .. corr_bits (corr[0] unused) */
+} laz_ic;
+
+/* laz_dec_init: starts decoding the bytes [p, end): reads the first 4 bytes. */
+void laz_dec_init(laz_dec *d, const uint8_t *p, const uint8_t *end);
+
+/* laz_model_init: (re)starts m as a fresh model of n symbols (2 <= n <= 2048), allocating on
+ * first use. Returns 0, or -1 when out of memory. */
+int laz_model_init(laz_model *m, uint32_t n);
+void laz_model_free(laz_model *m);
+void laz_bitmodel_init(laz_bitmodel *m);
+
+uint32_t laz_decode_bit(laz_dec *d, laz_bitmodel *m);
+uint32_t laz_read_bits(laz_dec *d, unsigned bits);   /* 1 .. 32 raw bits */
+uint32_t laz_read_int(laz_dec *d);                   /* 32 raw bits */
+
+/* laz_ic_create: an integer decompressor of bits (1..32; 32 for full-range values) and contexts
+ * contexts, bits_high 8 as LASzip uses everywhere. Returns 0 or -1 (out of memory). */
+int laz_ic_create(laz_ic *ic, unsigned bits, unsigned contexts);
+/* laz_ic_init: fresh models, as at the start of a chunk. Returns 0 or -1 (out of memory). */
+int laz_ic_init(laz_ic *ic);
+void laz_ic_free(laz_ic *ic);
+/* laz_ic_decompress: pred plus the decoded correction, wrapped into the corrector's range. */
+int32_t laz_ic_decompress(laz_ic *ic, laz_dec *d, int32_t pred, unsigned context);
+
+#define LAZ_AC_MIN_LENGTH 0x01000000u /* renormalise below 2^24 */
+#define LAZ_DM_SHIFT 15               /* symbol model distribution bits */
+
+/* Internal to laz_arith.c, called from the inline decoder below. */
+void laz__renorm(laz_dec *d);
+void laz__model_update(laz_model *m);
+
+/* laz_decode_symbol: the next symbol of model m (inline: most of the decoding time). */
+static inline uint32_t laz_decode_symbol(laz_dec *d, laz_model *m)
+{
+    uint32_t n, sym, x, y = d->length;
+    if (m->table) {
+        uint32_t dv = d->value / (d->length >>= LAZ_DM_SHIFT);
+        uint32_t t = dv >> m->table_shift;
+        sym = m->table[t];
+        n = m->table[t + 1] + 1;
+        while (n > sym + 1) {
+            uint32_t k = (sym + n) >> 1;
+            if (m->dist[k] > dv) n = k;
+            else sym = k;
+        }
+        x = m->dist[sym] * d->length;
+        if (sym != m->last) y = m->dist[sym + 1] * d->length;
+    } else {
+        x = sym = 0;
+        d->length >>= LAZ_DM_SHIFT;
+        n = m->n;
+        uint32_t k = n >> 1;
+        do {
+            uint32_t z = d->length * m->dist[k];
+            if (z > d->value) {
+                n = k;
+                y = z;
+            } else {
+                sym = k;
+                x = z;
+            }
+        } while ((k = (sym + n) >> 1) != sym);
+    }
+    d->value -= x;
+    d->length = y - x;
+    if (d->length < LAZ_AC_MIN_LENGTH) laz__renorm(d);
+    ++m->count[sym];
+    if (--m->until == 0) laz__model_update(m);
+    return sym;
+}
+
+
+/* The arithmetic of the item decoders, as LASzip defines it. */
+static inline uint8_t laz_u8_fold(int32_t n)
+{
+    return (uint8_t)(n < 0 ? n + 256 : n > 255 ? n - 256 : n);
+}
+static inline int32_t laz_u8_clamp(int32_t n) { return n < 0 ? 0 : n > 255 ? 255 : n; }
+
+/* StreamingMedian5: the median of the last five values, kept with a high/low insertion flag. */
+typedef struct laz_median5 {
+    int32_t v[5];
+    int high;
+} laz_median5;
+
+static inline void laz_median5_init(laz_median5 *m)
+{
+    for (int i = 0; i < 5; i++) m->v[i] = 0;
+    m->high = 1;
+}
+void laz_median5_add(laz_median5 *m, int32_t x);
+static inline int32_t laz_median5_get(const laz_median5 *m) { return m->v[2]; }
