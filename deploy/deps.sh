@@ -35,6 +35,12 @@ pc:sdl2=libsdl2-dev
 file:/usr/bin/Xvfb=xvfb
 file:/usr/bin/xwd=x11-apps
 "
+# Tests only: the browser viewer's end-to-end test (tests/test_browser.c) drives headless
+# Chromium through chromedriver; it skips, naming the package, where they are absent.
+NEEDS="$NEEDS
+file:/usr/bin/chromium=chromium
+file:/usr/bin/chromedriver=chromium-driver
+"
 
 # present ENTRY: 0 when the thing the entry names is on this machine.
 present() {

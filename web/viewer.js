@@ -316,6 +316,7 @@ function fullSize() {
 function touchRequest(t) {
   if (!S.dirty) S.dirtyT = t;
   S.dirty = true;
+  hud();
   pump();
 }
 
@@ -362,6 +363,7 @@ function pump() {
   const rseq = send(P.RENDER, null, {kind: 'render', cam, cseq});
   S.inflight = {seq: rseq, t: S.dirtyT};
   S.dirty = false;
+  hud();
 }
 
 function onFrame(r, seq, pend) {
@@ -411,6 +413,7 @@ async function show(f) {
   S.decoding = false;
   if (S.waiting) { const n = S.waiting; S.waiting = null; show(n); }
   pump();
+  hud();
 }
 
 /* ---- save ------------------------------------------------------------------------------- */
@@ -547,6 +550,8 @@ function syncControls() {
 }
 
 function hud() {
+  /* For tests: 1 when nothing is due, in flight, being decoded or interacting. */
+  $('idle').textContent = !S.dirty && !S.inflight && !S.decoding && !S.waiting && !S.interacting && S.frames ? '1' : '0';
   const fmt = (x) => (Math.round(x * 100) / 100).toString();
   const parts = [`${S.fpsT.length} fps`, `render ${S.render.toFixed(1)} ms`, `encode ${S.encode.toFixed(1)} ms`,
                  `latency ${S.lat.toFixed(0)} ms`, S.fpipe || PIPELINES[S.want.pipeline], `${S.fw}x${S.fh}`,
