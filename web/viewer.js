@@ -14,7 +14,10 @@
  * point budget; 150 ms after the last input, full size and quality 95.
  *
  * Query (for links and tests): ?cloud=NAME opens NAME at once; ?size=WxH fixes the frame size;
- * ?token=... is not read (a token never goes into a URL): the page asks for it. */
+ * ?pipeline=NAME starts with that pipeline;
+ * ?token=... is not read (a token never goes into a URL): the page asks for it. For the bench,
+ * window.splatStats() returns one line per frame: its camera and JPEG quality, camera sent -> frame received and
+ * -> drawn, and the frame's render + read-back + encode time (ms). */
 'use strict';
 
 const P = {
@@ -155,9 +158,12 @@ const S = {
   decoding: false, waiting: null, /* a frame being decoded; the newest frame that arrived meanwhile */
   frames: 0, spoiled: 0, lastSeq: 0, lastCamSeq: 0, fpsT: [], lat: 0, render: 0, encode: 0,
   fw: 0, fh: 0, fpipe: '', lastCam: null, nsave: 0, status: '', closedByUser: false,
+  stats: [],
 };
+window.splatStats = () => S.stats.join('\n');
 for (const k of Object.keys(PARAMS)) S.want[k] = S.applied[k] = PARAMS[k].def;
 S.want.quality = REST_QUALITY;
+if (PIPELINES.includes(query.get('pipeline'))) S.want.pipeline = PIPELINES.indexOf(query.get('pipeline'));
 
 function setStatus(s) { S.status = s; hud(); }
 function nextSeq() { S.seq = (S.seq + 1) >>> 0; if (S.seq === 0) S.seq = 1; return S.seq; }
@@ -360,7 +366,8 @@ function pump() {
   const cam = {eye: [0, 1, 2].map((i) => S.orbit.target[i] + S.orbit.offset[i]), target: S.orbit.target.slice(),
                up: S.orbit.up.slice(), fov: S.orbit.fov, width: w, height: h};
   const cseq = send(P.CAMERA, cameraPayload(S.orbit, w, h), null);
-  const rseq = send(P.RENDER, null, {kind: 'render', cam, cseq});
+  const rseq = send(P.RENDER, null, {kind: 'render', cam, cseq, quality: want.quality,
+                                     sent: performance.now()});
   S.inflight = {seq: rseq, t: S.dirtyT};
   S.dirty = false;
   hud();
@@ -368,14 +375,15 @@ function pump() {
 
 function onFrame(r, seq, pend) {
   const camSeq = r.u32(), pipe = r.u8(), format = r.u8(); r.u16();
-  const w = r.u32(), h = r.u32(), renderUs = r.u64(); r.u64();
+  const w = r.u32(), h = r.u32(), renderUs = r.u64(), readbackUs = r.u64();
   const encodeUs = r.u64(); r.u64();
   const data = r.rest();
   const type = format === 1 ? 'image/png' : 'image/jpeg';
   if (pend && pend.kind === 'save') { saveBlob(new Blob([data], {type}), pend.name); return; }
   const f = {seq, camSeq, pipe, w, h, renderUs, encodeUs, blob: new Blob([data], {type}),
              t: S.inflight && S.inflight.seq === seq ? S.inflight.t : performance.now(),
-             cam: pend ? pend.cam : null};
+             cam: pend ? pend.cam : null, sent: pend ? pend.sent : 0, recv: performance.now(),
+             work: (renderUs + readbackUs + encodeUs) / 1000, quality: pend ? pend.quality : 0};
   if (S.inflight && S.inflight.seq === seq) S.inflight = null;
   if (S.decoding) {
     if (S.waiting) S.spoiled++;   /* a newer frame replaces one that was never shown */
@@ -401,6 +409,13 @@ async function show(f) {
     S.render = f.renderUs / 1000; S.encode = f.encodeUs / 1000; S.lat = now - f.t;
     S.fpsT.push(now); while (S.fpsT.length && now - S.fpsT[0] > 1000) S.fpsT.shift();
     if (f.cam) S.lastCam = f.cam;
+    if (f.cam && f.sent && S.stats.length < 4096) {
+      /* One line per frame for the bench (window.splatStats): the camera, then camera sent ->
+       * frame received and -> drawn, and the frame's own render + read-back + encode, in ms. */
+      const c = f.cam;
+      S.stats.push([c.width, c.height, ...c.eye, ...c.target, ...c.up, c.fov, f.quality,
+                    (f.recv - f.sent).toFixed(3), (now - f.sent).toFixed(3), f.work.toFixed(3)].join(' '));
+    }
     $('nframes').textContent = String(S.frames);
     $('lastseq').textContent = String(f.seq);
     $('camseq').textContent = String(f.camSeq);

@@ -20,7 +20,7 @@ cp "$data/Guanyin.ply" "$tmp/data/"
     --cache "$tmp/cache" --preload Guanyin 2>"$tmp/splatd.log" &
 pid=$!
 i=0
-while [ "$(wc -l < "$tmp/port" 2>/dev/null || echo 0)" -lt 2 ]; do
+while ! { [ -s "$tmp/port" ] && [ "$(wc -l < "$tmp/port")" -ge 2 ]; }; do
     i=$((i + 1))
     if [ $i -gt 600 ] || ! kill -0 "$pid" 2>/dev/null; then
         echo "bench_ws: splatd did not start:" >&2; cat "$tmp/splatd.log" >&2; exit 1
@@ -35,6 +35,12 @@ echo "| measure | value | detail |"
 echo "|---|---|---|"
 "$bench/ws_bench" --port "$port" --http-port "$hport" --cloud Guanyin --size 1280x720 --pipeline points --frames 40
 "$bench/ws_bench" --port "$port" --http-port "$hport" --cloud Guanyin --size 640x360 --pipeline points --frames 40 --framing 0
+echo
+echo "## browser page: camera sent by the page -> frame received and drawn (headless Chromium, loopback, Guanyin.ply)"
+echo
+echo "| measure | value | detail |"
+echo "|---|---|---|"
+"$bench/ws_bench" --port "$port" --http-port "$hport" --cloud Guanyin.ply --size 640x360 --pipeline points --page 15
 kill -TERM "$pid"
 rc=0
 wait "$pid" || rc=$?

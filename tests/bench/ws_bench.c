@@ -1,7 +1,7 @@
 /* ws_bench.c — the browser listener's cost against plain TCP, on a running splatd.
  *
  *   ws_bench --port P --http-port H --cloud NAME [--size WxH] [--pipeline P] [--frames N]
- *            [--framing 0|1]
+ *            [--framing 0|1] [--page N]
  *
  * 1. Latency: N cameras of an orbit (default 40), each sent as CAMERA + RENDER on a TCP
  *    connection and, alternately, on a WebSocket connection (/ws, the browser's transport), the
@@ -11,6 +11,10 @@
  * 2. (--framing 1, the default) Framing cost per frame, in process: the bytes WebSocket framing adds (server frame header,
  *    client header + mask of each request), ws_decode of a masked CAMERA message and the
  *    server's frame header + first-4-KiB staging (ws_conn.c), in ns.
+ * 3. (--page N) The page itself in headless Chromium (chromedriver; skipped with a line when
+ *    absent): N single mouse drags 0.6 s apart on the canvas of WxH; for every frame the page
+ *    drew, its camera sent -> frame received and -> drawn (window.splatStats), then the same
+ *    cameras at the same sizes again over TCP and over the C WebSocket client. Medians.
  * Output: Markdown table rows on stdout. */
 #include <arpa/inet.h>
 #include <math.h>
@@ -28,6 +32,7 @@
 #include "params.h"
 #include "proto.h"
 #include "testutil.h"
+#include "webdriver.h"
 #include "ws.h"
 #include "wsclient.h"
 
@@ -143,6 +148,20 @@ static int c_open(conn *c, const char *cloud, const char *pipeline, proto_info *
     return 0;
 }
 
+/* c_quality: PARAMS quality q, waiting for its OK. 0 or -1. */
+static int c_quality(conn *c, int q)
+{
+    sp_params sp;
+    sp_params_defaults(&sp);
+    sp.quality = q;
+    proto_param_rec r;
+    proto_param_rec_from(&sp, SP_QUALITY, &r);
+    proto_buf b = {0};
+    proto_header h;
+    proto_enc_params(&b, ++c->seq, &r, 1);
+    return c_send(c, &b) || !c_expect(c, PROTO_MSG_OK, c->seq, &h) ? -1 : 0;
+}
+
 /* c_frame: CAMERA cam + RENDER; the latency until the FRAME is in (us) and the frame's
  * render + read-back + encode time (us) in *work and its bytes in *bytes. 0 or -1. */
 static int c_frame(conn *c, const proto_camera *cam, double *lat, double *work, size_t *bytes)
@@ -209,9 +228,126 @@ static void framing_cost(size_t frame_bytes)
     proto_buf_free(&b);
 }
 
+/* page_cams: one camera of the page's statistics. */
+typedef struct page_cam {
+    proto_camera cam;
+    int quality;
+    double recv_ms, drawn_ms, work_ms;
+} page_cam;
+
+/* page_run: the page in Chromium on the http port, nd single drags; fills up to cap cameras.
+ * Returns their number, or -1 (a line on stdout says why). */
+static int page_run(int hport, const char *cloud, const char *pipeline, int w, int h, int nd,
+                    page_cam *pc, int cap)
+{
+    char why[300], dir[512], url[512], v[256], id[160];
+    if (!tu_wd_available(why, sizeof why)) {
+        printf("| browser page | skipped | %s |\n", why);
+        return -1;
+    }
+    if (!tu_tmpdir(dir, sizeof dir)) return -1;
+    tu_wd wd;
+    if (tu_wd_start(&wd, dir, w + 100, h + 200, why, sizeof why) != 0) {
+        printf("| browser page | failed | %s |\n", why);
+        return -1;
+    }
+    snprintf(url, sizeof url, "http://127.0.0.1:%d/?cloud=%s&size=%dx%d&pipeline=%s", hport, cloud,
+             w, h, pipeline);
+    int n = -1;
+    char *stats = NULL;
+    if (tu_wd_go(&wd, url) != 0 || tu_wd_element(&wd, "#canvas", id, sizeof id) != 0) goto out;
+    for (int d = -1; d < nd; d++) {
+        if (d >= 0) {
+            char act[1024];
+            snprintf(act, sizeof act, "{\"actions\":[{\"type\":\"pointer\",\"id\":\"m\",\"parameters\":"
+                     "{\"pointerType\":\"mouse\"},\"actions\":[{\"type\":\"pointerMove\",\"duration\":0,"
+                     "\"origin\":{\"element-6066-11e4-a52e-4f735466cecf\":\"%s\"},\"x\":0,\"y\":0},"
+                     "{\"type\":\"pointerDown\",\"button\":0},{\"type\":\"pointerMove\",\"duration\":0,"
+                     "\"origin\":\"pointer\",\"x\":12,\"y\":0},{\"type\":\"pointerUp\",\"button\":0}]}]}",
+                     id);
+            if (tu_wd_post(&wd, "actions", act) != 0) goto out;
+            usleep(600000);
+        }
+        /* Rest: nothing due or in flight (the page's #idle), at most 30 s. */
+        for (int k = 0; k < 1500; k++) {
+            if (tu_wd_eval(&wd, "return document.getElementById('idle').textContent", v, sizeof v) == 0 &&
+                !strcmp(v, "1"))
+                break;
+            usleep(20000);
+        }
+    }
+    stats = malloc(1 << 20);
+    if (!stats || tu_wd_eval(&wd, "return window.splatStats()", stats, 1 << 20) != 0) goto out;
+    n = 0;
+    for (char *line = strtok(stats, "\n"); line && n < cap; line = strtok(NULL, "\n")) {
+        page_cam *c = &pc[n];
+        memset(c, 0, sizeof *c);
+        double fov;
+        if (sscanf(line, "%u %u %lf %lf %lf %lf %lf %lf %lf %lf %lf %lf %d %lf %lf %lf",
+                   &c->cam.width, &c->cam.height, &c->cam.eye[0], &c->cam.eye[1], &c->cam.eye[2],
+                   &c->cam.target[0], &c->cam.target[1], &c->cam.target[2], &c->cam.up[0],
+                   &c->cam.up[1], &c->cam.up[2], &fov, &c->quality, &c->recv_ms, &c->drawn_ms,
+                   &c->work_ms) != 16)
+            continue;
+        c->cam.fov_deg = (float)fov;
+        n++;
+    }
+out:
+    free(stats);
+    tu_wd_stop(&wd);
+    tu_rm_rf(dir);
+    if (n < 0) printf("| browser page | failed | see the chromedriver log |\n");
+    return n;
+}
+
+/* page_compare: the page's frames against the same cameras over TCP and the C WebSocket. */
+static int page_compare(conn *tcp, conn *ws, const page_cam *pc, int n, int w, int h)
+{
+    double *a = calloc((size_t)n, sizeof *a), *b = calloc((size_t)n, sizeof *b);
+    double *t = calloc((size_t)n, sizeof *t), *u = calloc((size_t)n, sizeof *u);
+    double *k = calloc((size_t)n, sizeof *k), *q = calloc((size_t)n, sizeof *q);
+    double *oa = calloc((size_t)n, sizeof *oa), *ot = calloc((size_t)n, sizeof *ot);
+    double *ou = calloc((size_t)n, sizeof *ou);
+    size_t bytes;
+    int full = 0;
+    int quality = -1;
+    for (int i = 0; i < n; i++) {
+        double lt, lw, wt, ww;
+        /* The page's JPEG quality for that frame (50 dragging, 95 at rest), set untimed. */
+        if (pc[i].quality != quality && pc[i].quality > 0) {
+            quality = pc[i].quality;
+            if (c_quality(tcp, quality) || c_quality(ws, quality)) return -1;
+        }
+        if (c_frame(tcp, &pc[i].cam, &lt, &wt, &bytes) || c_frame(ws, &pc[i].cam, &lw, &ww, &bytes))
+            return -1;
+        a[i] = pc[i].recv_ms;
+        b[i] = pc[i].drawn_ms;
+        k[i] = pc[i].work_ms;
+        t[i] = lt / 1e3;
+        u[i] = lw / 1e3;
+        q[i] = 0.5 * (wt + ww) / 1e3;
+        oa[i] = pc[i].recv_ms - pc[i].work_ms; /* what is not the server's render + encode */
+        ot[i] = (lt - wt) / 1e3;
+        ou[i] = (lw - ww) / 1e3;
+        full += pc[i].cam.width == (uint32_t)w;
+    }
+    printf("| page: camera sent -> frame received (%dx%d at rest, half while dragging) | %.2f ms | "
+           "median of %d frames (%d full size); minus each frame's render + read-back + encode: "
+           "%.2f ms |\n", w, h, median(a, n), n, full, median(oa, n));
+    printf("| page: camera sent -> frame drawn | %.2f ms | + createImageBitmap and drawImage |\n",
+           median(b, n));
+    printf("| same cameras and JPEG quality, C client over TCP | %.2f ms | minus render + read-back "
+           "+ encode: %.2f ms |\n", median(t, n), median(ot, n));
+    printf("| same cameras and JPEG quality, C client over WebSocket | %.2f ms | minus render + "
+           "read-back + encode: %.2f ms (render + read-back + encode of both: %.2f ms; the page's: "
+           "%.2f ms) |\n", median(u, n), median(ou, n), median(q, n), median(k, n));
+    free(a); free(b); free(t); free(u); free(k); free(q); free(oa); free(ot); free(ou);
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
-    int port = 0, hport = 0, w = 1280, h = 720, n = 40, framing = 1;
+    int port = 0, hport = 0, w = 1280, h = 720, n = 40, framing = 1, page = 0;
     const char *cloud = "Guanyin", *pipeline = "points";
     for (int i = 1; i + 1 < argc; i += 2) {
         if (!strcmp(argv[i], "--port")) port = atoi(argv[i + 1]);
@@ -221,6 +357,7 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--pipeline")) pipeline = argv[i + 1];
         else if (!strcmp(argv[i], "--frames")) n = atoi(argv[i + 1]);
         else if (!strcmp(argv[i], "--framing")) framing = atoi(argv[i + 1]);
+        else if (!strcmp(argv[i], "--page")) page = atoi(argv[i + 1]);
         else { fprintf(stderr, "ws_bench: unknown option %s\n", argv[i]); return 2; }
     }
     if (port <= 0 || hport <= 0 || n < 2 || n > 10000) {
@@ -237,6 +374,16 @@ int main(int argc, char **argv)
     if (c_open(&tcp, cloud, pipeline, &info) != 0 || c_open(&ws, cloud, pipeline, &info) != 0) {
         fprintf(stderr, "ws_bench: opening %s failed\n", cloud);
         return 1;
+    }
+    if (page > 0) {
+        /* The page first (its own connection), then its cameras again on ours. */
+        static page_cam pc[4096];
+        int np = page_run(hport, cloud, pipeline, w, h, page, pc, 4096);
+        int rc = np > 0 ? page_compare(&tcp, &ws, pc, np, w, h) : 0;
+        close(tcp.fd);
+        tu_ws_close(&ws.ws);
+        free(tcp.msg);
+        return rc == 0 ? 0 : 1;
     }
     double *lt = calloc((size_t)n, sizeof *lt), *lw = calloc((size_t)n, sizeof *lw);
     double *ot = calloc((size_t)n, sizeof *ot), *ow = calloc((size_t)n, sizeof *ow);
