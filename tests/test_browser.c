@@ -34,9 +34,11 @@
 
 /* The canvas shows the page's last frame: JPEG at quality 95 (4:2:0), decoded by Chromium and
  * drawn 1:1; `splat render` writes the same camera's frame as PNG. With the points pipeline on
- * the bunny that measured 55.1 dB, and 19.8 dB against the same view turned by 2 degrees (the
- * control the test also checks); 40 dB leaves room for another JPEG decoder's rounding. */
-#define MIN_PSNR_DB 40.0
+ * the bunny that measured 55.1 dB from the default distance and 46.5 dB after the pinch zoom
+ * (more texture for JPEG to lose), against 19.8 and 8.5 dB for the same views turned by 2
+ * degrees (the control the test also checks); 36 dB leaves room for JPEG's loss on a closer view
+ * and another decoder's rounding. */
+#define MIN_PSNR_DB 36.0
 
 static const char token[] = "browser test token, 32 bytes ok";
 
@@ -508,6 +510,17 @@ static size_t canvas_psnr(const char *shot, const char *ref, double *psnr)
     return lit;
 }
 
+/* cam_distance: |eye - target| of the page's camera text. */
+static double cam_distance(const char *cam)
+{
+    double e[3], t[3];
+    if (sscanf(cam, "{\"eye\":[%lf,%lf,%lf],\"target\":[%lf,%lf,%lf]", &e[0], &e[1], &e[2], &t[0],
+               &t[1], &t[2]) != 6)
+        fail_msg("camera text '%s'", cam);
+    return sqrt((e[0] - t[0]) * (e[0] - t[0]) + (e[1] - t[1]) * (e[1] - t[1]) +
+                (e[2] - t[2]) * (e[2] - t[2]));
+}
+
 static void test_chromium_page(void **state)
 {
     fx *f = *state;
@@ -557,10 +570,46 @@ static void test_chromium_page(void **state)
     page_text(wdp, "hudline", v, sizeof v);
     if (!strstr(v, " points ")) fail_msg("the key did not switch to points: '%s'", v);
 
-    /* A real mouse drag: 12 moves of 10 x 3 pixels, 40 ms apart. */
+    /* Touch: one finger orbits (a frame follows); two fingers spreading apart zoom in. */
+    char cam0[1024], cam1[1024];
     page_text(wdp, "nframes", v, sizeof v);
     before = atol(v);
     char act[4096];
+    snprintf(act, sizeof act, "{\"actions\":[{\"type\":\"pointer\",\"id\":\"f1\","
+             "\"parameters\":{\"pointerType\":\"touch\"},\"actions\":["
+             "{\"type\":\"pointerMove\",\"duration\":0,\"origin\":"
+             "{\"element-6066-11e4-a52e-4f735466cecf\":\"%s\"},\"x\":0,\"y\":0},"
+             "{\"type\":\"pointerDown\",\"button\":0},"
+             "{\"type\":\"pointerMove\",\"duration\":100,\"origin\":\"pointer\",\"x\":-30,\"y\":0},"
+             "{\"type\":\"pointerUp\",\"button\":0}]}]}", id);
+    assert_int_equal(tu_wd_post(wdp, "actions", act), 0);
+    wait_page(wdp, "nframes", at_least, before + 1, "a frame after a touch drag");
+    wait_page(wdp, "idle", is_one, 0, "rest after the touch drag");
+    page_text(wdp, "camera", cam0, sizeof cam0);
+    snprintf(act, sizeof act, "{\"actions\":["
+             "{\"type\":\"pointer\",\"id\":\"f1\",\"parameters\":{\"pointerType\":\"touch\"},"
+             "\"actions\":[{\"type\":\"pointerMove\",\"duration\":0,\"origin\":"
+             "{\"element-6066-11e4-a52e-4f735466cecf\":\"%s\"},\"x\":-20,\"y\":0},"
+             "{\"type\":\"pointerDown\",\"button\":0},{\"type\":\"pointerMove\",\"duration\":200,"
+             "\"origin\":\"pointer\",\"x\":-40,\"y\":0},{\"type\":\"pointerUp\",\"button\":0}]},"
+             "{\"type\":\"pointer\",\"id\":\"f2\",\"parameters\":{\"pointerType\":\"touch\"},"
+             "\"actions\":[{\"type\":\"pointerMove\",\"duration\":0,\"origin\":"
+             "{\"element-6066-11e4-a52e-4f735466cecf\":\"%s\"},\"x\":20,\"y\":0},"
+             "{\"type\":\"pointerDown\",\"button\":0},{\"type\":\"pointerMove\",\"duration\":200,"
+             "\"origin\":\"pointer\",\"x\":40,\"y\":0},{\"type\":\"pointerUp\",\"button\":0}]}]}",
+             id, id);
+    assert_int_equal(tu_wd_post(wdp, "actions", act), 0);
+    wait_page(wdp, "idle", is_one, 0, "rest after the pinch");
+    page_text(wdp, "camera", cam1, sizeof cam1);
+    double d0 = cam_distance(cam0), d1 = cam_distance(cam1);
+    printf("pinch: eye-target distance %.4f -> %.4f\n", d0, d1);
+    /* The fingers spread from 40 to 160 pixels apart: the distance shrinks by about that ratio
+     * (measured 0.33 against 0.25: the fingers' last moves are not both seen apart). */
+    assert_true(d1 < 0.5 * d0 && d1 > 0.1 * d0);
+
+    /* A real mouse drag: 12 moves of 10 x 3 pixels, 40 ms apart. */
+    page_text(wdp, "nframes", v, sizeof v);
+    before = atol(v);
     int n = snprintf(act, sizeof act, "{\"actions\":[{\"type\":\"pointer\",\"id\":\"m\","
                      "\"parameters\":{\"pointerType\":\"mouse\"},\"actions\":["
                      "{\"type\":\"pointerMove\",\"duration\":0,\"origin\":"
