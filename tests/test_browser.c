@@ -626,7 +626,14 @@ static void test_chromium_page(void **state)
     page_text(wdp, "lastseq", seq, sizeof seq);
     page_text(wdp, "fsize", fsize, sizeof fsize);
     page_text(wdp, "camera", cam, sizeof cam);
-    printf("page: %s frames, the last one request %s, %s, camera %s\n", frames, seq, fsize, cam);
+    char maxin[32], inputs[32];
+    page_text(wdp, "maxinflight", maxin, sizeof maxin);
+    page_text(wdp, "inputs", inputs, sizeof inputs);
+    printf("page: %s frames for %s input events, at most %s in flight; the last one request %s, "
+           "%s, camera %s\n", frames, inputs, maxin, seq, fsize, cam);
+    /* Frame spoiling: never more than one RENDER waiting for its frame, however fast the input. */
+    assert_string_equal(maxin, "1");
+    assert_true(atol(inputs) >= 12);
     assert_true(atol(frames) >= before + 2); /* at least one while dragging and the full one */
     assert_true(atol(seq) > 5);
     assert_string_equal(fsize, "320x240"); /* at rest: the full size again */

@@ -159,6 +159,7 @@ const S = {
   frames: 0, spoiled: 0, lastSeq: 0, lastCamSeq: 0, fpsT: [], lat: 0, render: 0, encode: 0,
   fw: 0, fh: 0, fpipe: '', lastCam: null, nsave: 0, status: '', closedByUser: false,
   stats: [],
+  outstanding: 0, maxOutstanding: 0, inputs: 0, /* RENDERs without their FRAME; input events */
 };
 window.splatStats = () => S.stats.join('\n');
 for (const k of Object.keys(PARAMS)) S.want[k] = S.applied[k] = PARAMS[k].def;
@@ -186,6 +187,7 @@ function connect() {
   ws.onclose = (ev) => {
     if (S.ws !== ws) return;
     S.ws = null; S.authed = false; S.opened = false; S.inflight = null; S.pending.clear();
+    S.outstanding = 0;
     S.applied = {}; for (const k of Object.keys(PARAMS)) S.applied[k] = PARAMS[k].def;
     if (S.closedByUser) { setStatus('disconnected (reload to connect again)'); return; }
     setStatus(`DISCONNECTED (${ev.code}${ev.reason ? ' ' + ev.reason : ''}); retrying in ${S.backoff / 1000} s`);
@@ -305,7 +307,11 @@ function onError(r, seq, pend) {
     }
     syncControls();
   }
-  if (pend && pend.kind === 'render') { if (S.inflight && S.inflight.seq === seq) S.inflight = null; pump(); }
+  if (pend && pend.kind === 'render') {
+    S.outstanding--;
+    if (S.inflight && S.inflight.seq === seq) S.inflight = null;
+    pump();
+  }
   setStatus(`error ${code}: ${text}`);
 }
 
@@ -369,6 +375,8 @@ function pump() {
   const rseq = send(P.RENDER, null, {kind: 'render', cam, cseq, quality: want.quality,
                                      sent: performance.now()});
   S.inflight = {seq: rseq, t: S.dirtyT};
+  S.outstanding++;
+  S.maxOutstanding = Math.max(S.maxOutstanding, S.outstanding);
   S.dirty = false;
   hud();
 }
@@ -385,6 +393,7 @@ function onFrame(r, seq, pend) {
              cam: pend ? pend.cam : null, sent: pend ? pend.sent : 0, recv: performance.now(),
              work: (renderUs + readbackUs + encodeUs) / 1000, quality: pend ? pend.quality : 0};
   if (S.inflight && S.inflight.seq === seq) S.inflight = null;
+  if (pend && pend.kind === 'render') S.outstanding--;
   if (S.decoding) {
     if (S.waiting) S.spoiled++;   /* a newer frame replaces one that was never shown */
     S.waiting = f;
@@ -458,6 +467,7 @@ function saveBlob(blob, name) {
 /* ---- input ------------------------------------------------------------------------------ */
 
 function input(t) {
+  S.inputs++;
   S.lastInput = t;
   if (!S.interacting) S.interacting = true;
   clearTimeout(S.settleTimer);
@@ -566,6 +576,8 @@ function syncControls() {
 
 function hud() {
   /* For tests: 1 when nothing is due, in flight, being decoded or interacting. */
+  $('maxinflight').textContent = String(S.maxOutstanding);
+  $('inputs').textContent = String(S.inputs);
   $('idle').textContent = !S.dirty && !S.inflight && !S.decoding && !S.waiting && !S.interacting && S.frames ? '1' : '0';
   const fmt = (x) => (Math.round(x * 100) / 100).toString();
   const parts = [`${S.fpsT.length} fps`, `render ${S.render.toFixed(1)} ms`, `encode ${S.encode.toFixed(1)} ms`,
