@@ -48,6 +48,7 @@ typedef struct fx {
     tu_daemon d;
     int http_port;
     tu_wd wd;                    /* the browser, stopped by teardown whatever happened */
+    char read_timeout[8];        /* --read-timeout for start (default 30) */
 } fx;
 
 static int setup(void **state)
@@ -92,7 +93,8 @@ static int teardown(void **state)
 static void start(fx *f, int with_token)
 {
     const char *args[] = {"--listen", "127.0.0.1:0", "--http", "127.0.0.1:0", "--data", f->data,
-                          "--cache", f->cache, with_token ? "--token-file" : NULL, f->tok, NULL};
+                          "--cache", f->cache, "--read-timeout", f->read_timeout[0] ?
+                          f->read_timeout : "30", with_token ? "--token-file" : NULL, f->tok, NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
     size_t len;
     char *log = (char *)tu_read_file(f->d.log, &len);
@@ -431,6 +433,34 @@ static void test_token_over_websocket(void **state)
     tu_ws_close(&w);
 }
 
+/* A WebSocket frame trickled after authentication is a message begun: --read-timeout closes
+ * the connection, as it does a protocol message trickled over TCP. */
+static void test_trickled_frame(void **state)
+{
+    fx *f = *state;
+    snprintf(f->read_timeout, sizeof f->read_timeout, "1");
+    start(f, 0);
+    char resp[2048];
+    tu_ws w;
+    assert_int_equal(tu_ws_open(&w, f->http_port, NULL, NULL, resp, sizeof resp), 0);
+    proto_welcome wel;
+    hello(&w, 1, NULL, &wel);
+    const uint8_t part[] = {0x82, 0x80 | 20, 1}; /* a header cut after a byte of its mask */
+    assert_int_equal(tu_send_all(w.fd, part, sizeof part), 0);
+    struct timespec t0, t1;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    int rc = tu_ws_recv(&w, 5000);
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    double s = (double)(t1.tv_sec - t0.tv_sec) + (t1.tv_nsec - t0.tv_nsec) * 1e-9;
+    printf("a trickled frame header: closed after %.2f s (--read-timeout 1)\n", s);
+    /* The close frame goes out (no data frame is being written), then the connection ends. */
+    assert_int_equal(rc, WS_EV_CLOSE);
+    assert_int_equal(tu_ws_recv(&w, 5000), -2);
+    assert_true(s > 0.8 && s < 3.0);
+    assert_true(log_has(f, "a message still incomplete 1 s after its first byte"));
+    tu_ws_close(&w);
+}
+
 /* ---- the page in Chromium ---- */
 
 static double now_s(void)
@@ -686,6 +716,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_http_answers, setup, teardown),
         cmocka_unit_test_setup_teardown(test_websocket_session, setup, teardown),
         cmocka_unit_test_setup_teardown(test_token_over_websocket, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_trickled_frame, setup, teardown),
         cmocka_unit_test_setup_teardown(test_chromium_page, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -418,7 +418,12 @@ static int read_some(sess *s)
                                                : "closed by the client before the handshake");
         return -1;
     }
-    if (r == NET_AGAIN) return 0;
+    if (r == NET_AGAIN) {
+        /* The transport may hold part of one of its own units (a WebSocket frame header): the
+         * read deadline covers those as well as a protocol message begun. */
+        read_deadline(s);
+        return 0;
+    }
     if (r < 0) {
         s->tr_failed = 1;
         sess_close(s, err[0] ? err : "read failed");
