@@ -495,7 +495,11 @@ static void wait_page(tu_wd *wd, const char *id, int (*ok)(const char *, long), 
 
 static int at_least(const char *v, long n) { return atol(v) >= n; }
 static int is_one(const char *v, long n) { (void)n; return !strcmp(v, "1"); }
-static int says_saved(const char *v, long n) { (void)n; return strstr(v, "saved splat-view-1.png") != NULL; }
+static int says_saved(const char *v, long n)
+{
+    (void)n;
+    return strstr(v, "saved splat-view-1.png") != NULL;
+}
 
 /* render_ref: `splat render` of bun with the points pipeline at 320x240 into path. Returns
  * its exit status. */
@@ -688,7 +692,8 @@ static void test_chromium_page(void **state)
     double c2 = cos(2 * M_PI / 180), s2 = sin(2 * M_PI / 180), d[3], e2[3];
     for (int i = 0; i < 3; i++) d[i] = e[i] - t[i];
     double kd = u[0] * d[0] + u[1] * d[1] + u[2] * d[2];
-    double kxd[3] = {u[1] * d[2] - u[2] * d[1], u[2] * d[0] - u[0] * d[2], u[0] * d[1] - u[1] * d[0]};
+    double kxd[3] = {u[1] * d[2] - u[2] * d[1], u[2] * d[0] - u[0] * d[2],
+                     u[0] * d[1] - u[1] * d[0]};
     for (int i = 0; i < 3; i++) e2[i] = t[i] + d[i] * c2 + kxd[i] * s2 + u[i] * kd * (1 - c2);
     char ref2[700];
     snprintf(ref2, sizeof ref2, "%s/ref2.png", f->root);

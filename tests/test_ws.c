@@ -354,11 +354,14 @@ static void test_http_parse(void **st)
     http_req r;
     char err[200];
     const char *req = "GET /ws?x=1 HTTP/1.1\r\nHost: 127.0.0.1:8080\r\nUpgrade: websocket\r\n"
-                      "Connection: keep-alive, Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
-                      "Origin: http://127.0.0.1:8080\r\nSec-WebSocket-Version: 13\r\nX-Other: a\r\n\r\nXYZ";
+                      "Connection: keep-alive, Upgrade\r\n"
+                      "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+                      "Origin: http://127.0.0.1:8080\r\nSec-WebSocket-Version: 13\r\n"
+                      "X-Other: a\r\n\r\nXYZ";
     size_t n = strlen(req);
     /* Every prefix short of the empty line needs more. */
-    for (size_t k = 0; k < n - 3; k++) assert_int_equal(http_parse_request(req, k, &r, err, sizeof err), 0);
+    for (size_t k = 0; k < n - 3; k++)
+        assert_int_equal(http_parse_request(req, k, &r, err, sizeof err), 0);
     assert_int_equal(http_parse_request(req, n, &r, err, sizeof err), (int)(n - 3));
     assert_string_equal(r.method, "GET");
     assert_string_equal(r.target, "/ws?x=1");
@@ -383,7 +386,8 @@ static void test_http_parse(void **st)
     for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
         int rc = http_parse_request(bad[k].in, strlen(bad[k].in), &r, err, sizeof err);
         if (rc != bad[k].status || !strstr(err, bad[k].words))
-            fail_msg("'%s': %d '%s', expected %d '%s'", bad[k].in, rc, err, bad[k].status, bad[k].words);
+            fail_msg("'%s': %d '%s', expected %d '%s'", bad[k].in, rc, err, bad[k].status,
+                     bad[k].words);
     }
     /* A header value over the kept size, a target over 255 bytes, a head over 8 KiB. */
     char big[HTTP_HEAD_MAX + 64];
@@ -400,7 +404,8 @@ static void test_http_parse(void **st)
     /* The response head. */
     char out[256];
     size_t hl = http_response_head(out, sizeof out, 404, "Not Found", "text/plain", 12, "X: y\r\n");
-    assert_string_equal(out, "HTTP/1.1 404 Not Found\r\nContent-Type: text/plain\r\nContent-Length: 12\r\nX: y\r\n\r\n");
+    assert_string_equal(out, "HTTP/1.1 404 Not Found\r\nContent-Type: text/plain\r\n"
+                             "Content-Length: 12\r\nX: y\r\n\r\n");
     assert_int_equal(hl, strlen(out));
     assert_int_equal(http_response_head(out, 20, 404, "Not Found", "text/plain", 12, NULL), 0);
 }

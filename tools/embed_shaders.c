@@ -1,7 +1,7 @@
 /* embed_shaders: turns shaders/NAME.glsl files into a C table compiled into the daemon.
  *
- *   embed_shaders OUTBASE file.glsl ...               writes OUTBASE.c and OUTBASE.h
- *   embed_shaders --prefix page OUTBASE file ...      the same table named page_src / pages_embedded
+ *   embed_shaders OUTBASE file.glsl ...            writes OUTBASE.c and OUTBASE.h
+ *   embed_shaders --prefix page OUTBASE file ...   the table as page_src / pages_embedded
  *
  * The table maps the file's base name ("splat_vis.glsl") to its text, so the renderer can
  * look shaders up by name and --shader-dir can replace any of them at run time. The browser

@@ -35,8 +35,8 @@ static void usage(FILE *f)
             "                       port, printed on stderr as 'listening on HOST:PORT'). Without\n"
             "                       --token-file only loopback addresses are accepted.\n"
             "  --http HOST:PORT     also serve the browser viewer: GET / is the page, /ws its\n"
-            "                       WebSocket carrying the same protocol (off by default; the same\n"
-            "                       loopback-only rule without --token-file as --listen)\n"
+            "                       WebSocket carrying the same protocol (off by default; the\n"
+            "                       same loopback-only rule without --token-file as --listen)\n"
             "  --port-file F        write the bound port to F once listening (with --http, the\n"
             "                       HTTP port on a second line)\n"
             "  --data DIR           the data directory: clients open clouds by file name in it\n"
@@ -674,7 +674,8 @@ static int start_http(srv *sv)
 /* check_exposure: the rule for every listener: beyond loopback only with a token of at least
  * SRV_TOKEN_MIN bytes. Returns 0, or 1 after printing why (doing, verb: the
  * listener's activity, in two forms, for the message). */
-static int check_exposure(const srv *sv, const char *host, const char *doing, const char *verb)
+static int check_exposure(const srv *sv, const char *host, const char *doing,
+                          const char *verb)
 {
     if (sv->o.token_file && !net_host_is_loopback(host) && sv->token.len < SRV_TOKEN_MIN) {
         /* Beyond loopback the token is all that stands between the network and the data, and
@@ -708,7 +709,8 @@ static int start(srv *sv)
         return 1;
     }
     if (check_exposure(sv, sv->o.host, "listening", "listen") != 0 ||
-        (sv->o.http_host[0] && check_exposure(sv, sv->o.http_host, "serving HTTP", "serve HTTP") != 0))
+        (sv->o.http_host[0] &&
+         check_exposure(sv, sv->o.http_host, "serving HTTP", "serve HTTP") != 0))
         return 1;
     /* Temporary files of cache writes interrupted by a crash or kill -9 (the O_EXCL fallback
      * where O_TMPFILE is missing) are removed before anything is prepared. */
@@ -791,7 +793,8 @@ static int start(srv *sv)
                 v6 ? "]" : "", sv->http_bound_port);
         fflush(stderr);
     }
-    if (sv->o.port_file && write_port_file(sv->o.port_file, sv->bound_port, sv->http_bound_port) != 0) {
+    if (sv->o.port_file &&
+        write_port_file(sv->o.port_file, sv->bound_port, sv->http_bound_port) != 0) {
         fprintf(stderr, "splatd: cannot write the port file %s: %s\n", sv->o.port_file, strerror(errno));
         return 1;
     }

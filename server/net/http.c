@@ -137,7 +137,8 @@ size_t http_response_head(char *out, size_t cap, int status, const char *reason,
 {
     int n;
     if (ctype)
-        n = snprintf(out, cap, "HTTP/1.1 %d %s\r\nContent-Type: %s\r\nContent-Length: %zu\r\n%s\r\n",
+        n = snprintf(out, cap,
+                     "HTTP/1.1 %d %s\r\nContent-Type: %s\r\nContent-Length: %zu\r\n%s\r\n",
                      status, reason, ctype, content_len, extra ? extra : "");
     else
         n = snprintf(out, cap, "HTTP/1.1 %d %s\r\n%s\r\n", status, reason, extra ? extra : "");

@@ -25,8 +25,9 @@ typedef struct http_req {
 
 /* http_parse_request: parses the request head at the start of buf[0..len). Returns the head's
  * length (through its empty line) when complete, 0 when more bytes are needed (and len is
- * below HTTP_HEAD_MAX), or a negative HTTP status (-400 malformed, -414 target over 255 bytes, -431 head or a kept header
- * too large, -505 not HTTP/1.x) with err naming what and where. */
+ * below HTTP_HEAD_MAX), or a negative HTTP status (-400 malformed, -414 target over 255
+ * bytes, -431 head or a kept header too large, -505 not HTTP/1.x) with err naming what and
+ * where. */
 int http_parse_request(const char *buf, size_t len, http_req *r, char *err, size_t errlen);
 
 /* http_has_token: 1 when the comma-separated header value holds token (case-insensitive,

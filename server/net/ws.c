@@ -100,12 +100,15 @@ static int first_bytes(ws_decoder *d, ws_event *ev)
         return fail(d, ev, WS_CLOSE_PROTOCOL, "frame with reserved bits 0x%llx set (no extension "
                     "was negotiated)", (unsigned long long)(b0 & 0x70));
     if ((op > WS_OP_BINARY && op < WS_OP_CLOSE) || op > WS_OP_PONG)
-        return fail(d, ev, WS_CLOSE_PROTOCOL, "frame with reserved opcode %llu", (unsigned long long)op);
+        return fail(d, ev, WS_CLOSE_PROTOCOL, "frame with reserved opcode %llu",
+                    (unsigned long long)op);
     if (d->require_mask && !d->masked)
-        return fail(d, ev, WS_CLOSE_PROTOCOL, "unmasked frame (opcode %llu) from a client", (unsigned long long)op);
+        return fail(d, ev, WS_CLOSE_PROTOCOL, "unmasked frame (opcode %llu) from a client",
+                    (unsigned long long)op);
     if (op >= WS_OP_CLOSE) {
         if (!d->fin)
-            return fail(d, ev, WS_CLOSE_PROTOCOL, "fragmented control frame (opcode %llu)", (unsigned long long)op);
+            return fail(d, ev, WS_CLOSE_PROTOCOL, "fragmented control frame (opcode %llu)",
+                        (unsigned long long)op);
         if (len7 > WS_CONTROL_MAX)
             return fail(d, ev, WS_CLOSE_PROTOCOL, "control frame (opcode %llu) longer than 125 "
                         "bytes", (unsigned long long)op);
@@ -183,7 +186,8 @@ static int control_done(ws_decoder *d, ws_event *ev)
         if (d->ctl_len >= 2) {
             unsigned c = (unsigned)d->ctl[0] << 8 | d->ctl[1];
             if (!valid_close_code(c))
-                return fail(d, ev, WS_CLOSE_PROTOCOL, "close frame with invalid code %llu", (unsigned long long)c);
+                return fail(d, ev, WS_CLOSE_PROTOCOL, "close frame with invalid code %llu",
+                            (unsigned long long)c);
             ev->code = (uint16_t)c;
             ev->len = d->ctl_len - 2;
             memcpy(ev->payload, d->ctl + 2, ev->len);

@@ -30,7 +30,8 @@ enum { WS_EV_NONE = 0,      /* input used up, or the output buffer is full */
        WS_EV_PING,          /* ev.payload holds the ping's payload: answer with a pong */
        WS_EV_PONG,
        WS_EV_CLOSE,         /* ev.code / ev.payload (reason): answer with a close */
-       WS_EV_ERROR = -1 };  /* malformed input: ev.code is the close code to send, ev.why says why */
+       WS_EV_ERROR = -1 };  /* malformed input: ev.code is the close code to send, ev.why
+                             * says why */
 
 typedef struct ws_event {
     uint16_t code;                      /* CLOSE: the peer's code (1005 when none); ERROR: ours */

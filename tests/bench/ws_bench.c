@@ -8,9 +8,10 @@
  *    time until the FRAME message is fully received (not decoded); the two connections render
  *    the same cameras, interleaved so that both see the same load. Medians, and each minus the
  *    frame's own render + read-back + encode time.
- * 2. (--framing 1, the default) Framing cost per frame, in process: the bytes WebSocket framing adds (server frame header,
- *    client header + mask of each request), ws_decode of a masked CAMERA message and the
- *    server's frame header + first-4-KiB staging (ws_conn.c), in ns.
+ * 2. (--framing 1, the default) Framing cost per frame, in process: the bytes WebSocket
+ *    framing adds (server frame header, client header + mask of each request), ws_decode of
+ *    a masked CAMERA message and the server's frame header + first-4-KiB staging (ws_conn.c),
+ *    in ns.
  * 3. (--page N) The page itself in headless Chromium (chromedriver; skipped with a line when
  *    absent): N single mouse drags 0.6 s apart on the canvas of WxH; for every frame the page
  *    drew, its camera sent -> frame received and -> drawn (window.splatStats), then the same
@@ -218,8 +219,8 @@ static void framing_cost(size_t frame_bytes)
     double enc_ns = (now_us() - t0) * 1e3 / n;
     (void)sink;
     free(payload);
-    printf("| WebSocket bytes per frame | %d + %d | server frame header (10 for a frame of 64 KiB or "
-           "more, 4 below) + client header and mask of CAMERA and RENDER (2 x 6) |\n",
+    printf("| WebSocket bytes per frame | %d + %d | server frame header (10 for a frame of 64 "
+           "KiB or more, 4 below) + client header and mask of CAMERA and RENDER (2 x 6) |\n",
            frame_bytes >= 65536 ? 10 : 4, 12);
     printf("| ws_decode of a masked CAMERA (%zu B) | %.0f ns | unmasking into the session's input, "
            "in process |\n", b.len, dec_ns);
@@ -259,19 +260,21 @@ static int page_run(int hport, const char *cloud, const char *pipeline, int w, i
     for (int d = -1; d < nd; d++) {
         if (d >= 0) {
             char act[1024];
-            snprintf(act, sizeof act, "{\"actions\":[{\"type\":\"pointer\",\"id\":\"m\",\"parameters\":"
-                     "{\"pointerType\":\"mouse\"},\"actions\":[{\"type\":\"pointerMove\",\"duration\":0,"
-                     "\"origin\":{\"element-6066-11e4-a52e-4f735466cecf\":\"%s\"},\"x\":0,\"y\":0},"
-                     "{\"type\":\"pointerDown\",\"button\":0},{\"type\":\"pointerMove\",\"duration\":0,"
-                     "\"origin\":\"pointer\",\"x\":12,\"y\":0},{\"type\":\"pointerUp\",\"button\":0}]}]}",
-                     id);
+            snprintf(act, sizeof act,
+                     "{\"actions\":[{\"type\":\"pointer\",\"id\":\"m\",\"parameters\":"
+                     "{\"pointerType\":\"mouse\"},\"actions\":[{\"type\":\"pointerMove\","
+                     "\"duration\":0,\"origin\":"
+                     "{\"element-6066-11e4-a52e-4f735466cecf\":\"%s\"},\"x\":0,\"y\":0},"
+                     "{\"type\":\"pointerDown\",\"button\":0},{\"type\":\"pointerMove\","
+                     "\"duration\":0,\"origin\":\"pointer\",\"x\":12,\"y\":0},"
+                     "{\"type\":\"pointerUp\",\"button\":0}]}]}", id);
             if (tu_wd_post(&wd, "actions", act) != 0) goto out;
             usleep(600000);
         }
         /* Rest: nothing due or in flight (the page's #idle), at most 30 s. */
         for (int k = 0; k < 1500; k++) {
-            if (tu_wd_eval(&wd, "return document.getElementById('idle').textContent", v, sizeof v) == 0 &&
-                !strcmp(v, "1"))
+            if (tu_wd_eval(&wd, "return document.getElementById('idle').textContent", v,
+                           sizeof v) == 0 && !strcmp(v, "1"))
                 break;
             usleep(20000);
         }
@@ -336,8 +339,8 @@ static int page_compare(conn *tcp, conn *ws, const page_cam *pc, int n, int w, i
            "%.2f ms |\n", w, h, median(a, n), n, full, median(oa, n));
     printf("| page: camera sent -> frame drawn | %.2f ms | + createImageBitmap and drawImage |\n",
            median(b, n));
-    printf("| same cameras and JPEG quality, C client over TCP | %.2f ms | minus render + read-back "
-           "+ encode: %.2f ms |\n", median(t, n), median(ot, n));
+    printf("| same cameras and JPEG quality, C client over TCP | %.2f ms | minus render + "
+           "read-back + encode: %.2f ms |\n", median(t, n), median(ot, n));
     printf("| same cameras and JPEG quality, C client over WebSocket | %.2f ms | minus render + "
            "read-back + encode: %.2f ms (render + read-back + encode of both: %.2f ms; the page's: "
            "%.2f ms) |\n", median(u, n), median(ou, n), median(q, n), median(k, n));
@@ -396,7 +399,8 @@ int main(int argc, char **argv)
                        cam.target, cam.up);
         double a, b, wa, wb;
         conn *first = (i & 1) ? &ws : &tcp, *second = (i & 1) ? &tcp : &ws;
-        if (c_frame(first, &cam, &a, &wa, &bytes) != 0 || c_frame(second, &cam, &b, &wb, &bytes) != 0) {
+        if (c_frame(first, &cam, &a, &wa, &bytes) != 0 ||
+            c_frame(second, &cam, &b, &wb, &bytes) != 0) {
             fprintf(stderr, "ws_bench: frame %d failed\n", i);
             return 1;
         }
