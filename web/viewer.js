@@ -16,8 +16,8 @@
  * Query (for links and tests): ?cloud=NAME opens NAME at once; ?size=WxH fixes the frame size;
  * ?pipeline=NAME starts with that pipeline;
  * ?token=... is not read (a token never goes into a URL): the page asks for it. For the bench,
- * window.splatStats() returns one line per frame: its camera and JPEG quality, camera sent -> frame received and
- * -> drawn, and the frame's render + read-back + encode time (ms). */
+ * window.splatStats() returns one line per frame: its camera and JPEG quality, camera sent ->
+ * frame received and -> drawn, and the frame's render + read-back + encode time (ms). */
 'use strict';
 
 const P = {
@@ -70,15 +70,21 @@ class Writer {
 }
 
 class Reader {
-  constructor(buf, off, len) { this.v = new DataView(buf, off, len); this.o = 0; this.buf = buf; this.base = off; }
+  constructor(buf, off, len) {
+    this.v = new DataView(buf, off, len); this.o = 0; this.buf = buf; this.base = off;
+  }
   need(k) { if (this.o + k > this.v.byteLength) throw new Error('message truncated'); }
   u8() { this.need(1); return this.v.getUint8(this.o++); }
   u16() { this.need(2); const x = this.v.getUint16(this.o, true); this.o += 2; return x; }
   u32() { this.need(4); const x = this.v.getUint32(this.o, true); this.o += 4; return x; }
-  u64() { this.need(8); const x = Number(this.v.getBigUint64(this.o, true)); this.o += 8; return x; }
+  u64() {
+    this.need(8); const x = Number(this.v.getBigUint64(this.o, true)); this.o += 8; return x;
+  }
   f32() { this.need(4); const x = this.v.getFloat32(this.o, true); this.o += 4; return x; }
   f64() { this.need(8); const x = this.v.getFloat64(this.o, true); this.o += 8; return x; }
-  bytes(k) { this.need(k); const a = new Uint8Array(this.buf, this.base + this.o, k); this.o += k; return a; }
+  bytes(k) {
+    this.need(k); const a = new Uint8Array(this.buf, this.base + this.o, k); this.o += k; return a;
+  }
   str8() { return new TextDecoder().decode(this.bytes(this.u8())); }
   str16() { return new TextDecoder().decode(this.bytes(this.u16())); }
   rest() { return this.bytes(this.v.byteLength - this.o); }
@@ -96,8 +102,13 @@ function message(type, seq, payload) {
 
 const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
 const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
-function norm(a) { const l = Math.sqrt(dot(a, a)); if (l > 0) { a[0] /= l; a[1] /= l; a[2] /= l; } return l; }
+const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                          a[0] * b[1] - a[1] * b[0]];
+function norm(a) {
+  const l = Math.sqrt(dot(a, a));
+  if (l > 0) { a[0] /= l; a[1] /= l; a[2] /= l; }
+  return l;
+}
 function rotate(v, k, ang) {
   const c = Math.cos(ang), s = Math.sin(ang), kxv = cross(k, v), kv = dot(k, v);
   for (let i = 0; i < 3; i++) v[i] = v[i] * c + kxv[i] * s + k[i] * kv * (1 - c);
@@ -139,9 +150,13 @@ function orbitPan(o, dx, dy, h) {
   for (let i = 0; i < 3; i++) o.target[i] += (-dx * right[i] + dy * camup[i]) * px;
 }
 
-function orbitZoom(o, n) { const f = Math.pow(0.9, n); for (let i = 0; i < 3; i++) o.offset[i] *= f; }
+function orbitZoom(o, n) {
+  const f = Math.pow(0.9, n);
+  for (let i = 0; i < 3; i++) o.offset[i] *= f;
+}
 
-const cloneOrbit = (o) => ({target: o.target.slice(), offset: o.offset.slice(), up: o.up.slice(), fov: o.fov});
+const cloneOrbit = (o) => ({target: o.target.slice(), offset: o.offset.slice(), up: o.up.slice(),
+                            fov: o.fov});
 
 /* ---- state ------------------------------------------------------------------------------ */
 
@@ -155,7 +170,8 @@ const S = {
   interacting: false, lastInput: 0, settleTimer: 0,
   dirty: false, dirtyT: 0,   /* a request is due; the time of the oldest input not yet sent */
   inflight: null,            /* the RENDER awaiting its FRAME: {seq, t} */
-  decoding: false, waiting: null, /* a frame being decoded; the newest frame that arrived meanwhile */
+  decoding: false,           /* a frame is being decoded */
+  waiting: null,             /* the newest frame that arrived meanwhile */
   frames: 0, spoiled: 0, lastSeq: 0, lastCamSeq: 0, fpsT: [], lat: 0, render: 0, encode: 0,
   fw: 0, fh: 0, fpipe: '', lastCam: null, nsave: 0, status: '', closedByUser: false,
   stats: [],
@@ -164,7 +180,8 @@ const S = {
 window.splatStats = () => S.stats.join('\n');
 for (const k of Object.keys(PARAMS)) S.want[k] = S.applied[k] = PARAMS[k].def;
 S.want.quality = REST_QUALITY;
-if (PIPELINES.includes(query.get('pipeline'))) S.want.pipeline = PIPELINES.indexOf(query.get('pipeline'));
+if (PIPELINES.includes(query.get('pipeline')))
+  S.want.pipeline = PIPELINES.indexOf(query.get('pipeline'));
 
 function setStatus(s) { S.status = s; hud(); }
 function nextSeq() { S.seq = (S.seq + 1) >>> 0; if (S.seq === 0) S.seq = 1; return S.seq; }
@@ -183,14 +200,17 @@ function connect() {
   ws.binaryType = 'arraybuffer';
   S.ws = ws;
   ws.onopen = () => { S.backoff = 250; hello(null); };
-  ws.onmessage = (ev) => { try { onMessage(ev.data); } catch (e) { setStatus('bad message: ' + e.message); } };
+  ws.onmessage = (ev) => {
+    try { onMessage(ev.data); } catch (e) { setStatus('bad message: ' + e.message); }
+  };
   ws.onclose = (ev) => {
     if (S.ws !== ws) return;
     S.ws = null; S.authed = false; S.opened = false; S.inflight = null; S.pending.clear();
     S.outstanding = 0;
     S.applied = {}; for (const k of Object.keys(PARAMS)) S.applied[k] = PARAMS[k].def;
     if (S.closedByUser) { setStatus('disconnected (reload to connect again)'); return; }
-    setStatus(`DISCONNECTED (${ev.code}${ev.reason ? ' ' + ev.reason : ''}); retrying in ${S.backoff / 1000} s`);
+    const why = `${ev.code}${ev.reason ? ' ' + ev.reason : ''}`;
+    setStatus(`DISCONNECTED (${why}); retrying in ${S.backoff / 1000} s`);
     setTimeout(connect, S.backoff);
     S.backoff = Math.min(S.backoff * 2, 5000);
   };
@@ -206,11 +226,12 @@ function hello(proof) {
 /* answerChallenge: HMAC-SHA256(key = token, message = challenge) with WebCrypto (PROTOCOL.md 4). */
 async function answerChallenge(tokenText) {
   if (!window.crypto || !crypto.subtle) {
-    setStatus('the server needs a token, and WebCrypto is only available on https or localhost pages');
+    setStatus('the server needs a token, and WebCrypto is only on https or localhost pages');
     return;
   }
   const tok = new TextEncoder().encode(tokenText.replace(/[\r\n]+$/, ''));
-  const key = await crypto.subtle.importKey('raw', tok, {name: 'HMAC', hash: 'SHA-256'}, false, ['sign']);
+  const key = await crypto.subtle.importKey('raw', tok, {name: 'HMAC', hash: 'SHA-256'}, false,
+                                            ['sign']);
   const proof = new Uint8Array(await crypto.subtle.sign('HMAC', key, S.challenge));
   hello(proof);
 }
@@ -226,7 +247,11 @@ function onMessage(buf) {
   switch (type) {
   case P.WELCOME: onWelcome(r); break;
   case P.CLOUDS: onClouds(r); break;
-  case P.PROGRESS: { const ph = r.u8(), f = r.f32(), tx = r.str8(); setStatus(`preparing ${S.cloud}: ${tx || 'phase ' + ph} ${(f * 100).toFixed(0)}%`); break; }
+  case P.PROGRESS: {
+    const ph = r.u8(), f = r.f32(), tx = r.str8();
+    setStatus(`preparing ${S.cloud}: ${tx || 'phase ' + ph} ${(f * 100).toFixed(0)}%`);
+    break;
+  }
   case P.INFO: onInfo(r); break;
   case P.FRAME: onFrame(r, seq, pend); break;
   case P.OK: break;
@@ -240,7 +265,8 @@ function onWelcome(r) {
   const version = r.u16(), authRequired = r.u8(), authenticated = r.u8();
   S.challenge = r.bytes(32).slice();
   const maxReq = r.u32(), maxW = r.u32(), maxH = r.u32();
-  S.welcome = {version, maxReq, maxW, maxH, server: r.str8(), backend: r.str8(), renderer: r.str8()};
+  S.welcome = {version, maxReq, maxW, maxH, server: r.str8(), backend: r.str8(),
+               renderer: r.str8()};
   if (authRequired && !authenticated) {
     $('token-box').hidden = false;
     setStatus('this server needs its token');
@@ -267,7 +293,8 @@ function onClouds(r) {
     const name = r.str8(), bytes = r.u64(), points = r.u64(), flags = r.u32();
     const o = document.createElement('option');
     o.value = name;
-    o.textContent = `${name} (${(bytes / 1048576).toFixed(1)} MiB${points ? ', ' + points + ' points' : ''}${flags & 2 ? ', loaded' : ''})`;
+    const extra = (points ? `, ${points} points` : '') + (flags & 2 ? ', loaded' : '');
+    o.textContent = `${name} (${(bytes / 1048576).toFixed(1)} MiB${extra})`;
     sel.appendChild(o);
   }
   sel.value = S.cloud;
@@ -302,7 +329,8 @@ function onError(r, seq, pend) {
   if (pend && pend.kind === 'params' && (code === E_BAD_PARAM_NAME || code === E_BAD_PARAM_VALUE)) {
     /* A parameter this server lacks: marked n/a and put back, never an error loop. */
     for (const [k, v] of Object.entries(pend.values)) {
-      if (k === 'pipeline') S.pipeUnavail.add(v); else if (code === E_BAD_PARAM_NAME) S.unavail.add(k);
+      if (k === 'pipeline') S.pipeUnavail.add(v);
+      else if (code === E_BAD_PARAM_NAME) S.unavail.add(k);
       S.want[k] = S.applied[k] = pend.old[k];
     }
     syncControls();
@@ -321,7 +349,8 @@ function fullSize() {
   const fixed = /^(\d+)x(\d+)$/.exec(query.get('size') || '');
   if (fixed) return [+fixed[1], +fixed[2]];
   const c = $('canvas'), dpr = Math.min(window.devicePixelRatio || 1, 2);
-  return [Math.max(1, Math.round(c.clientWidth * dpr)), Math.max(1, Math.round(c.clientHeight * dpr))];
+  return [Math.max(1, Math.round(c.clientWidth * dpr)),
+          Math.max(1, Math.round(c.clientHeight * dpr))];
 }
 
 /* touchRequest: something the frame shows changed (t: when the input happened). */
@@ -342,7 +371,9 @@ function sendParams(want) {
   for (const [k, p] of Object.entries(PARAMS)) {
     if (want[k] === S.applied[k] || S.unavail.has(k)) continue;
     w.str8(k); w.u8(p.type);
-    if (p.type === T_ENUM) w.i32(want[k]); else if (p.type === T_FLOAT) w.f32(want[k]); else w.i64(want[k]);
+    if (p.type === T_ENUM) w.i32(want[k]);
+    else if (p.type === T_FLOAT) w.f32(want[k]);
+    else w.i64(want[k]);
     values[k] = want[k]; old[k] = S.applied[k]; S.applied[k] = want[k];
   }
   send(P.PARAMS, w.done(), {kind: 'params', values, old});
@@ -369,7 +400,8 @@ function pump() {
   let [w, h] = fullSize();
   if (drag) { w = (w + 1) >> 1; h = (h + 1) >> 1; }
   sendParams(want);
-  const cam = {eye: [0, 1, 2].map((i) => S.orbit.target[i] + S.orbit.offset[i]), target: S.orbit.target.slice(),
+  const cam = {eye: [0, 1, 2].map((i) => S.orbit.target[i] + S.orbit.offset[i]),
+               target: S.orbit.target.slice(),
                up: S.orbit.up.slice(), fov: S.orbit.fov, width: w, height: h};
   const cseq = send(P.CAMERA, cameraPayload(S.orbit, w, h), null);
   const rseq = send(P.RENDER, null, {kind: 'render', cam, cseq, quality: want.quality,
@@ -423,7 +455,8 @@ async function show(f) {
        * frame received and -> drawn, and the frame's own render + read-back + encode, in ms. */
       const c = f.cam;
       S.stats.push([c.width, c.height, ...c.eye, ...c.target, ...c.up, c.fov, f.quality,
-                    (f.recv - f.sent).toFixed(3), (now - f.sent).toFixed(3), f.work.toFixed(3)].join(' '));
+                    (f.recv - f.sent).toFixed(3), (now - f.sent).toFixed(3),
+                    f.work.toFixed(3)].join(' '));
     }
     $('nframes').textContent = String(S.frames);
     $('lastseq').textContent = String(f.seq);
@@ -476,7 +509,10 @@ function input(t) {
 }
 
 function settle() {
-  if (performance.now() - S.lastInput < SETTLE_MS - 1) { S.settleTimer = setTimeout(settle, SETTLE_MS); return; }
+  if (performance.now() - S.lastInput < SETTLE_MS - 1) {
+    S.settleTimer = setTimeout(settle, SETTLE_MS);
+    return;
+  }
   S.interacting = false;
   touchRequest(performance.now());
 }
@@ -528,14 +564,21 @@ function stepParam(name, dir) {
 function paramChanged() { syncControls(); touchRequest(performance.now()); }
 
 function setPipeline(i) {
-  if (i >= PIPELINES.length) { setStatus(`no pipeline ${i + 1}: this viewer knows ${PIPELINES.length}`); return; }
-  if (S.pipeUnavail.has(i)) { setStatus(`pipeline ${PIPELINES[i]}: not available on this server`); return; }
+  if (i >= PIPELINES.length) {
+    setStatus(`no pipeline ${i + 1}: this viewer knows ${PIPELINES.length}`);
+    return;
+  }
+  if (S.pipeUnavail.has(i)) {
+    setStatus(`pipeline ${PIPELINES[i]}: not available on this server`);
+    return;
+  }
   S.want.pipeline = i;
   paramChanged();
 }
 
 function onKey(e) {
-  if (e.target.tagName === 'INPUT' && e.target.type !== 'range' && e.target.type !== 'checkbox') return;
+  const t = e.target;
+  if (t.tagName === 'INPUT' && t.type !== 'range' && t.type !== 'checkbox') return;
   const k = e.key.toLowerCase();
   if (k >= '1' && k <= '9') { setPipeline(k.charCodeAt(0) - 49); return; }
   switch (k) {
@@ -578,10 +621,12 @@ function hud() {
   /* For tests: 1 when nothing is due, in flight, being decoded or interacting. */
   $('maxinflight').textContent = String(S.maxOutstanding);
   $('inputs').textContent = String(S.inputs);
-  $('idle').textContent = !S.dirty && !S.inflight && !S.decoding && !S.waiting && !S.interacting && S.frames ? '1' : '0';
+  const rest = !S.dirty && !S.inflight && !S.decoding && !S.waiting && !S.interacting;
+  $('idle').textContent = rest && S.frames ? '1' : '0';
   const fmt = (x) => (Math.round(x * 100) / 100).toString();
-  const parts = [`${S.fpsT.length} fps`, `render ${S.render.toFixed(1)} ms`, `encode ${S.encode.toFixed(1)} ms`,
-                 `latency ${S.lat.toFixed(0)} ms`, S.fpipe || PIPELINES[S.want.pipeline], `${S.fw}x${S.fh}`,
+  const parts = [`${S.fpsT.length} fps`, `render ${S.render.toFixed(1)} ms`,
+                 `encode ${S.encode.toFixed(1)} ms`, `latency ${S.lat.toFixed(0)} ms`,
+                 S.fpipe || PIPELINES[S.want.pipeline], `${S.fw}x${S.fh}`,
                  `λ ${fmt(S.want.lambda)} t ${fmt(S.want.t)} l_m ${fmt(S.want.l_m)}`,
                  `field ${FIELDS[S.want.field]}`, S.want.shading ? 'EDL' : '',
                  `q${S.interacting ? DRAG_QUALITY : REST_QUALITY}`, `${S.frames} frames`];
@@ -592,12 +637,18 @@ function hud() {
 
 function setup() {
   const pipe = $('pipeline');
-  PIPELINES.forEach((n, i) => { const o = document.createElement('option'); o.value = String(i); o.textContent = `${i + 1} ${n}`; pipe.appendChild(o); });
+  const option = (sel, value, text) => {
+    const o = document.createElement('option');
+    o.value = value; o.textContent = text;
+    sel.appendChild(o);
+  };
+  PIPELINES.forEach((n, i) => option(pipe, String(i), `${i + 1} ${n}`));
   const field = $('field');
-  FIELDS.forEach((n, i) => { const o = document.createElement('option'); o.value = String(i); o.textContent = n; field.appendChild(o); });
+  FIELDS.forEach((n, i) => option(field, String(i), n));
   pipe.onchange = () => setPipeline(+pipe.value);
   field.onchange = () => { S.want.field = +field.value; paramChanged(); };
-  for (const k of ['lambda', 't', 'l_m']) $(k).oninput = () => { S.want[k] = +$(k).value; paramChanged(); };
+  for (const k of ['lambda', 't', 'l_m'])
+    $(k).oninput = () => { S.want[k] = +$(k).value; paramChanged(); };
   $('edl').onchange = () => { S.want.shading = $('edl').checked ? 1 : 0; paramChanged(); };
   $('clouds').onchange = () => openCloud($('clouds').value);
   $('reset').onclick = () => onKey({key: 'r', target: document.body, preventDefault() {}});
@@ -614,7 +665,13 @@ function setup() {
   c.addEventListener('contextmenu', (e) => e.preventDefault());
   window.addEventListener('keydown', onKey);
   window.addEventListener('resize', () => { if (S.orbit) input(performance.now()); });
-  setInterval(() => { if (S.ws && S.authed) { const w = new Writer(); w.i64(Date.now()); send(P.PING, w.done(), null); } }, 60000);
+  /* A PING a minute keeps an idle tab inside --idle-timeout. */
+  setInterval(() => {
+    if (!S.ws || !S.authed) return;
+    const w = new Writer();
+    w.i64(Date.now());
+    send(P.PING, w.done(), null);
+  }, 60000);
   syncControls();
   connect();
 }
