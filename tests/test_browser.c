@@ -361,6 +361,32 @@ static void test_websocket_session(void **state)
     assert_int_equal(em.code, PROTO_E_BAD_MAGIC);
     expect_close(&w, 1000);
     tu_ws_close(&w);
+    /* One protocol message per WebSocket message: two PINGs in one message are answered (the
+     * bytes reached the session in order), then the connection is closed with 1007; so is half
+     * a message. */
+    assert_int_equal(tu_ws_open(&w, p, NULL, NULL, resp, sizeof resp), 0);
+    hello(&w, 1, NULL, &wel);
+    proto_ping pg = {.token = 42};
+    proto_enc_ping(&b, 2, &pg);
+    proto_enc_ping(&b, 3, &pg);
+    assert_int_equal(b.len, 2 * (PROTO_HEADER_LEN + 8));
+    ws_send_msg(&w, &b);
+    ws_expect(&w, PROTO_MSG_PONG, &h, NULL, 0);
+    assert_int_equal(h.seq, 2);
+    ws_expect(&w, PROTO_MSG_PONG, &h, NULL, 0);
+    assert_int_equal(h.seq, 3);
+    expect_close(&w, 1007);
+    tu_ws_close(&w);
+    assert_true(log_has(f, "a WebSocket message of 48 bytes is not one protocol message (its "
+                           "header gives 24)"));
+    assert_int_equal(tu_ws_open(&w, p, NULL, NULL, resp, sizeof resp), 0);
+    hello(&w, 1, NULL, &wel);
+    proto_enc_ping(&b, 2, &pg);
+    assert_int_equal(tu_ws_send(&w, WS_OP_BINARY, b.data, 10), 0);
+    proto_buf_free(&b);
+    expect_close(&w, 1007);
+    tu_ws_close(&w);
+
     /* Requests before HELLO: AUTH_REQUIRED, as over TCP. */
     assert_int_equal(tu_ws_open(&w, p, NULL, NULL, resp, sizeof resp), 0);
     proto_enc_empty(&b, PROTO_MSG_LIST, 1);

@@ -9,8 +9,9 @@
  * GET /"), or NET_AGAIN (nothing can move now; *want is EV_READ or EV_WRITE, the socket event
  * that lets the call progress: a layer's read may have its own output to write first) or
  * NET_ERR (err holds a sentence). A write that returned NET_AGAIN is retried with the same
- * bytes, and the caller writes one protocol message at a time, from its first byte, in calls
- * that continue it (a framing layer turns each message into one frame). pending says whether
+ * bytes. The caller writes whole protocol messages in order (several may come in one call, and
+ * a call may continue the rest of one), so a framing layer finds each message's end from its
+ * header and makes it one frame; a write may take fewer bytes than offered. pending says whether
  * the layer holds input it already took off the socket (the socket will not be readable for
  * it): the caller reads again without waiting for an event. Event-loop thread. */
 #pragma once

@@ -9,6 +9,7 @@
 #include "ev.h"
 #include "http.h"
 #include "net.h"
+#include "proto.h"
 #include "ws.h"
 
 enum {
@@ -46,6 +47,12 @@ struct ws_conn {
     uint8_t stage[WS_MAX_HEADER + WSC_STAGE];
     size_t st_len, st_off, st_ret;
     uint64_t frame_left;       /* payload bytes of the data frame being written, not yet taken */
+    /* One protocol message per WebSocket message: the current message's size and header. */
+    uint64_t msg_got;
+    uint8_t msg_hdr[PROTO_HEADER_LEN];
+    size_t msg_hdr_have;
+    char bad_msg[160];         /* a message that was not one protocol message: fails the next
+                                * read */
 };
 
 ws_conn *ws_conn_new(const ws_conn_cfg *cfg, const net_transport *lower, void *lower_ctx)
@@ -273,9 +280,41 @@ static void flush_control(ws_conn *c)
     }
 }
 
+/* one_message: follows the data message being received (n more bytes at p; end: it ended)
+ * and, at its end, checks that it held exactly one protocol message: a header and the payload
+ * length the header gives. A mismatch is kept in bad_msg for the next read. */
+static void one_message(ws_conn *c, const uint8_t *p, size_t n, int end)
+{
+    size_t k = PROTO_HEADER_LEN - c->msg_hdr_have;
+    if (k > n) k = n;
+    memcpy(c->msg_hdr + c->msg_hdr_have, p, k);
+    c->msg_hdr_have += k;
+    c->msg_got += n;
+    if (!end) return;
+    uint64_t want = 0;
+    if (c->msg_hdr_have == PROTO_HEADER_LEN) {
+        proto_header h;
+        proto_get_header(c->msg_hdr, &h);
+        want = PROTO_HEADER_LEN + (uint64_t)h.len;
+    }
+    if (c->msg_got != want || want == 0)
+        snprintf(c->bad_msg, sizeof c->bad_msg, "a WebSocket message of %llu bytes is not one "
+                 "protocol message (its header gives %llu)", (unsigned long long)c->msg_got,
+                 (unsigned long long)want);
+    c->msg_got = 0;
+    c->msg_hdr_have = 0;
+}
+
 static ssize_t read_open(ws_conn *c, void *buf, size_t len, int *want, char *err, size_t errlen)
 {
     flush_control(c);
+    if (c->bad_msg[0]) {
+        /* Reported one read late, so the bytes before it reached the session in order. */
+        queue_close(c, WS_CLOSE_INVALID, "one protocol message per WebSocket message");
+        flush_control(c);
+        snprintf(err, errlen, "WebSocket: %s (closed with %u)", c->bad_msg, WS_CLOSE_INVALID);
+        return NET_ERR;
+    }
     if (c->rin_off == c->rin_len) {
         c->rin_off = c->rin_len = 0;
         ssize_t r = c->lo->read(c->lo_ctx, c->fd, c->rin, sizeof c->rin, want, err, errlen);
@@ -288,6 +327,8 @@ static ssize_t read_open(ws_conn *c, void *buf, size_t len, int *want, char *err
     int e = ws_decode(&c->dec, c->rin + c->rin_off, c->rin_len - c->rin_off, &used, buf, len,
                       &produced, &ev);
     c->rin_off += used;
+    if (produced) one_message(c, (const uint8_t *)buf, produced, e == WS_EV_END);
+    else if (e == WS_EV_END) one_message(c, buf, 0, 1);
     if (e == WS_EV_ERROR) {
         /* The close frame can go only at a frame boundary of the output; mid-frame the
          * connection just ends. */
@@ -395,23 +436,30 @@ static ssize_t wsc_write(void *ctx, int fd, const void *buf, size_t len, int *wa
             c->st_ret = 0;
             continue;
         }
-        /* A new message: one binary frame of exactly len bytes (the caller's one protocol
-         * message), its header and first bytes in one write. */
-        size_t h = ws_frame_header(c->stage, 1, WS_OP_BINARY, len, NULL);
-        size_t k = len < WSC_STAGE ? len : WSC_STAGE;
+        /* A new message at a protocol message boundary: one binary frame holding exactly that
+         * protocol message (its header gives the length; the session may hand over several
+         * messages at once), its frame header and first bytes in one write. */
+        uint64_t mlen = len;
+        if (len >= PROTO_HEADER_LEN) {
+            proto_header ph;
+            proto_get_header(buf, &ph);
+            if (PROTO_HEADER_LEN + (uint64_t)ph.len < mlen) mlen = PROTO_HEADER_LEN + ph.len;
+        }
+        size_t h = ws_frame_header(c->stage, 1, WS_OP_BINARY, mlen, NULL);
+        size_t k = mlen < WSC_STAGE ? (size_t)mlen : WSC_STAGE;
         memcpy(c->stage + h, buf, k);
         c->st_len = h + k;
         c->st_off = 0;
         c->st_ret = k;
-        c->frame_left = len - k;
+        c->frame_left = mlen - k;
     }
 }
 
 static int wsc_pending(void *ctx)
 {
     ws_conn *c = ctx;
-    return (c->state == WSC_OPEN && c->rin_off < c->rin_len) || c->state == WSC_DONE ||
-           c->lo->pending(c->lo_ctx);
+    return (c->state == WSC_OPEN && (c->rin_off < c->rin_len || c->bad_msg[0])) ||
+           c->state == WSC_DONE || c->lo->pending(c->lo_ctx);
 }
 
 static int wsc_midway(void *ctx)

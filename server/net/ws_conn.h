@@ -1,8 +1,9 @@
 /* ws_conn.h — the browser listener's transport layer (transport.h): a connection begins as
  * HTTP/1.1 and either gets one of the embedded files (then closes) or upgrades to a WebSocket
- * on cfg->ws_path, after which every binary message carries protocol bytes both ways: input
- * frames are unmasked into the session's input, and each protocol message the session writes
- * goes out as one unfragmented binary message. Pings are answered, a close is answered and
+ * on cfg->ws_path, after which every binary message carries one protocol message both ways:
+ * input frames are unmasked into the session's input (a message that is not exactly one
+ * protocol message closes the connection with 1007), and each protocol message the session
+ * writes goes out as one unfragmented binary message (its length taken from its header). Pings are answered, a close is answered and
  * ends the connection, malformed frames end it with a close code (ws.c does the framing).
  *
  * It reads and writes through a lower transport (net_tcp today), so TLS can be stacked under
