@@ -37,25 +37,6 @@
 #include "ws.h"
 #include "wsclient.h"
 
-static double now_us(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e6 + (double)ts.tv_nsec * 1e-3;
-}
-
-static int cmp_d(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double median(double *v, int n)
-{
-    qsort(v, (size_t)n, sizeof *v, cmp_d);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
 /* One connection: TCP (fd) or WebSocket (ws), the same calls for both. */
 typedef struct conn {
     int is_ws;
@@ -170,13 +151,13 @@ static int c_frame(conn *c, const proto_camera *cam, double *lat, double *work, 
     proto_buf b = {0};
     proto_header h;
     proto_error e;
-    double t0 = now_us();
+    double t0 = tu_now_us();
     proto_enc_camera(&b, ++c->seq, cam);
     if (c_send(c, &b)) return -1;
     proto_enc_empty(&b, PROTO_MSG_RENDER, ++c->seq);
     if (c_send(c, &b)) return -1;
     const uint8_t *p = c_expect(c, PROTO_MSG_FRAME, c->seq, &h);
-    *lat = now_us() - t0;
+    *lat = tu_now_us() - t0;
     proto_frame fr;
     if (!p || proto_parse_frame(p, h.len, &fr, &e) != 0) return -1;
     *work = (double)(fr.render_us + fr.readback_us + fr.encode_us);
@@ -199,7 +180,7 @@ static void framing_cost(size_t frame_bytes)
     ws_mask(f + hl, b.len, mask, 0);
     const int n = 2000000;
     volatile size_t sink = 0;
-    double t0 = now_us();
+    double t0 = tu_now_us();
     for (int i = 0; i < n; i++) {
         ws_decoder d = {.require_mask = 1, .binary_only = 1, .max_message = 65552};
         ws_event ev;
@@ -207,16 +188,16 @@ static void framing_cost(size_t frame_bytes)
         ws_decode(&d, f, hl + b.len, &used, out, sizeof out, &prod, &ev);
         sink += prod;
     }
-    double dec_ns = (now_us() - t0) * 1e3 / n;
+    double dec_ns = (tu_now_us() - t0) * 1e3 / n;
     uint8_t *payload = calloc(1, frame_bytes);
-    t0 = now_us();
+    t0 = tu_now_us();
     for (int i = 0; i < n; i++) {
         size_t h = ws_frame_header(stage, 1, WS_OP_BINARY, frame_bytes, NULL);
         size_t k = frame_bytes < 4096 ? frame_bytes : 4096;
         memcpy(stage + h, payload, k);
         sink += h + stage[h + (size_t)i % k];
     }
-    double enc_ns = (now_us() - t0) * 1e3 / n;
+    double enc_ns = (tu_now_us() - t0) * 1e3 / n;
     (void)sink;
     free(payload);
     printf("| WebSocket bytes per frame | %d + %d | server frame header (10 for a frame of 64 "
@@ -336,14 +317,14 @@ static int page_compare(conn *tcp, conn *ws, const page_cam *pc, int n, int w, i
     }
     printf("| page: camera sent -> frame received (%dx%d at rest, half while dragging) | %.2f ms | "
            "median of %d frames (%d full size); minus each frame's render + read-back + encode: "
-           "%.2f ms |\n", w, h, median(a, n), n, full, median(oa, n));
+           "%.2f ms |\n", w, h, tu_median(a, n), n, full, tu_median(oa, n));
     printf("| page: camera sent -> frame drawn | %.2f ms | + createImageBitmap and drawImage |\n",
-           median(b, n));
+           tu_median(b, n));
     printf("| same cameras and JPEG quality, C client over TCP | %.2f ms | minus render + "
-           "read-back + encode: %.2f ms |\n", median(t, n), median(ot, n));
+           "read-back + encode: %.2f ms |\n", tu_median(t, n), tu_median(ot, n));
     printf("| same cameras and JPEG quality, C client over WebSocket | %.2f ms | minus render + "
            "read-back + encode: %.2f ms (render + read-back + encode of both: %.2f ms; the page's: "
-           "%.2f ms) |\n", median(u, n), median(ou, n), median(q, n), median(k, n));
+           "%.2f ms) |\n", tu_median(u, n), tu_median(ou, n), tu_median(q, n), tu_median(k, n));
     free(a); free(b); free(t); free(u); free(k); free(q); free(oa); free(ot); free(ou);
     return 0;
 }
@@ -413,12 +394,12 @@ int main(int argc, char **argv)
         ow[i] = (aw - ww) / 1e3;
         wk[i] = 0.5 * (wt + ww) / 1e3;
     }
-    double mt = median(lt, n), mw = median(lw, n), mot = median(ot, n), mow = median(ow, n);
+    double mt = tu_median(lt, n), mw = tu_median(lw, n), mot = tu_median(ot, n), mow = tu_median(ow, n);
     printf("| camera -> frame received, TCP (%s, %dx%d) | %.2f ms | median of %d; minus the "
            "frame's render + read-back + encode: %.2f ms |\n", pipeline, w, h, mt, n, mot);
     printf("| camera -> frame received, WebSocket | %.2f ms | the same cameras interleaved; minus "
            "render + read-back + encode: %.2f ms, %+.2f ms against TCP (%zu B frames, render + "
-           "read-back + encode median %.2f ms) |\n", mw, mow, mow - mot, bytes, median(wk, n));
+           "read-back + encode median %.2f ms) |\n", mw, mow, mow - mot, bytes, tu_median(wk, n));
     if (framing) framing_cost(bytes);
     proto_buf b = {0};
     proto_enc_empty(&b, PROTO_MSG_BYE, ++tcp.seq);

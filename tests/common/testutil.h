@@ -45,3 +45,10 @@ void tu_skip_reason(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
  * EINTR (send with MSG_NOSIGNAL). 0, or -1 on an error, EOF or the socket's timeout. */
 int tu_send_all(int fd, const void *p, size_t n);
 int tu_recv_all(int fd, void *p, size_t n);
+
+/* tu_now_us: CLOCK_MONOTONIC in microseconds. */
+double tu_now_us(void);
+
+/* tu_median: the median of the n values v (reordered in place); the mean of the middle two
+ * for even n; 0 when n is 0. */
+double tu_median(double *v, int n);
