@@ -88,11 +88,15 @@ static int teardown(void **state)
     return rc;
 }
 
-/* start: splatd with --http 127.0.0.1:0 (and the token when with_token); finds the HTTP port
- * in its log ("http on http://127.0.0.1:PORT/"). */
+/* start: splatd with --http 127.0.0.1:0 (and the token when with_token), or on the ports of
+ * the previous daemon when f has them; finds the HTTP port in its log ("http on
+ * http://127.0.0.1:PORT/"). */
 static void start(fx *f, int with_token)
 {
-    const char *args[] = {"--listen", "127.0.0.1:0", "--http", "127.0.0.1:0", "--data", f->data,
+    char listen[64], http[64];
+    snprintf(listen, sizeof listen, "127.0.0.1:%d", f->d.port > 0 ? f->d.port : 0);
+    snprintf(http, sizeof http, "127.0.0.1:%d", f->http_port > 0 ? f->http_port : 0);
+    const char *args[] = {"--listen", listen, "--http", http, "--data", f->data,
                           "--cache", f->cache, "--read-timeout", f->read_timeout[0] ?
                           f->read_timeout : "30", with_token ? "--token-file" : NULL, f->tok, NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
@@ -521,6 +525,12 @@ static void wait_page(tu_wd *wd, const char *id, int (*ok)(const char *, long), 
 
 static int at_least(const char *v, long n) { return atol(v) >= n; }
 static int is_one(const char *v, long n) { (void)n; return !strcmp(v, "1"); }
+static int says_disconnected(const char *v, long n)
+{
+    (void)n;
+    return strstr(v, "DISCONNECTED") != NULL;
+}
+
 static int says_saved(const char *v, long n)
 {
     (void)n;
@@ -736,6 +746,19 @@ static void test_chromium_page(void **state)
     snprintf(path, sizeof path, "element/%s/click", tid);
     assert_int_equal(tu_wd_post(wdp, path, "{}"), 0);
     wait_page(wdp, "status", says_saved, 0, "the saved PNG");
+
+    /* The daemon stops and comes back on the same ports: the page says so, reconnects with
+     * back-off, answers the new challenge with the token it kept, opens the cloud again and
+     * shows the same view. */
+    page_text(wdp, "nframes", v, sizeof v);
+    before = atol(v);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+    wait_page(wdp, "status", says_disconnected, 0, "the disconnection");
+    start(f, 1);
+    wait_page(wdp, "nframes", at_least, before + 1, "a frame after the reconnection");
+    wait_page(wdp, "idle", is_one, 0, "rest after the reconnection");
+    page_text(wdp, "camera", v, sizeof v);
+    assert_string_equal(v, cam);
     tu_wd_stop(wdp);
     printf("browser test took %.1f s\n", now_s() - t0);
 }

@@ -40,7 +40,7 @@ const PARAMS = {
   l_m: {type: T_FLOAT, min: 0, max: 1, def: 0},
   field: {type: T_ENUM, values: FIELDS, def: 0},
 };
-const E_BAD_PARAM_NAME = 7, E_BAD_PARAM_VALUE = 8;
+const E_BAD_PARAM_NAME = 7, E_BAD_PARAM_VALUE = 8, E_AUTH_FAILED = 13;
 const SETTLE_MS = 150, DRAG_QUALITY = 50, REST_QUALITY = 95, DRAG_BUDGET = 300000;
 
 const $ = (id) => document.getElementById(id);
@@ -174,7 +174,7 @@ const S = {
   waiting: null,             /* the newest frame that arrived meanwhile */
   frames: 0, spoiled: 0, lastSeq: 0, lastCamSeq: 0, fpsT: [], lat: 0, render: 0, encode: 0,
   fw: 0, fh: 0, fpipe: '', lastCam: null, nsave: 0, status: '', closedByUser: false,
-  stats: [],
+  stats: [], token: null,
   outstanding: 0, maxOutstanding: 0, inputs: 0, /* RENDERs without their FRAME; input events */
 };
 window.splatStats = () => S.stats.join('\n');
@@ -229,6 +229,8 @@ async function answerChallenge(tokenText) {
     setStatus('the server needs a token, and WebCrypto is only on https or localhost pages');
     return;
   }
+  /* Kept in memory only (never stored), so a reconnection answers again by itself. */
+  S.token = tokenText;
   const tok = new TextEncoder().encode(tokenText.replace(/[\r\n]+$/, ''));
   const key = await crypto.subtle.importKey('raw', tok, {name: 'HMAC', hash: 'SHA-256'}, false,
                                             ['sign']);
@@ -268,6 +270,7 @@ function onWelcome(r) {
   S.welcome = {version, maxReq, maxW, maxH, server: r.str8(), backend: r.str8(),
                renderer: r.str8()};
   if (authRequired && !authenticated) {
+    if (S.token) { answerChallenge(S.token); return; }
     $('token-box').hidden = false;
     setStatus('this server needs its token');
     const go = () => answerChallenge($('token').value);
@@ -326,6 +329,7 @@ function onInfo(r) {
 function onError(r, seq, pend) {
   const code = r.u32(), text = r.str16();
   $('error').textContent = `${code} ${text}`;
+  if (code === E_AUTH_FAILED) S.token = null; /* ask again after the reconnection */
   if (pend && pend.kind === 'params' && (code === E_BAD_PARAM_NAME || code === E_BAD_PARAM_VALUE)) {
     /* A parameter this server lacks: marked n/a and put back, never an error loop. */
     for (const [k, v] of Object.entries(pend.values)) {
