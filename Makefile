@@ -108,13 +108,16 @@ FORCE:
 
 # ---- one build directory per flavour: normal ($(BUILD)) and ASan+UBSan ($(BUILD)/asan) ----
 define FLAVOUR
-$(1)/obj/%.o: %.c $(BUILD)/gen/shaders_gen.h $(BUILD)/gen/page_gen.h
+$(1)/obj/%.o: %.c $(BUILD)/gen/shaders_gen.h
 	@mkdir -p $$(dir $$@)
 	$$(CC) $$(BASE_CFLAGS) $$(call inc_of,$$<) $(2) -c $$< -o $$@
 
 $(1)/obj/gen/shaders_gen.o: $(BUILD)/gen/shaders_gen.c
 	@mkdir -p $$(dir $$@)
 	$$(CC) $$(BASE_CFLAGS) $(INC_render_gen) $(2) -c $$< -o $$@
+
+# Only the daemon's start-up includes the page table (a page edit rebuilds that and page_gen.o).
+$(1)/obj/server/daemon/daemon.o: $(BUILD)/gen/page_gen.h
 
 $(1)/obj/gen/page_gen.o: $(BUILD)/gen/page_gen.c
 	@mkdir -p $$(dir $$@)

@@ -258,9 +258,19 @@ static void queue_close(ws_conn *c, uint16_t code, const char *reason)
  * lower layer's AGAIN is not an error: they wait for the next write or read. */
 static void flush_control(ws_conn *c)
 {
-    if (mid_frame(c) || !c->ctl_len) return;
     int want;
     char e[8];
+    if (c->st_off < c->st_len && c->st_ret == 0 && c->frame_left == 0) {
+        /* The stage holds only the rest of control frames: it can go on by itself. */
+        while (c->st_off < c->st_len) {
+            ssize_t w = c->lo->write(c->lo_ctx, c->fd, c->stage + c->st_off,
+                                     c->st_len - c->st_off, &want, e, sizeof e);
+            if (w <= 0) return;
+            c->st_off += (size_t)w;
+        }
+        c->st_off = c->st_len = 0;
+    }
+    if (mid_frame(c) || !c->ctl_len) return;
     size_t off = 0;
     while (off < c->ctl_len) {
         ssize_t w = c->lo->write(c->lo_ctx, c->fd, c->ctl + off, c->ctl_len - off, &want, e,
