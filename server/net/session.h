@@ -1,6 +1,8 @@
 /* session.h — one client connection of the daemon, as one object that owns its I/O: reading
- * (at most SESS_IN_CHUNK bytes a wakeup), decoding, the ordered output queue, writing, its
- * event-loop interest, and closing (redis's connection object; STYLE.md 23). What the
+ * (SESS_IN_CHUNK bytes a read, a few reads a wakeup when its transport holds more), decoding,
+ * the ordered output queue, writing, its event-loop interest, and closing (redis's connection
+ * object; STYLE.md 23). Bytes cross the socket through a net_transport (transport.h): plain
+ * TCP by default, the browser listener's HTTP + WebSocket layer (ws_conn.h) for /ws. What the
  * messages mean is the owner's business: the session hands each decoded message to
  * ops->on_message (dispatch.c) and reports its close through ops->on_close (daemon.c). It also
  * carries the per-client render and auth state the dispatcher keeps. Event-loop thread only.
