@@ -74,6 +74,7 @@ DEPS_cmd       := $(SERVER_DIRS)
 $(foreach d,$(SERVER_DIRS),$(eval INC_server/$(d) := -Iprotocol $(addprefix -Iserver/,$(DEPS_$(d)))))
 INC_render_gen := -I$(BUILD)/gen
 INC_server/render += $(INC_render_gen)
+INC_server/daemon += $(INC_render_gen)
 INC_protocol   := -Iprotocol
 INC_client     := -Iprotocol -Iclient
 INC_ALL        := -Iprotocol $(addprefix -Iserver/,$(SERVER_DIRS)) -Iclient -Itests -Itests/common $(INC_render_gen)
@@ -86,6 +87,7 @@ PROTO_SRC  := $(wildcard protocol/*.c)
 SERVER_SRC := $(filter-out server/cmd/main.c server/mpi/%,$(wildcard server/*/*.c))
 CLIENT_LIB_SRC := $(filter-out client/splat_main.c client/splat_view.c,$(wildcard client/*.c))
 SHADERS    := $(sort $(wildcard shaders/*.glsl))
+WEB        := $(sort $(wildcard web/*.html web/*.js web/*.css))
 TEST_SRC   := $(wildcard tests/test_*.c)
 TEST_COMMON_SRC := $(wildcard tests/common/*.c)
 TOOL_SRC   := $(wildcard tests/tools/*.c)
@@ -116,8 +118,15 @@ $(1)/obj/gen/shaders_gen.o: $(BUILD)/gen/shaders_gen.c
 	@mkdir -p $$(dir $$@)
 	$$(CC) $$(BASE_CFLAGS) $(INC_render_gen) $(2) -c $$< -o $$@
 
+# Only the daemon's start-up includes the page table (a page edit rebuilds that and page_gen.o).
+$(1)/obj/server/daemon/daemon.o: $(BUILD)/gen/page_gen.h
+
+$(1)/obj/gen/page_gen.o: $(BUILD)/gen/page_gen.c
+	@mkdir -p $$(dir $$@)
+	$$(CC) $$(BASE_CFLAGS) $(INC_render_gen) $(2) -c $$< -o $$@
+
 ifeq ($(STRICT),1)
-$(1)/libsplatd.a: $(call obj,$(1),$(SERVER_SRC)) $(1)/obj/gen/shaders_gen.o
+$(1)/libsplatd.a: $(call obj,$(1),$(SERVER_SRC)) $(1)/obj/gen/shaders_gen.o $(1)/obj/gen/page_gen.o
 	@rm -f $$@; ar rcs $$@ $$^
 
 $(1)/libsplatproto.a: $(call obj,$(1),$(PROTO_SRC))
@@ -129,8 +138,8 @@ $(1)/libsplatclient.a: $(call obj,$(1),$(CLIENT_LIB_SRC) $(PROTO_SRC))
 $(1)/libtestcommon.a: $(call obj,$(1),$(TEST_COMMON_SRC))
 	@rm -f $$@; ar rcs $$@ $$^
 else
-$(1)/libsplatd.a: FORCE $(BUILD)/gen/shaders_gen.c
-	@sh tools/dev_archive.sh "$$(CC) $$(BASE_CFLAGS) $$(INC_ALL) $(2)" $(1) $$@ $(SERVER_SRC) $(BUILD)/gen/shaders_gen.c
+$(1)/libsplatd.a: FORCE $(BUILD)/gen/shaders_gen.c $(BUILD)/gen/page_gen.c
+	@sh tools/dev_archive.sh "$$(CC) $$(BASE_CFLAGS) $$(INC_ALL) $(2)" $(1) $$@ $(SERVER_SRC) $(BUILD)/gen/shaders_gen.c $(BUILD)/gen/page_gen.c
 
 $(1)/libsplatproto.a: FORCE
 	@sh tools/dev_archive.sh "$$(CC) $$(BASE_CFLAGS) $$(INC_ALL) $(2)" $(1) $$@ $(PROTO_SRC)
@@ -208,6 +217,11 @@ $(BUILD)/embed_shaders: tools/embed_shaders.c
 $(BUILD)/gen/shaders_gen.c $(BUILD)/gen/shaders_gen.h &: $(BUILD)/embed_shaders $(SHADERS)
 	@mkdir -p $(BUILD)/gen
 	$(BUILD)/embed_shaders $(BUILD)/gen/shaders_gen $(SHADERS)
+
+# The browser viewer's page (web/: HTML, JS, CSS) is compiled into the daemon the same way.
+$(BUILD)/gen/page_gen.c $(BUILD)/gen/page_gen.h &: $(BUILD)/embed_shaders $(WEB)
+	@mkdir -p $(BUILD)/gen
+	$(BUILD)/embed_shaders --prefix page $(BUILD)/gen/page_gen $(WEB)
 
 .PHONY: all test asan bench fuzz run install clean
 all: $(BUILD)/bin/splatd $(BUILD)/bin/splat $(BUILD)/bin/splat-view $(BUILD)/libsplatclient.a $(BUILD)/libsplatclient.so $(TOOLS) \

@@ -38,6 +38,12 @@ file:/usr/lib/python3/dist-packages/yaml/__init__.py=python3-yaml
 tool:mpicc=libopenmpi-dev
 tool:mpirun=openmpi-bin
 "
+# Tests only: the browser viewer's end-to-end test (tests/test_browser.c) drives headless
+# Chromium through chromedriver; it skips, naming the package, where they are absent.
+NEEDS="$NEEDS
+file:/usr/bin/chromium=chromium
+file:/usr/bin/chromedriver=chromium-driver
+"
 
 # present ENTRY: 0 when the thing the entry names is on this machine.
 present() {

@@ -27,7 +27,7 @@
 #define MUTATIONS 1000 /* per valid seed: about 0.5 s in all without ASan, 4 s with it */
 
 static const char *const targets[] = {"proto", "ply", "pcd", "las", "xyz", "lzf", "params",
-                                      "laz", "copc"};
+                                      "ws", "laz", "copc"};
 
 /* The fuzz directory (see the file comment) into buf. */
 static const char *fuzz_dir(char *buf, size_t len)
@@ -155,6 +155,7 @@ static void test_corpus_las(void **state) { (void)state; run_corpus("las"); }
 static void test_corpus_xyz(void **state) { (void)state; run_corpus("xyz"); }
 static void test_corpus_lzf(void **state) { (void)state; run_corpus("lzf"); }
 static void test_corpus_params(void **state) { (void)state; run_corpus("params"); }
+static void test_corpus_ws(void **state) { (void)state; run_corpus("ws"); }
 static void test_corpus_laz(void **state) { (void)state; run_corpus("laz"); }
 static void test_corpus_copc(void **state) { (void)state; run_corpus("copc"); }
 
@@ -219,7 +220,8 @@ int main(void)
         cmocka_unit_test(test_corpus_ply),    cmocka_unit_test(test_corpus_pcd),
         cmocka_unit_test(test_corpus_las),    cmocka_unit_test(test_corpus_xyz),
         cmocka_unit_test(test_corpus_lzf),    cmocka_unit_test(test_corpus_params),
-        cmocka_unit_test(test_corpus_laz),    cmocka_unit_test(test_corpus_copc),
+        cmocka_unit_test(test_corpus_ws),     cmocka_unit_test(test_corpus_laz),
+        cmocka_unit_test(test_corpus_copc),
         cmocka_unit_test(test_crashes),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -297,15 +297,8 @@ static void test_view_save_matches_render(void **state)
     assert_int_equal(vh, 240);
     assert_int_equal(rw, vw);
     assert_int_equal(rh, vh);
-    size_t n = (size_t)vw * vh, lit = 0;
-    double se = 0;
-    for (size_t i = 0; i < n; i++) {
-        const uint8_t *p = a + 4 * i, *q = b + 4 * i;
-        lit += p[0] > 8 || p[1] > 8 || p[2] > 8;
-        for (int c = 0; c < 3; c++) se += (double)(p[c] - q[c]) * (p[c] - q[c]);
-    }
-    double mse = se / (3.0 * n);
-    double psnr = mse > 0 ? 10 * log10(255.0 * 255.0 / mse) : INFINITY;
+    size_t n = (size_t)vw * vh, lit;
+    double psnr = tu_psnr_all(a, b, n, &lit);
     printf("saved view: %zu of %zu pixels lit; PSNR against splat render %.2f dB (bound %.0f)\n",
            lit, n, psnr, MIN_PSNR_DB);
     if (lit < n / 50) fail_msg("the saved view is blank: %zu of %zu pixels lit", lit, n);

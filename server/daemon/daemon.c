@@ -22,6 +22,7 @@
 #include "commands.h"
 #include "daemon.h"
 #include "datadir.h"
+#include "page_gen.h"
 #include "srv.h"
 
 static void usage(FILE *f)
@@ -34,7 +35,11 @@ static void usage(FILE *f)
             "  --listen HOST:PORT   address to listen on (default 127.0.0.1:7878; port 0 picks a free\n"
             "                       port, printed on stderr as 'listening on HOST:PORT'). Without\n"
             "                       --token-file only loopback addresses are accepted.\n"
-            "  --port-file F        write the bound port to F once listening\n"
+            "  --http HOST:PORT     also serve the browser viewer: GET / is the page, /ws its\n"
+            "                       WebSocket carrying the same protocol (off by default; the\n"
+            "                       same loopback-only rule without --token-file as --listen)\n"
+            "  --port-file F        write the bound port to F once listening (with --http, the\n"
+            "                       HTTP port on a second line)\n"
             "  --data DIR           the data directory: clients open clouds by file name in it\n"
             "  --cache DIR          prepared-cloud cache (default $SPLATD_CACHE, $XDG_CACHE_HOME/splatd,\n"
             "                       ~/.cache/splatd)\n"
@@ -96,7 +101,7 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
 {
     enum { O_LISTEN = 1000, O_DATA, O_CACHE, O_BACKEND, O_TOKEN, O_PRELOAD, O_SHADERS, O_MAXC,
            O_PORTFILE, O_HS, O_GPUMEM, O_FRAMEMEM, O_IDLE, O_RDTO, O_WRTO, O_UNAUTH, O_PERADDR, O_AUTHDELAY,
-           O_HELP };
+           O_HTTP, O_HELP };
     static const struct option lo[] = {
         {"listen", required_argument, 0, O_LISTEN},   {"data", required_argument, 0, O_DATA},
         {"cache", required_argument, 0, O_CACHE},     {"backend", required_argument, 0, O_BACKEND},
@@ -109,6 +114,7 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
         {"write-timeout", required_argument, 0, O_WRTO}, {"max-unauth", required_argument, 0, O_UNAUTH},
         {"max-per-addr", required_argument, 0, O_PERADDR},
         {"auth-fail-delay", required_argument, 0, O_AUTHDELAY},
+        {"http", required_argument, 0, O_HTTP},
         {"help", no_argument, 0, O_HELP},             {0, 0, 0, 0},
     };
     snprintf(o->host, sizeof o->host, "127.0.0.1");
@@ -150,6 +156,13 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
         case O_LISTEN:
             if (net_parse_hostport(optarg, o->host, sizeof o->host, &o->port, &err) != 0) {
                 fprintf(stderr, "splatd: --listen: %s\n", err.msg);
+                return -1;
+            }
+            break;
+        case O_HTTP:
+            if (net_parse_hostport(optarg, o->http_host, sizeof o->http_host, &o->http_port,
+                                   &err) != 0) {
+                fprintf(stderr, "splatd: --http: %s\n", err.msg);
                 return -1;
             }
             break;
@@ -293,9 +306,22 @@ static void on_handshake_timeout(ev_loop *l, ev_timer *t, void *data)
     sess_close(s, msg);
 }
 
-/* refuse: a best-effort ERROR on a connection the daemon will not serve, then close. */
-static void refuse(int fd, int code, const char *text)
+/* refuse: a best-effort ERROR on a connection the daemon will not serve (an HTTP 503 with the
+ * text on the browser listener), then close. */
+static void refuse(int fd, int http, int code, const char *text)
 {
+    if (http) {
+        char r[512];
+        int n = snprintf(r, sizeof r, "HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain"
+                         "\r\nContent-Length: %zu\r\nConnection: close\r\n\r\n%s\n",
+                         strlen(text) + 1, text);
+        if (n > 0 && (size_t)n < sizeof r) {
+            ssize_t w = send(fd, r, (size_t)n, MSG_NOSIGNAL | MSG_DONTWAIT);
+            (void)w;
+        }
+        close(fd);
+        return;
+    }
     proto_buf b = {0};
     if (proto_enc_error(&b, 0, (uint32_t)code, text) == 0) {
         ssize_t w = send(fd, b.data, b.len, MSG_NOSIGNAL | MSG_DONTWAIT);
@@ -441,10 +467,10 @@ void srv_auth_failed(srv *sv, sess *s, uint32_t seq, int noproof)
     ev_timer_start(sv->loop, &s->hs_timer, delay, on_auth_fail_due, s);
 }
 
-static void on_accept(ev_loop *l, int fd, int mask, void *data)
+/* accept_from: takes the pending connections of listener fd (at most 16 a wakeup) under the
+ * caps, as sessions; http: the browser listener's, whose sessions speak through ws_conn. */
+static void accept_from(srv *sv, int fd, int http)
 {
-    (void)l; (void)mask;
-    srv *sv = data;
     for (int n = 0; n < 16 && !sv->stopping; n++) {
         char addr[NET_ADDR_LEN], host[NET_ADDR_LEN];
         int c = net_accept(fd, addr, sizeof addr);
@@ -459,12 +485,12 @@ static void on_accept(ev_loop *l, int fd, int mask, void *data)
         if (cs.from_host >= sv->o.max_per_addr) {
             srv_log(sv, NULL, "%s refused: %d connections from %s already (--max-per-addr)", addr,
                     cs.from_host, host);
-            refuse(c, PROTO_E_BUSY, "too many connections from your address; retry later");
+            refuse(c, http, PROTO_E_BUSY, "too many connections from your address; retry later");
             continue;
         }
         if (cs.authed >= sv->o.max_clients) {
             srv_log(sv, NULL, "%s refused: %d clients already connected (--max-clients)", addr, cs.authed);
-            refuse(c, PROTO_E_BUSY, "too many clients; retry later");
+            refuse(c, http, PROTO_E_BUSY, "too many clients; retry later");
             continue;
         }
         if (cs.unauth >= sv->o.max_unauth && cs.oldest_unauth) {
@@ -483,7 +509,7 @@ static void on_accept(ev_loop *l, int fd, int mask, void *data)
             if (!sv->sessions[i]) { idx = i; break; }
         if (idx < 0) {
             srv_log(sv, NULL, "%s refused: no free connection slot", addr);
-            refuse(c, PROTO_E_BUSY, "too many clients; retry later");
+            refuse(c, http, PROTO_E_BUSY, "too many clients; retry later");
             continue;
         }
         if (++sv->gens[idx] == 0) sv->gens[idx] = 1;
@@ -493,17 +519,40 @@ static void on_accept(ev_loop *l, int fd, int mask, void *data)
         if (!s || auth_challenge(s->challenge, &err) != 0 || rt_client_open(sv->rt, id) != 0) {
             srv_log(sv, NULL, "%s refused: %s", addr, s ? err.msg : "out of memory");
             sess_free(s, NULL, NULL);
-            refuse(c, PROTO_E_INTERNAL, "the server cannot take a connection now");
+            refuse(c, http, PROTO_E_INTERNAL, "the server cannot take a connection now");
             continue;
+        }
+        if (http) {
+            ws_conn *wc = ws_conn_new(&sv->http_cfg, &net_tcp, NULL);
+            if (!wc) {
+                srv_log(sv, NULL, "%s refused: out of memory", addr);
+                sess_free(s, NULL, NULL);
+                rt_client_close(sv->rt, id);
+                refuse(c, http, PROTO_E_INTERNAL, "the server cannot take a connection now");
+                continue;
+            }
+            sess_set_transport(s, &ws_transport, wc);
         }
         s->version = PROTO_VERSION;
         s->lim = &sv->lim;
         sv->sessions[idx] = s;
         sv->nsess++;
-        srv_log(sv, s, "connected");
+        srv_log(sv, s, http ? "connected (http)" : "connected");
         ev_timer_start(sv->loop, &s->hs_timer, (uint64_t)sv->o.handshake_ms, on_handshake_timeout, s);
         sess_kick(s);
     }
+}
+
+static void on_accept(ev_loop *l, int fd, int mask, void *data)
+{
+    (void)l; (void)mask;
+    accept_from(data, fd, 0);
+}
+
+static void on_accept_http(ev_loop *l, int fd, int mask, void *data)
+{
+    (void)l; (void)mask;
+    accept_from(data, fd, 1);
 }
 
 /* ---- shutdown ---- */
@@ -525,6 +574,11 @@ static void begin_shutdown(srv *sv, const char *why)
         ev_unwatch(sv->loop, sv->lfd);
         close(sv->lfd);
         sv->lfd = -1;
+    }
+    if (sv->http_lfd >= 0) {
+        ev_unwatch(sv->loop, sv->http_lfd);
+        close(sv->http_lfd);
+        sv->http_lfd = -1;
     }
     rt_drop_requests(sv->rt);
     for (int i = 0; i < sv->nslots; i++) {
@@ -565,16 +619,80 @@ static void on_wakeup(ev_loop *l, void *data)
 
 /* ---- start-up ---- */
 
-static int write_port_file(const char *path, int port)
+static int write_port_file(const char *path, int port, int http_port)
 {
     char tmp[4200];
     snprintf(tmp, sizeof tmp, "%s.tmp%ld", path, (long)getpid());
     FILE *f = fopen(tmp, "w");
     if (!f) return -1;
     fprintf(f, "%d\n", port);
+    if (http_port) fprintf(f, "%d\n", http_port);
     if (fclose(f) != 0 || rename(tmp, path) != 0) {
         unlink(tmp);
         return -1;
+    }
+    return 0;
+}
+
+/* start_http: the browser listener (--http): its embedded files, its WebSocket limits and
+ * its socket. Returns 0, or 1 after printing why. */
+static int start_http(srv *sv)
+{
+    sd_err err = {0};
+    ws_file *files = sv->http_files;
+    int n = 0;
+    for (int i = 0; i < pages_embedded_count && n < SRV_HTTP_FILES; i++) {
+        const page_src *p = &pages_embedded[i];
+        const char *dot = strrchr(p->name, '.');
+        ws_file *f = &files[n++];
+        f->body = p->text;
+        f->len = strlen(p->text);
+        f->type = !dot ? "application/octet-stream"
+                : !strcmp(dot, ".html") ? "text/html; charset=utf-8"
+                : !strcmp(dot, ".js") ? "text/javascript; charset=utf-8"
+                : !strcmp(dot, ".css") ? "text/css; charset=utf-8" : "application/octet-stream";
+        /* viewer.html is the page at /; the others keep their names. */
+        snprintf(sv->http_paths[n - 1], sizeof sv->http_paths[n - 1], "/%s",
+                 !strcmp(p->name, "viewer.html") ? "" : p->name);
+        f->path = sv->http_paths[n - 1];
+    }
+    sv->http_cfg = (ws_conn_cfg){
+        .files = files, .nfiles = n, .ws_path = "/ws",
+        /* Without a token, only loopback names in Host: a DNS-rebound name is refused. */
+        .loopback_hosts_only = sv->token.len == 0,
+        /* One WebSocket message carries one protocol message: header + the largest request. */
+        .max_message = PROTO_HEADER_LEN + PROTO_MAX_REQUEST,
+    };
+    if (net_listen(sv->o.http_host, sv->o.http_port, 128, &sv->http_lfd, &sv->http_bound_port,
+                   &err) != 0 ||
+        ev_watch(sv->loop, sv->http_lfd, EV_READ, on_accept_http, sv, &err) != 0) {
+        fprintf(stderr, "splatd: --http: %s\n", err.msg);
+        return 1;
+    }
+    return 0;
+}
+
+/* check_exposure: the rule for every listener: beyond loopback only with a token of at least
+ * SRV_TOKEN_MIN bytes. Returns 0, or 1 after printing why (doing, verb: the
+ * listener's activity, in two forms, for the message). */
+static int check_exposure(const srv *sv, const char *host, const char *doing,
+                          const char *verb)
+{
+    if (sv->o.token_file && !net_host_is_loopback(host) && sv->token.len < SRV_TOKEN_MIN) {
+        /* Beyond loopback the token is all that stands between the network and the data, and
+         * the delay per failure only slows guessing down: a short token would not last. */
+        fprintf(stderr,
+                "splatd: the token in %s is %zu bytes; %s on %s (not loopback) needs at "
+                "least %d (head -c 32 /dev/urandom | base64 > F)\n", sv->o.token_file,
+                sv->token.len, doing, host, SRV_TOKEN_MIN);
+        return 1;
+    }
+    if (!sv->o.token_file && !net_host_is_loopback(host)) {
+        fprintf(stderr,
+                "splatd: refusing to %s on %s without authentication: anyone who can reach "
+                "it could read your data. Use --token-file F (mode 0600), or listen on "
+                "127.0.0.1.\n", verb, host);
+        return 1;
     }
     return 0;
 }
@@ -591,22 +709,10 @@ static int start(srv *sv)
         fprintf(stderr, "splatd: %s\n", err.msg);
         return 1;
     }
-    if (sv->o.token_file && !net_host_is_loopback(sv->o.host) && sv->token.len < SRV_TOKEN_MIN) {
-        /* Beyond loopback the token is all that stands between the network and the data, and
-         * the delay per failure only slows guessing down: a short token would not last. */
-        fprintf(stderr,
-                "splatd: the token in %s is %zu bytes; listening on %s (not loopback) needs at "
-                "least %d (head -c 32 /dev/urandom | base64 > F)\n", sv->o.token_file,
-                sv->token.len, sv->o.host, SRV_TOKEN_MIN);
+    if (check_exposure(sv, sv->o.host, "listening", "listen") != 0 ||
+        (sv->o.http_host[0] &&
+         check_exposure(sv, sv->o.http_host, "serving HTTP", "serve HTTP") != 0))
         return 1;
-    }
-    if (!sv->o.token_file && !net_host_is_loopback(sv->o.host)) {
-        fprintf(stderr,
-                "splatd: refusing to listen on %s without authentication: anyone who can reach "
-                "it could read your data. Use --token-file F (mode 0600), or listen on "
-                "127.0.0.1.\n", sv->o.host);
-        return 1;
-    }
     /* Temporary files of cache writes interrupted by a crash or kill -9 (the O_EXCL fallback
      * where O_TMPFILE is missing) are removed before anything is prepared. */
     char cdir[PATH_MAX];
@@ -675,13 +781,21 @@ static int start(srv *sv)
         fprintf(stderr, "splatd: %s\n", err.msg);
         return 1;
     }
+    if (sv->o.http_host[0] && start_http(sv) != 0) return 1;
     ev_set_before_sleep(sv->loop, before_sleep, sv);
     ev_set_wakeup(sv->loop, on_wakeup, sv);
     ev_timer_init(&sv->stop_timer);
     int v6 = strchr(sv->o.host, ':') != NULL;
     fprintf(stderr, "listening on %s%s%s:%d\n", v6 ? "[" : "", sv->o.host, v6 ? "]" : "", sv->bound_port);
     fflush(stderr);
-    if (sv->o.port_file && write_port_file(sv->o.port_file, sv->bound_port) != 0) {
+    if (sv->http_lfd >= 0) {
+        v6 = strchr(sv->o.http_host, ':') != NULL;
+        fprintf(stderr, "http on http://%s%s%s:%d/\n", v6 ? "[" : "", sv->o.http_host,
+                v6 ? "]" : "", sv->http_bound_port);
+        fflush(stderr);
+    }
+    if (sv->o.port_file &&
+        write_port_file(sv->o.port_file, sv->bound_port, sv->http_bound_port) != 0) {
         fprintf(stderr, "splatd: cannot write the port file %s: %s\n", sv->o.port_file, strerror(errno));
         return 1;
     }
@@ -702,6 +816,7 @@ static int teardown(srv *sv)
         return 1;
     }
     if (sv->lfd >= 0) close(sv->lfd);
+    if (sv->http_lfd >= 0) close(sv->http_lfd);
     if (sv->sigfd >= 0) close(sv->sigfd);
     ev_destroy(sv->loop);
     for (int i = 0; i < sv->nclouds; i++) free(sv->clouds[i].waiters);
@@ -719,7 +834,7 @@ int cmd_daemon(int argc, char **argv)
 
 int daemon_run(int argc, char **argv, const rt_hooks *hooks)
 {
-    srv sv = {.lfd = -1, .sigfd = -1, .hooks = hooks};
+    srv sv = {.lfd = -1, .sigfd = -1, .http_lfd = -1, .hooks = hooks};
     int rc = parse_opts(argc, argv, &sv.o);
     if (rc != 0) return rc > 0 ? 0 : 2;
     rc = start(&sv);

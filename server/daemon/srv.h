@@ -9,15 +9,19 @@
 #include "ev.h"
 #include "render_thread.h"
 #include "session.h"
+#include "ws_conn.h"
 
 enum {
     SRV_MAX_PRELOAD = 32,
     SRV_TOKEN_MIN = 16,          /* bytes of token needed to listen beyond loopback */
+    SRV_HTTP_FILES = 8,          /* embedded files the browser listener serves, at most */
 };
 
 typedef struct srv_opts {
     char host[NET_ADDR_LEN];     /* default 127.0.0.1 */
     int port;                    /* default 7878; 0 = ephemeral */
+    char http_host[NET_ADDR_LEN]; /* --http: the browser listener; "" when off (default) */
+    int http_port;
     const char *data_dir;        /* required */
     const char *cache_dir;       /* default NULL: cache.h's default */
     const char *token_file;      /* NULL: no auth (loopback only) */
@@ -84,6 +88,11 @@ typedef struct srv {
     auth_token token;
     int lfd, sigfd;
     int bound_port;
+    int http_lfd;                /* --http listener, -1 when off */
+    int http_bound_port;
+    ws_conn_cfg http_cfg;        /* what every browser connection is served */
+    ws_file http_files[SRV_HTTP_FILES];
+    char http_paths[SRV_HTTP_FILES][64];
     sess **sessions;             /* max_clients + max_unauth slots */
     int nslots;
     sess_limits lim;             /* the deadlines every session gets (from o) */

@@ -17,6 +17,7 @@ sess *sess_new(uint32_t id, int fd, const char *addr, ev_loop *loop, const sess_
     if (!s->in) { free(s); return NULL; }
     s->id = id;
     s->fd = fd;
+    s->tr = &net_tcp;
     s->loop = loop;
     s->ops = ops;
     s->owner = owner;
@@ -31,6 +32,7 @@ sess *sess_new(uint32_t id, int fd, const char *addr, ev_loop *loop, const sess_
     ev_timer_init(&s->idle_timer);
     ev_timer_init(&s->rd_timer);
     ev_timer_init(&s->wr_timer);
+    ev_timer_init(&s->pend_timer);
     s->t_connect_ms = ev_now_ms();
     s->last_io_ms = s->t_connect_ms;
     return s;
@@ -51,6 +53,7 @@ void sess_free(sess *s, void (*release)(void *user, uint32_t id), void *user)
     free(s->stream_frame);
     free(s->cur_own);
     proto_decoder_free(&s->dec);
+    if (s->tr_ctx) s->tr->close(s->tr_ctx, 0);
     free(s->in);
     free(s);
 }
@@ -188,11 +191,15 @@ int sess_flush(sess *s, void (*release)(void *user, uint32_t id), void *user)
     for (int n = 0; n < 16; n++) {
         if (!s->cur && !next_message(s, release, user)) return 1;
         while (s->cur_off < s->cur_len) {
-            ssize_t w = send(s->fd, s->cur + s->cur_off, s->cur_len - s->cur_off, MSG_NOSIGNAL);
+            int want = 0;
+            char err[160] = "";
+            ssize_t w = s->tr->write(s->tr_ctx, s->fd, s->cur + s->cur_off, s->cur_len - s->cur_off,
+                                     &want, err, sizeof err);
+            if (w == NET_AGAIN) return 0;
             if (w < 0) {
-                if (errno == EINTR) continue;
-                if (errno == EAGAIN || errno == EWOULDBLOCK) return 0;
-                return -errno;
+                s->tr_failed = 1;
+                snprintf(s->close_reason, sizeof s->close_reason, "%s", err);
+                return -EIO;
             }
             s->cur_off += (size_t)w;
             s->bytes_out += (uint64_t)w;
@@ -256,10 +263,17 @@ static void read_deadline(sess *s)
     if (!s->lim || !s->lim->read_ms || s->dead) return;
     /* hdr_have is the decoder's count of header bytes of the message in progress: 0 exactly at
      * a message boundary (proto_decode resets it when a message completes). */
-    int mid = s->dec.hdr_have > 0 && !s->paused && !s->close_after;
+    int part = s->dec.hdr_have > 0 || (s->tr->midway && s->tr->midway(s->tr_ctx));
+    int mid = part && !s->paused && !s->close_after;
     if (!mid) ev_timer_stop(s->loop, &s->rd_timer);
     else if (!ev_timer_armed(&s->rd_timer))
         ev_timer_start(s->loop, &s->rd_timer, s->lim->read_ms, on_read_deadline, s);
+}
+
+void sess_set_transport(sess *s, const net_transport *tr, void *ctx)
+{
+    s->tr = tr;
+    s->tr_ctx = ctx;
 }
 
 void sess_set_authed(sess *s)
@@ -275,13 +289,24 @@ void sess_set_authed(sess *s)
 
 static void on_io(ev_loop *l, int fd, int mask, void *data);
 
+static void on_pending(ev_loop *l, ev_timer *t, void *data)
+{
+    (void)t;
+    sess *s = data;
+    if (!s->dead) on_io(l, s->fd, EV_READ, s);
+}
+
 /* update_watch: EV_READ while the input is drained and the session takes requests, EV_WRITE
  * when output waits, EV_HUP alone while requests wait unread (to notice the client going). */
 static void update_watch(sess *s, int want_write)
 {
-    int mask = want_write ? EV_WRITE : 0;
-    if (!s->paused && !s->close_after && s->in_off == s->in_len) mask |= EV_READ;
+    int mask = want_write || s->tr_want_write ? EV_WRITE : 0;
+    int reading = !s->paused && !s->close_after && s->in_off == s->in_len;
+    if (reading) mask |= EV_READ;
     else if (!s->close_after) mask |= EV_HUP;
+    /* Input the transport already holds makes no socket event: read it on the next turn. */
+    if (reading && s->tr->pending(s->tr_ctx) && !ev_timer_armed(&s->pend_timer))
+        ev_timer_start(s->loop, &s->pend_timer, 0, on_pending, s);
     if (ev_mask(s->loop, s->fd) == mask) return;
     if (mask == 0) ev_unwatch(s->loop, s->fd);
     else if (ev_watch(s->loop, s->fd, mask, on_io, s, NULL) != 0) sess_close(s, "event loop error");
@@ -301,8 +326,8 @@ void sess_kick(sess *s)
     int progress = s->bytes_out != before;
     if (progress) s->last_io_ms = ev_now_ms();
     if (rc < 0) {
-        char r[96];
-        snprintf(r, sizeof r, "write failed: %s", strerror(-rc));
+        char r[192];
+        snprintf(r, sizeof r, "%s", s->close_reason[0] ? s->close_reason : "write failed");
         sess_close(s, r);
         return;
     }
@@ -345,6 +370,8 @@ void sess_close(sess *s, const char *reason)
     if (s->dead) return;
     s->dead = 1;
     ev_unwatch(s->loop, s->fd);
+    if (s->tr_ctx) s->tr->close(s->tr_ctx, !s->tr_failed);
+    s->tr_ctx = NULL;
     close(s->fd);
     s->fd = -1;
     ev_timer_stop(s->loop, &s->hs_timer);
@@ -352,6 +379,7 @@ void sess_close(sess *s, const char *reason)
     ev_timer_stop(s->loop, &s->idle_timer);
     ev_timer_stop(s->loop, &s->rd_timer);
     ev_timer_stop(s->loop, &s->wr_timer);
+    ev_timer_stop(s->loop, &s->pend_timer);
     s->ops->on_close(s->owner, s, reason);
 }
 
@@ -376,6 +404,38 @@ void sess_input(sess *s)
     sess_kick(s);
 }
 
+/* read_some: one read through the transport into the input buffer, decoded at once. Returns
+ * 1 when bytes came, 0 when none could (the transport waits for an event), -1 when the session
+ * closed. */
+static int read_some(sess *s)
+{
+    int want = EV_READ;
+    char err[192] = "";
+    ssize_t r = s->tr->read(s->tr_ctx, s->fd, s->in, SESS_IN_CHUNK, &want, err, sizeof err);
+    s->tr_want_write = r == NET_AGAIN && want == EV_WRITE;
+    if (r == 0) {
+        sess_close(s, err[0] ? err : s->authed ? "closed by the client"
+                                               : "closed by the client before the handshake");
+        return -1;
+    }
+    if (r == NET_AGAIN) {
+        /* The transport may hold part of one of its own units (a WebSocket frame header): the
+         * read deadline covers those as well as a protocol message begun. */
+        read_deadline(s);
+        return 0;
+    }
+    if (r < 0) {
+        s->tr_failed = 1;
+        sess_close(s, err[0] ? err : "read failed");
+        return -1;
+    }
+    s->last_io_ms = ev_now_ms();
+    s->in_off = 0;
+    s->in_len = (size_t)r;
+    sess_input(s);
+    return 1;
+}
+
 static void on_io(ev_loop *l, int fd, int mask, void *data)
 {
     (void)l;
@@ -387,26 +447,19 @@ static void on_io(ev_loop *l, int fd, int mask, void *data)
         sess_close(s, "closed by the client while its requests waited");
         return;
     }
-    if ((mask & EV_READ) && s->in_off == s->in_len) {
-        ssize_t r = recv(s->fd, s->in, SESS_IN_CHUNK, 0);
-        if (r == 0) {
-            sess_close(s, s->authed ? "closed by the client"
-                                    : "closed by the client before the handshake");
-            return;
+    int want_read = (mask & EV_READ) || ((mask & EV_WRITE) && s->tr_want_write);
+    if (want_read && s->in_off == s->in_len) {
+        /* A few reads when the transport holds more input than one buffer (a WebSocket's
+         * frames); sess_input kicks the output after each. */
+        for (int n = 0; n < 4; n++) {
+            int rc = read_some(s);
+            if (rc < 0) return;
+            if (rc == 0 || s->dead || s->paused || s->close_after || s->in_off != s->in_len ||
+                !s->tr->pending(s->tr_ctx))
+                break;
         }
-        if (r < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
-            char why[96];
-            snprintf(why, sizeof why, "read failed: %s", strerror(errno));
-            sess_close(s, why);
-            return;
-        }
-        if (r > 0) {
-            s->last_io_ms = ev_now_ms();
-            s->in_off = 0;
-            s->in_len = (size_t)r;
-            sess_input(s);
-            return;
-        }
+        if (!s->dead) sess_kick(s);
+        return;
     }
     sess_kick(s);
 }

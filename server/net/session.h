@@ -1,6 +1,8 @@
 /* session.h — one client connection of the daemon, as one object that owns its I/O: reading
- * (at most SESS_IN_CHUNK bytes a wakeup), decoding, the ordered output queue, writing, its
- * event-loop interest, and closing (redis's connection object; STYLE.md 23). What the
+ * (SESS_IN_CHUNK bytes a read, a few reads a wakeup when its transport holds more), decoding,
+ * the ordered output queue, writing, its event-loop interest, and closing (redis's connection
+ * object; STYLE.md 23). Bytes cross the socket through a net_transport (transport.h): plain
+ * TCP by default, the browser listener's HTTP + WebSocket layer (ws_conn.h) for /ws. What the
  * messages mean is the owner's business: the session hands each decoded message to
  * ops->on_message (dispatch.c) and reports its close through ops->on_close (daemon.c). It also
  * carries the per-client render and auth state the dispatcher keeps. Event-loop thread only.
@@ -23,6 +25,7 @@
 #include "net.h"
 #include "proto.h"
 #include "render.h"
+#include "transport.h"
 
 enum {
     SESS_OUT_MAX = 4 << 20,     /* bytes of non-frame output queued before the client is dropped */
@@ -75,6 +78,11 @@ typedef struct sess_ops {
 struct sess {
     uint32_t id;                /* (generation << 16) | index; never 0 */
     int fd;
+    const net_transport *tr;    /* how bytes cross the socket (net_tcp unless set) */
+    void *tr_ctx;               /* the transport's state, closed with the session */
+    int tr_want_write;          /* the transport's read waits for the socket to be writable */
+    int tr_failed;              /* the transport failed: its close is not graceful */
+    ev_timer pend_timer;        /* input the transport holds: read again without an event */
     void *owner;                /* the daemon context, passed to every ops callback */
     const sess_ops *ops;
     ev_loop *loop;
@@ -140,6 +148,10 @@ struct sess {
  * Returns NULL when out of memory. Start it with sess_kick. */
 sess *sess_new(uint32_t id, int fd, const char *addr, ev_loop *loop, const sess_ops *ops,
                void *owner);
+
+/* sess_set_transport: the session's bytes go through tr (ctx: its state, now owned by the
+ * session and closed with it) instead of plain TCP. Call before sess_kick. */
+void sess_set_transport(sess *s, const net_transport *tr, void *ctx);
 
 /* sess_set_authed: the session passed authentication: requests after HELLO are decoded with
  * the full limits, and the idle deadline starts. */

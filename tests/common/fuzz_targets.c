@@ -18,6 +18,8 @@
 #include "params.h"
 #include "proto.h"
 #include "sd_err.h"
+#include "http.h"
+#include "ws.h"
 
 /* ---- failing an oracle ------------------------------------------------------------------- */
 
@@ -635,10 +637,96 @@ fuzz_fn fuzz_target_find(const char *name)
     static const struct { const char *name; fuzz_fn fn; } targets[] = {
         {"proto", fuzz_one_proto}, {"ply", fuzz_one_ply}, {"pcd", fuzz_one_pcd},
         {"las", fuzz_one_las},     {"xyz", fuzz_one_xyz}, {"lzf", fuzz_one_lzf},
-        {"params", fuzz_one_params},
+        {"params", fuzz_one_params}, {"ws", fuzz_one_ws},
         {"laz", fuzz_one_laz},     {"copc", fuzz_one_copc},
     };
     for (size_t i = 0; i < sizeof targets / sizeof targets[0]; i++)
         if (!strcmp(targets[i].name, name)) return targets[i].fn;
     return NULL;
+}
+
+/* ---- WebSocket framing and HTTP request heads (server/net/ws.c, http.c) ---- */
+
+typedef struct ws_trace {
+    uint8_t *out;              /* every payload byte produced, in order */
+    size_t out_len;
+    int ev[256], code[256];    /* events and their codes (close / error) */
+    size_t ev_len[256];
+    int nev;
+    int err;                   /* the close code of an error, 0 when none */
+} ws_trace;
+
+/* ws_run: in[0..n) through a fresh decoder d0 (settings copied) fed step bytes at a time with
+ * an output buffer of cap bytes; records what came out. */
+static void ws_run(const ws_decoder *d0, const uint8_t *in, size_t n, size_t step, size_t cap,
+                   ws_trace *t)
+{
+    ws_decoder d = *d0;
+    uint8_t buf[4096];
+    size_t off = 0;
+    memset(t->ev, 0, sizeof t->ev);
+    t->nev = 0;
+    t->err = 0;
+    t->out_len = 0;
+    for (int guard = 0; off < n && guard < 1 << 22; guard++) {
+        size_t lim = n - off < step ? n - off : step, used = 0, prod = 0;
+        ws_event ev;
+        int rc = ws_decode(&d, in + off, lim, &used, buf, cap, &prod, &ev);
+        if (used > lim || prod > cap)
+            fz_fail("ws", "ws_decode used %zu of %zu, produced %zu of %zu", used, lim, prod, cap);
+        memcpy(t->out + t->out_len, buf, prod);
+        t->out_len += prod;
+        off += used;
+        if (rc == WS_EV_ERROR) {
+            if ((ev.code != 1002 && ev.code != 1003 && ev.code != 1009) || !ev.why[0])
+                fz_fail("ws", "ws_decode error with code %u, text '%s'", ev.code, ev.why);
+            t->err = ev.code;
+            return;
+        }
+        if (rc != WS_EV_NONE && t->nev < 256) {
+            t->ev[t->nev] = rc;
+            t->code[t->nev] = rc == WS_EV_CLOSE ? ev.code : 0;
+            t->ev_len[t->nev] = rc == WS_EV_END ? 0 : ev.len;
+            t->nev++;
+        }
+        if (rc == WS_EV_NONE && used == 0 && prod == 0) break; /* needs more than there is */
+    }
+}
+
+int fuzz_one_ws(const uint8_t *data, size_t len)
+{
+    if (len < 1) return -1;
+    uint8_t cfg = data[0];
+    const uint8_t *in = data + 1;
+    size_t n = len - 1;
+    static const uint64_t caps[8] = {0, 125, 126, 65535, 65536, 65552, 1 << 20, 3};
+    ws_decoder d0 = {.require_mask = (cfg >> 3) & 1, .binary_only = (cfg >> 4) & 1,
+                     .max_message = caps[cfg >> 5]};
+    ws_trace a = {.out = malloc(n + 1)}, b = {.out = malloc(n + 1)};
+    if (!a.out || !b.out) abort();
+    /* All at once with a roomy output, and in chunks of 1..128 bytes with a 7-byte output:
+     * the same bytes, events and error either way. */
+    ws_run(&d0, in, n, n ? n : 1, 4096, &a);
+    ws_run(&d0, in, n, (size_t)1 << (cfg & 7), 7, &b);
+    if (a.out_len != b.out_len || memcmp(a.out, b.out, a.out_len) != 0)
+        fz_fail("ws", "%zu bytes at once, %zu in pieces (or different bytes)", a.out_len,
+                b.out_len);
+    if (a.err != b.err || a.nev != b.nev || memcmp(a.ev, b.ev, sizeof a.ev) != 0 ||
+        memcmp(a.code, b.code, sizeof a.code) != 0)
+        fz_fail("ws", "events or error differ between whole and pieces (%d/%d, %d/%d)", a.nev,
+                  b.nev, a.err, b.err);
+    if (a.out_len > n) fz_fail("ws", "%zu payload bytes from %zu input bytes", a.out_len, n);
+    int rc = a.err ? -a.err : 0;
+    free(a.out);
+    free(b.out);
+    /* The same bytes as an HTTP request head. */
+    http_req r;
+    char err[200] = "";
+    int h = http_parse_request((const char *)in, n, &r, err, sizeof err);
+    if (h > 0 && ((size_t)h > n || h < 4 || memcmp(in + h - 4, "\r\n\r\n", 4) != 0))
+        fz_fail("http", "head length %d of %zu bytes does not end in an empty line", h, n);
+    if (h == 0 && n >= HTTP_HEAD_MAX) fz_fail("http", "needs more after %zu bytes", n);
+    if (h < 0 && ((h != -400 && h != -414 && h != -431 && h != -505) || !err[0]))
+        fz_fail("http", "status %d, text '%s'", -h, err);
+    return rc;
 }

@@ -57,3 +57,12 @@ int fuzz_one_copc(const uint8_t *data, size_t len);
  * "xyz", "lzf", "params", "laz", "copc"), or NULL. */
 typedef int (*fuzz_fn)(const uint8_t *data, size_t len);
 fuzz_fn fuzz_target_find(const char *name);
+
+/* fuzz_one_ws: byte 0 configures a ws_decoder (bits 0-2: the piece size 2^k, bit 3
+ * require_mask, bit 4 binary_only, bits 5-7 one of eight max_message values); the rest goes
+ * through ws_decode all at once and in pieces with a 7-byte output buffer, which must give the
+ * same payload bytes, events and error (a close code 1002/1003/1009 with a text); then through
+ * http_parse_request, whose answer must be a complete head, "more" below 8 KiB, or a status
+ * 400/414/431/505 with a text. Returns 0 when the stream decoded without error, else minus
+ * the close code. */
+int fuzz_one_ws(const uint8_t *data, size_t len);

@@ -57,3 +57,17 @@ double tu_psnr_covered(const uint8_t *a, const uint8_t *g, size_t npx, size_t *n
     double mse = se / (3.0 * n);
     return mse > 0 ? 10 * log10(255.0 * 255.0 / mse) : INFINITY;
 }
+
+double tu_psnr_all(const uint8_t *a, const uint8_t *g, size_t npx, size_t *lit)
+{
+    double se = 0;
+    size_t l = 0;
+    for (size_t i = 0; i < npx; i++) {
+        const uint8_t *p = a + 4 * i, *q = g + 4 * i;
+        l += p[0] > 8 || p[1] > 8 || p[2] > 8;
+        for (int c = 0; c < 3; c++) se += (double)(p[c] - q[c]) * (p[c] - q[c]);
+    }
+    *lit = l;
+    double mse = se / (3.0 * (double)(npx ? npx : 1));
+    return mse > 0 ? 10 * log10(255.0 * 255.0 / mse) : INFINITY;
+}

@@ -16,3 +16,8 @@ int tu_png_write(const char *path, uint32_t w, uint32_t h, const uint8_t *rgba, 
  * matches trivially and would inflate the figure by 10 log10(npx / covered). INFINITY when
  * they are equal; *ncov gets the number of pixels compared. */
 double tu_psnr_covered(const uint8_t *a, const uint8_t *g, size_t npx, size_t *ncov);
+
+/* tu_psnr_all: PSNR (dB, over R, G, B) of RGBA8 image a against g over all npx pixels, for
+ * screen captures compared with a render of the same view; *lit gets the pixels of a with a
+ * channel above 8 (a blank capture has none). INFINITY when they are equal. */
+double tu_psnr_all(const uint8_t *a, const uint8_t *g, size_t npx, size_t *lit);

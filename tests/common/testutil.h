@@ -54,3 +54,9 @@ int tu_run(char *out, size_t len, const char *fmt, ...) __attribute__((format(pr
 /* tu_data_dir: makes root/data holding tests/data/src as dst (a daemon's data directory with one
  * cloud), its path in buf. Returns 0, or -1 when it could not. */
 int tu_data_dir(const char *root, const char *src, const char *dst, char *buf, size_t len);
+/* tu_now_us: CLOCK_MONOTONIC in microseconds. */
+double tu_now_us(void);
+
+/* tu_median: the median of the n values v (reordered in place); the mean of the middle two
+ * for even n; 0 when n is 0. */
+double tu_median(double *v, int n);
