@@ -30,6 +30,7 @@ file:/usr/include/OpenEXR/openexr.h=libopenexr-dev
 pc:libpng=libpng-dev
 pc:liblz4=liblz4-dev
 pc:libcrypto=libssl-dev
+pc:libssl=libssl-dev
 pc:cmocka=libcmocka-dev
 pc:sdl2=libsdl2-dev
 file:/usr/bin/Xvfb=xvfb

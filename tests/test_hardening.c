@@ -59,6 +59,7 @@
 #include "cloud.h"
 #include "common/daemonproc.h"
 #include "common/testutil.h"
+#include "common/tlscert.h"
 #include "io_text.h"
 #include "prep.h"
 #include "proto.h"
@@ -106,18 +107,6 @@ static int teardown(void **state)
     else printf("kept %s\n", f->root);
     free(f);
     return 0;
-}
-
-/* log_count: occurrences of needle in the daemon's log. */
-static int log_count(const tu_daemon *d, const char *needle)
-{
-    size_t len;
-    char *log = (char *)tu_read_file(d->log, &len);
-    if (!log) return 0;
-    int n = 0;
-    for (const char *p = log; (p = strstr(p, needle)); p += strlen(needle)) n++;
-    free(log);
-    return n;
 }
 
 /* ---- sockets ---- */
@@ -492,9 +481,9 @@ static void test_slow_clients(void **state)
     /* Each kind was closed by the server: the deadlines and the unauthenticated pool act. */
     for (int kind = 0; kind < A_KINDS; kind++)
         if (k.closed[kind] < 1) fail_msg("no attacker of kind %d was closed by the daemon", kind);
-    assert_true(log_count(&f->d, "(--read-timeout)") >= 1);
-    assert_true(log_count(&f->d, "(--idle-timeout)") >= 1);
-    assert_true(log_count(&f->d, "(--max-unauth)") >= 1);
+    assert_true(tu_daemon_log_count(&f->d, "(--read-timeout)") >= 1);
+    assert_true(tu_daemon_log_count(&f->d, "(--idle-timeout)") >= 1);
+    assert_true(tu_daemon_log_count(&f->d, "(--max-unauth)") >= 1);
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
@@ -518,8 +507,8 @@ static void test_unauth_flood(void **state)
     int failed = legit_rounds(f->d.port, 1, 9, &med1, &max1);
     attack_end(&k);
     assert_int_equal(failed, 0);
-    int delayed = log_count(&f->d, "authentication failed (");
-    int per_addr = log_count(&f->d, "(--max-per-addr)");
+    int delayed = tu_daemon_log_count(&f->d, "authentication failed (");
+    int per_addr = tu_daemon_log_count(&f->d, "(--max-per-addr)");
     printf("unauthenticated flood: legit session median %.1f ms (max %.1f) quiet, %.1f ms "
            "(max %.1f) with 64 reconnecting sockets; %d wrong proofs answered, %d connections "
            "refused by --max-per-addr, %d reconnects\n", med0 * 1e3, max0 * 1e3, med1 * 1e3,
@@ -629,7 +618,7 @@ static void test_write_timeout(void **state)
     double closed_at = -1;
     for (int i = 0; i < 100 && closed_at < 0; i++) {
         usleep(50000);
-        if (log_count(&f->d, "(--write-timeout)") > 0) closed_at = now_s() - t0;
+        if (tu_daemon_log_count(&f->d, "(--write-timeout)") > 0) closed_at = now_s() - t0;
         if (i == 10) assert_true(legit_session(f->d.port, 0) > 0); /* others are served */
     }
     printf("a client that does not read: closed %.2f s after its RENDERs (--write-timeout 1)\n",
@@ -1011,7 +1000,7 @@ static void test_cache_kill9(void **state)
     struct stat st;
     assert_int_equal(stat(dead, &st), -1);
     assert_int_equal(stat(live, &st), 0);
-    assert_int_equal(log_count(&f->d, "removed 1 temporary file(s) of interrupted cache writes"), 1);
+    assert_int_equal(tu_daemon_log_count(&f->d, "removed 1 temporary file(s) of interrupted cache writes"), 1);
     assert_int_equal(tu_daemon_stop(&f->d), 0);
     unlink(live);
 }
@@ -1051,8 +1040,8 @@ static void test_prep_exit_status(void **state)
     const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", open_dir, NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
     assert_true(legit_session(f->d.port, 0) > 0);
-    assert_int_equal(log_count(&f->d, "cache: cache directory"), 1);
-    assert_int_equal(log_count(&f->d, "writable by others"), 1);
+    assert_int_equal(tu_daemon_log_count(&f->d, "cache: cache directory"), 1);
+    assert_int_equal(tu_daemon_log_count(&f->d, "writable by others"), 1);
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
@@ -1370,15 +1359,19 @@ static void test_token_checks(void **state)
     const char *a1[] = {"--listen", "0.0.0.0:0", "--data", f->data, "--token-file", shorttok, NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, &st, a1), -1);
     assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 1);
-    assert_int_equal(log_count(&f->d, "is 8 bytes; listening on 0.0.0.0 (not loopback) needs at least 16"), 1);
+    assert_int_equal(tu_daemon_log_count(&f->d, "is 8 bytes; listening on 0.0.0.0 (not loopback) needs at least 16"), 1);
     double t0 = now_s();
     const char *a2[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--token-file", fifo, NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, &st, a2), -1);
     assert_true(now_s() - t0 < 5);
     assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 1);
-    assert_int_equal(log_count(&f->d, "is not a regular file"), 1);
-    /* A long enough token: it starts. */
-    const char *a3[] = {"--listen", "0.0.0.0:0", "--data", f->data, "--token-file", f->token, NULL};
+    assert_int_equal(tu_daemon_log_count(&f->d, "is not a regular file"), 1);
+    /* A long enough token (and TLS, required there too; test_tls): it starts. */
+    char cert[700], key[700];
+    assert_int_equal(tu_make_cert(f->root, "srv", "splatd-test", "127.0.0.1", NULL, cert, key,
+                                  sizeof cert), 0);
+    const char *a3[] = {"--listen", "0.0.0.0:0", "--data", f->data, "--token-file", f->token,
+                        "--tls-cert", cert, "--tls-key", key, NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, a3), 0);
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }

@@ -16,12 +16,14 @@
 #include <sys/resource.h>
 #include <sys/signalfd.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "cache.h"
 #include "commands.h"
 #include "datadir.h"
 #include "srv.h"
+#include "tls.h"
 
 static void usage(FILE *f)
 {
@@ -32,7 +34,8 @@ static void usage(FILE *f)
             "\n"
             "  --listen HOST:PORT   address to listen on (default 127.0.0.1:7878; port 0 picks a free\n"
             "                       port, printed on stderr as 'listening on HOST:PORT'). Without\n"
-            "                       --token-file only loopback addresses are accepted.\n"
+            "                       --token-file, --tls-cert and --tls-key only loopback addresses\n"
+            "                       are accepted.\n"
             "  --port-file F        write the bound port to F once listening\n"
             "  --data DIR           the data directory: clients open clouds by file name in it\n"
             "  --cache DIR          prepared-cloud cache (default $SPLATD_CACHE, $XDG_CACHE_HOME/splatd,\n"
@@ -41,6 +44,9 @@ static void usage(FILE *f)
             "  --shader-dir DIR     load shaders from DIR instead of the built-in copies\n"
             "  --token-file F       require clients to prove they know the token in F (HMAC-SHA256\n"
             "                       of a random challenge); F must not be accessible by group or others\n"
+            "  --tls-cert F         serve TLS (1.2 or newer) with the PEM certificate chain in F;\n"
+            "                       required, with --tls-key, to listen beyond loopback\n"
+            "  --tls-key F          the certificate's PEM private key (mode 0600)\n"
             "  --preload NAME ...   prepare and upload these clouds at start-up (names up to the next\n"
             "                       option; --preload may also be repeated)\n"
             "  --max-clients N      authenticated connections served at once (default 64)\n"
@@ -95,7 +101,7 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
 {
     enum { O_LISTEN = 1000, O_DATA, O_CACHE, O_BACKEND, O_TOKEN, O_PRELOAD, O_SHADERS, O_MAXC,
            O_PORTFILE, O_HS, O_GPUMEM, O_FRAMEMEM, O_IDLE, O_RDTO, O_WRTO, O_UNAUTH, O_PERADDR, O_AUTHDELAY,
-           O_HELP };
+           O_TLSCERT, O_TLSKEY, O_HELP };
     static const struct option lo[] = {
         {"listen", required_argument, 0, O_LISTEN},   {"data", required_argument, 0, O_DATA},
         {"cache", required_argument, 0, O_CACHE},     {"backend", required_argument, 0, O_BACKEND},
@@ -108,6 +114,7 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
         {"write-timeout", required_argument, 0, O_WRTO}, {"max-unauth", required_argument, 0, O_UNAUTH},
         {"max-per-addr", required_argument, 0, O_PERADDR},
         {"auth-fail-delay", required_argument, 0, O_AUTHDELAY},
+        {"tls-cert", required_argument, 0, O_TLSCERT}, {"tls-key", required_argument, 0, O_TLSKEY},
         {"help", no_argument, 0, O_HELP},             {0, 0, 0, 0},
     };
     snprintf(o->host, sizeof o->host, "127.0.0.1");
@@ -155,6 +162,8 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
         case O_DATA: o->data_dir = optarg; break;
         case O_CACHE: o->cache_dir = optarg; break;
         case O_TOKEN: o->token_file = optarg; break;
+        case O_TLSCERT: o->tls_cert = optarg; break;
+        case O_TLSKEY: o->tls_key = optarg; break;
         case O_SHADERS: o->shader_dir = optarg; break;
         case O_PORTFILE: o->port_file = optarg; break;
         case O_BACKEND:
@@ -292,9 +301,15 @@ static void on_handshake_timeout(ev_loop *l, ev_timer *t, void *data)
     sess_close(s, msg);
 }
 
-/* refuse: a best-effort ERROR on a connection the daemon will not serve, then close. */
-static void refuse(int fd, int code, const char *text)
+/* refuse: a best-effort ERROR on a connection the daemon will not serve, then close. Over
+ * TLS the connection just closes: the client is in its handshake, and a plaintext answer would
+ * read as a broken one. */
+static void refuse(const srv *sv, int fd, int code, const char *text)
 {
+    if (sv->tls) {
+        close(fd);
+        return;
+    }
     proto_buf b = {0};
     if (proto_enc_error(&b, 0, (uint32_t)code, text) == 0) {
         ssize_t w = send(fd, b.data, b.len, MSG_NOSIGNAL | MSG_DONTWAIT);
@@ -458,12 +473,12 @@ static void on_accept(ev_loop *l, int fd, int mask, void *data)
         if (cs.from_host >= sv->o.max_per_addr) {
             srv_log(sv, NULL, "%s refused: %d connections from %s already (--max-per-addr)", addr,
                     cs.from_host, host);
-            refuse(c, PROTO_E_BUSY, "too many connections from your address; retry later");
+            refuse(sv, c, PROTO_E_BUSY, "too many connections from your address; retry later");
             continue;
         }
         if (cs.authed >= sv->o.max_clients) {
             srv_log(sv, NULL, "%s refused: %d clients already connected (--max-clients)", addr, cs.authed);
-            refuse(c, PROTO_E_BUSY, "too many clients; retry later");
+            refuse(sv, c, PROTO_E_BUSY, "too many clients; retry later");
             continue;
         }
         if (cs.unauth >= sv->o.max_unauth && cs.oldest_unauth) {
@@ -482,7 +497,7 @@ static void on_accept(ev_loop *l, int fd, int mask, void *data)
             if (!sv->sessions[i]) { idx = i; break; }
         if (idx < 0) {
             srv_log(sv, NULL, "%s refused: no free connection slot", addr);
-            refuse(c, PROTO_E_BUSY, "too many clients; retry later");
+            refuse(sv, c, PROTO_E_BUSY, "too many clients; retry later");
             continue;
         }
         if (++sv->gens[idx] == 0) sv->gens[idx] = 1;
@@ -492,8 +507,19 @@ static void on_accept(ev_loop *l, int fd, int mask, void *data)
         if (!s || auth_challenge(s->challenge, &err) != 0 || rt_client_open(sv->rt, id) != 0) {
             srv_log(sv, NULL, "%s refused: %s", addr, s ? err.msg : "out of memory");
             sess_free(s, NULL, NULL);
-            refuse(c, PROTO_E_INTERNAL, "the server cannot take a connection now");
+            refuse(sv, c, PROTO_E_INTERNAL, "the server cannot take a connection now");
             continue;
+        }
+        if (sv->tls) {
+            void *t = tls_conn_new(sv->tls, c);
+            if (!t) {
+                srv_log(sv, NULL, "%s refused: out of memory for its TLS state", addr);
+                sess_free(s, NULL, NULL);
+                rt_client_close(sv->rt, id);
+                refuse(sv, c, PROTO_E_INTERNAL, "");
+                continue;
+            }
+            sess_set_transport(s, &tls_transport, t);
         }
         s->version = PROTO_VERSION;
         s->lim = &sv->lim;
@@ -606,6 +632,31 @@ static int start(srv *sv)
                 "127.0.0.1.\n", sv->o.host);
         return 1;
     }
+    if (!sv->o.tls_cert != !sv->o.tls_key) {
+        fprintf(stderr, "splatd: --tls-cert and --tls-key go together (given: only %s)\n",
+                sv->o.tls_cert ? "--tls-cert" : "--tls-key");
+        return 1;
+    }
+    if (!sv->o.tls_cert && !net_host_is_loopback(sv->o.host)) {
+        /* Without TLS, anyone on the path reads the frames and cloud names and can take over
+         * an authenticated connection: beyond loopback it is not an option. */
+        fprintf(stderr,
+                "splatd: refusing to listen on %s without TLS: beyond loopback the frames, cloud "
+                "names and the session itself would travel in the clear. Give --tls-cert F and "
+                "--tls-key F (and --token-file F), or listen on 127.0.0.1.\n", sv->o.host);
+        return 1;
+    }
+    struct stat kst;
+    if (sv->o.tls_key && stat(sv->o.tls_key, &kst) == 0 && (kst.st_mode & (S_IRWXG | S_IRWXO))) {
+        fprintf(stderr, "splatd: --tls-key %s has mode %04o: a private key must not be "
+                "accessible to group or others (chmod 600 %s)\n", sv->o.tls_key,
+                (unsigned)(kst.st_mode & 07777), sv->o.tls_key);
+        return 1;
+    }
+    if (sv->o.tls_cert && tls_server_new(sv->o.tls_cert, sv->o.tls_key, &sv->tls, &err) != 0) {
+        fprintf(stderr, "splatd: %s\n", err.msg);
+        return 1;
+    }
     /* Temporary files of cache writes interrupted by a crash or kill -9 (the O_EXCL fallback
      * where O_TMPFILE is missing) are removed before anything is prepared. */
     char cdir[PATH_MAX];
@@ -685,6 +736,7 @@ static int start(srv *sv)
         return 1;
     }
     if (sv->token.len) srv_log(sv, NULL, "clients must authenticate (token from %s)", sv->o.token_file);
+    if (sv->tls) srv_log(sv, NULL, "TLS only, certificate %s", tls_server_subject(sv->tls));
     return 0;
 }
 
@@ -708,6 +760,8 @@ static int teardown(srv *sv)
     free(sv->sessions);
     free(sv->gens);
     memset(&sv->token, 0, sizeof sv->token);
+    tls_server_free(sv->tls);
+    sv->tls = NULL;
     return 0;
 }
 

@@ -9,6 +9,7 @@
 #include "ev.h"
 #include "render_thread.h"
 #include "session.h"
+#include "tls.h"
 
 enum {
     SRV_MAX_PRELOAD = 32,
@@ -21,6 +22,8 @@ typedef struct srv_opts {
     const char *data_dir;        /* required */
     const char *cache_dir;       /* default NULL: cache.h's default */
     const char *token_file;      /* NULL: no auth (loopback only) */
+    const char *tls_cert;        /* --tls-cert: NULL: plaintext (loopback only) */
+    const char *tls_key;         /* --tls-key */
     const char *port_file;       /* write the bound port here */
     const char *shader_dir;
     rnd_backend_kind backend;
@@ -81,6 +84,7 @@ typedef struct srv {
     ev_loop *loop;
     rt_ctx *rt;
     auth_token token;
+    tls_server *tls;             /* NULL: plaintext */
     int lfd, sigfd;
     int bound_port;
     sess **sessions;             /* max_clients + max_unauth slots */

@@ -1,5 +1,8 @@
-/* net.c — TCP listen/accept and address formatting (see net.h; redis anet.c). */
+/* net.c — TCP listen/accept, address formatting (see net.h; redis anet.c) and the plain
+ * transport net_tcp (transport.h). */
 #include "net.h"
+#include "ev.h"
+#include "transport.h"
 
 #include <arpa/inet.h>
 #include <errno.h>
@@ -131,3 +134,52 @@ int net_accept(int lfd, char *addr, size_t addrlen)
     fmt_addr((struct sockaddr *)&ss, addr, addrlen);
     return c;
 }
+
+/* ---- the plain transport (transport.h) ---- */
+
+static ssize_t tcp_read(void *ctx, int fd, void *buf, size_t len, int *want, char *err,
+                        size_t errlen)
+{
+    (void)ctx;
+    for (;;) {
+        ssize_t r = recv(fd, buf, len, 0);
+        if (r >= 0) return r;
+        if (errno == EINTR) continue;
+        if (errno == EAGAIN || errno == EWOULDBLOCK) {
+            *want = EV_READ;
+            return NET_AGAIN;
+        }
+        snprintf(err, errlen, "read failed: %s", strerror(errno));
+        return NET_ERR;
+    }
+}
+
+static ssize_t tcp_write(void *ctx, int fd, const void *buf, size_t len, int *want, char *err,
+                         size_t errlen)
+{
+    (void)ctx;
+    for (;;) {
+        ssize_t w = send(fd, buf, len, MSG_NOSIGNAL);
+        if (w >= 0) return w;
+        if (errno == EINTR) continue;
+        if (errno == EAGAIN || errno == EWOULDBLOCK) {
+            *want = EV_WRITE;
+            return NET_AGAIN;
+        }
+        snprintf(err, errlen, "write failed: %s", strerror(errno));
+        return NET_ERR;
+    }
+}
+
+static int tcp_pending(void *ctx)
+{
+    (void)ctx;
+    return 0;
+}
+
+static void tcp_close(void *ctx, int graceful)
+{
+    (void)ctx; (void)graceful;
+}
+
+const net_transport net_tcp = {"tcp", tcp_read, tcp_write, tcp_pending, tcp_close};

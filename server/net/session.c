@@ -21,6 +21,7 @@ sess *sess_new(uint32_t id, int fd, const char *addr, ev_loop *loop, const sess_
     s->ops = ops;
     s->owner = owner;
     strncpy(s->addr, addr, sizeof s->addr - 1);
+    s->tr = &net_tcp;
     proto_decoder_init(&s->dec, PROTO_C2S);
     s->dec.preauth = 1;
     s->cloud = -1;
@@ -31,14 +32,24 @@ sess *sess_new(uint32_t id, int fd, const char *addr, ev_loop *loop, const sess_
     ev_timer_init(&s->idle_timer);
     ev_timer_init(&s->rd_timer);
     ev_timer_init(&s->wr_timer);
+    ev_timer_init(&s->pend_timer);
     s->t_connect_ms = ev_now_ms();
     s->last_io_ms = s->t_connect_ms;
     return s;
 }
 
+void sess_set_transport(sess *s, const net_transport *tr, void *ctx)
+{
+    if (s->tr_ctx) s->tr->close(s->tr_ctx, 0);
+    s->tr = tr ? tr : &net_tcp;
+    s->tr_ctx = ctx;
+    s->rd_want = s->wr_want = 0;
+}
+
 void sess_free(sess *s, void (*release)(void *user, uint32_t id), void *user)
 {
     if (!s) return;
+    if (s->tr_ctx) s->tr->close(s->tr_ctx, 0);
     sess_item *it = s->head;
     while (it) {
         sess_item *n = it->next;
@@ -188,12 +199,16 @@ int sess_flush(sess *s, void (*release)(void *user, uint32_t id), void *user)
     for (int n = 0; n < 16; n++) {
         if (!s->cur && !next_message(s, release, user)) return 1;
         while (s->cur_off < s->cur_len) {
-            ssize_t w = send(s->fd, s->cur + s->cur_off, s->cur_len - s->cur_off, MSG_NOSIGNAL);
-            if (w < 0) {
-                if (errno == EINTR) continue;
-                if (errno == EAGAIN || errno == EWOULDBLOCK) return 0;
-                return -errno;
+            int want = 0;
+            ssize_t w = s->tr->write(s->tr_ctx, s->fd, s->cur + s->cur_off,
+                                     s->cur_len - s->cur_off, &want, s->io_err,
+                                     sizeof s->io_err);
+            if (w == NET_AGAIN) {
+                s->wr_want = want;
+                return 0;
             }
+            if (w <= 0) return -EIO;
+            s->wr_want = 0;
             s->cur_off += (size_t)w;
             s->bytes_out += (uint64_t)w;
         }
@@ -275,13 +290,27 @@ void sess_set_authed(sess *s)
 
 static void on_io(ev_loop *l, int fd, int mask, void *data);
 
+static void on_pending(ev_loop *l, ev_timer *t, void *data)
+{
+    (void)t;
+    sess *s = data;
+    on_io(l, s->fd, EV_READ, s);
+}
+
 /* update_watch: EV_READ while the input is drained and the session takes requests, EV_WRITE
- * when output waits, EV_HUP alone while requests wait unread (to notice the client going). */
+ * when output waits, EV_HUP alone while requests wait unread (to notice the client going).
+ * A transport may turn these around (a TLS read that must write first, a write that must read
+ * first), and input its layer already holds is read from a zero-delay timer, since the socket
+ * will not signal it. */
 static void update_watch(sess *s, int want_write)
 {
-    int mask = want_write ? EV_WRITE : 0;
-    if (!s->paused && !s->close_after && s->in_off == s->in_len) mask |= EV_READ;
+    int mask = want_write ? (s->wr_want == EV_READ ? EV_READ : EV_WRITE) : 0;
+    int reading = !s->paused && !s->close_after && s->in_off == s->in_len;
+    if (reading) mask |= EV_READ | (s->rd_want == EV_WRITE ? EV_WRITE : 0);
     else if (!s->close_after) mask |= EV_HUP;
+    if ((mask & EV_READ) && (mask & EV_HUP)) mask &= ~EV_HUP;
+    if (reading && s->tr->pending(s->tr_ctx) && !ev_timer_armed(&s->pend_timer))
+        ev_timer_start(s->loop, &s->pend_timer, 0, on_pending, s);
     if (ev_mask(s->loop, s->fd) == mask) return;
     if (mask == 0) ev_unwatch(s->loop, s->fd);
     else if (ev_watch(s->loop, s->fd, mask, on_io, s, NULL) != 0) sess_close(s, "event loop error");
@@ -301,8 +330,8 @@ void sess_kick(sess *s)
     int progress = s->bytes_out != before;
     if (progress) s->last_io_ms = ev_now_ms();
     if (rc < 0) {
-        char r[96];
-        snprintf(r, sizeof r, "write failed: %s", strerror(-rc));
+        char r[192];
+        snprintf(r, sizeof r, "%s", s->io_err[0] ? s->io_err : "write failed");
         sess_close(s, r);
         return;
     }
@@ -345,6 +374,8 @@ void sess_close(sess *s, const char *reason)
     if (s->dead) return;
     s->dead = 1;
     ev_unwatch(s->loop, s->fd);
+    if (s->tr_ctx) s->tr->close(s->tr_ctx, !s->io_err[0]);
+    s->tr_ctx = NULL;
     close(s->fd);
     s->fd = -1;
     ev_timer_stop(s->loop, &s->hs_timer);
@@ -352,6 +383,7 @@ void sess_close(sess *s, const char *reason)
     ev_timer_stop(s->loop, &s->idle_timer);
     ev_timer_stop(s->loop, &s->rd_timer);
     ev_timer_stop(s->loop, &s->wr_timer);
+    ev_timer_stop(s->loop, &s->pend_timer);
     s->ops->on_close(s->owner, s, reason);
 }
 
@@ -388,15 +420,32 @@ static void on_io(ev_loop *l, int fd, int mask, void *data)
         return;
     }
     if ((mask & EV_READ) && s->in_off == s->in_len) {
-        ssize_t r = recv(s->fd, s->in, SESS_IN_CHUNK, 0);
+        int want = 0;
+        ssize_t r = s->tr->read(s->tr_ctx, s->fd, s->in, SESS_IN_CHUNK, &want, s->io_err,
+                                sizeof s->io_err);
+        s->rd_want = r == NET_AGAIN ? want : 0;
         if (r == 0) {
             sess_close(s, s->authed ? "closed by the client"
                                     : "closed by the client before the handshake");
             return;
         }
-        if (r < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) {
-            char why[96];
-            snprintf(why, sizeof why, "read failed: %s", strerror(errno));
+        if (r == NET_NOT_TLS) {
+            /* A plaintext client on a TLS listener: told so in plaintext (the one thing sent
+             * unencrypted), then closed; nothing it sent is read. */
+            char why[sizeof s->io_err];
+            snprintf(why, sizeof why, "%s", s->io_err);
+            sess_set_transport(s, NULL, NULL);
+            s->io_err[0] = 0;
+            s->ops->on_decode_error(s->owner, s, PROTO_E_AUTH_REQUIRED,
+                                    "this server accepts TLS connections only: connect with TLS "
+                                    "(splat --tls, spc_options.tls)");
+            snprintf(s->close_reason, sizeof s->close_reason, "%s", why);
+            sess_kick(s);
+            return;
+        }
+        if (r < 0 && r != NET_AGAIN) {
+            char why[192];
+            snprintf(why, sizeof why, "%s", s->io_err);
             sess_close(s, why);
             return;
         }

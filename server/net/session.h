@@ -12,6 +12,9 @@
  * (latest wins). Memory per session is bounded: bytes items by SESS_OUT_MAX (over it the client
  * is disconnected), frames by the render thread's per-client outstanding limit.
  *
+ * Transport: bytes move through s->tr (transport.h): net_tcp unless the owner puts another
+ * layer (TLS) in with sess_set_transport before the first kick.
+ *
  * Lifetime: sess_close marks a session dead and closes its socket; the daemon frees it at a
  * safe point (before the loop sleeps), never inside a callback (STYLE.md 7). */
 #pragma once
@@ -23,6 +26,7 @@
 #include "net.h"
 #include "proto.h"
 #include "render.h"
+#include "transport.h"
 
 enum {
     SESS_OUT_MAX = 4 << 20,     /* bytes of non-frame output queued before the client is dropped */
@@ -81,6 +85,14 @@ struct sess {
     char addr[NET_ADDR_LEN];
     char client_name[PROTO_MAX_CLIENT + 1];
     uint64_t t_connect_ms;
+
+    /* transport */
+    const net_transport *tr;    /* net_tcp by default */
+    void *tr_ctx;               /* the layer's state; closed with the session */
+    int rd_want;                /* the event the last NET_AGAIN read waits for (0: none) */
+    int wr_want;                /* the event the last NET_AGAIN write waits for (0: none) */
+    ev_timer pend_timer;        /* the layer holds input already off the socket: read it soon */
+    char io_err[150];           /* the last transport error, for the close reason */
 
     /* input */
     proto_decoder dec;
@@ -141,6 +153,10 @@ struct sess {
 sess *sess_new(uint32_t id, int fd, const char *addr, ev_loop *loop, const sess_ops *ops,
                void *owner);
 
+/* sess_set_transport: the layer the session's bytes go through from now on (ctx is taken over
+ * and closed with the session); NULL: plain TCP. */
+void sess_set_transport(sess *s, const net_transport *tr, void *ctx);
+
 /* sess_set_authed: the session passed authentication: requests after HELLO are decoded with
  * the full limits, and the idle deadline starts. */
 void sess_set_authed(sess *s);
@@ -180,7 +196,7 @@ int sess_set_stream_frame(sess *s, uint8_t *msg, size_t len);
 /* sess_flush: writes what can be written without blocking, in order. Returns 1 when
  * everything is written, 0 when the socket is full (watch EV_WRITE), or a negative errno when
  * the connection failed. release(user, id) is called for each frame that leaves the waiting
- * state (starts being written). */
+ * state (starts being written). On failure s->io_err says why. */
 int sess_flush(sess *s, void (*release)(void *user, uint32_t id), void *user);
 
 /* sess_has_output: 1 when anything is queued or being written. */
