@@ -26,7 +26,8 @@
 #define MAX_FILES 512
 #define MUTATIONS 1000 /* per valid seed: about 0.5 s in all without ASan, 4 s with it */
 
-static const char *const targets[] = {"proto", "ply", "pcd", "las", "xyz", "lzf", "params"};
+static const char *const targets[] = {"proto", "ply", "pcd", "las", "xyz", "lzf", "params",
+                                      "cache", "frame"};
 
 /* The fuzz directory (see the file comment) into buf. */
 static const char *fuzz_dir(char *buf, size_t len)
@@ -154,6 +155,8 @@ static void test_corpus_las(void **state) { (void)state; run_corpus("las"); }
 static void test_corpus_xyz(void **state) { (void)state; run_corpus("xyz"); }
 static void test_corpus_lzf(void **state) { (void)state; run_corpus("lzf"); }
 static void test_corpus_params(void **state) { (void)state; run_corpus("params"); }
+static void test_corpus_cache(void **state) { (void)state; run_corpus("cache"); }
+static void test_corpus_frame(void **state) { (void)state; run_corpus("frame"); }
 
 /* Every saved crash input, through its target: must return (any code) without crashing. */
 static void test_crashes(void **state)
@@ -216,6 +219,7 @@ int main(void)
         cmocka_unit_test(test_corpus_ply),    cmocka_unit_test(test_corpus_pcd),
         cmocka_unit_test(test_corpus_las),    cmocka_unit_test(test_corpus_xyz),
         cmocka_unit_test(test_corpus_lzf),    cmocka_unit_test(test_corpus_params),
+        cmocka_unit_test(test_corpus_cache),  cmocka_unit_test(test_corpus_frame),
         cmocka_unit_test(test_crashes),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -44,7 +44,21 @@ int fuzz_one_lzf(const uint8_t *data, size_t len);
  * parameters must be unchanged and the message non-empty. Returns 0 or -1. */
 int fuzz_one_params(const uint8_t *data, size_t len);
 
+/* fuzz_one_cache: the bytes as a prep-cache file (cache.c) for a small source file, sealed
+ * (cache__seal: the source's key and the checksums made to match what the file holds) and
+ * loaded by cache__load with the default k. A loaded cache must have the layout's block length
+ * inside its mapping and batches tiling its points; a refusal must say why. Returns 0 when
+ * loaded, SD_EUNSUP when out of date, SD_ESTALE when damaged. */
+int fuzz_one_cache(const uint8_t *data, size_t len);
+
+/* fuzz_one_frame: byte 0 picks the format (bits 0-1: JPEG, LZ4, raw, PNG) and, with bit 2,
+ * that the rest after bytes 1-2 is a whole FRAME payload (proto_parse_frame gives format and
+ * size); else bytes 1-2 are the announced width and height (0: none) and the rest the image.
+ * fd_decode (the client's decoder) must give an image of the announced size whose every byte
+ * is readable, or a code with a message. Returns fd_decode's code (or the parse's). */
+int fuzz_one_frame(const uint8_t *data, size_t len);
+
 /* fuzz_target_find: the fuzz_one_* function of a target name ("proto", "ply", "pcd", "las",
- * "xyz", "lzf", "params"), or NULL. */
+ * "xyz", "lzf", "params", "cache", "frame"), or NULL. */
 typedef int (*fuzz_fn)(const uint8_t *data, size_t len);
 fuzz_fn fuzz_target_find(const char *name);

@@ -3,7 +3,7 @@
 #
 #   sh tests/fuzz/run.sh [SECONDS] [TARGET...]      (from the repository root; make fuzz)
 #
-# Targets: proto ply pcd las xyz lzf params (default: all). Each fuzzer is
+# Targets: proto ply pcd las xyz lzf params cache frame (default: all). Each fuzzer is
 # build/fuzz/fuzz_<target>, built with -fsanitize=fuzzer,address,undefined from the sources it
 # needs and tests/common/fuzz_targets.c (the bodies, shared with tests/test_fuzz_regress.c).
 # Each runs niced on a copy of tests/fuzz/corpus/<target>/ (the seeds stay as they are), with
@@ -17,7 +17,7 @@ cd "$(dirname "$0")/../.." || exit 2
 
 secs=${1:-60}
 [ $# -gt 0 ] && shift
-targets=${*:-proto ply pcd las xyz lzf params}
+targets=${*:-proto ply pcd las xyz lzf params cache frame}
 CLANG=${CLANG:-clang}
 max_len=${FUZZ_MAX_LEN:-65536}
 out=build/fuzz
@@ -32,13 +32,15 @@ CFLAGS="-std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer -Wall -Wextra -Wno
         -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=undefined
         -Iprotocol $(for d in util io prep render pipelines enc net daemon cmd; do printf -- "-Iserver/%s " $d; done)-Iclient -Itests -Itests/common -I/usr/include/OpenEXR"
 SRCS="$(ls protocol/*.c) server/io/io_text.c server/io/io_ply.c server/io/io_pcd.c server/io/io_las.c
-      server/io/io_xyz.c server/io/cloud.c server/io/lzf.c server/util/sd_err.c server/util/sd_hash.c tests/common/fuzz_targets.c"
+      server/io/io_xyz.c server/io/cloud.c server/io/lzf.c server/util/sd_err.c server/util/sd_hash.c
+      $(ls server/prep/*.c) client/frame_decode.c tests/common/fuzz_targets.c"
+LIBS="-lflann -lturbojpeg -llz4 -lpthread -lm"
 mkdir -p "$out/obj"
 objs=""
 for s in $SRCS; do
     o="$out/obj/$(echo "$s" | tr / _ | sed 's/\.c$/.o/')"
     # shellcheck disable=SC2046
-    if [ ! -f "$o" ] || [ -n "$(find "$s" tests/fuzz/run.sh $(ls server/*.h protocol/*.h \
+    if [ ! -f "$o" ] || [ -n "$(find "$s" tests/fuzz/run.sh $(ls server/*/*.h protocol/*.h client/*.h \
             tests/common/*.h) -newer "$o" 2>/dev/null | head -n 1)" ]; then
         # shellcheck disable=SC2086
         $CLANG $CFLAGS -c "$s" -o "$o" || { echo "fuzz: compiling $s failed" >&2; exit 2; }
@@ -49,7 +51,7 @@ for t in $targets; do
     src=tests/fuzz/fuzz_$t.c
     [ -f "$src" ] || { echo "fuzz: no target '$t' ($src)" >&2; exit 2; }
     # shellcheck disable=SC2086
-    $CLANG $CFLAGS -fsanitize=fuzzer "$src" $objs -lm -o "$out/fuzz_$t" ||
+    $CLANG $CFLAGS -fsanitize=fuzzer "$src" $objs $LIBS -o "$out/fuzz_$t" ||
         { echo "fuzz: linking fuzz_$t failed" >&2; exit 2; }
 done
 
