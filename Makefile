@@ -44,7 +44,7 @@ PKG_CFLAGS := $(shell pkg-config --cflags egl opengl osmesa libturbojpeg libpng 
 #   SERVER_LIBS  splatd and the tools built on libsplatd: GL back ends, kNN, encoders
 #   TEST_LIBS    the test and bench programs, which link both libraries
 CLIENT_LIBS := $(shell pkg-config --libs libssl libcrypto liblz4 libturbojpeg 2>/dev/null) -lm
-SERVER_LIBS := $(shell pkg-config --libs egl opengl osmesa libturbojpeg libpng liblz4 libssl libcrypto 2>/dev/null) \
+SERVER_LIBS := $(shell pkg-config --libs egl opengl osmesa libturbojpeg libpng liblz4 libssl libcrypto libxxhash liblzf 2>/dev/null) \
                $(FLANN_LIBS) $(EXR_LIBS) -lpthread -lm
 TEST_LIBS   := $(SERVER_LIBS) $(shell pkg-config --libs cmocka 2>/dev/null)
 #   VIEW_LIBS    splat-view, the SDL2 window of `splat view` (a binary of its own, so that

@@ -26,8 +26,9 @@
 #include "prep.h"
 #include "sd_hash.h"
 
-/* Bump when the layout of prepared.h or the meaning of any prepared value changes. */
-#define CACHE_VERSION 4u
+/* Bump when the layout of prepared.h or the meaning of any prepared value changes, or the
+ * hash of the keys and checksums (5: XXH3-64 from libxxhash instead of splatd's own). */
+#define CACHE_VERSION 5u
 #define CACHE_MAGIC "SPLATDC\0"
 #define CACHE_BLOCK_OFFSET 4096u
 

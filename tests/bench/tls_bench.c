@@ -17,6 +17,7 @@
 #include <time.h>
 
 #include "splat_client.h"
+#include "testutil.h"
 #include "tlscert.h"
 
 enum { MAXR = 16, MAXN = 200 };
@@ -26,18 +27,6 @@ static double now_us(void)
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
     return (double)ts.tv_sec * 1e6 + (double)ts.tv_nsec * 1e-3;
-}
-
-static int cmp_d(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double median(double *v, int n)
-{
-    qsort(v, (size_t)n, sizeof *v, cmp_d);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
 typedef struct bench {
@@ -76,14 +65,14 @@ static void one_round(const bench *b, int tls, const char *fmt, int w, int h, do
         v[i] = now_us() - t0;
         spc_close(c);
     }
-    out[0] = median(v, n);
+    out[0] = tu_median(v, n);
     spc_client *c = conn(b, tls);
     for (int i = 0; i < n; i++) {
         uint64_t rtt = 0;
         if (spc_ping(c, &rtt) < 0) die(c, "ping");
         v[i] = (double)rtt;
     }
-    out[1] = median(v, n);
+    out[1] = tu_median(v, n);
     spc_info info;
     if (spc_open(c, b->cloud, &info, NULL, NULL) < 0) die(c, "open");
     char kv[32];
@@ -102,7 +91,7 @@ static void one_round(const bench *b, int tls, const char *fmt, int w, int h, do
         if (spc_send_render(c, &cam, NULL) < 0 || spc_recv_frame(c, &f, 0) < 0) die(c, "render");
         v[i] = now_us() - t0 - (double)(f.render_us + f.readback_us + f.encode_us);
     }
-    out[2] = median(v, n);
+    out[2] = tu_median(v, n);
     int sent = 0, got = 0;
     double bytes = 0, t0 = now_us();
     while (got < n) {
@@ -164,7 +153,7 @@ int main(int argc, char **argv)
     double m[4][2][5];
     for (int k = 0; k < ncases; k++)
         for (int t = 0; t < 2; t++)
-            for (int q = 0; q < 5; q++) m[k][t][q] = median(r[k][t][q], b.rounds);
+            for (int q = 0; q < 5; q++) m[k][t][q] = tu_median(r[k][t][q], b.rounds);
     /* connect and PING do not depend on the case: medians over all of them */
     double cv[2][4 * MAXR], pv[2][4 * MAXR];
     for (int t = 0; t < 2; t++)
@@ -173,8 +162,8 @@ int main(int argc, char **argv)
                 cv[t][k * b.rounds + round] = r[k][t][0][round];
                 pv[t][k * b.rounds + round] = r[k][t][1][round];
             }
-    double c0 = median(cv[0], ncases * b.rounds), c1 = median(cv[1], ncases * b.rounds);
-    double p0 = median(pv[0], ncases * b.rounds), p1 = median(pv[1], ncases * b.rounds);
+    double c0 = tu_median(cv[0], ncases * b.rounds), c1 = tu_median(cv[1], ncases * b.rounds);
+    double p0 = tu_median(pv[0], ncases * b.rounds), p1 = tu_median(pv[1], ncases * b.rounds);
     printf("| measure | plaintext | TLS | TLS cost |\n|---|---|---|---|\n");
     printf("| connect + HELLO (TLS: + handshake, ECDSA P-256) | %.2f ms | %.2f ms | +%.2f ms |\n",
            c0 / 1000, c1 / 1000, (c1 - c0) / 1000);

@@ -45,3 +45,7 @@ void tu_skip_reason(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
  * EINTR (send with MSG_NOSIGNAL). 0, or -1 on an error, EOF or the socket's timeout. */
 int tu_send_all(int fd, const void *p, size_t n);
 int tu_recv_all(int fd, void *p, size_t n);
+
+/* tu_median: the median of the n > 0 values v (v is reordered); the mean of the middle two
+ * for even n. For benches: medians of repeated timings. */
+double tu_median(double *v, int n);

@@ -34,7 +34,7 @@ CFLAGS="-std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer -Wall -Wextra -Wno
 SRCS="$(ls protocol/*.c) server/io/io_text.c server/io/io_ply.c server/io/io_pcd.c server/io/io_las.c
       server/io/io_xyz.c server/io/cloud.c server/io/lzf.c server/util/sd_err.c server/util/sd_hash.c
       $(ls server/prep/*.c) client/frame_decode.c tests/common/fuzz_targets.c"
-LIBS="-lflann -lturbojpeg -llz4 -lpthread -lm"
+LIBS="-lflann -lturbojpeg -llz4 -lxxhash -llzf -lpthread -lm"
 mkdir -p "$out/obj"
 objs=""
 for s in $SRCS; do
