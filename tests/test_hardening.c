@@ -1347,6 +1347,37 @@ static void test_frame_budget(void **state)
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
+/* The frame being written to a client counts against --max-frame-bytes until it is written:
+ * with room for one 1024x1024 raw frame, a client that asks for one and does not read holds
+ * the budget, so another client's frame waits until --write-timeout closes the first (before,
+ * the frame left the budget at its first byte sent, and the second rendered at once while the
+ * first's 4 MiB still sat in the daemon). */
+static void test_budget_counts_sending(void **state)
+{
+    fx *f = *state;
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
+                          "--preload", "bunny", "--max-frame-bytes", "17M", "--write-timeout", "1",
+                          NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    int w = raw_client(f->d.port, 1024, 1024, 1); /* warm-up: buffers of this size exist */
+    assert_int_equal(drain(w, 1), 1);
+    close(w);
+    int a = raw_client(f->d.port, 1024, 1024, 1);
+    usleep(300000); /* its frame is rendered and being written, and stuck */
+    double t0 = now_s();
+    int b = raw_client(f->d.port, 1024, 1024, 1);
+    assert_int_equal(drain(b, 1), 1);
+    double waited = now_s() - t0;
+    printf("budget of one frame: the second client's frame came %.2f s after its request, the "
+           "first client (not reading) closed after --write-timeout 1\n", waited);
+    assert_true(waited > 0.5);
+    assert_true(waited < 5);
+    assert_int_equal(tu_daemon_log_count(&f->d, "the client does not read (--write-timeout)"), 1);
+    close(a);
+    close(b);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+}
+
 /* Beyond loopback the token must be at least 16 bytes; a FIFO as the token file is refused at
  * start-up at once instead of blocking it. */
 static void test_token_checks(void **state)
@@ -1401,6 +1432,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_header_before_hash, setup, teardown),
         cmocka_unit_test_setup_teardown(test_frame_budget, setup, teardown),
         cmocka_unit_test_setup_teardown(test_token_checks, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_budget_counts_sending, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

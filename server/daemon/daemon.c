@@ -269,6 +269,8 @@ static const sess_ops daemon_sess_ops = {
     .on_decode_error = srv_decode_error,
     .on_close = on_sess_close,
     .release = srv_release_frame,
+    .sending = srv_sending_frame,
+    .sent = srv_sent_frame,
     .stream_blocked = on_stream_blocked,
 };
 

@@ -49,6 +49,18 @@ void srv_release_frame(void *user, uint32_t id)
     rt_frame_released(sv->rt, id);
 }
 
+void srv_sending_frame(void *user, uint32_t id)
+{
+    srv *sv = user;
+    rt_frame_sending(sv->rt, id);
+}
+
+void srv_sent_frame(void *user, uint32_t id)
+{
+    srv *sv = user;
+    rt_frame_sent(sv->rt, id);
+}
+
 /* utf8_len: the length (1-4) of the well-formed UTF-8 sequence at p (n bytes available), or
  * 0 when it is not one (RFC 3629: no overlong forms, no surrogates, at most U+10FFFF). */
 static size_t utf8_len(const unsigned char *p, size_t n)

@@ -129,8 +129,12 @@ sess *srv_lookup(srv *sv, uint32_t id);
 void srv_on_worker_events(srv *sv);
 /* srv_preload: resolves and starts preparing cloud name. Returns 0 or SD_E* with err. */
 int srv_preload(srv *sv, const char *name, sd_err *err);
-/* srv_release_frame: sess_ops.release (user = srv): the render thread's count of s's frames. */
+/* srv_release_frame: sess_ops.release (user = srv): the render thread's count of s's frames.
+ * srv_sending_frame, srv_sent_frame: sess_ops.sending and .sent: a frame starts being written
+ * (no longer outstanding, still in the frame budget), and is written (out of the budget). */
 void srv_release_frame(void *user, uint32_t id);
+void srv_sending_frame(void *user, uint32_t id);
+void srv_sent_frame(void *user, uint32_t id);
 /* srv_pack_frame: rt_pack_fn: builds a FRAME message (header + payload). Encoder thread. */
 int srv_pack_frame(void *user, const rt_frame_meta *m, const uint8_t *data, size_t len,
                    uint8_t **msg, size_t *msglen);

@@ -172,9 +172,11 @@ static int next_message(sess *s, void (*release)(void *, uint32_t), void *user)
     return 0;
 }
 
-/* done_message: frees the message just written. */
+/* done_message: frees the message just written (a frame's bytes are then given back to the
+ * owner's budget through ops->sent). */
 static void done_message(sess *s)
 {
+    int frame = !s->cur_item || s->cur_item->is_frame;
     if (s->cur_item) {
         sess_item *h = s->cur_item;
         if (h->is_frame) s->frames_sent++;
@@ -191,6 +193,7 @@ static void done_message(sess *s)
     }
     s->cur = NULL;
     s->cur_len = s->cur_off = 0;
+    if (frame && s->ops && s->ops->sent) s->ops->sent(s->owner, s->id);
 }
 
 int sess_flush(sess *s, void (*release)(void *user, uint32_t id), void *user)
@@ -316,10 +319,12 @@ static void update_watch(sess *s, int want_write)
     else if (ev_watch(s->loop, s->fd, mask, on_io, s, NULL) != 0) sess_close(s, "event loop error");
 }
 
+/* release_cb: sess_flush's callback from sess_kick: a frame starts being written. */
 static void release_cb(void *user, uint32_t id)
 {
     sess *s = user;
-    if (s->ops->release) s->ops->release(s->owner, id);
+    if (s->ops->sending) s->ops->sending(s->owner, id);
+    else if (s->ops->release) s->ops->release(s->owner, id);
 }
 
 void sess_kick(sess *s)

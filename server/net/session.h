@@ -70,8 +70,13 @@ typedef struct sess_ops {
     /* on_close: the session closed (socket already closed, reason for the log); the owner
      * frees it later, at a safe point, with sess_free. */
     void (*on_close)(void *owner, sess *s, const char *reason);
-    /* release: a frame the render thread counts as outstanding for s left the waiting state. */
+    /* release: a frame the render thread counts as outstanding for s is gone unsent (dropped,
+     * or s freed while it waited). */
     void (*release)(void *owner, uint32_t id);
+    /* sending: such a frame starts being written (it leaves the waiting state; NULL: release
+     * is called instead); sent: the frame being written is written and freed. */
+    void (*sending)(void *owner, uint32_t id);
+    void (*sent)(void *owner, uint32_t id);
     /* stream_blocked: whether a streamed frame waits to be written (latest-wins backpressure). */
     void (*stream_blocked)(void *owner, sess *s, int blocked);
 } sess_ops;
