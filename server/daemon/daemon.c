@@ -95,6 +95,22 @@ static int parse_size(const char *s, uint64_t *out)
     return 0;
 }
 
+void srv_opts_defaults(srv_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    snprintf(o->host, sizeof o->host, "127.0.0.1");
+    o->port = PROTO_DEFAULT_PORT;
+    o->max_clients = 64;
+    o->handshake_ms = 10000;
+    o->idle_ms = 300000;
+    o->read_ms = 30000;
+    o->write_ms = 30000;
+    o->max_unauth = 64;
+    o->max_per_addr = 32;
+    o->auth_delay_ms = 250;
+    o->shutdown_ms = 5000;
+}
+
 /* parse_opts: fills o from argv. Returns 0, 1 for --help (exit 0), or -1 after printing the
  * error (exit 2). */
 static int parse_opts(int argc, char **argv, srv_opts *o)
@@ -117,17 +133,7 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
         {"tls-cert", required_argument, 0, O_TLSCERT}, {"tls-key", required_argument, 0, O_TLSKEY},
         {"help", no_argument, 0, O_HELP},             {0, 0, 0, 0},
     };
-    snprintf(o->host, sizeof o->host, "127.0.0.1");
-    o->port = PROTO_DEFAULT_PORT;
-    o->max_clients = 64;
-    o->handshake_ms = 10000;
-    o->idle_ms = 300000;
-    o->read_ms = 30000;
-    o->write_ms = 30000;
-    o->max_unauth = 64;
-    o->max_per_addr = 32;
-    o->auth_delay_ms = 250;
-    o->shutdown_ms = 5000;
+    srv_opts_defaults(o);
     optind = 1;
     opterr = 0;
     int c;
@@ -457,79 +463,86 @@ void srv_auth_failed(srv *sv, sess *s, uint32_t seq, int noproof)
     ev_timer_start(sv->loop, &s->hs_timer, delay, on_auth_fail_due, s);
 }
 
+int srv_adopt(srv *sv, int c, const char *addr)
+{
+    char host[NET_ADDR_LEN];
+    addr_host(addr, host, sizeof host);
+    srv_census cs;
+    census(sv, host, &cs);
+    if (cs.from_host >= sv->o.max_per_addr) {
+        srv_log(sv, NULL, "%s refused: %d connections from %s already (--max-per-addr)", addr,
+                cs.from_host, host);
+        refuse(sv, c, PROTO_E_BUSY, "too many connections from your address; retry later");
+        return SD_ELIMIT;
+    }
+    if (cs.authed >= sv->o.max_clients) {
+        srv_log(sv, NULL, "%s refused: %d clients already connected (--max-clients)", addr, cs.authed);
+        refuse(sv, c, PROTO_E_BUSY, "too many clients; retry later");
+        return SD_ELIMIT;
+    }
+    if (cs.unauth >= sv->o.max_unauth && cs.oldest_unauth) {
+        /* The unauthenticated pool is full: one of it makes room (refusing the newcomer, as
+         * a plain cap would, lets a flood of idle sockets lock everyone out). An address
+         * competes with itself first: its own oldest unauthenticated connection goes, so a
+         * reconnecting flood from one address churns through its own sockets and never
+         * evicts another client mid-handshake; a newcomer from an address with none takes
+         * the oldest of the pool. Its slot is freed at once for the newcomer. */
+        sess *victim = cs.oldest_unauth_host ? cs.oldest_unauth_host : cs.oldest_unauth;
+        sess_close(victim, "unauthenticated, dropped for a newer connection (--max-unauth)");
+        free_dead(sv);
+    }
+    int idx = -1;
+    for (int i = 0; i < sv->nslots; i++)
+        if (!sv->sessions[i]) { idx = i; break; }
+    if (idx < 0) {
+        srv_log(sv, NULL, "%s refused: no free connection slot", addr);
+        refuse(sv, c, PROTO_E_BUSY, "too many clients; retry later");
+        return SD_ELIMIT;
+    }
+    if (++sv->gens[idx] == 0) sv->gens[idx] = 1;
+    uint32_t id = ((uint32_t)sv->gens[idx] << 16) | (uint32_t)idx;
+    sess *s = sess_new(id, c, addr, sv->loop, &daemon_sess_ops, sv);
+    sd_err err = {0};
+    if (!s || auth_challenge(s->challenge, &err) != 0 || rt_client_open(sv->rt, id) != 0) {
+        srv_log(sv, NULL, "%s refused: %s", addr, s ? err.msg : "out of memory");
+        sess_free(s, NULL, NULL);
+        refuse(sv, c, PROTO_E_INTERNAL, "the server cannot take a connection now");
+        return SD_ENOMEM;
+    }
+    if (sv->tls) {
+        void *t = tls_conn_new(sv->tls, c);
+        if (!t) {
+            srv_log(sv, NULL, "%s refused: out of memory for its TLS state", addr);
+            sess_free(s, NULL, NULL);
+            rt_client_close(sv->rt, id);
+            refuse(sv, c, PROTO_E_INTERNAL, "");
+            return SD_ENOMEM;
+        }
+        sess_set_transport(s, &tls_transport, t);
+    }
+    s->version = PROTO_VERSION;
+    s->lim = &sv->lim;
+    sv->sessions[idx] = s;
+    sv->nsess++;
+    srv_log(sv, s, "connected");
+    ev_timer_start(sv->loop, &s->hs_timer, (uint64_t)sv->o.handshake_ms, on_handshake_timeout, s);
+    sess_kick(s);
+    return 0;
+}
+
 static void on_accept(ev_loop *l, int fd, int mask, void *data)
 {
     (void)l; (void)mask;
     srv *sv = data;
     for (int n = 0; n < 16 && !sv->stopping; n++) {
-        char addr[NET_ADDR_LEN], host[NET_ADDR_LEN];
+        char addr[NET_ADDR_LEN];
         int c = net_accept(fd, addr, sizeof addr);
         if (c == -EAGAIN) return;
         if (c < 0) {
             srv_log(sv, NULL, "accept failed: %s", strerror(-c));
             return;
         }
-        addr_host(addr, host, sizeof host);
-        srv_census cs;
-        census(sv, host, &cs);
-        if (cs.from_host >= sv->o.max_per_addr) {
-            srv_log(sv, NULL, "%s refused: %d connections from %s already (--max-per-addr)", addr,
-                    cs.from_host, host);
-            refuse(sv, c, PROTO_E_BUSY, "too many connections from your address; retry later");
-            continue;
-        }
-        if (cs.authed >= sv->o.max_clients) {
-            srv_log(sv, NULL, "%s refused: %d clients already connected (--max-clients)", addr, cs.authed);
-            refuse(sv, c, PROTO_E_BUSY, "too many clients; retry later");
-            continue;
-        }
-        if (cs.unauth >= sv->o.max_unauth && cs.oldest_unauth) {
-            /* The unauthenticated pool is full: one of it makes room (refusing the newcomer, as
-             * a plain cap would, lets a flood of idle sockets lock everyone out). An address
-             * competes with itself first: its own oldest unauthenticated connection goes, so a
-             * reconnecting flood from one address churns through its own sockets and never
-             * evicts another client mid-handshake; a newcomer from an address with none takes
-             * the oldest of the pool. Its slot is freed at once for the newcomer. */
-            sess *victim = cs.oldest_unauth_host ? cs.oldest_unauth_host : cs.oldest_unauth;
-            sess_close(victim, "unauthenticated, dropped for a newer connection (--max-unauth)");
-            free_dead(sv);
-        }
-        int idx = -1;
-        for (int i = 0; i < sv->nslots; i++)
-            if (!sv->sessions[i]) { idx = i; break; }
-        if (idx < 0) {
-            srv_log(sv, NULL, "%s refused: no free connection slot", addr);
-            refuse(sv, c, PROTO_E_BUSY, "too many clients; retry later");
-            continue;
-        }
-        if (++sv->gens[idx] == 0) sv->gens[idx] = 1;
-        uint32_t id = ((uint32_t)sv->gens[idx] << 16) | (uint32_t)idx;
-        sess *s = sess_new(id, c, addr, sv->loop, &daemon_sess_ops, sv);
-        sd_err err = {0};
-        if (!s || auth_challenge(s->challenge, &err) != 0 || rt_client_open(sv->rt, id) != 0) {
-            srv_log(sv, NULL, "%s refused: %s", addr, s ? err.msg : "out of memory");
-            sess_free(s, NULL, NULL);
-            refuse(sv, c, PROTO_E_INTERNAL, "the server cannot take a connection now");
-            continue;
-        }
-        if (sv->tls) {
-            void *t = tls_conn_new(sv->tls, c);
-            if (!t) {
-                srv_log(sv, NULL, "%s refused: out of memory for its TLS state", addr);
-                sess_free(s, NULL, NULL);
-                rt_client_close(sv->rt, id);
-                refuse(sv, c, PROTO_E_INTERNAL, "");
-                continue;
-            }
-            sess_set_transport(s, &tls_transport, t);
-        }
-        s->version = PROTO_VERSION;
-        s->lim = &sv->lim;
-        sv->sessions[idx] = s;
-        sv->nsess++;
-        srv_log(sv, s, "connected");
-        ev_timer_start(sv->loop, &s->hs_timer, (uint64_t)sv->o.handshake_ms, on_handshake_timeout, s);
-        sess_kick(s);
+        (void)srv_adopt(sv, c, addr);
     }
 }
 
@@ -606,6 +619,40 @@ static int write_port_file(const char *path, int port)
     return 0;
 }
 
+int srv_core_start(srv *sv, sd_err *err)
+{
+    struct rlimit rl;
+    int max_fds = 4096;
+    if (getrlimit(RLIMIT_NOFILE, &rl) == 0 && rl.rlim_cur != RLIM_INFINITY && rl.rlim_cur < 65536)
+        max_fds = (int)rl.rlim_cur > max_fds ? (int)rl.rlim_cur : max_fds;
+    sv->loop = ev_create(max_fds, err);
+    if (!sv->loop) return SD_EIO;
+    /* Authenticated and unauthenticated connections have separate caps, so the table holds
+     * both; ids keep the slot in 16 bits (8192 at most here). */
+    sv->nslots = sv->o.max_clients + sv->o.max_unauth;
+    sv->lim = (sess_limits){.idle_ms = (uint32_t)sv->o.idle_ms, .read_ms = (uint32_t)sv->o.read_ms,
+                            .write_ms = (uint32_t)sv->o.write_ms};
+    sv->sessions = calloc((size_t)sv->nslots, sizeof *sv->sessions);
+    sv->gens = calloc((size_t)sv->nslots, sizeof *sv->gens);
+    if (!sv->sessions || !sv->gens) return sd_errf(err, SD_ENOMEM, "out of memory");
+    if (!sv->max_w) sv->max_w = 8192;
+    if (!sv->max_h) sv->max_h = 8192;
+    rt_desc rd = {
+        .rnd = {.backend = sv->o.backend, .shader_dir = sv->o.shader_dir,
+                .max_width = sv->max_w, .max_height = sv->max_h, .gpu_memory = sv->o.gpu_memory},
+        .max_clients = sv->nslots, .cache_dir = sv->o.cache_dir,
+        .frame_budget = sv->o.max_frame_bytes,
+        .pack = srv_pack_frame, .pack_user = sv,
+    };
+    sd_err rerr = {0};
+    sv->rt = rt_create(&rd, sv->loop, &rerr);
+    if (!sv->rt) return sd_errf(err, rerr.code ? rerr.code : SD_EIO, "cannot start the renderer: %s", rerr.msg);
+    ev_set_before_sleep(sv->loop, before_sleep, sv);
+    ev_set_wakeup(sv->loop, on_wakeup, sv);
+    ev_timer_init(&sv->stop_timer);
+    return 0;
+}
+
 /* start: everything before the loop runs. Returns 0, or 1 after printing why. */
 static int start(srv *sv)
 {
@@ -678,33 +725,8 @@ static int start(srv *sv)
         fprintf(stderr, "splatd: signalfd: %s\n", strerror(errno));
         return 1;
     }
-    struct rlimit rl;
-    int max_fds = 4096;
-    if (getrlimit(RLIMIT_NOFILE, &rl) == 0 && rl.rlim_cur != RLIM_INFINITY && rl.rlim_cur < 65536)
-        max_fds = (int)rl.rlim_cur > max_fds ? (int)rl.rlim_cur : max_fds;
-    sv->loop = ev_create(max_fds, &err);
-    /* Authenticated and unauthenticated connections have separate caps, so the table holds
-     * both; ids keep the slot in 16 bits (8192 at most here). */
-    sv->nslots = sv->o.max_clients + sv->o.max_unauth;
-    sv->lim = (sess_limits){.idle_ms = (uint32_t)sv->o.idle_ms, .read_ms = (uint32_t)sv->o.read_ms,
-                            .write_ms = (uint32_t)sv->o.write_ms};
-    sv->sessions = calloc((size_t)sv->nslots, sizeof *sv->sessions);
-    sv->gens = calloc((size_t)sv->nslots, sizeof *sv->gens);
-    if (!sv->loop || !sv->sessions || !sv->gens) {
-        fprintf(stderr, "splatd: %s\n", sv->loop ? "out of memory" : err.msg);
-        return 1;
-    }
-    sv->max_w = sv->max_h = 8192;
-    rt_desc rd = {
-        .rnd = {.backend = sv->o.backend, .shader_dir = sv->o.shader_dir,
-                .max_width = sv->max_w, .max_height = sv->max_h, .gpu_memory = sv->o.gpu_memory},
-        .max_clients = sv->nslots, .cache_dir = sv->o.cache_dir,
-        .frame_budget = sv->o.max_frame_bytes,
-        .pack = srv_pack_frame, .pack_user = sv,
-    };
-    sv->rt = rt_create(&rd, sv->loop, &err);
-    if (!sv->rt) {
-        fprintf(stderr, "splatd: cannot start the renderer: %s\n", err.msg);
+    if (srv_core_start(sv, &err) != 0) {
+        fprintf(stderr, "splatd: %s\n", err.msg);
         return 1;
     }
     srv_log(sv, NULL, "renderer: %s (%s); cloud buffers held to %llu MiB of GPU memory, frames "
@@ -727,9 +749,6 @@ static int start(srv *sv)
         fprintf(stderr, "splatd: %s\n", err.msg);
         return 1;
     }
-    ev_set_before_sleep(sv->loop, before_sleep, sv);
-    ev_set_wakeup(sv->loop, on_wakeup, sv);
-    ev_timer_init(&sv->stop_timer);
     int v6 = strchr(sv->o.host, ':') != NULL;
     fprintf(stderr, "listening on %s%s%s:%d\n", v6 ? "[" : "", sv->o.host, v6 ? "]" : "", sv->bound_port);
     fflush(stderr);
@@ -742,10 +761,10 @@ static int start(srv *sv)
     return 0;
 }
 
-/* teardown: closes every session and frees everything, except when a cloud preparation is
+/* srv_teardown (srv.h): closes every session and frees everything, except when a cloud preparation is
  * still running (see rt_stop_for_exit): then the workers' context and the loop stay as they
  * are, and the process exits without waiting for it. */
-static int teardown(srv *sv)
+int srv_teardown(srv *sv)
 {
     for (int i = 0; sv->sessions && i < sv->nslots; i++)
         if (sv->sessions[i] && !sv->sessions[i]->dead) sess_close(sv->sessions[i], "server stopped");
@@ -778,7 +797,7 @@ int cmd_daemon(int argc, char **argv)
         srv_log(&sv, NULL, "event loop failed: %s", strerror(errno));
         rc = 1;
     }
-    int abandoned = teardown(&sv);
+    int abandoned = srv_teardown(&sv);
     if (ran && rc == 0) srv_log(&sv, NULL, "stopped");
     if (abandoned) {
         /* The prep thread is still running: leave at once, without exit()'s library

@@ -268,7 +268,10 @@ static void stream_update(srv *sv, sess *s, uint32_t seq)
     s->stream_seq = seq;
     uint64_t now = ev_now_ms();
     if (s->max_fps > 0) {
-        uint64_t gap = (uint64_t)(1000.0f / s->max_fps);
+        /* In double and capped at a day: a cap as small as a float allows (1e-45 frames/s is
+         * in [0, 1000]) makes 1000 / max_fps infinite, which no integer holds. */
+        double gapd = 1000.0 / (double)s->max_fps;
+        uint64_t gap = gapd < 86400000.0 ? (uint64_t)gapd : 86400000u;
         if (now < s->last_stream_ms + gap) {
             if (!ev_timer_armed(&s->fps_timer))
                 ev_timer_start(sv->loop, &s->fps_timer, s->last_stream_ms + gap - now, on_fps_timer, s);

@@ -105,6 +105,22 @@ typedef struct srv {
 /* srv_log: one line on stderr, "splatd: ADDR message", ADDR from s when not NULL. */
 void srv_log(const srv *sv, const sess *s, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 
+/* srv_adopt: serves the connected non-blocking socket c from peer addr ("HOST:PORT"): the
+ * admission limits, a new session (TLS when the daemon has it), its handshake deadline. On
+ * refusal the socket is answered BUSY (or closed) and closed, and SD_ELIMIT/SD_ENOMEM returned;
+ * else 0. What on_accept does with each accepted socket; the dispatch fuzzer's way in. */
+int srv_adopt(srv *sv, int c, const char *addr);
+
+/* srv_opts_defaults: o with every default (as `splatd` with no option). */
+void srv_opts_defaults(srv_opts *o);
+/* srv_core_start: the parts of start-up the sessions need (event loop, session table,
+ * deadlines, the render, encoder and prep threads); no socket, signal or preload. sv->o must
+ * be set; sv->max_w/max_h (0: 8192) bound frame sizes. Returns 0 or an SD_E* code with err.
+ * srv_teardown: closes every session and frees what srv_core_start and start-up made; returns 1
+ * when a cloud preparation was left running (the process should exit without waiting). */
+int srv_core_start(srv *sv, sd_err *err);
+int srv_teardown(srv *sv);
+
 /* srv_admit: s has just authenticated (a HELLO without a token, or with the right proof):
  * admits it under --max-clients (sess_set_authed) and returns 1; or answers BUSY to request
  * seq, closes it once that is written and returns 0. */

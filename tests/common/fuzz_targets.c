@@ -126,9 +126,9 @@ static int check_params_msg(const proto_msg *m, proto_error *e)
     return 0;
 }
 
-/* parse_msg: runs the message's parser and, when it accepts, the re-encoding check. Returns
+/* fuzz_parse_msg (fuzz_targets.h): runs the message's parser and, when it accepts, the re-encoding check. Returns
  * the parser's code. */
-static int parse_msg(const proto_msg *m)
+int fuzz_parse_msg(const proto_msg *m)
 {
     proto_error e;
     memset(&e, 0, sizeof e);
@@ -307,7 +307,7 @@ static void run_decoder(uint8_t cfg, const uint8_t *data, size_t len, size_t chu
         r->hash = fnv(fnv(r->hash, hb, sizeof hb), m.payload, m.len);
         r->msgs++;
         if (parse) {
-            int prc = parse_msg(&m);
+            int prc = fuzz_parse_msg(&m);
             if (prc < 0 && !r->parse_rc) r->parse_rc = prc;
         }
     }

@@ -58,6 +58,20 @@ int fuzz_one_cache(const uint8_t *data, size_t len);
  * is readable, or a code with a message. Returns fd_decode's code (or the parse's). */
 int fuzz_one_frame(const uint8_t *data, size_t len);
 
+/* fuzz_one_dispatch (tests/common/fuzz_dispatch.c, linked only where the whole server is):
+ * the bytes as what one client sends to the daemon's session and dispatch code, in this
+ * process, on the real renderer (frames at most 128x128, one 64-point cloud "sphere"
+ * prepared). The connection is served until the daemon closes it or falls quiet (at most 1 s),
+ * then the client goes. Everything the daemon sent must decode and parse with the protocol's
+ * own client-side code, and the session must be freed once the client has gone. Returns 0, or
+ * minus the code of the first ERROR the daemon sent. */
+int fuzz_one_dispatch(const uint8_t *data, size_t len);
+
+/* fuzz_parse_msg: one decoded message through its proto_parse_* and, when it parses, the
+ * re-encoding check (an oracle failure aborts). Returns the parser's code. */
+typedef struct proto_msg proto_msg;
+int fuzz_parse_msg(const proto_msg *m);
+
 /* fuzz_target_find: the fuzz_one_* function of a target name ("proto", "ply", "pcd", "las",
  * "xyz", "lzf", "params", "cache", "frame"), or NULL. */
 typedef int (*fuzz_fn)(const uint8_t *data, size_t len);

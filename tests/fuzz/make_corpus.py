@@ -339,6 +339,28 @@ def params():
         put("params", "bad_%02d" % i, kv)
 
 
+def dispatch_seeds():
+    """Seeds of the dispatch target (fuzz_one_dispatch): what one client sends to the daemon,
+    whose data directory holds the 64-point cloud "sphere" and whose frames are at most
+    128x128. Valid seeds get no ERROR; bad_* seeds each get one."""
+    def session(*parts):
+        seq = iter(range(1, 100))
+        return b"".join(msg(t, p, next(seq)) for t, p in parts)
+    put("dispatch", "hello_list_ping", session(("HELLO", hello()), ("LIST", b""),
+                                               ("PING", struct.pack("<Q", 7)), ("BYE", b"")))
+    put("dispatch", "open_render", session(
+        ("HELLO", hello()), ("OPEN", s8("sphere")), ("CAMERA", camera(64, 48)),
+        ("PARAMS", params_payload()), ("RENDER", b""), ("RENDER", b"")))
+    put("dispatch", "stream", session(
+        ("HELLO", hello()), ("OPEN", s8("sphere.xyz")), ("STREAM", struct.pack("<Bf", 1, 30.0)),
+        ("CAMERA", camera(32, 32)), ("CAMERA", camera(48, 32)), ("PING", struct.pack("<Q", 1))))
+    put("dispatch", "bad_not_found", session(("HELLO", hello()), ("OPEN", s8("nothing"))))
+    put("dispatch", "bad_before_hello", msg("LIST"))
+    put("dispatch", "bad_too_large", session(("HELLO", hello()), ("OPEN", s8("sphere")),
+                                             ("CAMERA", camera(4096, 4096)), ("RENDER", b"")))
+    put("dispatch", "bad_magic", b"GET / HTTP/1.1\r\n\r\n")
+
+
 def lz4_literals(data):
     """One LZ4 block holding data as a single literal run (a valid block without matches)."""
     n = len(data)
@@ -377,6 +399,7 @@ def frame_seeds():
 def main():
     proto()
     frame_seeds()
+    dispatch_seeds()
     ply()
     pcd()
     las()

@@ -3,7 +3,9 @@
 #
 #   sh tests/fuzz/run.sh [SECONDS] [TARGET...]      (from the repository root; make fuzz)
 #
-# Targets: proto ply pcd las xyz lzf params cache frame (default: all). Each fuzzer is
+# Targets: proto ply pcd las xyz lzf params cache frame dispatch (default: all). dispatch links
+# the whole server (its session, dispatch and render-thread code, on the real renderer) and
+# tests/common/fuzz_dispatch.c; it needs `make` to have generated build/gen/shaders_gen.c. Each fuzzer is
 # build/fuzz/fuzz_<target>, built with -fsanitize=fuzzer,address,undefined from the sources it
 # needs and tests/common/fuzz_targets.c (the bodies, shared with tests/test_fuzz_regress.c).
 # Each runs niced on a copy of tests/fuzz/corpus/<target>/ (the seeds stay as they are), with
@@ -17,7 +19,7 @@ cd "$(dirname "$0")/../.." || exit 2
 
 secs=${1:-60}
 [ $# -gt 0 ] && shift
-targets=${*:-proto ply pcd las xyz lzf params cache frame}
+targets=${*:-proto ply pcd las xyz lzf params cache frame dispatch}
 CLANG=${CLANG:-clang}
 max_len=${FUZZ_MAX_LEN:-65536}
 out=build/fuzz
@@ -30,13 +32,23 @@ fi
 # ---- build: every source once into objects, then one link per target ----
 CFLAGS="-std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer -Wall -Wextra -Wno-unused-parameter
         -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=undefined
-        -Iprotocol $(for d in util io prep render pipelines enc net daemon cmd; do printf -- "-Iserver/%s " $d; done)-Iclient -Itests -Itests/common -I/usr/include/OpenEXR"
+        -Iprotocol $(for d in util io prep render pipelines enc net daemon cmd; do printf -- "-Iserver/%s " $d; done)-Iclient -Itests -Itests/common -Ibuild/gen -I/usr/include/OpenEXR"
 SRCS="$(ls protocol/*.c) server/io/io_text.c server/io/io_ply.c server/io/io_pcd.c server/io/io_las.c
       server/io/io_xyz.c server/io/cloud.c server/io/lzf.c server/util/sd_err.c server/util/sd_hash.c
       $(ls server/prep/*.c) client/frame_decode.c tests/common/fuzz_targets.c"
 LIBS="-lflann -lturbojpeg -llz4 -lxxhash -llzf -lpthread -lm"
+# The dispatch target: the rest of the server (all but its main), the embedded shaders.
+DISPATCH_SRCS="$(ls server/*/*.c | grep -v -e '^server/cmd/main.c$' -e '^server/io/' -e '^server/prep/' \
+                 -e '^server/util/') build/gen/shaders_gen.c tests/common/fuzz_dispatch.c"
+DISPATCH_LIBS="$(pkg-config --libs egl opengl osmesa libpng libssl libcrypto) -lOpenEXRCore"
+case " $targets " in
+    *" dispatch "*)
+        [ -f build/gen/shaders_gen.c ] || make build/gen/shaders_gen.c >/dev/null ||
+            { echo "fuzz: cannot generate build/gen/shaders_gen.c" >&2; exit 2; }
+        SRCS="$SRCS $DISPATCH_SRCS" ;;
+esac
 mkdir -p "$out/obj"
-objs=""
+objs="" dobjs=""
 for s in $SRCS; do
     o="$out/obj/$(echo "$s" | tr / _ | sed 's/\.c$/.o/')"
     # shellcheck disable=SC2046
@@ -45,13 +57,15 @@ for s in $SRCS; do
         # shellcheck disable=SC2086
         $CLANG $CFLAGS -c "$s" -o "$o" || { echo "fuzz: compiling $s failed" >&2; exit 2; }
     fi
-    objs="$objs $o"
+    case " $DISPATCH_SRCS " in *" $s "*) dobjs="$dobjs $o" ;; *) objs="$objs $o" ;; esac
 done
 for t in $targets; do
     src=tests/fuzz/fuzz_$t.c
     [ -f "$src" ] || { echo "fuzz: no target '$t' ($src)" >&2; exit 2; }
     # shellcheck disable=SC2086
-    $CLANG $CFLAGS -fsanitize=fuzzer "$src" $objs $LIBS -o "$out/fuzz_$t" ||
+    extra=""
+    [ "$t" = dispatch ] && extra="$dobjs $DISPATCH_LIBS"
+    $CLANG $CFLAGS -fsanitize=fuzzer "$src" $objs $extra $LIBS -o "$out/fuzz_$t" ||
         { echo "fuzz: linking fuzz_$t failed" >&2; exit 2; }
 done
 
