@@ -165,7 +165,7 @@ int fuzz_one_dispatch(const uint8_t *data, size_t len)
         s = srv_lookup(sv, id);
         if (!s || s->dead) break;
         int idle = off == len && !got && !sess_busy(s) && rt_pending(sv->rt, id) == 0 &&
-                   s->in_off == s->in_len;
+                   s->in_off == s->in_len && !ev_timer_armed(&s->fps_timer);
         quiet = idle ? quiet + 1 : 0;
         if (quiet >= 3) break;
     }
