@@ -18,6 +18,7 @@
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "common/daemonproc.h"
@@ -63,6 +64,17 @@ static int teardown(void **state)
     if (f->d.pid > 0) tu_daemon_stop(&f->d);
     tu_rm_rf(f->root);
     free(f);
+    return 0;
+}
+
+/* log_wait: 1 once the daemon's log holds needle, polling for up to 5 s (a line written when
+ * a connection closes may come just after the client saw it close). */
+static int log_wait(const tu_daemon *d, const char *needle)
+{
+    for (int i = 0; i < 100; i++) {
+        if (tu_daemon_log_count(d, needle) > 0) return 1;
+        usleep(50000);
+    }
     return 0;
 }
 
@@ -116,7 +128,7 @@ static void test_tls_round_trip(void **state)
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 
     start_tls(f, 1);
-    assert_true(tu_daemon_log_count(&f->d, "TLS only, certificate /CN=splatd-test"));
+    assert_true(log_wait(&f->d, "TLS only, certificate /CN=splatd-test"));
     o = (spc_options){.port = f->d.port, .tls_ca = f->cert, .token_file = f->token};
     if (spc_connect(&o, &c, err, sizeof err) != 0) fail_msg("TLS connect: %s", err);
     assert_int_equal(spc_server(c)->auth_required, 1);
@@ -195,7 +207,7 @@ static void test_tls_mismatch(void **state)
     spc_options o = {.port = f->d.port, .token_file = f->token};
     assert_int_equal(spc_connect(&o, &c, err, sizeof err), SPC_E_AUTH_REQUIRED);
     if (!strstr(err, "accepts TLS connections only")) fail_msg("plaintext client: %s", err);
-    assert_true(tu_daemon_log_count(&f->d, "not a TLS client (first byte 0x53)"));
+    assert_true(log_wait(&f->d, "not a TLS client (first byte 0x53)"));
     /* A connection that sends nothing of a handshake and goes: nothing breaks. */
     int fd = socket(AF_INET, SOCK_STREAM, 0);
     struct sockaddr_in a = {.sin_family = AF_INET, .sin_port = htons((uint16_t)f->d.port)};
@@ -217,6 +229,36 @@ static void test_tls_mismatch(void **state)
     o = (spc_options){.port = f->d.port};
     if (spc_connect(&o, &c, err, sizeof err) != 0) fail_msg("plain after TLS: %s", err);
     spc_close(c);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+}
+
+/* A client that starts a TLS handshake and stalls is closed at the handshake deadline, like
+ * one that never sends HELLO. */
+static void test_tls_handshake_deadline(void **state)
+{
+    fx *f = *state;
+    const char *a[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--tls-cert", f->cert,
+                       "--tls-key", f->key, "--handshake-timeout", "1", NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, a), 0);
+    int fd = socket(AF_INET, SOCK_STREAM, 0);
+    struct sockaddr_in sa = {.sin_family = AF_INET, .sin_port = htons((uint16_t)f->d.port)};
+    sa.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    struct timeval tv = {10, 0};
+    setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    assert_int_equal(connect(fd, (struct sockaddr *)&sa, sizeof sa), 0);
+    struct timespec t0, t1;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    assert_int_equal(send(fd, "\x16\x03\x01\x00", 4, 0), 4); /* half a record header */
+    char b;
+    ssize_t r;
+    while ((r = recv(fd, &b, 1, 0)) > 0) {}
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    double secs = (double)(t1.tv_sec - t0.tv_sec) + (double)(t1.tv_nsec - t0.tv_nsec) * 1e-9;
+    close(fd);
+    printf("a stalled TLS handshake was closed after %.2f s (--handshake-timeout 1)\n", secs);
+    assert_int_equal(r, 0); /* closed by the daemon, not our receive timeout */
+    assert_true(secs > 0.8 && secs < 5);
+    assert_true(log_wait(&f->d, "closed: no HELLO within 1 s"));
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
@@ -261,6 +303,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_tls_verification, setup, teardown),
         cmocka_unit_test_setup_teardown(test_tls_mismatch, setup, teardown),
         cmocka_unit_test_setup_teardown(test_tls_required, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_tls_handshake_deadline, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
