@@ -142,6 +142,25 @@ static void test_tls_round_trip(void **state)
     free(pframe);
     free(tframe);
 
+    /* The command line: `splat --tls-ca` lists the clouds; without --tls it is told to use it. */
+    char cmd[2400], out[4096];
+    snprintf(cmd, sizeof cmd, "'%s' --port %d --tls-ca '%s' --token-file '%s' list 2>&1",
+             tu_splat_bin(), f->d.port, f->cert, f->token);
+    FILE *p = popen(cmd, "r");
+    assert_non_null(p);
+    size_t n = fread(out, 1, sizeof out - 1, p);
+    out[n] = 0;
+    int st = pclose(p);
+    if (st != 0 || !strstr(out, "bunny")) fail_msg("splat --tls-ca list (%d): %s", st, out);
+    snprintf(cmd, sizeof cmd, "'%s' --port %d --token-file '%s' list 2>&1", tu_splat_bin(),
+             f->d.port, f->token);
+    p = popen(cmd, "r");
+    assert_non_null(p);
+    n = fread(out, 1, sizeof out - 1, p);
+    out[n] = 0;
+    st = pclose(p);
+    if (st == 0 || !strstr(out, "accepts TLS connections only")) fail_msg("splat list (%d): %s", st, out);
+
     /* The name "localhost" is in the certificate too. */
     o = (spc_options){.host = "localhost", .port = f->d.port, .tls_ca = f->cert, .token_file = f->token};
     if (spc_connect(&o, &c, err, sizeof err) != 0) fail_msg("TLS connect to localhost: %s", err);
