@@ -1294,9 +1294,23 @@ static int drain(int fd, int n)
     return frames;
 }
 
+/* drain_job: drain() on a thread of its own, so that several clients read at once. */
+typedef struct drain_job {
+    int fd, n, got;
+} drain_job;
+
+static void *drain_thread(void *p)
+{
+    drain_job *j = p;
+    j->got = drain(j->fd, j->n);
+    return NULL;
+}
+
 /* held_growth: starts a daemon with extra args, lets 6 clients each ask for two 1024x1024 raw
  * frames (4 MiB each) without reading, and returns how much the daemon's RSS grew (kB); then
- * the clients read, and every frame arrives. */
+ * the clients read, all at once (a frame being written holds its place in the budget until its
+ * client has read it, so one client reading alone may wait for another's), and every frame
+ * arrives. */
 static long held_growth(fx *f, const char *budget)
 {
     const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
@@ -1312,10 +1326,17 @@ static long held_growth(fx *f, const char *budget)
     for (int i = 0; i < 6; i++) fds[i] = raw_client(f->d.port, 1024, 1024, 2);
     usleep(1000000);
     long during = rss_kb(f->d.pid);
+    drain_job jobs[6];
+    pthread_t th[6];
     for (int i = 0; i < 6; i++) {
-        assert_int_equal(drain(fds[i], 2), 2);
+        jobs[i] = (drain_job){.fd = fds[i], .n = 2};
+        assert_int_equal(pthread_create(&th[i], NULL, drain_thread, &jobs[i]), 0);
+    }
+    for (int i = 0; i < 6; i++) {
+        pthread_join(th[i], NULL);
         close(fds[i]);
     }
+    for (int i = 0; i < 6; i++) assert_int_equal(jobs[i].got, 2);
     assert_int_equal(tu_daemon_stop(&f->d), 0);
     return during - before;
 }
