@@ -424,7 +424,10 @@ static void on_io(ev_loop *l, int fd, int mask, void *data)
         sess_close(s, "closed by the client while its requests waited");
         return;
     }
-    if ((mask & EV_READ) && s->in_off == s->in_len) {
+    /* A read is due on input, or on the socket turning writable when the last read had to
+     * write first (a TLS handshake or key update behind a full send buffer). */
+    int readable = (mask & EV_READ) || (s->rd_want == EV_WRITE && (mask & EV_WRITE));
+    if (readable && s->in_off == s->in_len) {
         int want = 0;
         ssize_t r = s->tr->read(s->tr_ctx, s->fd, s->in, SESS_IN_CHUNK, &want, s->io_err,
                                 sizeof s->io_err);
