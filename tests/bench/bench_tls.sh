@@ -33,4 +33,5 @@ done
 echo "## TLS: cost per frame (loopback, bun000.ply, 40k points)"
 echo
 "$bench/tls_bench" --plain "$(cat "$tmp/port1")" --tls "$(cat "$tmp/port2")" --ca "$tmp/bench.crt" \
-    --cloud bunny --rounds "${TLS_BENCH_ROUNDS:-3}" --frames "${TLS_BENCH_FRAMES:-15}"
+    --cloud bunny --rounds "${TLS_BENCH_ROUNDS:-3}" --frames "${TLS_BENCH_FRAMES:-15}" \
+    --pids "$p1,$p2"

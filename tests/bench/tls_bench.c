@@ -4,17 +4,20 @@
  *
  *   tls_bench --make-cert DIR         writes DIR/bench.crt and DIR/bench.key (IP 127.0.0.1)
  *   tls_bench --plain P --tls Q --ca FILE --cloud NAME [--rounds R] [--frames N]
+ *             [--pids PLAIN_PID,TLS_PID]
  *
  * Rows (Markdown): connection set-up (connect + HELLO, and TLS's handshake); PING round trip;
  * per frame format and size: the overhead of one frame at a time (end-to-end time minus the
  * server's render, read-back and encode times, so the renderer's own time, which TLS does not
  * change, is left out) and the throughput of a path with 4 frames in flight (frames/s and MB/s
- * of frame bytes). Each figure is the median over rounds of per-round medians. */
+ * of frame bytes). Each figure is the median over rounds of per-round medians. With --pids,
+ * also the daemons' resident memory per idle connection (24 connected clients each). */
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "splat_client.h"
 #include "testutil.h"
@@ -31,6 +34,7 @@ static double now_us(void)
 
 typedef struct bench {
     int port[2];                  /* 0: plaintext, 1: TLS */
+    int pid[2];                   /* the daemons, for their memory; 0: not measured */
     const char *ca, *cloud;
     int rounds, frames;
 } bench;
@@ -110,6 +114,36 @@ static void one_round(const bench *b, int tls, const char *fmt, int w, int h, do
     spc_close(c);
 }
 
+/* rss_kb: VmRSS of process pid in KiB, or -1. */
+static long rss_kb(int pid)
+{
+    char path[64], line[256];
+    snprintf(path, sizeof path, "/proc/%d/status", pid);
+    FILE *f = fopen(path, "r");
+    if (!f) return -1;
+    long kb = -1;
+    while (fgets(line, sizeof line, f))
+        if (sscanf(line, "VmRSS: %ld", &kb) == 1) break;
+    fclose(f);
+    return kb;
+}
+
+/* idle_cost: the daemon's resident KiB per connected, idle client (24 of them, after HELLO). */
+static double idle_cost(const bench *b, int tls)
+{
+    enum { N = 24 }; /* under --max-per-addr (32) */
+    spc_client *c[N];
+    c[0] = conn(b, tls); /* warm-up: the first connection's one-time allocations */
+    spc_close(c[0]);
+    usleep(200000);
+    long before = rss_kb(b->pid[tls]);
+    for (int i = 0; i < N; i++) c[i] = conn(b, tls);
+    usleep(200000);
+    long after = rss_kb(b->pid[tls]);
+    for (int i = 0; i < N; i++) spc_close(c[i]);
+    return (double)(after - before) / N;
+}
+
 int main(int argc, char **argv)
 {
     if (argc == 3 && !strcmp(argv[1], "--make-cert")) {
@@ -129,6 +163,7 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--cloud")) b.cloud = argv[i + 1];
         else if (!strcmp(argv[i], "--rounds")) b.rounds = atoi(argv[i + 1]);
         else if (!strcmp(argv[i], "--frames")) b.frames = atoi(argv[i + 1]);
+        else if (!strcmp(argv[i], "--pids")) sscanf(argv[i + 1], "%d,%d", &b.pid[0], &b.pid[1]);
         else { fprintf(stderr, "tls_bench: unknown option %s\n", argv[i]); return 2; }
     }
     if (!b.port[0] || !b.port[1] || !b.ca || b.rounds < 1 || b.rounds > MAXR || b.frames < 3 ||
@@ -176,6 +211,11 @@ int main(int argc, char **argv)
         printf("| %dx%d %s, path of %d frames, 4 in flight | %.1f frames/s, %.0f MB/s | %.1f "
                "frames/s, %.0f MB/s | %.0f %% of plaintext's rate |\n", cases[k].w, cases[k].h,
                cases[k].fmt, b.frames, a[3], a[4], t[3], t[4], 100 * t[3] / a[3]);
+    }
+    if (b.pid[0] > 0 && b.pid[1] > 0) {
+        double m0 = idle_cost(&b, 0), m1 = idle_cost(&b, 1);
+        printf("| daemon memory per idle connected client (24 of them) | %.0f KiB | %.0f KiB | "
+               "%+.0f KiB |\n", m0, m1, m1 - m0);
     }
     printf("\n(medians of %d alternating rounds of %d frames each; pipeline points, "
            "cloud %s)\n", b.rounds, b.frames, b.cloud);
