@@ -100,6 +100,7 @@ int cli_parse(int argc, char **argv, cli_args *a, char *err, size_t errlen)
             continue;
         }
         if (!strcmp(arg, "--force")) { a->force = 1; continue; }
+        if (!strcmp(arg, "--tls")) { a->tls = 1; continue; }
         if (!strcmp(arg, "-q") || !strcmp(arg, "--quiet")) { a->quiet = 1; continue; }
         /* options with a value: --opt value or --opt=value */
         char opt[32];
@@ -114,7 +115,8 @@ int cli_parse(int argc, char **argv, cli_args *a, char *err, size_t errlen)
         } else {
             snprintf(opt, sizeof opt, "%s", arg);
         }
-        static const char *with_value[] = {"--host", "--port", "--token-file", "-o", "--output",
+        static const char *with_value[] = {"--host", "--port", "--token-file", "--tls-ca", "--tls-name",
+                                           "-o", "--output",
                                            "--path", "--orbit", "--inflight", "--set", "--eye",
                                            "--target", "--up", "--fov", "--size", "--timeout",
                                            "--shard", "--shards", NULL};
@@ -139,6 +141,12 @@ int cli_parse(int argc, char **argv, cli_args *a, char *err, size_t errlen)
             a->port = (int)l;
         } else if (!strcmp(opt, "--token-file")) {
             a->token_file = val;
+        } else if (!strcmp(opt, "--tls-ca")) {
+            a->tls_ca = val;
+            a->tls = 1;
+        } else if (!strcmp(opt, "--tls-name")) {
+            a->tls_name = val;
+            a->tls = 1;
         } else if (!strcmp(opt, "-o") || !strcmp(opt, "--output")) {
             a->output = val;
         } else if (!strcmp(opt, "--path")) {

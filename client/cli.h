@@ -9,6 +9,9 @@ typedef struct cli_args {
     const char *host;          /* default "127.0.0.1" */
     int port;                  /* default 7878 */
     const char *token_file;    /* default NULL */
+    int tls;                   /* --tls */
+    const char *tls_ca;        /* --tls-ca FILE (implies --tls) */
+    const char *tls_name;      /* --tls-name NAME (implies --tls) */
     int timeout_s;             /* default 60 (per blocking call) */
     const char *command;       /* list, info, render, path */
     const char *name;          /* cloud name */

@@ -51,6 +51,7 @@ uint32_t spc__next_seq(spc_client *c)
 
 static void close_fd(spc_client *c)
 {
+    spc__tls_end(c, 0);
     if (c->fd >= 0) close(c->fd);
     c->fd = -1;
 }
@@ -65,8 +66,9 @@ int spc__fail(spc_client *c, int code, const char *fmt, ...)
     return code;
 }
 
-/* wait_fd: polls c->fd for ev until the deadline. 0 when ready, or TIMEOUT/IO. */
-static int wait_fd(spc_client *c, short ev, uint64_t deadline)
+int spc__buffered(const spc_client *c) { return c->rpos < c->rlen || spc__tls_pending(c); }
+
+int spc__wait_fd(spc_client *c, short ev, uint64_t deadline)
 {
     for (;;) {
         int ms = -1;
@@ -94,13 +96,25 @@ int spc__flush(spc_client *c, uint64_t deadline)
     }
     size_t off = 0;
     while (off < c->out.len) {
+        if (c->ssl) {
+            size_t done = 0;
+            short ev = POLLOUT;
+            int t = spc__tls_io(c, 1, c->out.data + off, c->out.len - off, &done, &ev);
+            if (t < 0 || t == 2) {
+                c->out.len = 0;
+                return t < 0 ? t : spc__fail(c, SPC_E_CLOSED, "the server closed the connection");
+            }
+            if (t == 1 && (t = spc__wait_fd(c, ev, deadline)) < 0) return t;
+            off += done;
+            continue;
+        }
         ssize_t n = send(c->fd, c->out.data + off, c->out.len - off, MSG_NOSIGNAL);
         if (n > 0) {
             off += (size_t)n;
             continue;
         }
         if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) {
-            int rc = wait_fd(c, POLLOUT, deadline);
+            int rc = spc__wait_fd(c, POLLOUT, deadline);
             if (rc < 0) return rc;
             continue;
         }
@@ -127,6 +141,16 @@ int spc__recv(spc_client *c, proto_msg *m, uint64_t deadline)
             /* NEED_MORE: everything was consumed */
         }
         c->rpos = c->rlen = 0;
+        if (c->ssl) {
+            size_t done = 0;
+            short ev = POLLIN;
+            int t = spc__tls_io(c, 0, c->rbuf, sizeof c->rbuf, &done, &ev);
+            if (t < 0) return t;
+            if (t == 2) return spc__fail(c, SPC_E_CLOSED, "the server closed the connection");
+            if (t == 1 && (t = spc__wait_fd(c, ev, deadline)) < 0) return t;
+            c->rlen = done;
+            continue;
+        }
         ssize_t n = recv(c->fd, c->rbuf, sizeof c->rbuf, 0);
         if (n > 0) {
             c->rlen = (size_t)n;
@@ -135,7 +159,7 @@ int spc__recv(spc_client *c, proto_msg *m, uint64_t deadline)
         if (n == 0)
             return spc__fail(c, SPC_E_CLOSED, "the server closed the connection");
         if (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR) {
-            int rc = wait_fd(c, POLLIN, deadline);
+            int rc = spc__wait_fd(c, POLLIN, deadline);
             if (rc < 0) return rc;
             continue;
         }
@@ -370,7 +394,10 @@ int spc_connect(const spc_options *opt, spc_client **out, char *err, size_t errl
         spc_close(c);
         return SPC_E_IO;
     }
-    int rc = handshake(c, &o);
+    int rc = 0;
+    if (o.tls || o.tls_ca || o.tls_name)
+        rc = spc__tls_start(c, o.host, o.tls_name, o.tls_ca, spc__deadline(c));
+    if (rc == 0) rc = handshake(c, &o);
     if (rc < 0) {
         snprintf(err, errlen, "%s:%d: %s", o.host, o.port, c->errmsg);
         spc_close(c);
@@ -388,6 +415,7 @@ void spc_close(spc_client *c)
         if (proto_enc_empty(&c->out, PROTO_MSG_BYE, spc__next_seq(c)) == 0)
             (void)spc__flush(c, spc__now_us() + 200000); /* best effort, 200 ms */
     }
+    if (c->fd >= 0) spc__tls_end(c, 1);
     close_fd(c);
     proto_decoder_free(&c->dec);
     proto_buf_free(&c->out);

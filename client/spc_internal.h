@@ -9,8 +9,14 @@
 #include "proto.h"
 #include "splat_client.h"
 
+struct spc_tls_io;
+
 struct spc_client {
     int fd;                       /* -1 once closed */
+    struct ssl_st *ssl;           /* the TLS connection (spc_tls.c), NULL for plain TCP */
+    struct ssl_ctx_st *tls_ctx;
+    struct bio_method_st *tls_meth;
+    struct spc_tls_io *tls_io;
     int timeout_ms;               /* < 0: none */
     uint32_t seq;                 /* last request sequence number used */
     proto_decoder dec;            /* server -> client */
@@ -53,6 +59,30 @@ int spc__server_error(spc_client *c, const proto_msg *m);
  * progress, which may be NULL, and restarts the timeout). Returns 0 with *m set, or a code. */
 int spc__wait(spc_client *c, uint32_t seq, unsigned type, proto_msg *m, spc_progress_fn progress,
               void *user);
+
+/* spc__wait_fd: polls c->fd for ev (POLLIN/POLLOUT) until the deadline. 0 when ready, or
+ * TIMEOUT/IO (failed on c). */
+int spc__wait_fd(spc_client *c, short ev, uint64_t deadline);
+
+/* spc__buffered: 1 when received bytes wait inside the library (its buffer or TLS's), so
+ * the socket alone would not say that a message may be readable. */
+int spc__buffered(const spc_client *c);
+
+/* ---- TLS (spc_tls.c) ---- */
+
+/* spc__tls_start: the TLS handshake on the connected c->fd, verifying the server's
+ * certificate chain against ca_file (PEM; NULL: the system's trusted certificates) and that
+ * it names `name` (an IP address or a DNS name; NULL: host). 0, or a code failed on c. */
+int spc__tls_start(spc_client *c, const char *host, const char *name, const char *ca_file,
+                   uint64_t deadline);
+/* spc__tls_io: one SSL_write (writing) or SSL_read of up to len bytes. Returns 0 with *done
+ * bytes moved, 1 when nothing can move now (*ev: the poll event to wait for), 2 when the
+ * server closed the connection (reads), or a negative code failed on c. */
+int spc__tls_io(spc_client *c, int writing, void *buf, size_t len, size_t *done, short *ev);
+/* spc__tls_pending: 1 when TLS holds decrypted bytes not read yet. */
+int spc__tls_pending(const spc_client *c);
+/* spc__tls_end: frees the TLS state (graceful: sends close_notify first, best effort). */
+void spc__tls_end(spc_client *c, int graceful);
 
 /* spc__read_token: reads a token file (refusing group/other permissions). Returns the token
  * length (> 0) written to buf (cap bytes), or SPC_E_TOKEN with err filled. */

@@ -83,6 +83,11 @@ typedef struct spc_options {
     int timeout_ms;              /* default 30000: limit of every blocking call; < 0: none */
     const char *client_name;     /* default "libsplatclient": shown in the server's log */
     uint32_t max_frame_bytes;    /* default 256 MiB: larger FRAME messages are refused */
+    int tls;                     /* 1: TLS, verifying the server's certificate against the
+                                  * system's trusted certificates and its name against host */
+    const char *tls_ca;          /* PEM file of the CA(s) to trust instead (implies tls) */
+    const char *tls_name;        /* the name the certificate must carry when it differs from
+                                  * host (implies tls); an IP address or a DNS name */
 } spc_options;
 
 /* What the server said about itself in its WELCOME. */

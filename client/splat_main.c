@@ -27,6 +27,10 @@ static const char conn_opts[] =
     "  --host H          server host (default 127.0.0.1)\n"
     "  --port P          server port (default 7878)\n"
     "  --token-file F    shared token, mode 0600 (when the server requires one)\n"
+    "  --tls             connect with TLS, trusting the system's certificates and checking that\n"
+    "                    the server's certificate names H\n"
+    "  --tls-ca F        trust the CA certificate(s) in PEM file F instead (implies --tls)\n"
+    "  --tls-name N      the name the certificate must carry when it is not H (implies --tls)\n"
     "  --timeout S       seconds one request may take (default 60, 0 = none)\n"
     "  -q, --quiet       no progress output\n"
     "  -h, --help        this text\n";
@@ -60,7 +64,7 @@ static void usage(FILE *f, const char *cmd)
         fprintf(f,
             "splat " SPLAT_VERSION " — client of the splatd point-cloud rendering daemon\n"
             "\n"
-            "usage: splat [--host H] [--port P] [--token-file F] [-q] COMMAND ...\n"
+            "usage: splat [--host H] [--port P] [--token-file F] [--tls] [-q] COMMAND ...\n"
             "\n"
             "commands (splat COMMAND --help for each one's options):\n"
             "  list                       the clouds in the server's data directory\n"
@@ -460,7 +464,7 @@ static int exec_view(int argc, char **argv, int view_at)
 static int view_command(int argc, char **argv)
 {
     static const char *const with_value[] = {
-        "--host", "--port", "--token-file", "--timeout", "--set", "-o", "--path", "--orbit",
+        "--host", "--port", "--token-file", "--tls-ca", "--tls-name", "--timeout", "--set", "-o", "--path", "--orbit",
         "--inflight", "--eye", "--target", "--up", "--fov", "--size", "--script",
         "--drag-budget", "--shard", "--shards"};
     for (int i = 1; i < argc; i++) {
@@ -506,6 +510,7 @@ int main(int argc, char **argv)
             return EXIT_USAGE;
         }
     spc_options o = {.host = a.host, .port = a.port, .token_file = a.token_file,
+                     .tls = a.tls, .tls_ca = a.tls_ca, .tls_name = a.tls_name,
                      .timeout_ms = a.timeout_s ? a.timeout_s * 1000 : -1,
                      .client_name = "splat"};
     spc_client *c;

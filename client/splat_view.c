@@ -44,7 +44,8 @@ enum { EXIT_FAIL = 1, EXIT_USAGE = 2 };
 #define MAX_SAVES 8
 
 static const char usage_text[] =
-    "usage: splat view NAME [--host H] [--port P] [--token-file F] [--size WxH]\n"
+    "usage: splat view NAME [--host H] [--port P] [--token-file F] [--tls] [--tls-ca F]\n"
+    "                  [--tls-name N] [--size WxH]\n"
     "                  [--set key=value ...] [--script FILE] [--verbose] [--drag-budget N]\n"
     "                  [--no-progressive] [--timeout S] [--keepalive S]\n"
     "\n"
@@ -506,7 +507,7 @@ static int session(shared *s, spc_client *c, char *err, size_t errlen)
         }
         /* Wait for a frame or a wish of the window; bytes the library holds already count as
          * readable (the socket alone would not say so). */
-        int buffered = c->rpos < c->rlen;
+        int buffered = spc__buffered(c);
         struct pollfd p[2] = {{spc_fd(c), POLLIN, 0}, {s->wake_fd, POLLIN, 0}};
         if (!buffered && poll(p, 2, 200) < 0 && errno != EINTR) {
             rc = SPC_E_IO;
@@ -1091,6 +1092,7 @@ int main(int argc, char **argv)
         const char *a = argv[i];
         const char *val = i + 1 < argc ? argv[i + 1] : NULL;
         int takes = !strcmp(a, "--host") || !strcmp(a, "--port") || !strcmp(a, "--token-file") ||
+                    !strcmp(a, "--tls-ca") || !strcmp(a, "--tls-name") ||
                     !strcmp(a, "--size") || !strcmp(a, "--set") || !strcmp(a, "--script") ||
                     !strcmp(a, "--drag-budget") || !strcmp(a, "--timeout") ||
                     !strcmp(a, "--keepalive");
@@ -1113,6 +1115,9 @@ int main(int argc, char **argv)
             }
             opt.port = (int)p;
         } else if (!strcmp(a, "--token-file")) opt.token_file = val;
+        else if (!strcmp(a, "--tls")) opt.tls = 1;
+        else if (!strcmp(a, "--tls-ca")) opt.tls_ca = val;
+        else if (!strcmp(a, "--tls-name")) opt.tls_name = val;
         else if (!strcmp(a, "--size")) {
             if (cli_parse_size(val, &w, &h) < 0) {
                 fprintf(stderr, "splat view: --size needs WxH (1..16384 each), not '%s'\n", val);

@@ -272,7 +272,7 @@ static void test_progress_lines_off_terminal(void **state)
 }
 
 /* The thin client needs no GL stack, kNN or EXR library: `splat` and libsplatclient.so record
- * only what they use (checked on the binary under test, so the ASan build too, where the
+ * only what they use (libssl for TLS, libcrypto for it and the token's HMAC) (checked on the binary under test, so the ASan build too, where the
  * linker keeps every library named on the command line). */
 static void test_thin_client_links(void **state)
 {
@@ -296,6 +296,7 @@ static void test_thin_client_links(void **state)
         int rc = tu_run(out, sizeof out, "readelf -d '%s' | grep NEEDED", bins[b]);
         if (rc != 0) fail_msg("readelf -d %s failed (%d): %s", bins[b], rc, out);
         assert_non_null(strstr(out, "libcrypto"));
+        assert_non_null(strstr(out, "libssl"));
         for (size_t i = 0; i < sizeof forbidden / sizeof forbidden[0]; i++)
             if (strstr(out, forbidden[i]))
                 fail_msg("%s needs %s:\n%s", bins[b], forbidden[i], out);

@@ -59,6 +59,7 @@
 #include "cloud.h"
 #include "common/daemonproc.h"
 #include "common/testutil.h"
+#include "common/tlscert.h"
 #include "io_text.h"
 #include "prep.h"
 #include "proto.h"
@@ -106,18 +107,6 @@ static int teardown(void **state)
     else printf("kept %s\n", f->root);
     free(f);
     return 0;
-}
-
-/* log_count: occurrences of needle in the daemon's log. */
-static int log_count(const tu_daemon *d, const char *needle)
-{
-    size_t len;
-    char *log = (char *)tu_read_file(d->log, &len);
-    if (!log) return 0;
-    int n = 0;
-    for (const char *p = log; (p = strstr(p, needle)); p += strlen(needle)) n++;
-    free(log);
-    return n;
 }
 
 /* ---- sockets ---- */
@@ -492,9 +481,9 @@ static void test_slow_clients(void **state)
     /* Each kind was closed by the server: the deadlines and the unauthenticated pool act. */
     for (int kind = 0; kind < A_KINDS; kind++)
         if (k.closed[kind] < 1) fail_msg("no attacker of kind %d was closed by the daemon", kind);
-    assert_true(log_count(&f->d, "(--read-timeout)") >= 1);
-    assert_true(log_count(&f->d, "(--idle-timeout)") >= 1);
-    assert_true(log_count(&f->d, "(--max-unauth)") >= 1);
+    assert_true(tu_daemon_log_count(&f->d, "(--read-timeout)") >= 1);
+    assert_true(tu_daemon_log_count(&f->d, "(--idle-timeout)") >= 1);
+    assert_true(tu_daemon_log_count(&f->d, "(--max-unauth)") >= 1);
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
@@ -518,8 +507,8 @@ static void test_unauth_flood(void **state)
     int failed = legit_rounds(f->d.port, 1, 9, &med1, &max1);
     attack_end(&k);
     assert_int_equal(failed, 0);
-    int delayed = log_count(&f->d, "authentication failed (");
-    int per_addr = log_count(&f->d, "(--max-per-addr)");
+    int delayed = tu_daemon_log_count(&f->d, "authentication failed (");
+    int per_addr = tu_daemon_log_count(&f->d, "(--max-per-addr)");
     printf("unauthenticated flood: legit session median %.1f ms (max %.1f) quiet, %.1f ms "
            "(max %.1f) with 64 reconnecting sockets; %d wrong proofs answered, %d connections "
            "refused by --max-per-addr, %d reconnects\n", med0 * 1e3, max0 * 1e3, med1 * 1e3,
@@ -629,7 +618,7 @@ static void test_write_timeout(void **state)
     double closed_at = -1;
     for (int i = 0; i < 100 && closed_at < 0; i++) {
         usleep(50000);
-        if (log_count(&f->d, "(--write-timeout)") > 0) closed_at = now_s() - t0;
+        if (tu_daemon_log_count(&f->d, "(--write-timeout)") > 0) closed_at = now_s() - t0;
         if (i == 10) assert_true(legit_session(f->d.port, 0) > 0); /* others are served */
     }
     printf("a client that does not read: closed %.2f s after its RENDERs (--write-timeout 1)\n",
@@ -688,27 +677,30 @@ static void test_guarded_truncation(void **state)
     pc_cloud_free(&c);
 }
 
-/* sd_hash64 gives the values of the implementation that wrote the caches in use (recorded from
- * it before the one-shot form became init + update + final): a change of hash would make every
- * cache look stale, or worse, collide. Lengths around the 8- and 32-byte boundaries and a seed. */
+/* sd_hash64 is XXH3-64 (libxxhash): the values below were computed independently with the
+ * xxhsum tool (`xxhsum -H3`, xxHash 0.8.1) over the same bytes, one length in each of XXH3's
+ * code paths (0, 1-3, 4-8, 9-16, 17-128, 129-240, longer) and at their edges. A change of hash
+ * must come with a new CACHE_VERSION (cache.c): else every cache would look stale, or worse,
+ * collide. A seed changes the value. */
 static void test_hash_known_answers(void **state)
 {
     (void)state;
     static const struct { size_t len; uint64_t h; } kat[] = {
-        {0, 0x9090306c6e91ed59ull},   {1, 0x390be085fb2f3d4bull},   {7, 0xb26519947b0a8a8cull},
-        {8, 0xbc3e80b69cd430c4ull},   {31, 0xb55dac899fd96b5aull},  {32, 0xa926fd50fcb207c6ull},
-        {33, 0x288404429b577c14ull},  {63, 0x505d27f43d8c3b1aull},  {64, 0x45104aec612e6f4dull},
-        {100, 0xd03fbbb4d168e521ull}, {999, 0x79dd0662c5787f31ull}, {1000, 0xe45933e445682a44ull},
+        {0, 0x2d06800538d394c2ull},   {1, 0x4a4139caf4136257ull},   {3, 0x505118c313121c0eull},
+        {4, 0x3f6889ef166b4ad1ull},   {8, 0x93f1200f9be82671ull},   {9, 0x05b2fd4d97edcdaeull},
+        {16, 0x2e4359e2a04a5e32ull},  {17, 0xf60c53684bbc489dull},  {128, 0x5c6ab7b5b2360539ull},
+        {129, 0x45fabbd183de7649ull}, {240, 0xc0796428068cd12eull}, {241, 0x859dc8ab6dd85c7cull},
+        {1000, 0x35b90186550dbb50ull},
     };
     static uint8_t b[1000];
     for (int i = 0; i < 1000; i++) b[i] = (uint8_t)(i * 37 + 11);
-    size_t n = sizeof kat / sizeof kat[0];
-    for (size_t k = 0; k < n; k++) {
-        uint64_t got = sd_hash64(b, kat[k].len, k == n - 1 ? 42 : 0);
+    for (size_t k = 0; k < sizeof kat / sizeof kat[0]; k++) {
+        uint64_t got = sd_hash64(b, kat[k].len, 0);
         if (got != kat[k].h)
             fail_msg("sd_hash64 of %zu bytes: %016llx, expected %016llx", kat[k].len,
                      (unsigned long long)got, (unsigned long long)kat[k].h);
     }
+    assert_true(sd_hash64(b, 1000, 42) != sd_hash64(b, 1000, 0));
 }
 
 /* The streamed hash (a source file hashed in 1 MiB pieces by pread) equals sd_hash64 of the
@@ -1011,7 +1003,7 @@ static void test_cache_kill9(void **state)
     struct stat st;
     assert_int_equal(stat(dead, &st), -1);
     assert_int_equal(stat(live, &st), 0);
-    assert_int_equal(log_count(&f->d, "removed 1 temporary file(s) of interrupted cache writes"), 1);
+    assert_int_equal(tu_daemon_log_count(&f->d, "removed 1 temporary file(s) of interrupted cache writes"), 1);
     assert_int_equal(tu_daemon_stop(&f->d), 0);
     unlink(live);
 }
@@ -1051,8 +1043,8 @@ static void test_prep_exit_status(void **state)
     const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", open_dir, NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
     assert_true(legit_session(f->d.port, 0) > 0);
-    assert_int_equal(log_count(&f->d, "cache: cache directory"), 1);
-    assert_int_equal(log_count(&f->d, "writable by others"), 1);
+    assert_int_equal(tu_daemon_log_count(&f->d, "cache: cache directory"), 1);
+    assert_int_equal(tu_daemon_log_count(&f->d, "writable by others"), 1);
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
@@ -1302,9 +1294,23 @@ static int drain(int fd, int n)
     return frames;
 }
 
+/* drain_job: drain() on a thread of its own, so that several clients read at once. */
+typedef struct drain_job {
+    int fd, n, got;
+} drain_job;
+
+static void *drain_thread(void *p)
+{
+    drain_job *j = p;
+    j->got = drain(j->fd, j->n);
+    return NULL;
+}
+
 /* held_growth: starts a daemon with extra args, lets 6 clients each ask for two 1024x1024 raw
  * frames (4 MiB each) without reading, and returns how much the daemon's RSS grew (kB); then
- * the clients read, and every frame arrives. */
+ * the clients read, all at once (a frame being written holds its place in the budget until its
+ * client has read it, so one client reading alone may wait for another's), and every frame
+ * arrives. */
 static long held_growth(fx *f, const char *budget)
 {
     const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
@@ -1320,10 +1326,17 @@ static long held_growth(fx *f, const char *budget)
     for (int i = 0; i < 6; i++) fds[i] = raw_client(f->d.port, 1024, 1024, 2);
     usleep(1000000);
     long during = rss_kb(f->d.pid);
+    drain_job jobs[6];
+    pthread_t th[6];
     for (int i = 0; i < 6; i++) {
-        assert_int_equal(drain(fds[i], 2), 2);
+        jobs[i] = (drain_job){.fd = fds[i], .n = 2};
+        assert_int_equal(pthread_create(&th[i], NULL, drain_thread, &jobs[i]), 0);
+    }
+    for (int i = 0; i < 6; i++) {
+        pthread_join(th[i], NULL);
         close(fds[i]);
     }
+    for (int i = 0; i < 6; i++) assert_int_equal(jobs[i].got, 2);
     assert_int_equal(tu_daemon_stop(&f->d), 0);
     return during - before;
 }
@@ -1355,6 +1368,37 @@ static void test_frame_budget(void **state)
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
+/* The frame being written to a client counts against --max-frame-bytes until it is written:
+ * with room for one 1024x1024 raw frame, a client that asks for one and does not read holds
+ * the budget, so another client's frame waits until --write-timeout closes the first (before,
+ * the frame left the budget at its first byte sent, and the second rendered at once while the
+ * first's 4 MiB still sat in the daemon). */
+static void test_budget_counts_sending(void **state)
+{
+    fx *f = *state;
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
+                          "--preload", "bunny", "--max-frame-bytes", "17M", "--write-timeout", "1",
+                          NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    int w = raw_client(f->d.port, 1024, 1024, 1); /* warm-up: buffers of this size exist */
+    assert_int_equal(drain(w, 1), 1);
+    close(w);
+    int a = raw_client(f->d.port, 1024, 1024, 1);
+    usleep(300000); /* its frame is rendered and being written, and stuck */
+    double t0 = now_s();
+    int b = raw_client(f->d.port, 1024, 1024, 1);
+    assert_int_equal(drain(b, 1), 1);
+    double waited = now_s() - t0;
+    printf("budget of one frame: the second client's frame came %.2f s after its request, the "
+           "first client (not reading) closed after --write-timeout 1\n", waited);
+    assert_true(waited > 0.5);
+    assert_true(waited < 5);
+    assert_int_equal(tu_daemon_log_count(&f->d, "the client does not read (--write-timeout)"), 1);
+    close(a);
+    close(b);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+}
+
 /* Beyond loopback the token must be at least 16 bytes; a FIFO as the token file is refused at
  * start-up at once instead of blocking it. */
 static void test_token_checks(void **state)
@@ -1370,15 +1414,19 @@ static void test_token_checks(void **state)
     const char *a1[] = {"--listen", "0.0.0.0:0", "--data", f->data, "--token-file", shorttok, NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, &st, a1), -1);
     assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 1);
-    assert_int_equal(log_count(&f->d, "is 8 bytes; listening on 0.0.0.0 (not loopback) needs at least 16"), 1);
+    assert_int_equal(tu_daemon_log_count(&f->d, "is 8 bytes; listening on 0.0.0.0 (not loopback) needs at least 16"), 1);
     double t0 = now_s();
     const char *a2[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--token-file", fifo, NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, &st, a2), -1);
     assert_true(now_s() - t0 < 5);
     assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 1);
-    assert_int_equal(log_count(&f->d, "is not a regular file"), 1);
-    /* A long enough token: it starts. */
-    const char *a3[] = {"--listen", "0.0.0.0:0", "--data", f->data, "--token-file", f->token, NULL};
+    assert_int_equal(tu_daemon_log_count(&f->d, "is not a regular file"), 1);
+    /* A long enough token (and TLS, required there too; test_tls): it starts. */
+    char cert[700], key[700];
+    assert_int_equal(tu_make_cert(f->root, "srv", "splatd-test", "127.0.0.1", NULL, cert, key,
+                                  sizeof cert), 0);
+    const char *a3[] = {"--listen", "0.0.0.0:0", "--data", f->data, "--token-file", f->token,
+                        "--tls-cert", cert, "--tls-key", key, NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, a3), 0);
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
@@ -1405,6 +1453,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_header_before_hash, setup, teardown),
         cmocka_unit_test_setup_teardown(test_frame_budget, setup, teardown),
         cmocka_unit_test_setup_teardown(test_token_checks, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_budget_counts_sending, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

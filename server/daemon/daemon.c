@@ -16,6 +16,7 @@
 #include <sys/resource.h>
 #include <sys/signalfd.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "cache.h"
@@ -24,6 +25,7 @@
 #include "datadir.h"
 #include "page_gen.h"
 #include "srv.h"
+#include "tls.h"
 
 static void usage(FILE *f)
 {
@@ -34,7 +36,8 @@ static void usage(FILE *f)
             "\n"
             "  --listen HOST:PORT   address to listen on (default 127.0.0.1:7878; port 0 picks a free\n"
             "                       port, printed on stderr as 'listening on HOST:PORT'). Without\n"
-            "                       --token-file only loopback addresses are accepted.\n"
+            "                       --token-file, --tls-cert and --tls-key only loopback addresses\n"
+            "                       are accepted.\n"
             "  --http HOST:PORT     also serve the browser viewer: GET / is the page, /ws its\n"
             "                       WebSocket carrying the same protocol (off by default; the\n"
             "                       same loopback-only rule without --token-file as --listen)\n"
@@ -47,6 +50,9 @@ static void usage(FILE *f)
             "  --shader-dir DIR     load shaders from DIR instead of the built-in copies\n"
             "  --token-file F       require clients to prove they know the token in F (HMAC-SHA256\n"
             "                       of a random challenge); F must not be accessible by group or others\n"
+            "  --tls-cert F         serve TLS (1.2 or newer) with the PEM certificate chain in F;\n"
+            "                       required, with --tls-key, to listen beyond loopback\n"
+            "  --tls-key F          the certificate's PEM private key (mode 0600)\n"
             "  --preload NAME ...   prepare and upload these clouds at start-up (names up to the next\n"
             "                       option; --preload may also be repeated)\n"
             "  --max-clients N      authenticated connections served at once (default 64)\n"
@@ -95,13 +101,29 @@ static int parse_size(const char *s, uint64_t *out)
     return 0;
 }
 
+void srv_opts_defaults(srv_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    snprintf(o->host, sizeof o->host, "127.0.0.1");
+    o->port = PROTO_DEFAULT_PORT;
+    o->max_clients = 64;
+    o->handshake_ms = 10000;
+    o->idle_ms = 300000;
+    o->read_ms = 30000;
+    o->write_ms = 30000;
+    o->max_unauth = 64;
+    o->max_per_addr = 32;
+    o->auth_delay_ms = 250;
+    o->shutdown_ms = 5000;
+}
+
 /* parse_opts: fills o from argv. Returns 0, 1 for --help (exit 0), or -1 after printing the
  * error (exit 2). */
 static int parse_opts(int argc, char **argv, srv_opts *o)
 {
     enum { O_LISTEN = 1000, O_DATA, O_CACHE, O_BACKEND, O_TOKEN, O_PRELOAD, O_SHADERS, O_MAXC,
            O_PORTFILE, O_HS, O_GPUMEM, O_FRAMEMEM, O_IDLE, O_RDTO, O_WRTO, O_UNAUTH, O_PERADDR, O_AUTHDELAY,
-           O_HTTP, O_HELP };
+           O_HTTP, O_TLSCERT, O_TLSKEY, O_HELP };
     static const struct option lo[] = {
         {"listen", required_argument, 0, O_LISTEN},   {"data", required_argument, 0, O_DATA},
         {"cache", required_argument, 0, O_CACHE},     {"backend", required_argument, 0, O_BACKEND},
@@ -115,19 +137,10 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
         {"max-per-addr", required_argument, 0, O_PERADDR},
         {"auth-fail-delay", required_argument, 0, O_AUTHDELAY},
         {"http", required_argument, 0, O_HTTP},
+        {"tls-cert", required_argument, 0, O_TLSCERT}, {"tls-key", required_argument, 0, O_TLSKEY},
         {"help", no_argument, 0, O_HELP},             {0, 0, 0, 0},
     };
-    snprintf(o->host, sizeof o->host, "127.0.0.1");
-    o->port = PROTO_DEFAULT_PORT;
-    o->max_clients = 64;
-    o->handshake_ms = 10000;
-    o->idle_ms = 300000;
-    o->read_ms = 30000;
-    o->write_ms = 30000;
-    o->max_unauth = 64;
-    o->max_per_addr = 32;
-    o->auth_delay_ms = 250;
-    o->shutdown_ms = 5000;
+    srv_opts_defaults(o);
     optind = 1;
     opterr = 0;
     int c;
@@ -169,6 +182,8 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
         case O_DATA: o->data_dir = optarg; break;
         case O_CACHE: o->cache_dir = optarg; break;
         case O_TOKEN: o->token_file = optarg; break;
+        case O_TLSCERT: o->tls_cert = optarg; break;
+        case O_TLSKEY: o->tls_key = optarg; break;
         case O_SHADERS: o->shader_dir = optarg; break;
         case O_PORTFILE: o->port_file = optarg; break;
         case O_BACKEND:
@@ -274,6 +289,8 @@ static const sess_ops daemon_sess_ops = {
     .on_decode_error = srv_decode_error,
     .on_close = on_sess_close,
     .release = srv_release_frame,
+    .sending = srv_sending_frame,
+    .sent = srv_sent_frame,
     .stream_blocked = on_stream_blocked,
 };
 
@@ -307,9 +324,14 @@ static void on_handshake_timeout(ev_loop *l, ev_timer *t, void *data)
 }
 
 /* refuse: a best-effort ERROR on a connection the daemon will not serve (an HTTP 503 with the
- * text on the browser listener), then close. */
-static void refuse(int fd, int http, int code, const char *text)
+ * text on the browser listener), then close. Over TLS the connection just closes: the client
+ * is in its handshake, and a plaintext answer would read as a broken one. */
+static void refuse(const srv *sv, int fd, int http, int code, const char *text)
 {
+    if (!http && sv->tls) {
+        close(fd);
+        return;
+    }
     if (http) {
         char r[512];
         int n = snprintf(r, sizeof r, "HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain"
@@ -467,79 +489,93 @@ void srv_auth_failed(srv *sv, sess *s, uint32_t seq, int noproof)
     ev_timer_start(sv->loop, &s->hs_timer, delay, on_auth_fail_due, s);
 }
 
-/* accept_from: takes the pending connections of listener fd (at most 16 a wakeup) under the
- * caps, as sessions; http: the browser listener's, whose sessions speak through ws_conn. */
+/* adopt: serves the accepted socket c from addr as a session under the caps; http: the
+ * browser listener's, whose sessions speak through ws_conn. */
+static int adopt(srv *sv, int c, const char *addr, int http)
+{
+    char host[NET_ADDR_LEN];
+    addr_host(addr, host, sizeof host);
+    srv_census cs;
+    census(sv, host, &cs);
+    if (cs.from_host >= sv->o.max_per_addr) {
+        srv_log(sv, NULL, "%s refused: %d connections from %s already (--max-per-addr)", addr,
+                cs.from_host, host);
+        refuse(sv, c, http, PROTO_E_BUSY, "too many connections from your address; retry later");
+        return SD_ELIMIT;
+    }
+    if (cs.authed >= sv->o.max_clients) {
+        srv_log(sv, NULL, "%s refused: %d clients already connected (--max-clients)", addr, cs.authed);
+        refuse(sv, c, http, PROTO_E_BUSY, "too many clients; retry later");
+        return SD_ELIMIT;
+    }
+    if (cs.unauth >= sv->o.max_unauth && cs.oldest_unauth) {
+        /* The unauthenticated pool is full: one of it makes room (refusing the newcomer, as
+         * a plain cap would, lets a flood of idle sockets lock everyone out). An address
+         * competes with itself first: its own oldest unauthenticated connection goes, so a
+         * reconnecting flood from one address churns through its own sockets and never
+         * evicts another client mid-handshake; a newcomer from an address with none takes
+         * the oldest of the pool. Its slot is freed at once for the newcomer. */
+        sess *victim = cs.oldest_unauth_host ? cs.oldest_unauth_host : cs.oldest_unauth;
+        sess_close(victim, "unauthenticated, dropped for a newer connection (--max-unauth)");
+        free_dead(sv);
+    }
+    int idx = -1;
+    for (int i = 0; i < sv->nslots; i++)
+        if (!sv->sessions[i]) { idx = i; break; }
+    if (idx < 0) {
+        srv_log(sv, NULL, "%s refused: no free connection slot", addr);
+        refuse(sv, c, http, PROTO_E_BUSY, "too many clients; retry later");
+        return SD_ELIMIT;
+    }
+    if (++sv->gens[idx] == 0) sv->gens[idx] = 1;
+    uint32_t id = ((uint32_t)sv->gens[idx] << 16) | (uint32_t)idx;
+    sess *s = sess_new(id, c, addr, sv->loop, &daemon_sess_ops, sv);
+    sd_err err = {0};
+    if (!s || auth_challenge(s->challenge, &err) != 0 || rt_client_open(sv->rt, id) != 0) {
+        srv_log(sv, NULL, "%s refused: %s", addr, s ? err.msg : "out of memory");
+        sess_free(s, NULL, NULL);
+        refuse(sv, c, http, PROTO_E_INTERNAL, "the server cannot take a connection now");
+        return SD_ENOMEM;
+    }
+    /* The session's transport: HTTP + WebSocket on the browser listener, TLS on a TLS one. */
+    const net_transport *tr = http ? &ws_transport : sv->tls ? &tls_transport : NULL;
+    void *tctx = http ? (void *)ws_conn_new(&sv->http_cfg, &net_tcp, NULL)
+               : sv->tls ? tls_conn_new(sv->tls, c) : NULL;
+    if (tr && !tctx) {
+        srv_log(sv, NULL, "%s refused: out of memory for its %s state", addr, tr->name);
+        sess_free(s, NULL, NULL);
+        rt_client_close(sv->rt, id);
+        refuse(sv, c, http, PROTO_E_INTERNAL, "the server cannot take a connection now");
+        return SD_ENOMEM;
+    }
+    if (tr) sess_set_transport(s, tr, tctx);
+    s->version = PROTO_VERSION;
+    s->lim = &sv->lim;
+    sv->sessions[idx] = s;
+    sv->nsess++;
+    srv_log(sv, s, http ? "connected (http)" : "connected");
+    ev_timer_start(sv->loop, &s->hs_timer, (uint64_t)sv->o.handshake_ms, on_handshake_timeout, s);
+    sess_kick(s);
+    return 0;
+}
+
+int srv_adopt(srv *sv, int c, const char *addr)
+{
+    return adopt(sv, c, addr, 0);
+}
+
+/* accept_from: takes the pending connections of listener fd (at most 16 a wakeup). */
 static void accept_from(srv *sv, int fd, int http)
 {
     for (int n = 0; n < 16 && !sv->stopping; n++) {
-        char addr[NET_ADDR_LEN], host[NET_ADDR_LEN];
+        char addr[NET_ADDR_LEN];
         int c = net_accept(fd, addr, sizeof addr);
         if (c == -EAGAIN) return;
         if (c < 0) {
             srv_log(sv, NULL, "accept failed: %s", strerror(-c));
             return;
         }
-        addr_host(addr, host, sizeof host);
-        srv_census cs;
-        census(sv, host, &cs);
-        if (cs.from_host >= sv->o.max_per_addr) {
-            srv_log(sv, NULL, "%s refused: %d connections from %s already (--max-per-addr)", addr,
-                    cs.from_host, host);
-            refuse(c, http, PROTO_E_BUSY, "too many connections from your address; retry later");
-            continue;
-        }
-        if (cs.authed >= sv->o.max_clients) {
-            srv_log(sv, NULL, "%s refused: %d clients already connected (--max-clients)", addr, cs.authed);
-            refuse(c, http, PROTO_E_BUSY, "too many clients; retry later");
-            continue;
-        }
-        if (cs.unauth >= sv->o.max_unauth && cs.oldest_unauth) {
-            /* The unauthenticated pool is full: one of it makes room (refusing the newcomer, as
-             * a plain cap would, lets a flood of idle sockets lock everyone out). An address
-             * competes with itself first: its own oldest unauthenticated connection goes, so a
-             * reconnecting flood from one address churns through its own sockets and never
-             * evicts another client mid-handshake; a newcomer from an address with none takes
-             * the oldest of the pool. Its slot is freed at once for the newcomer. */
-            sess *victim = cs.oldest_unauth_host ? cs.oldest_unauth_host : cs.oldest_unauth;
-            sess_close(victim, "unauthenticated, dropped for a newer connection (--max-unauth)");
-            free_dead(sv);
-        }
-        int idx = -1;
-        for (int i = 0; i < sv->nslots; i++)
-            if (!sv->sessions[i]) { idx = i; break; }
-        if (idx < 0) {
-            srv_log(sv, NULL, "%s refused: no free connection slot", addr);
-            refuse(c, http, PROTO_E_BUSY, "too many clients; retry later");
-            continue;
-        }
-        if (++sv->gens[idx] == 0) sv->gens[idx] = 1;
-        uint32_t id = ((uint32_t)sv->gens[idx] << 16) | (uint32_t)idx;
-        sess *s = sess_new(id, c, addr, sv->loop, &daemon_sess_ops, sv);
-        sd_err err = {0};
-        if (!s || auth_challenge(s->challenge, &err) != 0 || rt_client_open(sv->rt, id) != 0) {
-            srv_log(sv, NULL, "%s refused: %s", addr, s ? err.msg : "out of memory");
-            sess_free(s, NULL, NULL);
-            refuse(c, http, PROTO_E_INTERNAL, "the server cannot take a connection now");
-            continue;
-        }
-        if (http) {
-            ws_conn *wc = ws_conn_new(&sv->http_cfg, &net_tcp, NULL);
-            if (!wc) {
-                srv_log(sv, NULL, "%s refused: out of memory", addr);
-                sess_free(s, NULL, NULL);
-                rt_client_close(sv->rt, id);
-                refuse(c, http, PROTO_E_INTERNAL, "the server cannot take a connection now");
-                continue;
-            }
-            sess_set_transport(s, &ws_transport, wc);
-        }
-        s->version = PROTO_VERSION;
-        s->lim = &sv->lim;
-        sv->sessions[idx] = s;
-        sv->nsess++;
-        srv_log(sv, s, http ? "connected (http)" : "connected");
-        ev_timer_start(sv->loop, &s->hs_timer, (uint64_t)sv->o.handshake_ms, on_handshake_timeout, s);
-        sess_kick(s);
+        (void)adopt(sv, c, addr, http);
     }
 }
 
@@ -697,6 +733,40 @@ static int check_exposure(const srv *sv, const char *host, const char *doing,
     return 0;
 }
 
+int srv_core_start(srv *sv, sd_err *err)
+{
+    struct rlimit rl;
+    int max_fds = 4096;
+    if (getrlimit(RLIMIT_NOFILE, &rl) == 0 && rl.rlim_cur != RLIM_INFINITY && rl.rlim_cur < 65536)
+        max_fds = (int)rl.rlim_cur > max_fds ? (int)rl.rlim_cur : max_fds;
+    sv->loop = ev_create(max_fds, err);
+    if (!sv->loop) return SD_EIO;
+    /* Authenticated and unauthenticated connections have separate caps, so the table holds
+     * both; ids keep the slot in 16 bits (8192 at most here). */
+    sv->nslots = sv->o.max_clients + sv->o.max_unauth;
+    sv->lim = (sess_limits){.idle_ms = (uint32_t)sv->o.idle_ms, .read_ms = (uint32_t)sv->o.read_ms,
+                            .write_ms = (uint32_t)sv->o.write_ms};
+    sv->sessions = calloc((size_t)sv->nslots, sizeof *sv->sessions);
+    sv->gens = calloc((size_t)sv->nslots, sizeof *sv->gens);
+    if (!sv->sessions || !sv->gens) return sd_errf(err, SD_ENOMEM, "out of memory");
+    if (!sv->max_w) sv->max_w = 8192;
+    if (!sv->max_h) sv->max_h = 8192;
+    rt_desc rd = {
+        .rnd = {.backend = sv->o.backend, .shader_dir = sv->o.shader_dir,
+                .max_width = sv->max_w, .max_height = sv->max_h, .gpu_memory = sv->o.gpu_memory},
+        .max_clients = sv->nslots, .cache_dir = sv->o.cache_dir,
+        .frame_budget = sv->o.max_frame_bytes,
+        .pack = srv_pack_frame, .pack_user = sv, .hooks = sv->hooks,
+    };
+    sd_err rerr = {0};
+    sv->rt = rt_create(&rd, sv->loop, &rerr);
+    if (!sv->rt) return sd_errf(err, rerr.code ? rerr.code : SD_EIO, "cannot start the renderer: %s", rerr.msg);
+    ev_set_before_sleep(sv->loop, before_sleep, sv);
+    ev_set_wakeup(sv->loop, on_wakeup, sv);
+    ev_timer_init(&sv->stop_timer);
+    return 0;
+}
+
 /* start: everything before the loop runs. Returns 0, or 1 after printing why. */
 static int start(srv *sv)
 {
@@ -713,6 +783,31 @@ static int start(srv *sv)
         (sv->o.http_host[0] &&
          check_exposure(sv, sv->o.http_host, "serving HTTP", "serve HTTP") != 0))
         return 1;
+    if (!sv->o.tls_cert != !sv->o.tls_key) {
+        fprintf(stderr, "splatd: --tls-cert and --tls-key go together (given: only %s)\n",
+                sv->o.tls_cert ? "--tls-cert" : "--tls-key");
+        return 1;
+    }
+    if (!sv->o.tls_cert && !net_host_is_loopback(sv->o.host)) {
+        /* Without TLS, anyone on the path reads the frames and cloud names and can take over
+         * an authenticated connection: beyond loopback it is not an option. */
+        fprintf(stderr,
+                "splatd: refusing to listen on %s without TLS: beyond loopback the frames, cloud "
+                "names and the session itself would travel in the clear. Give --tls-cert F and "
+                "--tls-key F (and --token-file F), or listen on 127.0.0.1.\n", sv->o.host);
+        return 1;
+    }
+    struct stat kst;
+    if (sv->o.tls_key && stat(sv->o.tls_key, &kst) == 0 && (kst.st_mode & (S_IRWXG | S_IRWXO))) {
+        fprintf(stderr, "splatd: --tls-key %s has mode %04o: a private key must not be "
+                "accessible to group or others (chmod 600 %s)\n", sv->o.tls_key,
+                (unsigned)(kst.st_mode & 07777), sv->o.tls_key);
+        return 1;
+    }
+    if (sv->o.tls_cert && tls_server_new(sv->o.tls_cert, sv->o.tls_key, &sv->tls, &err) != 0) {
+        fprintf(stderr, "splatd: %s\n", err.msg);
+        return 1;
+    }
     /* Temporary files of cache writes interrupted by a crash or kill -9 (the O_EXCL fallback
      * where O_TMPFILE is missing) are removed before anything is prepared. */
     char cdir[PATH_MAX];
@@ -732,33 +827,8 @@ static int start(srv *sv)
         fprintf(stderr, "splatd: signalfd: %s\n", strerror(errno));
         return 1;
     }
-    struct rlimit rl;
-    int max_fds = 4096;
-    if (getrlimit(RLIMIT_NOFILE, &rl) == 0 && rl.rlim_cur != RLIM_INFINITY && rl.rlim_cur < 65536)
-        max_fds = (int)rl.rlim_cur > max_fds ? (int)rl.rlim_cur : max_fds;
-    sv->loop = ev_create(max_fds, &err);
-    /* Authenticated and unauthenticated connections have separate caps, so the table holds
-     * both; ids keep the slot in 16 bits (8192 at most here). */
-    sv->nslots = sv->o.max_clients + sv->o.max_unauth;
-    sv->lim = (sess_limits){.idle_ms = (uint32_t)sv->o.idle_ms, .read_ms = (uint32_t)sv->o.read_ms,
-                            .write_ms = (uint32_t)sv->o.write_ms};
-    sv->sessions = calloc((size_t)sv->nslots, sizeof *sv->sessions);
-    sv->gens = calloc((size_t)sv->nslots, sizeof *sv->gens);
-    if (!sv->loop || !sv->sessions || !sv->gens) {
-        fprintf(stderr, "splatd: %s\n", sv->loop ? "out of memory" : err.msg);
-        return 1;
-    }
-    sv->max_w = sv->max_h = 8192;
-    rt_desc rd = {
-        .rnd = {.backend = sv->o.backend, .shader_dir = sv->o.shader_dir,
-                .max_width = sv->max_w, .max_height = sv->max_h, .gpu_memory = sv->o.gpu_memory},
-        .max_clients = sv->nslots, .cache_dir = sv->o.cache_dir,
-        .frame_budget = sv->o.max_frame_bytes,
-        .pack = srv_pack_frame, .pack_user = sv, .hooks = sv->hooks,
-    };
-    sv->rt = rt_create(&rd, sv->loop, &err);
-    if (!sv->rt) {
-        fprintf(stderr, "splatd: cannot start the renderer: %s\n", err.msg);
+    if (srv_core_start(sv, &err) != 0) {
+        fprintf(stderr, "splatd: %s\n", err.msg);
         return 1;
     }
     srv_log(sv, NULL, "renderer: %s (%s); cloud buffers held to %llu MiB of GPU memory, frames "
@@ -782,9 +852,6 @@ static int start(srv *sv)
         return 1;
     }
     if (sv->o.http_host[0] && start_http(sv) != 0) return 1;
-    ev_set_before_sleep(sv->loop, before_sleep, sv);
-    ev_set_wakeup(sv->loop, on_wakeup, sv);
-    ev_timer_init(&sv->stop_timer);
     int v6 = strchr(sv->o.host, ':') != NULL;
     fprintf(stderr, "listening on %s%s%s:%d\n", v6 ? "[" : "", sv->o.host, v6 ? "]" : "", sv->bound_port);
     fflush(stderr);
@@ -800,13 +867,14 @@ static int start(srv *sv)
         return 1;
     }
     if (sv->token.len) srv_log(sv, NULL, "clients must authenticate (token from %s)", sv->o.token_file);
+    if (sv->tls) srv_log(sv, NULL, "TLS only, certificate %s", tls_server_subject(sv->tls));
     return 0;
 }
 
-/* teardown: closes every session and frees everything, except when a cloud preparation is
+/* srv_teardown (srv.h): closes every session and frees everything, except when a cloud preparation is
  * still running (see rt_stop_for_exit): then the workers' context and the loop stay as they
  * are, and the process exits without waiting for it. */
-static int teardown(srv *sv)
+int srv_teardown(srv *sv)
 {
     for (int i = 0; sv->sessions && i < sv->nslots; i++)
         if (sv->sessions[i] && !sv->sessions[i]->dead) sess_close(sv->sessions[i], "server stopped");
@@ -824,6 +892,8 @@ static int teardown(srv *sv)
     free(sv->sessions);
     free(sv->gens);
     memset(&sv->token, 0, sizeof sv->token);
+    tls_server_free(sv->tls);
+    sv->tls = NULL;
     return 0;
 }
 
@@ -843,7 +913,7 @@ int daemon_run(int argc, char **argv, const rt_hooks *hooks)
         srv_log(&sv, NULL, "event loop failed: %s", strerror(errno));
         rc = 1;
     }
-    int abandoned = teardown(&sv);
+    int abandoned = srv_teardown(&sv);
     if (ran && rc == 0) srv_log(&sv, NULL, "stopped");
     if (abandoned) {
         /* The prep thread is still running: leave at once, without exit()'s library

@@ -49,6 +49,18 @@ void srv_release_frame(void *user, uint32_t id)
     rt_frame_released(sv->rt, id);
 }
 
+void srv_sending_frame(void *user, uint32_t id)
+{
+    srv *sv = user;
+    rt_frame_sending(sv->rt, id);
+}
+
+void srv_sent_frame(void *user, uint32_t id)
+{
+    srv *sv = user;
+    rt_frame_sent(sv->rt, id);
+}
+
 /* utf8_len: the length (1-4) of the well-formed UTF-8 sequence at p (n bytes available), or
  * 0 when it is not one (RFC 3629: no overlong forms, no surrogates, at most U+10FFFF). */
 static size_t utf8_len(const unsigned char *p, size_t n)
@@ -256,7 +268,10 @@ static void stream_update(srv *sv, sess *s, uint32_t seq)
     s->stream_seq = seq;
     uint64_t now = ev_now_ms();
     if (s->max_fps > 0) {
-        uint64_t gap = (uint64_t)(1000.0f / s->max_fps);
+        /* In double and capped at a day: a cap as small as a float allows (1e-45 frames/s is
+         * in [0, 1000]) makes 1000 / max_fps infinite, which no integer holds. */
+        double gapd = 1000.0 / (double)s->max_fps;
+        uint64_t gap = gapd < 86400000.0 ? (uint64_t)gapd : 86400000u;
         if (now < s->last_stream_ms + gap) {
             if (!ev_timer_armed(&s->fps_timer))
                 ev_timer_start(sv->loop, &s->fps_timer, s->last_stream_ms + gap - now, on_fps_timer, s);

@@ -32,6 +32,9 @@ typedef struct rt_slot {
                                         * (one render thread, one FIFO encoder, in-order
                                         * delivery), so a release gives back the oldest */
     int cost_head;
+    uint64_t sending;           /* the cost of its frame being written to the socket: it left
+                                 * the outstanding count (the next one may render) but its bytes
+                                 * stay held until written (rt_frame_sent) */
 } rt_slot;
 
 typedef struct rt_encjob {
@@ -615,6 +618,7 @@ void rt_client_close(rt_ctx *rt, uint32_t id)
         /* Its frames in flight are dropped when they arrive at the loop; their bytes are
          * given back now (for a moment the budget counts less than is held). */
         while (s->outstanding > 0) slot_release(rt, s);
+        rt->frame_held = rt->frame_held >= s->sending ? rt->frame_held - s->sending : 0;
         memset(s, 0, sizeof *s);
         pthread_cond_signal(&rt->cv_render);
     }
@@ -650,6 +654,32 @@ int rt_submit_queue(rt_ctx *rt, uint32_t id, const rt_request *rq)
     }
     pthread_mutex_unlock(&rt->mu);
     return rc;
+}
+
+void rt_frame_sending(rt_ctx *rt, uint32_t id)
+{
+    pthread_mutex_lock(&rt->mu);
+    rt_slot *s = slot_of(rt, id);
+    if (s && s->outstanding > 0) {
+        uint64_t c = s->cost[s->cost_head];
+        s->cost_head = (s->cost_head + 1) % RT_MAX_OUTSTANDING;
+        s->outstanding--;
+        s->sending += c;
+        pthread_cond_signal(&rt->cv_render);
+    }
+    pthread_mutex_unlock(&rt->mu);
+}
+
+void rt_frame_sent(rt_ctx *rt, uint32_t id)
+{
+    pthread_mutex_lock(&rt->mu);
+    rt_slot *s = slot_of(rt, id);
+    if (s && s->sending) {
+        rt->frame_held = rt->frame_held >= s->sending ? rt->frame_held - s->sending : 0;
+        s->sending = 0;
+        pthread_cond_signal(&rt->cv_render);
+    }
+    pthread_mutex_unlock(&rt->mu);
 }
 
 void rt_frame_released(rt_ctx *rt, uint32_t id)

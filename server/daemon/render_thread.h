@@ -149,8 +149,15 @@ int rt_submit_latest(rt_ctx *rt, uint32_t id, const rt_request *rq);
 /* rt_submit_queue: appends a one-shot request. Returns 0, or SD_ELIMIT when RT_QUEUE_MAX are
  * already queued (the caller answers BUSY). */
 int rt_submit_queue(rt_ctx *rt, uint32_t id, const rt_request *rq);
-/* rt_frame_released: one frame of client id left the loop's waiting slot. */
+/* rt_frame_released: one frame of client id is gone before being written (a streamed frame
+ * replaced by a newer one, a failed frame): no longer outstanding, its bytes given back. */
 void rt_frame_released(rt_ctx *rt, uint32_t id);
+/* rt_frame_sending: client id's oldest outstanding frame started being written to its socket:
+ * it no longer counts as outstanding (its next frame may render), but its bytes stay counted
+ * against the frame budget until rt_frame_sent (or rt_client_close). */
+void rt_frame_sending(rt_ctx *rt, uint32_t id);
+/* rt_frame_sent: the frame being written to client id has been written (and freed). */
+void rt_frame_sent(rt_ctx *rt, uint32_t id);
 /* rt_set_stream_blocked: while blocked, the client's latest-wins (streamed) requests wait: the
  * loop sets it when a streamed frame waits unsent (the client is not reading), so a stalled
  * streaming client costs no render time. */

@@ -9,6 +9,7 @@
 #include "ev.h"
 #include "render_thread.h"
 #include "session.h"
+#include "tls.h"
 #include "ws_conn.h"
 
 enum {
@@ -25,6 +26,8 @@ typedef struct srv_opts {
     const char *data_dir;        /* required */
     const char *cache_dir;       /* default NULL: cache.h's default */
     const char *token_file;      /* NULL: no auth (loopback only) */
+    const char *tls_cert;        /* --tls-cert: NULL: plaintext (loopback only) */
+    const char *tls_key;         /* --tls-key */
     const char *port_file;       /* write the bound port here */
     const char *shader_dir;
     rnd_backend_kind backend;
@@ -86,6 +89,7 @@ typedef struct srv {
     rt_ctx *rt;
     const rt_hooks *hooks;       /* a distributed renderer (daemon_run), or NULL */
     auth_token token;
+    tls_server *tls;             /* NULL: plaintext */
     int lfd, sigfd;
     int bound_port;
     int http_lfd;                /* --http listener, -1 when off */
@@ -111,6 +115,22 @@ typedef struct srv {
 /* srv_log: one line on stderr, "splatd: ADDR message", ADDR from s when not NULL. */
 void srv_log(const srv *sv, const sess *s, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 
+/* srv_adopt: serves the connected non-blocking socket c from peer addr ("HOST:PORT"): the
+ * admission limits, a new session (TLS when the daemon has it), its handshake deadline. On
+ * refusal the socket is answered BUSY (or closed) and closed, and SD_ELIMIT/SD_ENOMEM returned;
+ * else 0. What on_accept does with each accepted socket; the dispatch fuzzer's way in. */
+int srv_adopt(srv *sv, int c, const char *addr);
+
+/* srv_opts_defaults: o with every default (as `splatd` with no option). */
+void srv_opts_defaults(srv_opts *o);
+/* srv_core_start: the parts of start-up the sessions need (event loop, session table,
+ * deadlines, the render, encoder and prep threads); no socket, signal or preload. sv->o must
+ * be set; sv->max_w/max_h (0: 8192) bound frame sizes. Returns 0 or an SD_E* code with err.
+ * srv_teardown: closes every session and frees what srv_core_start and start-up made; returns 1
+ * when a cloud preparation was left running (the process should exit without waiting). */
+int srv_core_start(srv *sv, sd_err *err);
+int srv_teardown(srv *sv);
+
 /* srv_admit: s has just authenticated (a HELLO without a token, or with the right proof):
  * admits it under --max-clients (sess_set_authed) and returns 1; or answers BUSY to request
  * seq, closes it once that is written and returns 0. */
@@ -135,8 +155,12 @@ sess *srv_lookup(srv *sv, uint32_t id);
 void srv_on_worker_events(srv *sv);
 /* srv_preload: resolves and starts preparing cloud name. Returns 0 or SD_E* with err. */
 int srv_preload(srv *sv, const char *name, sd_err *err);
-/* srv_release_frame: sess_ops.release (user = srv): the render thread's count of s's frames. */
+/* srv_release_frame: sess_ops.release (user = srv): the render thread's count of s's frames.
+ * srv_sending_frame, srv_sent_frame: sess_ops.sending and .sent: a frame starts being written
+ * (no longer outstanding, still in the frame budget), and is written (out of the budget). */
 void srv_release_frame(void *user, uint32_t id);
+void srv_sending_frame(void *user, uint32_t id);
+void srv_sent_frame(void *user, uint32_t id);
 /* srv_pack_frame: rt_pack_fn: builds a FRAME message (header + payload). Encoder thread. */
 int srv_pack_frame(void *user, const rt_frame_meta *m, const uint8_t *data, size_t len,
                    uint8_t **msg, size_t *msglen);

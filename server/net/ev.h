@@ -86,5 +86,9 @@ void ev_wakeup(ev_loop *l);
 
 /* ev_run: runs until ev_stop. Returns 0, or SD_EIO when epoll_wait fails. */
 int ev_run(ev_loop *l);
+/* ev_run_once: one iteration of ev_run: the before-sleep hook, a wait of at most max_wait_ms
+ * (< 0: until the next timer or event) and the callbacks of what is ready. For a caller that
+ * drives the loop itself (the dispatch fuzzer). Returns 0, or SD_EIO when epoll_wait fails. */
+int ev_run_once(ev_loop *l, int max_wait_ms);
 /* ev_stop: makes ev_run return after the current iteration. */
 void ev_stop(ev_loop *l);

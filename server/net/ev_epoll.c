@@ -153,41 +153,46 @@ static void run_timers(ev_loop *l)
 
 int ev_run(ev_loop *l)
 {
-    struct epoll_event evs[EV_MAX_EVENTS];
     l->stop = 0;
     while (!l->stop) {
-        if (l->before_sleep) l->before_sleep(l, l->before_sleep_data);
-        if (l->stop) break;
-        int timeout = -1;
-        ev_timer *t = ev__theap_top(&l->timers);
-        if (t) {
-            uint64_t now = ev_now_ms();
-            timeout = t->due_ms <= now ? 0 : (int)(t->due_ms - now > 60000 ? 60000 : t->due_ms - now);
-        }
-        int n = epoll_wait(l->epfd, evs, EV_MAX_EVENTS, timeout);
-        if (n < 0) {
-            if (errno == EINTR) continue;
-            return SD_EIO;
-        }
-        for (int i = 0; i < n; i++) {
-            int fd = evs[i].data.fd;
-            if (fd == -1) {
-                uint64_t v;
-                ssize_t r = read(l->wakefd, &v, sizeof v);
-                (void)r;
-                if (l->on_wakeup) l->on_wakeup(l, l->wakeup_data);
-                continue;
-            }
-            ev_fdslot *s = &l->fds[fd];
-            int mask = 0;
-            if (evs[i].events & (EPOLLIN | EPOLLERR | EPOLLHUP)) mask |= EV_READ;
-            if (evs[i].events & (EPOLLOUT | EPOLLERR | EPOLLHUP)) mask |= EV_WRITE;
-            if (evs[i].events & (EPOLLRDHUP | EPOLLERR | EPOLLHUP)) mask |= EV_HUP;
-            mask &= s->mask ? s->mask : 0;
-            /* A callback earlier in this batch may have unwatched this fd: s->mask is 0 then. */
-            if (mask && s->cb) s->cb(l, fd, mask, s->data);
-        }
-        run_timers(l);
+        int rc = ev_run_once(l, -1);
+        if (rc < 0) return rc;
     }
+    return 0;
+}
+
+int ev_run_once(ev_loop *l, int max_wait_ms)
+{
+    struct epoll_event evs[EV_MAX_EVENTS];
+    if (l->before_sleep) l->before_sleep(l, l->before_sleep_data);
+    if (l->stop) return 0;
+    int timeout = -1;
+    ev_timer *t = ev__theap_top(&l->timers);
+    if (t) {
+        uint64_t now = ev_now_ms();
+        timeout = t->due_ms <= now ? 0 : (int)(t->due_ms - now > 60000 ? 60000 : t->due_ms - now);
+    }
+    if (max_wait_ms >= 0 && (timeout < 0 || timeout > max_wait_ms)) timeout = max_wait_ms;
+    int n = epoll_wait(l->epfd, evs, EV_MAX_EVENTS, timeout);
+    if (n < 0) return errno == EINTR ? 0 : SD_EIO;
+    for (int i = 0; i < n; i++) {
+        int fd = evs[i].data.fd;
+        if (fd == -1) {
+            uint64_t v;
+            ssize_t r = read(l->wakefd, &v, sizeof v);
+            (void)r;
+            if (l->on_wakeup) l->on_wakeup(l, l->wakeup_data);
+            continue;
+        }
+        ev_fdslot *s = &l->fds[fd];
+        int mask = 0;
+        if (evs[i].events & (EPOLLIN | EPOLLERR | EPOLLHUP)) mask |= EV_READ;
+        if (evs[i].events & (EPOLLOUT | EPOLLERR | EPOLLHUP)) mask |= EV_WRITE;
+        if (evs[i].events & (EPOLLRDHUP | EPOLLERR | EPOLLHUP)) mask |= EV_HUP;
+        mask &= s->mask ? s->mask : 0;
+        /* A callback earlier in this batch may have unwatched this fd: s->mask is 0 then. */
+        if (mask && s->cb) s->cb(l, fd, mask, s->data);
+    }
+    run_timers(l);
     return 0;
 }

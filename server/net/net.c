@@ -1,6 +1,6 @@
-/* net.c — TCP listen/accept and address formatting (see net.h; redis anet.c). */
+/* net.c — TCP listen/accept, address formatting (see net.h; redis anet.c) and the plain
+ * transport net_tcp (transport.h). */
 #include "net.h"
-
 #include "ev.h"
 #include "transport.h"
 

@@ -17,11 +17,11 @@ sess *sess_new(uint32_t id, int fd, const char *addr, ev_loop *loop, const sess_
     if (!s->in) { free(s); return NULL; }
     s->id = id;
     s->fd = fd;
-    s->tr = &net_tcp;
     s->loop = loop;
     s->ops = ops;
     s->owner = owner;
     strncpy(s->addr, addr, sizeof s->addr - 1);
+    s->tr = &net_tcp;
     proto_decoder_init(&s->dec, PROTO_C2S);
     s->dec.preauth = 1;
     s->cloud = -1;
@@ -38,9 +38,18 @@ sess *sess_new(uint32_t id, int fd, const char *addr, ev_loop *loop, const sess_
     return s;
 }
 
+void sess_set_transport(sess *s, const net_transport *tr, void *ctx)
+{
+    if (s->tr_ctx) s->tr->close(s->tr_ctx, 0);
+    s->tr = tr ? tr : &net_tcp;
+    s->tr_ctx = ctx;
+    s->rd_want = s->wr_want = 0;
+}
+
 void sess_free(sess *s, void (*release)(void *user, uint32_t id), void *user)
 {
     if (!s) return;
+    if (s->tr_ctx) s->tr->close(s->tr_ctx, 0);
     sess_item *it = s->head;
     while (it) {
         sess_item *n = it->next;
@@ -53,7 +62,6 @@ void sess_free(sess *s, void (*release)(void *user, uint32_t id), void *user)
     free(s->stream_frame);
     free(s->cur_own);
     proto_decoder_free(&s->dec);
-    if (s->tr_ctx) s->tr->close(s->tr_ctx, 0);
     free(s->in);
     free(s);
 }
@@ -164,9 +172,11 @@ static int next_message(sess *s, void (*release)(void *, uint32_t), void *user)
     return 0;
 }
 
-/* done_message: frees the message just written. */
+/* done_message: frees the message just written (a frame's bytes are then given back to the
+ * owner's budget through ops->sent). */
 static void done_message(sess *s)
 {
+    int frame = !s->cur_item || s->cur_item->is_frame;
     if (s->cur_item) {
         sess_item *h = s->cur_item;
         if (h->is_frame) s->frames_sent++;
@@ -183,6 +193,7 @@ static void done_message(sess *s)
     }
     s->cur = NULL;
     s->cur_len = s->cur_off = 0;
+    if (frame && s->ops && s->ops->sent) s->ops->sent(s->owner, s->id);
 }
 
 int sess_flush(sess *s, void (*release)(void *user, uint32_t id), void *user)
@@ -192,15 +203,18 @@ int sess_flush(sess *s, void (*release)(void *user, uint32_t id), void *user)
         if (!s->cur && !next_message(s, release, user)) return 1;
         while (s->cur_off < s->cur_len) {
             int want = 0;
-            char err[160] = "";
-            ssize_t w = s->tr->write(s->tr_ctx, s->fd, s->cur + s->cur_off, s->cur_len - s->cur_off,
-                                     &want, err, sizeof err);
-            if (w == NET_AGAIN) return 0;
-            if (w < 0) {
+            ssize_t w = s->tr->write(s->tr_ctx, s->fd, s->cur + s->cur_off,
+                                     s->cur_len - s->cur_off, &want, s->io_err,
+                                     sizeof s->io_err);
+            if (w == NET_AGAIN) {
+                s->wr_want = want;
+                return 0;
+            }
+            if (w <= 0) {
                 s->tr_failed = 1;
-                snprintf(s->close_reason, sizeof s->close_reason, "%s", err);
                 return -EIO;
             }
+            s->wr_want = 0;
             s->cur_off += (size_t)w;
             s->bytes_out += (uint64_t)w;
         }
@@ -270,12 +284,6 @@ static void read_deadline(sess *s)
         ev_timer_start(s->loop, &s->rd_timer, s->lim->read_ms, on_read_deadline, s);
 }
 
-void sess_set_transport(sess *s, const net_transport *tr, void *ctx)
-{
-    s->tr = tr;
-    s->tr_ctx = ctx;
-}
-
 void sess_set_authed(sess *s)
 {
     s->authed = 1;
@@ -297,14 +305,17 @@ static void on_pending(ev_loop *l, ev_timer *t, void *data)
 }
 
 /* update_watch: EV_READ while the input is drained and the session takes requests, EV_WRITE
- * when output waits, EV_HUP alone while requests wait unread (to notice the client going). */
+ * when output waits, EV_HUP alone while requests wait unread (to notice the client going).
+ * A transport may turn these around (a TLS read that must write first, a write that must read
+ * first), and input its layer already holds is read from a zero-delay timer, since the socket
+ * will not signal it. */
 static void update_watch(sess *s, int want_write)
 {
-    int mask = want_write || s->tr_want_write ? EV_WRITE : 0;
+    int mask = want_write ? (s->wr_want == EV_READ ? EV_READ : EV_WRITE) : 0;
     int reading = !s->paused && !s->close_after && s->in_off == s->in_len;
-    if (reading) mask |= EV_READ;
+    if (reading) mask |= EV_READ | (s->rd_want == EV_WRITE ? EV_WRITE : 0);
     else if (!s->close_after) mask |= EV_HUP;
-    /* Input the transport already holds makes no socket event: read it on the next turn. */
+    if ((mask & EV_READ) && (mask & EV_HUP)) mask &= ~EV_HUP;
     if (reading && s->tr->pending(s->tr_ctx) && !ev_timer_armed(&s->pend_timer))
         ev_timer_start(s->loop, &s->pend_timer, 0, on_pending, s);
     if (ev_mask(s->loop, s->fd) == mask) return;
@@ -312,10 +323,12 @@ static void update_watch(sess *s, int want_write)
     else if (ev_watch(s->loop, s->fd, mask, on_io, s, NULL) != 0) sess_close(s, "event loop error");
 }
 
+/* release_cb: sess_flush's callback from sess_kick: a frame starts being written. */
 static void release_cb(void *user, uint32_t id)
 {
     sess *s = user;
-    if (s->ops->release) s->ops->release(s->owner, id);
+    if (s->ops->sending) s->ops->sending(s->owner, id);
+    else if (s->ops->release) s->ops->release(s->owner, id);
 }
 
 void sess_kick(sess *s)
@@ -327,7 +340,7 @@ void sess_kick(sess *s)
     if (progress) s->last_io_ms = ev_now_ms();
     if (rc < 0) {
         char r[192];
-        snprintf(r, sizeof r, "%s", s->close_reason[0] ? s->close_reason : "write failed");
+        snprintf(r, sizeof r, "%s", s->io_err[0] ? s->io_err : "write failed");
         sess_close(s, r);
         return;
     }
@@ -406,16 +419,19 @@ void sess_input(sess *s)
 
 /* read_some: one read through the transport into the input buffer, decoded at once. Returns
  * 1 when bytes came, 0 when none could (the transport waits for an event), -1 when the session
- * closed. */
+ * closed or is closing. */
 static int read_some(sess *s)
 {
     int want = EV_READ;
-    char err[192] = "";
-    ssize_t r = s->tr->read(s->tr_ctx, s->fd, s->in, SESS_IN_CHUNK, &want, err, sizeof err);
-    s->tr_want_write = r == NET_AGAIN && want == EV_WRITE;
+    s->io_err[0] = 0;
+    ssize_t r = s->tr->read(s->tr_ctx, s->fd, s->in, SESS_IN_CHUNK, &want, s->io_err,
+                            sizeof s->io_err);
+    s->rd_want = r == NET_AGAIN ? want : 0;
     if (r == 0) {
-        sess_close(s, err[0] ? err : s->authed ? "closed by the client"
-                                               : "closed by the client before the handshake");
+        char why[sizeof s->io_err];
+        snprintf(why, sizeof why, "%s", s->io_err[0] ? s->io_err
+                 : s->authed ? "closed by the client" : "closed by the client before the handshake");
+        sess_close(s, why);
         return -1;
     }
     if (r == NET_AGAIN) {
@@ -424,9 +440,25 @@ static int read_some(sess *s)
         read_deadline(s);
         return 0;
     }
+    if (r == NET_NOT_TLS) {
+        /* A plaintext client on a TLS listener: told so in plaintext (the one thing sent
+         * unencrypted), then closed; nothing it sent is read. */
+        char why[sizeof s->io_err];
+        snprintf(why, sizeof why, "%s", s->io_err);
+        sess_set_transport(s, NULL, NULL);
+        s->io_err[0] = 0;
+        s->ops->on_decode_error(s->owner, s, PROTO_E_AUTH_REQUIRED,
+                                "this server accepts TLS connections only: connect with TLS "
+                                "(splat --tls, spc_options.tls)");
+        snprintf(s->close_reason, sizeof s->close_reason, "%s", why);
+        sess_kick(s);
+        return -1;
+    }
     if (r < 0) {
+        char why[sizeof s->io_err];
+        snprintf(why, sizeof why, "%s", s->io_err[0] ? s->io_err : "read failed");
         s->tr_failed = 1;
-        sess_close(s, err[0] ? err : "read failed");
+        sess_close(s, why);
         return -1;
     }
     s->last_io_ms = ev_now_ms();
@@ -447,8 +479,10 @@ static void on_io(ev_loop *l, int fd, int mask, void *data)
         sess_close(s, "closed by the client while its requests waited");
         return;
     }
-    int want_read = (mask & EV_READ) || ((mask & EV_WRITE) && s->tr_want_write);
-    if (want_read && s->in_off == s->in_len) {
+    /* A read is due on input, or on the socket turning writable when the last read had to
+     * write first (a TLS handshake or key update behind a full send buffer). */
+    int readable = (mask & EV_READ) || (s->rd_want == EV_WRITE && (mask & EV_WRITE));
+    if (readable && s->in_off == s->in_len) {
         /* A few reads when the transport holds more input than one buffer (a WebSocket's
          * frames); sess_input kicks the output after each. */
         for (int n = 0; n < 4; n++) {

@@ -14,6 +14,9 @@
  * (latest wins). Memory per session is bounded: bytes items by SESS_OUT_MAX (over it the client
  * is disconnected), frames by the render thread's per-client outstanding limit.
  *
+ * Transport: bytes move through s->tr (transport.h): net_tcp unless the owner puts another
+ * layer (TLS, or WebSocket over TCP or TLS) in with sess_set_transport before the first kick.
+ *
  * Lifetime: sess_close marks a session dead and closes its socket; the daemon frees it at a
  * safe point (before the loop sleeps), never inside a callback (STYLE.md 7). */
 #pragma once
@@ -69,8 +72,13 @@ typedef struct sess_ops {
     /* on_close: the session closed (socket already closed, reason for the log); the owner
      * frees it later, at a safe point, with sess_free. */
     void (*on_close)(void *owner, sess *s, const char *reason);
-    /* release: a frame the render thread counts as outstanding for s left the waiting state. */
+    /* release: a frame the render thread counts as outstanding for s is gone unsent (dropped,
+     * or s freed while it waited). */
     void (*release)(void *owner, uint32_t id);
+    /* sending: such a frame starts being written (it leaves the waiting state; NULL: release
+     * is called instead); sent: the frame being written is written and freed. */
+    void (*sending)(void *owner, uint32_t id);
+    void (*sent)(void *owner, uint32_t id);
     /* stream_blocked: whether a streamed frame waits to be written (latest-wins backpressure). */
     void (*stream_blocked)(void *owner, sess *s, int blocked);
 } sess_ops;
@@ -78,17 +86,21 @@ typedef struct sess_ops {
 struct sess {
     uint32_t id;                /* (generation << 16) | index; never 0 */
     int fd;
-    const net_transport *tr;    /* how bytes cross the socket (net_tcp unless set) */
-    void *tr_ctx;               /* the transport's state, closed with the session */
-    int tr_want_write;          /* the transport's read waits for the socket to be writable */
-    int tr_failed;              /* the transport failed: its close is not graceful */
-    ev_timer pend_timer;        /* input the transport holds: read again without an event */
     void *owner;                /* the daemon context, passed to every ops callback */
     const sess_ops *ops;
     ev_loop *loop;
     char addr[NET_ADDR_LEN];
     char client_name[PROTO_MAX_CLIENT + 1];
     uint64_t t_connect_ms;
+
+    /* transport */
+    const net_transport *tr;    /* net_tcp by default */
+    void *tr_ctx;               /* the layer's state; closed with the session */
+    int rd_want;                /* the event the last NET_AGAIN read waits for (0: none) */
+    int wr_want;                /* the event the last NET_AGAIN write waits for (0: none) */
+    ev_timer pend_timer;        /* the layer holds input already off the socket: read it soon */
+    char io_err[150];           /* the last transport error, for the close reason */
+    int tr_failed;              /* the transport failed: its close is not graceful */
 
     /* input */
     proto_decoder dec;
@@ -149,8 +161,9 @@ struct sess {
 sess *sess_new(uint32_t id, int fd, const char *addr, ev_loop *loop, const sess_ops *ops,
                void *owner);
 
-/* sess_set_transport: the session's bytes go through tr (ctx: its state, now owned by the
- * session and closed with it) instead of plain TCP. Call before sess_kick. */
+/* sess_set_transport: the layer the session's bytes go through from now on (ctx is taken over
+ * and closed with the session; a layer set before is closed); NULL: plain TCP. Call before the
+ * first sess_kick, or to drop a layer that refused the connection (NET_NOT_TLS). */
 void sess_set_transport(sess *s, const net_transport *tr, void *ctx);
 
 /* sess_set_authed: the session passed authentication: requests after HELLO are decoded with
@@ -192,7 +205,7 @@ int sess_set_stream_frame(sess *s, uint8_t *msg, size_t len);
 /* sess_flush: writes what can be written without blocking, in order. Returns 1 when
  * everything is written, 0 when the socket is full (watch EV_WRITE), or a negative errno when
  * the connection failed. release(user, id) is called for each frame that leaves the waiting
- * state (starts being written). */
+ * state (starts being written). On failure s->io_err says why. */
 int sess_flush(sess *s, void (*release)(void *user, uint32_t id), void *user);
 
 /* sess_has_output: 1 when anything is queued or being written. */

@@ -26,8 +26,9 @@
 #include "prep.h"
 #include "sd_hash.h"
 
-/* Bump when the layout of prepared.h or the meaning of any prepared value changes. */
-#define CACHE_VERSION 4u
+/* Bump when the layout of prepared.h or the meaning of any prepared value changes, or the
+ * hash of the keys and checksums (5: XXH3-64 from libxxhash instead of splatd's own). */
+#define CACHE_VERSION 5u
 #define CACHE_MAGIC "SPLATDC\0"
 #define CACHE_BLOCK_OFFSET 4096u
 
@@ -352,10 +353,11 @@ static int try_load(const char *cpath, const char *src, src_key *key, int k, pc_
     uint64_t next = 0;
     for (uint64_t i = 0; i < h.nbatches; i++) {
         if (bt[i].first != next || bt[i].count == 0 || bt[i].count > h.n - next) {
-            munmap(m, maplen);
+            /* The message quotes the batch: written before the mapping goes. */
             snprintf(why, whylen, "batch %llu [%u, +%u) does not follow the previous one in its "
                      "%llu points", (unsigned long long)i, bt[i].first, bt[i].count,
                      (unsigned long long)h.n);
+            munmap(m, maplen);
             goto out;
         }
         next += bt[i].count;
@@ -627,4 +629,46 @@ int cache__set_version(const char *cache_path, uint32_t version)
     }
     close(fd);
     return rc;
+}
+
+int cache__seal(const char *cache_path, const char *src)
+{
+    src_key key = {0};
+    sd_err err = {0};
+    if (source_key(src, &key, 0, &err) < 0 || source_key(src, &key, 1, &err) < 0) return -1;
+    int fd = open(cache_path, O_RDWR | O_CLOEXEC | O_NOFOLLOW);
+    if (fd < 0) return -1;
+    struct stat st;
+    cache_header h;
+    int rc = -1;
+    if (fstat(fd, &st) == 0 && (uint64_t)st.st_size >= CACHE_BLOCK_OFFSET &&
+        pread(fd, &h, sizeof h, 0) == (ssize_t)sizeof h) {
+        h.src_size = key.size;
+        h.src_mtime_ns = key.mtime_ns;
+        h.src_hash = key.hash;
+        uint64_t left = (uint64_t)st.st_size - CACHE_BLOCK_OFFSET;
+        uint8_t *m = left ? mmap(NULL, (size_t)left + CACHE_BLOCK_OFFSET, PROT_READ, MAP_PRIVATE,
+                                 fd, 0) : NULL;
+        if (m != MAP_FAILED) {
+            h.block_hash = sd_hash64(m ? m + CACHE_BLOCK_OFFSET : (const uint8_t *)"",
+                                     left < h.block_len ? (size_t)left : (size_t)h.block_len, 0);
+            if (m) munmap(m, (size_t)left + CACHE_BLOCK_OFFSET);
+            h.header_hash = sd_hash64(&h, offsetof(cache_header, header_hash), 0);
+            if (pwrite(fd, &h, sizeof h, 0) == (ssize_t)sizeof h) rc = 0;
+        }
+    }
+    close(fd);
+    return rc;
+}
+
+int cache__load(const char *cache_path, const char *src, int k, pc_prepared *out, char *why,
+                size_t whylen)
+{
+    src_key key = {0};
+    sd_err err = {0};
+    if (source_key(src, &key, 0, &err) < 0) {
+        snprintf(why, whylen, "%s", err.msg);
+        return -1;
+    }
+    return try_load(cache_path, src, &key, k, out, why, whylen);
 }

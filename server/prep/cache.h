@@ -68,3 +68,14 @@ int cache_path_for(const char *src, const char *dir, int k, char *buf, size_t le
 /* cache__set_version: rewrites the version field of a cache file (with a valid checksum), so
  * tests can check that a cache of another version is rebuilt. Internal; returns 0 or -1. */
 int cache__set_version(const char *cache_path, uint32_t version);
+
+/* cache__seal: makes the cache file at cache_path describe the source src (its size, time and
+ * content hash) and gives it valid checksums over what it holds (the block's over at most the
+ * length its header claims), so that a fuzzer's bytes reach the checks behind the checksums.
+ * Internal (tests/fuzz); returns 0 or -1. */
+int cache__seal(const char *cache_path, const char *src);
+/* cache__load: the loader of cache_open_cloud alone: maps and checks the cache file at
+ * cache_path for source src and k. Returns 1 with *out (free with pc_prepared_free), 0 when
+ * out of date, -1 when damaged; why says which. Internal (tests/fuzz). */
+int cache__load(const char *cache_path, const char *src, int k, pc_prepared *out, char *why,
+                size_t whylen);

@@ -16,24 +16,13 @@
 #include <time.h>
 
 #include "splat_client.h"
+#include "testutil.h"
 
 static double now_us(void)
 {
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
     return (double)ts.tv_sec * 1e6 + (double)ts.tv_nsec * 1e-3;
-}
-
-static int cmp_d(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double median(double *v, int n)
-{
-    qsort(v, (size_t)n, sizeof *v, cmp_d);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
 static int die(spc_client *c, const char *what, int rc)
@@ -95,8 +84,8 @@ int main(int argc, char **argv)
         ovh[i] = e2e[i] - srv[i] - dec[i];
         rr[i] = (double)(f.render_us + f.readback_us);
     }
-    double m_e2e = median(e2e, nlat), m_srv = median(srv, nlat), m_dec = median(dec, nlat);
-    double m_ovh = median(ovh, nlat);
+    double m_e2e = tu_median(e2e, nlat), m_srv = tu_median(srv, nlat), m_dec = tu_median(dec, nlat);
+    double m_ovh = tu_median(ovh, nlat);
     printf("| end-to-end latency, %dx%d JPEG, %s, median of %d | %.1f ms | render+readback+encode %.1f ms, "
            "client decode %.1f ms, protocol+transfer overhead %.2f ms (target <= 2 ms) |\n",
            w, h, pipeline, nlat, m_e2e / 1000, m_srv / 1000, m_dec / 1000, m_ovh / 1000);
@@ -117,7 +106,7 @@ int main(int argc, char **argv)
             got++;
         }
         double fps = npath / ((now_us() - t0) / 1e6);
-        double bound = 1e6 / median(rr, npath);
+        double bound = 1e6 / tu_median(rr, npath);
         if (depth == 1) render_bound = bound;
         printf("| camera path, %d frames, %d in flight | %.1f frames/s | render-bound rate %.1f frames/s "
                "(1 / median render+readback); %.0f %% of it (target >= 95 %% when pipelined) |\n",

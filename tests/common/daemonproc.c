@@ -5,6 +5,7 @@
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -85,4 +86,15 @@ int tu_daemon_stop(tu_daemon *d)
     waitpid(d->pid, &st, 0);
     d->pid = 0;
     return -2;
+}
+
+int tu_daemon_log_count(const tu_daemon *d, const char *needle)
+{
+    size_t len;
+    char *log = (char *)tu_read_file(d->log, &len);
+    if (!log) return 0;
+    int n = 0;
+    for (const char *p = log; (p = strstr(p, needle)); p += strlen(needle)) n++;
+    free(log);
+    return n;
 }

@@ -19,6 +19,9 @@ int tu_daemon_start(tu_daemon *d, const char *dir, int *status, const char *cons
  * -1 when it died of a signal or was not running, -2 when it had to be killed. */
 int tu_daemon_stop(tu_daemon *d);
 
+/* tu_daemon_log_count: occurrences of needle in the daemon's log (0 when it cannot be read). */
+int tu_daemon_log_count(const tu_daemon *d, const char *needle);
+
 /* tu_splatd_bin, tu_splat_bin: the binaries under test ($SPLATD_BIN, $SPLAT_BIN). */
 const char *tu_splatd_bin(void);
 const char *tu_splat_bin(void);

@@ -11,11 +11,15 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
+#include "cache.h"
 #include "cloud.h"
+#include "frame_decode.h"
 #include "lzf.h"
 #include "params.h"
+#include "prep.h"
 #include "proto.h"
 #include "sd_err.h"
 #include "http.h"
@@ -124,9 +128,9 @@ static int check_params_msg(const proto_msg *m, proto_error *e)
     return 0;
 }
 
-/* parse_msg: runs the message's parser and, when it accepts, the re-encoding check. Returns
+/* fuzz_parse_msg (fuzz_targets.h): runs the message's parser and, when it accepts, the re-encoding check. Returns
  * the parser's code. */
-static int parse_msg(const proto_msg *m)
+int fuzz_parse_msg(const proto_msg *m)
 {
     proto_error e;
     memset(&e, 0, sizeof e);
@@ -305,7 +309,7 @@ static void run_decoder(uint8_t cfg, const uint8_t *data, size_t len, size_t chu
         r->hash = fnv(fnv(r->hash, hb, sizeof hb), m.payload, m.len);
         r->msgs++;
         if (parse) {
-            int prc = parse_msg(&m);
+            int prc = fuzz_parse_msg(&m);
             if (prc < 0 && !r->parse_rc) r->parse_rc = prc;
         }
     }
@@ -630,6 +634,134 @@ int fuzz_one_params(const uint8_t *data, size_t len)
     return 0;
 }
 
+/* ---- the prep-cache loader --------------------------------------------------------------- */
+
+/* A 3-point XYZ source the cache claims to describe (its size, time and hash go in by
+ * cache__seal; what is in it does not matter to the loader). */
+static const char CACHE_SRC[] = "0 0 0\n1 0 0\n0 1 0\n";
+
+/* write_file: path := data. Aborts on failure (the harness's fault, not the input's). */
+static void write_file(const char *path, const void *data, size_t len)
+{
+    FILE *f = fopen(path, "wb");
+    if (!f || (len && fwrite(data, 1, len, f) != len) || fclose(f) != 0) {
+        perror(path);
+        abort();
+    }
+}
+
+int fuzz_one_cache(const uint8_t *data, size_t len)
+{
+    /* tmpfs when there is one: a file system round trip per input is most of the cost. */
+    const char *tmp = getenv("TMPDIR");
+    if (access("/dev/shm", W_OK) == 0) tmp = "/dev/shm";
+    char dir[512], src[600], cpath[600];
+    snprintf(dir, sizeof dir, "%s/splatd-fuzz-cache.XXXXXX", tmp && *tmp ? tmp : "/tmp");
+    if (!mkdtemp(dir)) {
+        perror("mkdtemp");
+        abort();
+    }
+    snprintf(src, sizeof src, "%s/s.xyz", dir);
+    snprintf(cpath, sizeof cpath, "%s/c.splc", dir);
+    write_file(src, CACHE_SRC, sizeof CACHE_SRC - 1);
+    write_file(cpath, data, len);
+    int sealed = cache__seal(cpath, src) == 0;
+    if (!sealed && len >= 4096) fz_fail("cache", "cache__seal failed on a %zu-byte file", len);
+    pc_prepared p;
+    memset(&p, 0, sizeof p);
+    char why[256] = "";
+    int rc = cache__load(cpath, src, PREP_DEFAULT_K, &p, why, sizeof why);
+    if (rc < -1 || rc > 1) fz_fail("cache", "cache__load returned %d", rc);
+    if (rc != 1 && !why[0]) fz_fail("cache", "refused (%d) without a reason", rc);
+    if (rc == 1) {
+        /* What the loader accepts is what the renderer trusts: a block of exactly the layout's
+         * length inside the mapping, batches tiling [0, n), terminated strings. */
+        if (!sealed) fz_fail("cache", "an unsealed file was loaded");
+        uint64_t want = pc_prepared_block_len(p.n, p.attrs, p.nbatches);
+        if (p.n == 0 || p.nbatches == 0 || p.block_len != want || p.map_len != 4096 + want ||
+            (const uint8_t *)p.block != (const uint8_t *)p.map + 4096)
+            fz_fail("cache", "loaded n %llu, %llu batches, block %llu bytes (layout %llu), map %zu",
+                    (unsigned long long)p.n, (unsigned long long)p.nbatches,
+                    (unsigned long long)p.block_len, (unsigned long long)want, p.map_len);
+        uint64_t next = 0;
+        for (uint64_t i = 0; i < p.nbatches; i++) {
+            if (p.batches[i].first != next || p.batches[i].count == 0)
+                fz_fail("cache", "batch %llu does not follow", (unsigned long long)i);
+            next += p.batches[i].count;
+        }
+        if (next != p.n) fz_fail("cache", "batches hold %llu of %llu points",
+                                 (unsigned long long)next, (unsigned long long)p.n);
+        if (!memchr(p.format, 0, sizeof p.format) || !memchr(p.scalar_name, 0, sizeof p.scalar_name))
+            fz_fail("cache", "format or scalar name not terminated");
+        unsigned t = touch(p.pos, p.n, 3 * sizeof(float), 0, 0, "cache", "pos");
+        t += touch(p.normal, p.n, 3 * sizeof(float), 0, 0, "cache", "normal");
+        t += touch(p.radius, p.n, sizeof(float), 0, 0, "cache", "radius");
+        t += touch(p.F, p.n, sizeof(float), 0, 0, "cache", "F");
+        t += touch(p.block, (size_t)p.block_len, 1, 0, 0, "cache", "block");
+        (void)t;
+        pc_prepared_free(&p);
+    }
+    unlink(cpath);
+    unlink(src);
+    rmdir(dir);
+    return rc == 1 ? 0 : rc < 0 ? SD_ESTALE : SD_EUNSUP;
+}
+
+/* ---- the client's frame decoder ---------------------------------------------------------- */
+
+int fuzz_one_frame(const uint8_t *data, size_t len)
+{
+    if (len < 3) return FD_ETRUNC;
+    static const int fmts[4] = {SP_FMT_JPEG, SP_FMT_LZ4, SP_FMT_RAW, SP_FMT_PNG};
+    int fmt = fmts[data[0] & 3], w = data[1], h = data[2];
+    const uint8_t *pl = data + 3;
+    size_t plen = len - 3;
+    if (data[0] & 4) {
+        /* The whole FRAME payload as a server sends it: the client decodes what it parsed. */
+        proto_frame f;
+        proto_error pe;
+        memset(&pe, 0, sizeof pe);
+        if (proto_parse_frame(pl, (uint32_t)plen, &f, &pe) < 0) {
+            if (!pe.msg[0]) fz_fail("frame", "FRAME refused without a message");
+            return -pe.code;
+        }
+        if (f.data_len > plen || (f.data_len && (f.data < pl || f.data + f.data_len > pl + plen)))
+            fz_fail("frame", "FRAME data (%u bytes) outside its %zu-byte payload", f.data_len, plen);
+        if (f.width > 1u << 16 || f.height > 1u << 16) return FD_ELIMIT;
+        fmt = f.format;
+        w = (int)f.width;
+        h = (int)f.height;
+        pl = f.data;
+        plen = f.data_len;
+    }
+    char err[400] = "";
+    fd_ctx *d = fd_create(err, sizeof err);
+    if (!d) {
+        fprintf(stderr, "fd_create: %s\n", err);
+        abort();
+    }
+    const uint8_t *rgba = NULL;
+    int ow = -1, oh = -1;
+    int rc = fd_decode(d, fmt, pl, plen, w, h, &rgba, &ow, &oh, err, sizeof err);
+    if (rc < 0) {
+        if (rc < FD_EINVAL || !err[0]) fz_fail("frame", "fd_decode returned %d, message '%s'", rc, err);
+    } else {
+        if (rc != 0 || !rgba || ow <= 0 || oh <= 0 || (w > 0 && ow != w) || (h > 0 && oh != h))
+            fz_fail("frame", "fd_decode returned %d, %dx%d for a %dx%d frame", rc, ow, oh, w, h);
+        if (fmt == SP_FMT_RAW && (rgba != pl || plen != (size_t)ow * (size_t)oh * 4))
+            fz_fail("frame", "raw %dx%d from %zu bytes", ow, oh, plen);
+        if (fmt == SP_FMT_LZ4) {
+            int hw = 0, hh = 0;
+            char e2[400];
+            if (fd_lz4_header(pl, plen, &hw, &hh, e2, sizeof e2) != 0 || hw != ow || hh != oh)
+                fz_fail("frame", "LZ4 frame decoded at %dx%d, its header says %dx%d", ow, oh, hw, hh);
+        }
+        (void)touch(rgba, (size_t)ow * (size_t)oh, 4, 0, 0, "frame", "rgba");
+    }
+    fd_destroy(d);
+    return rc;
+}
+
 /* ---- lookup ------------------------------------------------------------------------------ */
 
 fuzz_fn fuzz_target_find(const char *name)
@@ -639,6 +771,7 @@ fuzz_fn fuzz_target_find(const char *name)
         {"las", fuzz_one_las},     {"xyz", fuzz_one_xyz}, {"lzf", fuzz_one_lzf},
         {"params", fuzz_one_params}, {"ws", fuzz_one_ws},
         {"laz", fuzz_one_laz},     {"copc", fuzz_one_copc},
+        {"cache", fuzz_one_cache}, {"frame", fuzz_one_frame},
     };
     for (size_t i = 0; i < sizeof targets / sizeof targets[0]; i++)
         if (!strcmp(targets[i].name, name)) return targets[i].fn;

@@ -53,8 +53,37 @@ int fuzz_one_laz(const uint8_t *data, size_t len);
  * 0 or copc_visit's negative code. */
 int fuzz_one_copc(const uint8_t *data, size_t len);
 
+/* fuzz_one_cache: the bytes as a prep-cache file (cache.c) for a small source file, sealed
+ * (cache__seal: the source's key and the checksums made to match what the file holds) and
+ * loaded by cache__load with the default k. A loaded cache must have the layout's block length
+ * inside its mapping and batches tiling its points; a refusal must say why. Returns 0 when
+ * loaded, SD_EUNSUP when out of date, SD_ESTALE when damaged. */
+int fuzz_one_cache(const uint8_t *data, size_t len);
+
+/* fuzz_one_frame: byte 0 picks the format (bits 0-1: JPEG, LZ4, raw, PNG) and, with bit 2,
+ * that the rest after bytes 1-2 is a whole FRAME payload (proto_parse_frame gives format and
+ * size); else bytes 1-2 are the announced width and height (0: none) and the rest the image.
+ * fd_decode (the client's decoder) must give an image of the announced size whose every byte
+ * is readable, or a code with a message. Returns fd_decode's code (or the parse's). */
+int fuzz_one_frame(const uint8_t *data, size_t len);
+
+/* fuzz_one_dispatch (tests/common/fuzz_dispatch.c, linked only where the whole server is):
+ * the bytes as what one client sends to the daemon's session and dispatch code, in this
+ * process, on the real renderer (frames at most 128x128, one 64-point cloud "sphere"
+ * prepared). The connection is served until the daemon closes it or falls quiet (at most 1 s),
+ * then the client goes. Everything the daemon sent must decode and parse with the protocol's
+ * own client-side code, and the session must be freed once the client has gone. Returns 0, or
+ * minus the code of the first ERROR the daemon sent. */
+int fuzz_one_dispatch(const uint8_t *data, size_t len);
+
+/* fuzz_parse_msg: one decoded message through its proto_parse_* and, when it parses, the
+ * re-encoding check (an oracle failure aborts). Returns the parser's code. */
+typedef struct proto_msg proto_msg;
+int fuzz_parse_msg(const proto_msg *m);
+
 /* fuzz_target_find: the fuzz_one_* function of a target name ("proto", "ply", "pcd", "las",
- * "xyz", "lzf", "params", "laz", "copc"), or NULL. */
+ * "xyz", "lzf", "params", "laz", "copc", "ws", "cache", "frame"; "dispatch" where the server is
+ * linked), or NULL. */
 typedef int (*fuzz_fn)(const uint8_t *data, size_t len);
 fuzz_fn fuzz_target_find(const char *name);
 

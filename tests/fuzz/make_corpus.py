@@ -4,6 +4,10 @@
     python3 tests/fuzz/make_corpus.py        (from the repository root)
 
 Every seed is a small valid input, except those named bad_*, which each target must reject.
+Two kinds of seed are made by splatd itself and kept as they are (this script leaves them): the
+frame target's jpeg_* (see frame_seeds) and the cache target's, which are prep caches of small
+clouds (`splatd prep FILE --cache DIR`: 30 and 64 points of xyz, 40 of PLY with colours), valid
+ones named after their cloud, damaged ones bad_*.
 tests/test_fuzz_regress.c checks both: valid seeds give 0, bad_* seeds a negative code.
 The layouts follow the readers' and protocol/proto.h's descriptions of the formats.
 """
@@ -382,8 +386,67 @@ def copc():
     put("copc", "bad_page_size.bin", copc_info(160, 40) + page)
 
 
+def dispatch_seeds():
+    """Seeds of the dispatch target (fuzz_one_dispatch): what one client sends to the daemon,
+    whose data directory holds the 64-point cloud "sphere" and whose frames are at most
+    128x128. Valid seeds get no ERROR; bad_* seeds each get one."""
+    def session(*parts):
+        seq = iter(range(1, 100))
+        return b"".join(msg(t, p, next(seq)) for t, p in parts)
+    put("dispatch", "hello_list_ping", session(("HELLO", hello()), ("LIST", b""),
+                                               ("PING", struct.pack("<Q", 7)), ("BYE", b"")))
+    put("dispatch", "open_render", session(
+        ("HELLO", hello()), ("OPEN", s8("sphere")), ("CAMERA", camera(64, 48)),
+        ("PARAMS", params_payload()), ("RENDER", b""), ("RENDER", b"")))
+    put("dispatch", "stream", session(
+        ("HELLO", hello()), ("OPEN", s8("sphere.xyz")), ("STREAM", struct.pack("<Bf", 1, 30.0)),
+        ("CAMERA", camera(32, 32)), ("CAMERA", camera(48, 32)), ("PING", struct.pack("<Q", 1))))
+    put("dispatch", "bad_not_found", session(("HELLO", hello()), ("OPEN", s8("nothing"))))
+    put("dispatch", "bad_before_hello", msg("LIST"))
+    put("dispatch", "bad_too_large", session(("HELLO", hello()), ("OPEN", s8("sphere")),
+                                             ("CAMERA", camera(4096, 4096)), ("RENDER", b"")))
+    put("dispatch", "bad_magic", b"GET / HTTP/1.1\r\n\r\n")
+
+
+def lz4_literals(data):
+    """One LZ4 block holding data as a single literal run (a valid block without matches)."""
+    n = len(data)
+    if n < 15:
+        return bytes([n << 4]) + data
+    ext, rest = b"", n - 15
+    while rest >= 255:
+        ext += b"\xff"
+        rest -= 255
+    return bytes([0xF0]) + ext + bytes([rest]) + data
+
+
+def spl4(w, h, pixels):
+    return b"SPL4" + struct.pack("<III", w, h, w * h * 4) + lz4_literals(pixels)
+
+
+def frame_seeds():
+    """Seeds of the client's frame decoder (fuzz_one_frame): byte 0 picks the format (0 JPEG,
+    1 LZ4, 2 raw, 3 PNG; +4: the rest after bytes 1-2 is a whole FRAME payload), bytes 1-2 the
+    announced width and height. The jpeg_* seeds are not written here: they are the 3 selector
+    bytes followed by `splatd render tests/data/bun000.ply --pipeline points --size WxH -o
+    x.jpg` (8x6 and 16x12), kept as they are."""
+    px = bytes((i * 37) & 255 for i in range(4 * 4 * 3))
+    put("frame", "raw_2x2", b"\x02\x02\x02" + bytes(range(16)))
+    put("frame", "raw_4x3", b"\x02\x04\x03" + px)
+    put("frame", "lz4_4x3", b"\x01\x04\x03" + spl4(4, 3, px))
+    put("frame", "lz4_3x5_unannounced", b"\x01\x00\x00" + spl4(3, 5, bytes(60)))
+    put("frame", "msg_raw_2x2", b"\x06\x00\x00" + frame(3, 2, 2, bytes(range(16))))
+    put("frame", "msg_lz4_4x3", b"\x05\x00\x00" + frame(2, 4, 3, spl4(4, 3, px)))
+    put("frame", "bad_raw_short", b"\x02\x02\x02" + bytes(15))
+    put("frame", "bad_lz4_magic", b"\x01\x04\x03" + b"SPL5" + spl4(4, 3, px)[4:])
+    put("frame", "bad_lz4_size", b"\x01\x04\x03" + spl4(4, 3, px)[:-1])
+    put("frame", "bad_png", b"\x03\x00\x00\x89PNG\r\n\x1a\n")
+
+
 def main():
     proto()
+    frame_seeds()
+    dispatch_seeds()
     ply()
     pcd()
     las()

@@ -3,7 +3,10 @@
 #
 #   sh tests/fuzz/run.sh [SECONDS] [TARGET...]      (from the repository root; make fuzz)
 #
-# Targets: proto ply pcd las xyz lzf params ws laz copc (default: all). Each fuzzer is
+# Targets: proto ply pcd las xyz lzf params ws laz copc cache frame dispatch (default: all).
+# dispatch links the whole server (its session, dispatch and render-thread code, on the real
+# renderer) and tests/common/fuzz_dispatch.c; it needs `make` to have generated
+# build/gen/shaders_gen.c and page_gen.c. Each fuzzer is
 # build/fuzz/fuzz_<target>, built with -fsanitize=fuzzer,address,undefined from the sources it
 # needs and tests/common/fuzz_targets.c (the bodies, shared with tests/test_fuzz_regress.c).
 # Each runs niced on a copy of tests/fuzz/corpus/<target>/ (the seeds stay as they are), with
@@ -17,7 +20,7 @@ cd "$(dirname "$0")/../.." || exit 2
 
 secs=${1:-60}
 [ $# -gt 0 ] && shift
-targets=${*:-proto ply pcd las xyz lzf params ws laz copc}
+targets=${*:-proto ply pcd las xyz lzf params ws laz copc cache frame dispatch}
 CLANG=${CLANG:-clang}
 max_len=${FUZZ_MAX_LEN:-65536}
 out=build/fuzz
@@ -30,12 +33,27 @@ fi
 # ---- build: every source once into objects, then one link per target ----
 CFLAGS="-std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer -Wall -Wextra -Wno-unused-parameter
         -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=undefined
-        -Iprotocol $(for d in util io prep render pipelines enc net daemon cmd; do printf -- "-Iserver/%s " $d; done)-Iclient -Itests -Itests/common -I/usr/include/OpenEXR"
+        -Iprotocol $(for d in util io prep render pipelines enc net daemon cmd; do printf -- "-Iserver/%s " $d; done)-Iclient -Itests -Itests/common -Ibuild/gen -I/usr/include/OpenEXR"
 SRCS="$(ls protocol/*.c) server/io/io_text.c server/io/io_ply.c server/io/io_pcd.c server/io/io_las.c
       server/io/io_xyz.c server/io/cloud.c server/io/lzf.c server/util/sd_err.c server/util/sd_hash.c server/net/ws.c server/net/http.c
-      $(ls server/io/laz*.c) server/io/io_laz.c server/io/las_header.c server/io/copc.c tests/common/fuzz_copc.c tests/common/fuzz_targets.c"
+      $(ls server/io/laz*.c) server/io/io_laz.c server/io/las_header.c server/io/copc.c tests/common/fuzz_copc.c
+      $(ls server/prep/*.c) client/frame_decode.c tests/common/fuzz_targets.c"
+LIBS="-lflann -lturbojpeg -llz4 -lxxhash -llzf -lcrypto -lpthread -lm"
+# The dispatch target: the rest of the server (all but its main), the embedded shaders.
+# (ws.c and http.c are in SRCS already, for the ws target; server/mpi is the MPI binary's.)
+DISPATCH_SRCS="$(ls server/*/*.c | grep -v -e '^server/cmd/main.c$' -e '^server/io/' -e '^server/prep/' \
+                 -e '^server/util/' -e '^server/mpi/' -e '^server/net/ws.c$' -e '^server/net/http.c$') \
+               build/gen/shaders_gen.c build/gen/page_gen.c tests/common/fuzz_dispatch.c"
+DISPATCH_LIBS="$(pkg-config --libs egl opengl osmesa libpng libssl libcrypto) -lOpenEXRCore"
+case " $targets " in
+    *" dispatch "*)
+        { [ -f build/gen/shaders_gen.c ] && [ -f build/gen/page_gen.c ]; } ||
+            make build/gen/shaders_gen.c build/gen/page_gen.c >/dev/null ||
+            { echo "fuzz: cannot generate build/gen/shaders_gen.c and page_gen.c" >&2; exit 2; }
+        SRCS="$SRCS $DISPATCH_SRCS" ;;
+esac
 mkdir -p "$out/obj"
-objs=""
+objs="" dobjs=""
 for s in $SRCS; do
     o="$out/obj/$(echo "$s" | tr / _ | sed 's/\.c$/.o/')"
     # shellcheck disable=SC2046
@@ -44,13 +62,15 @@ for s in $SRCS; do
         # shellcheck disable=SC2086
         $CLANG $CFLAGS -c "$s" -o "$o" || { echo "fuzz: compiling $s failed" >&2; exit 2; }
     fi
-    objs="$objs $o"
+    case " $DISPATCH_SRCS " in *" $s "*) dobjs="$dobjs $o" ;; *) objs="$objs $o" ;; esac
 done
 for t in $targets; do
     src=tests/fuzz/fuzz_$t.c
     [ -f "$src" ] || { echo "fuzz: no target '$t' ($src)" >&2; exit 2; }
     # shellcheck disable=SC2086
-    $CLANG $CFLAGS -fsanitize=fuzzer "$src" $objs -lcrypto -lm -lpthread -o "$out/fuzz_$t" ||
+    extra=""
+    [ "$t" = dispatch ] && extra="$dobjs $DISPATCH_LIBS"
+    $CLANG $CFLAGS -fsanitize=fuzzer "$src" $objs $extra $LIBS -o "$out/fuzz_$t" ||
         { echo "fuzz: linking fuzz_$t failed" >&2; exit 2; }
 done
 
