@@ -3,7 +3,8 @@
  * checks (Origin, Host, version, key) over raw sockets, the protocol spoken in binary
  * WebSocket messages (HELLO, LIST, OPEN, RENDER, the token challenge), ping/pong and close, and
  * malformed or oversize frames closed with their close code before anything is read or
- * allocated; then the page itself in Debian's headless Chromium (driven by chromedriver): it
+ * allocated; with --tls-cert the same listener as https and wss (page, Origin, a frame
+ * byte-identical to the plaintext one, plaintext refused); then the page itself in Debian's headless Chromium (driven by chromedriver): it
  * answers the token with WebCrypto, opens a cloud, a key switches the pipeline, a mouse drag
  * brings frames, and a screenshot of the canvas matches `splat render` of the camera the page
  * reports. */
@@ -14,6 +15,7 @@
 #include <cmocka.h>
 
 #include <math.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -29,6 +31,7 @@
 #include "imgtest.h"
 #include "proto.h"
 #include "testutil.h"
+#include "tlscert.h"
 #include "webdriver.h"
 #include "wsclient.h"
 
@@ -49,6 +52,7 @@ typedef struct fx {
     int http_port;
     tu_wd wd;                    /* the browser, stopped by teardown whatever happened */
     char read_timeout[8];        /* --read-timeout for start (default 30) */
+    char cert[700], key[700];    /* --tls-cert/--tls-key for start when set */
 } fx;
 
 static int setup(void **state)
@@ -66,6 +70,7 @@ static int setup(void **state)
     if (tu_copy_file(src, dst) != 0) return -1;
     int n = snprintf(line, sizeof line, "%s\n", token);
     if (tu_write_file(f->tok, line, (size_t)n) != 0 || chmod(f->tok, 0600) != 0) return -1;
+    signal(SIGPIPE, SIG_IGN); /* a TLS close_notify to a peer that has gone */
     *state = f;
     return 0;
 }
@@ -88,24 +93,30 @@ static int teardown(void **state)
     return rc;
 }
 
-/* start: splatd with --http 127.0.0.1:0 (and the token when with_token), or on the ports of
- * the previous daemon when f has them; finds the HTTP port in its log ("http on
- * http://127.0.0.1:PORT/"). */
+/* start: splatd with --http 127.0.0.1:0 (and the token when with_token, TLS when f->cert is
+ * set), or on the ports of the previous daemon when f has them; finds the HTTP port in its log
+ * ("http on http://127.0.0.1:PORT/", https:// with TLS). */
 static void start(fx *f, int with_token)
 {
     char listen[64], http[64];
     snprintf(listen, sizeof listen, "127.0.0.1:%d", f->d.port > 0 ? f->d.port : 0);
     snprintf(http, sizeof http, "127.0.0.1:%d", f->http_port > 0 ? f->http_port : 0);
-    const char *args[] = {"--listen", listen, "--http", http, "--data", f->data,
-                          "--cache", f->cache, "--read-timeout", f->read_timeout[0] ?
-                          f->read_timeout : "30", with_token ? "--token-file" : NULL, f->tok, NULL};
+    const char *args[20] = {"--listen", listen, "--http", http, "--data", f->data,
+                            "--cache", f->cache, "--read-timeout", f->read_timeout[0] ?
+                            f->read_timeout : "30"};
+    int n = 10;
+    if (with_token) args[n++] = "--token-file", args[n++] = f->tok;
+    if (f->cert[0])
+        args[n++] = "--tls-cert", args[n++] = f->cert, args[n++] = "--tls-key", args[n++] = f->key;
+    args[n] = NULL;
     assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
     size_t len;
     char *log = (char *)tu_read_file(f->d.log, &len);
     assert_non_null(log);
-    const char *p = strstr(log, "http on http://127.0.0.1:");
-    if (!p) fail_msg("no 'http on' line in the log:\n%s", log);
-    f->http_port = atoi(p + strlen("http on http://127.0.0.1:"));
+    const char *line = f->cert[0] ? "http on https://127.0.0.1:" : "http on http://127.0.0.1:";
+    const char *p = strstr(log, line);
+    if (!p) fail_msg("no '%s' line in the log:\n%s", line, log);
+    f->http_port = atoi(p + strlen(line));
     assert_true(f->http_port > 0);
     free(log);
 }
@@ -211,6 +222,13 @@ static void test_start_rule(void **state)
                         "--cache", f->cache, "--token-file", shortf, NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, &st, a2), -1);
     assert_true(log_has(f, "is 8 bytes; serving HTTP on 0.0.0.0 (not loopback) needs at least 16"));
+    /* With a good token but no certificate: refused too (the page, the token's challenge and
+     * the frames would cross the network in the clear), as --listen is. */
+    const char *a4[] = {"--listen", "127.0.0.1:0", "--http", "0.0.0.0:0", "--data", f->data,
+                        "--cache", f->cache, "--token-file", f->tok, NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, &st, a4), -1);
+    assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 1);
+    assert_true(log_has(f, "refusing to serve HTTP on 0.0.0.0 without TLS"));
     /* A malformed address names the option. */
     const char *a3[] = {"--http", "nowhere", "--data", f->data, NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, &st, a3), -1);
@@ -410,6 +428,111 @@ static void test_websocket_session(void **state)
     fclose(st);
     printf("daemon peak RSS %ld MiB\n", kb >> 10);
     assert_true(kb > 0 && kb < 600 * 1024);
+}
+
+/* ---- https and wss ---- */
+
+/* bunny_frame: HELLO, OPEN bun, a 160x120 camera and RENDER over the open socket w; returns
+ * the FRAME payload's image bytes (malloc'd, *len) after checking its header fields. */
+static uint8_t *bunny_frame(tu_ws *w, size_t *len)
+{
+    proto_welcome wel;
+    hello(w, 1, NULL, &wel);
+    assert_int_equal(wel.authenticated, 1);
+    proto_buf b = {0};
+    proto_header h;
+    proto_enc_open(&b, 2, "bun");
+    ws_send_msg(w, &b);
+    do ws_next(w, &h); while (h.type == PROTO_MSG_PROGRESS);
+    assert_int_equal(h.type, PROTO_MSG_INFO);
+    proto_camera cam = {.eye = {0.3, 0.4, 0.2}, .target = {-0.017, 0.11, 0}, .up = {0, 0, 1},
+                        .fov_deg = 45, .width = 160, .height = 120};
+    proto_enc_camera(&b, 3, &cam);
+    ws_send_msg(w, &b);
+    proto_enc_empty(&b, PROTO_MSG_RENDER, 4);
+    ws_send_msg(w, &b);
+    ws_expect(w, PROTO_MSG_FRAME, &h, NULL, 0);
+    proto_frame fr;
+    proto_error e;
+    assert_int_equal(proto_parse_frame(w->msg + PROTO_HEADER_LEN, h.len, &fr, &e), 0);
+    assert_int_equal(h.seq, 4);
+    assert_int_equal(fr.camera_seq, 3);
+    assert_int_equal(fr.width, 160);
+    assert_int_equal(fr.height, 120);
+    assert_true(fr.data_len > 100 && fr.data[0] == 0xff && fr.data[1] == 0xd8);
+    uint8_t *out = malloc(fr.data_len);
+    assert_non_null(out);
+    memcpy(out, fr.data, fr.data_len);
+    *len = fr.data_len;
+    return out;
+}
+
+static void test_https_wss(void **state)
+{
+    fx *f = *state;
+    char resp[4096], origin[64], want[128], other[700], okey[700];
+    tu_ws w;
+    /* The reference: the same frame over plain ws from a daemon without TLS. */
+    start(f, 0);
+    assert_int_equal(tu_ws_open(&w, f->http_port, NULL, NULL, resp, sizeof resp), 0);
+    size_t plain_len, tls_len;
+    uint8_t *plain = bunny_frame(&w, &plain_len);
+    tu_ws_close(&w);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+    f->d.port = f->http_port = 0;
+
+    assert_int_equal(tu_make_cert(f->root, "server", "splatd-test", "127.0.0.1", "localhost",
+                                  f->cert, f->key, sizeof f->cert), 0);
+    assert_int_equal(tu_make_cert(f->root, "other", "someone-else", "127.0.0.1", "localhost",
+                                  other, okey, sizeof other), 0);
+    start(f, 0);
+    int p = f->http_port;
+    /* The page over https, verified against the test's certificate. */
+    assert_true(tu_https_request(p, f->cert, "GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n",
+                                 resp, sizeof resp) > 0);
+    if (strncmp(resp, "HTTP/1.1 200 ", 13) != 0) fail_msg("GET / over https: %s", resp);
+    assert_non_null(strstr(resp, "Content-Type: text/html"));
+    assert_non_null(strstr(resp, "<canvas id=\"canvas\""));
+    /* A client trusting another certificate refuses the server's. */
+    assert_int_equal(tu_https_request(p, other, "GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n",
+                                      resp, sizeof resp), -1);
+    /* Plain http on the https port: a plaintext 400 naming the https address, nothing else. */
+    assert_true(tu_http_request(p, "GET / HTTP/1.1\r\nHost: 127.0.0.1:7\r\n\r\n", resp,
+                                sizeof resp) > 0);
+    if (strncmp(resp, "HTTP/1.1 400 ", 13) != 0) fail_msg("plain GET on https: %s", resp);
+    assert_non_null(strstr(resp, "this server speaks HTTPS only: open https://127.0.0.1:7/"));
+    assert_null(strstr(resp, "<canvas"));
+    /* ws:// (no TLS) cannot open the socket either. */
+    assert_int_equal(tu_ws_open(&w, p, NULL, NULL, resp, sizeof resp), -1);
+    assert_int_equal(strncmp(resp, "HTTP/1.1 400 ", 13), 0);
+    /* The page's origin is https://: the http:// one is another origin now. */
+    snprintf(origin, sizeof origin, "http://127.0.0.1:%d", p);
+    assert_int_equal(tu_ws_open_tls(&w, p, f->cert, NULL, origin, resp, sizeof resp), -1);
+    assert_int_equal(strncmp(resp, "HTTP/1.1 403 ", 13), 0);
+    snprintf(want, sizeof want, "is not this page's origin 'https://127.0.0.1:%d'", p);
+    assert_true(log_has(f, want));
+    /* wss from the page's own origin: the protocol round trip, the same frame bytes as over
+     * plain ws (TLS changes the transport only), a ping and the closing handshake. */
+    snprintf(origin, sizeof origin, "https://127.0.0.1:%d", p);
+    assert_int_equal(tu_ws_open_tls(&w, p, f->cert, NULL, origin, resp, sizeof resp), 0);
+    uint8_t *tls = bunny_frame(&w, &tls_len);
+    assert_int_equal(tls_len, plain_len);
+    assert_memory_equal(tls, plain, plain_len);
+    free(tls);
+    free(plain);
+    assert_int_equal(tu_ws_send(&w, WS_OP_PING, "tls", 3), 0);
+    assert_int_equal(tu_ws_recv(&w, 5000), WS_EV_PONG);
+    assert_memory_equal(w.ev.payload, "tls", 3);
+    uint8_t cf[2] = {0x03, 0xe8};
+    assert_int_equal(tu_ws_send(&w, WS_OP_CLOSE, cf, 2), 0);
+    expect_close(&w, 1000);
+    tu_ws_close(&w);
+    /* The script served over https picks wss:// for a page loaded over https. */
+    static char js[1 << 18];
+    assert_true(tu_https_request(p, f->cert, "GET /viewer.js HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n",
+                                 js, sizeof js) > 0);
+    assert_int_equal(strncmp(js, "HTTP/1.1 200 ", 13), 0);
+    assert_non_null(strstr(js, "location.protocol === 'https:' ? 'wss' : 'ws'"));
 }
 
 /* mac: HMAC-SHA256(token, challenge) with libcrypto (not the daemon's code). */
@@ -771,6 +894,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_websocket_session, setup, teardown),
         cmocka_unit_test_setup_teardown(test_token_over_websocket, setup, teardown),
         cmocka_unit_test_setup_teardown(test_trickled_frame, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_https_wss, setup, teardown),
         cmocka_unit_test_setup_teardown(test_chromium_page, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -196,7 +196,9 @@ function send(type, payload, pend) {
 
 function connect() {
   S.closedByUser = false;
-  const ws = new WebSocket(`ws://${location.host}/ws`);
+  // wss when the page came over https (splatd with --tls-cert): a page on https may not open
+  // a plaintext socket, and the daemon's TLS listener takes TLS only.
+  const ws = new WebSocket(`${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws`);
   ws.binaryType = 'arraybuffer';
   S.ws = ws;
   ws.onopen = () => { S.backoff = 250; hello(null); };

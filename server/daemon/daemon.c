@@ -324,11 +324,12 @@ static void on_handshake_timeout(ev_loop *l, ev_timer *t, void *data)
 }
 
 /* refuse: a best-effort ERROR on a connection the daemon will not serve (an HTTP 503 with the
- * text on the browser listener), then close. Over TLS the connection just closes: the client
- * is in its handshake, and a plaintext answer would read as a broken one. */
+ * text on the browser listener), then close. Over TLS (both listeners have it when the daemon
+ * has a certificate) the connection just closes: the client is in its handshake, and a
+ * plaintext answer would read as a broken one. */
 static void refuse(const srv *sv, int fd, int http, int code, const char *text)
 {
-    if (!http && sv->tls) {
+    if (sv->tls) {
         close(fd);
         return;
     }
@@ -537,10 +538,16 @@ static int adopt(srv *sv, int c, const char *addr, int http)
         refuse(sv, c, http, PROTO_E_INTERNAL, "the server cannot take a connection now");
         return SD_ENOMEM;
     }
-    /* The session's transport: HTTP + WebSocket on the browser listener, TLS on a TLS one. */
-    const net_transport *tr = http ? &ws_transport : sv->tls ? &tls_transport : NULL;
-    void *tctx = http ? (void *)ws_conn_new(&sv->http_cfg, &net_tcp, NULL)
-               : sv->tls ? tls_conn_new(sv->tls, c) : NULL;
+    /* The session's transport: TLS when the daemon has a certificate, under HTTP + WebSocket on
+     * the browser listener (https and wss). */
+    void *tls = sv->tls ? tls_conn_new(sv->tls, c) : NULL, *tctx = tls;
+    const net_transport *tr = sv->tls ? &tls_transport : NULL;
+    if (http) {
+        tr = &ws_transport;
+        tctx = sv->tls && !tls ? NULL
+             : ws_conn_new(&sv->http_cfg, tls ? &tls_transport : &net_tcp, tls);
+        if (!tctx && tls) tls_transport.close(tls, 0);
+    }
     if (tr && !tctx) {
         srv_log(sv, NULL, "%s refused: out of memory for its %s state", addr, tr->name);
         sess_free(s, NULL, NULL);
@@ -696,6 +703,7 @@ static int start_http(srv *sv)
         .files = files, .nfiles = n, .ws_path = "/ws",
         /* Without a token, only loopback names in Host: a DNS-rebound name is refused. */
         .loopback_hosts_only = sv->token.len == 0,
+        .https = sv->tls != NULL,
         /* One WebSocket message carries one protocol message: header + the largest request. */
         .max_message = PROTO_HEADER_LEN + PROTO_MAX_REQUEST,
     };
@@ -788,13 +796,16 @@ static int start(srv *sv)
                 sv->o.tls_cert ? "--tls-cert" : "--tls-key");
         return 1;
     }
-    if (!sv->o.tls_cert && !net_host_is_loopback(sv->o.host)) {
-        /* Without TLS, anyone on the path reads the frames and cloud names and can take over
-         * an authenticated connection: beyond loopback it is not an option. */
+    /* Without TLS, anyone on the path reads the frames and cloud names and can take over
+     * an authenticated connection: beyond loopback it is not an option, on either listener. */
+    for (int l = 0; l < 2 && !sv->o.tls_cert; l++) {
+        const char *h = l ? sv->o.http_host : sv->o.host;
+        if (!h[0] || net_host_is_loopback(h)) continue;
         fprintf(stderr,
-                "splatd: refusing to listen on %s without TLS: beyond loopback the frames, cloud "
+                "splatd: refusing to %s on %s without TLS: beyond loopback the frames, cloud "
                 "names and the session itself would travel in the clear. Give --tls-cert F and "
-                "--tls-key F (and --token-file F), or listen on 127.0.0.1.\n", sv->o.host);
+                "--tls-key F (and --token-file F), or %s on 127.0.0.1.\n",
+                l ? "serve HTTP" : "listen", h, l ? "serve HTTP" : "listen");
         return 1;
     }
     struct stat kst;
@@ -857,8 +868,8 @@ static int start(srv *sv)
     fflush(stderr);
     if (sv->http_lfd >= 0) {
         v6 = strchr(sv->o.http_host, ':') != NULL;
-        fprintf(stderr, "http on http://%s%s%s:%d/\n", v6 ? "[" : "", sv->o.http_host,
-                v6 ? "]" : "", sv->http_bound_port);
+        fprintf(stderr, "http on %s://%s%s%s:%d/\n", sv->tls ? "https" : "http",
+                v6 ? "[" : "", sv->o.http_host, v6 ? "]" : "", sv->http_bound_port);
         fflush(stderr);
     }
     if (sv->o.port_file &&

@@ -27,6 +27,7 @@ struct ws_conn {
     void *lo_ctx;
     int fd;
     int state;
+    int plain_on_tls;          /* a plaintext HTTP request came to a TLS listener */
     /* HTTP */
     char head[HTTP_HEAD_MAX];
     size_t head_len, head_used;
@@ -135,6 +136,15 @@ static void host_part(const char *hv, char *out, size_t len)
 /* handle: answers a complete request head. */
 static void handle(ws_conn *c, const http_req *r)
 {
+    if (c->plain_on_tls) {
+        /* Answered in plaintext (the request was), with the address that works; nothing is
+         * served over it. */
+        char why[HTTP_FIELD_MAX + 96];
+        snprintf(why, sizeof why, "this server speaks HTTPS only: open https://%s/",
+                 r->has_host ? r->host : "HOST:PORT");
+        respond_error(c, 400, why, NULL);
+        return;
+    }
     if (strcmp(r->method, "GET") != 0) {
         respond_error(c, 405, "only GET is served", "Allow: GET\r\n");
         return;
@@ -177,7 +187,7 @@ static void handle(ws_conn *c, const http_req *r)
     /* The WebSocket opening handshake (RFC 6455 4.2.1). */
     if (r->has_origin) {
         char own[HTTP_FIELD_MAX + 8];
-        snprintf(own, sizeof own, "http://%s", r->host);
+        snprintf(own, sizeof own, "%s://%s", c->cfg->https ? "https" : "http", r->host);
         if (strcasecmp(own, r->origin) != 0) {
             char why[2 * HTTP_FIELD_MAX + 64];
             snprintf(why, sizeof why, "Origin '%s' is not this page's origin '%s'", r->origin, own);
@@ -372,6 +382,15 @@ static ssize_t wsc_read(void *ctx, int fd, void *buf, size_t len, int *want, cha
         case WSC_HTTP: {
             ssize_t r = c->lo->read(c->lo_ctx, fd, c->head + c->head_len,
                                     sizeof c->head - c->head_len, want, err, errlen);
+            if (r == NET_NOT_TLS) {
+                /* A browser that typed http:// on the https listener: its request is read in
+                 * plaintext and answered with a 400 naming the https address. */
+                c->lo->close(c->lo_ctx, 0);
+                c->lo = &net_tcp;
+                c->lo_ctx = NULL;
+                c->plain_on_tls = 1;
+                continue;
+            }
             if (r == 0) snprintf(err, errlen, "closed by the client %s",
                                  c->head_len ? "in the middle of an HTTP request"
                                              : "before sending an HTTP request");

@@ -6,12 +6,14 @@
  * writes goes out as one unfragmented binary message (its length taken from its header). Pings are answered, a close is answered and
  * ends the connection, malformed frames end it with a close code (ws.c does the framing).
  *
- * It reads and writes through a lower transport (net_tcp today), so TLS can be stacked under
- * it. The session is the same object as for a TCP client: its deadlines, caps and
+ * It reads and writes through a lower transport: net_tcp, or TLS (tls.c) when the daemon has a
+ * certificate (https and wss; a plaintext request to such a listener, NET_NOT_TLS from below,
+ * is read in plaintext and answered with a 400 naming the https:// address). The session is the same object as for a TCP client: its deadlines, caps and
  * authentication apply from the first byte (an HTTP request is an unauthenticated connection).
  *
  * Checks before the upgrade: GET only, no body; Host present; Origin, when the request has one
- * (a browser always sends it on a WebSocket), equal to the page's own origin "http://" + Host,
+ * (a browser always sends it on a WebSocket), equal to the page's own origin "http://" + Host
+ * ("https://" over TLS),
  * so another site's script cannot open the socket; and, with loopback_hosts_only (no token),
  * a Host naming a loopback address, so a DNS-rebound name cannot reach the daemon either. */
 #pragma once
@@ -32,6 +34,7 @@ typedef struct ws_conn_cfg {
     int nfiles;
     const char *ws_path;       /* the upgrade path, e.g. "/ws" */
     int loopback_hosts_only;   /* 1: the Host header must name a loopback address */
+    int https;                 /* 1: the lower layer is TLS: the page's origin is https:// */
     uint64_t max_message;      /* payload bytes one WebSocket message may carry */
 } ws_conn_cfg;
 
