@@ -14,7 +14,10 @@
 #include <setjmp.h>
 #include <cmocka.h>
 
+#include <arpa/inet.h>
+#include <ifaddrs.h>
 #include <math.h>
+#include <net/if.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -714,6 +717,79 @@ static double cam_distance(const char *cam)
                 (e[2] - t[2]) * (e[2] - t[2]));
 }
 
+/* page_token: waits for the page's token box, types the token and submits it. */
+static void page_token(tu_wd *wdp)
+{
+    char js[200], tid[160], v[64], path[400];
+    for (int i = 0; i < 300; i++) {
+        tu_wd_eval(wdp, "return document.getElementById('token-box').hidden ? 'no' : 'yes'", v,
+                   sizeof v);
+        if (!strcmp(v, "yes")) break;
+        usleep(20000);
+    }
+    assert_string_equal(v, "yes");
+    assert_int_equal(tu_wd_element(wdp, "#token", tid, sizeof tid), 0);
+    snprintf(js, sizeof js, "{\"text\":\"%s\"}", token);
+    snprintf(path, sizeof path, "element/%s/value", tid);
+    assert_int_equal(tu_wd_post(wdp, path, js), 0);
+    assert_int_equal(tu_wd_element(wdp, "#token-go", tid, sizeof tid), 0);
+    snprintf(path, sizeof path, "element/%s/click", tid);
+    assert_int_equal(tu_wd_post(wdp, path, "{}"), 0);
+}
+
+/* The page over https from a non-loopback address (where a browser offers WebCrypto only to
+ * secure contexts): the daemon with a token and the test's self-signed certificate for that
+ * address, Chromium accepting it (acceptInsecureCerts); the page answers the challenge over wss
+ * and shows frames. */
+static void test_chromium_https(void **state)
+{
+    fx *f = *state;
+    char why[300], ip[64] = "";
+    if (!tu_wd_available(why, sizeof why)) {
+        TU_SKIP("headless Chromium is absent: %s", why);
+        return;
+    }
+    struct ifaddrs *ifs, *i;
+    assert_int_equal(getifaddrs(&ifs), 0);
+    for (i = ifs; i && !ip[0]; i = i->ifa_next)
+        if (i->ifa_addr && i->ifa_addr->sa_family == AF_INET && !(i->ifa_flags & IFF_LOOPBACK))
+            inet_ntop(AF_INET, &((struct sockaddr_in *)i->ifa_addr)->sin_addr, ip, sizeof ip);
+    freeifaddrs(ifs);
+    if (!ip[0]) {
+        TU_SKIP("this machine has no non-loopback IPv4 address to serve https on");
+        return;
+    }
+    assert_int_equal(tu_make_cert(f->root, "server", "splatd-test", ip, "localhost", f->cert,
+                                  f->key, sizeof f->cert), 0);
+    char http[96], line[128];
+    snprintf(http, sizeof http, "%s:0", ip);
+    const char *a[] = {"--listen", "127.0.0.1:0", "--http", http, "--data", f->data, "--cache",
+                       f->cache, "--token-file", f->tok, "--tls-cert", f->cert, "--tls-key",
+                       f->key, NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, a), 0);
+    size_t len;
+    char *log = (char *)tu_read_file(f->d.log, &len);
+    assert_non_null(log);
+    snprintf(line, sizeof line, "http on https://%s:", ip);
+    const char *p = strstr(log, line);
+    if (!p) fail_msg("no '%s' line in the log:\n%s", line, log);
+    int port = atoi(p + strlen(line));
+    free(log);
+    tu_wd *wdp = &f->wd;
+    if (tu_wd_start_insecure(wdp, f->root, 400, 300, why, sizeof why) != 0) fail_msg("%s", why);
+    char url[256], v[256];
+    snprintf(url, sizeof url, "https://%s:%d/?cloud=bun&size=160x120", ip, port);
+    assert_int_equal(tu_wd_go(wdp, url), 0);
+    tu_wd_eval(wdp, "return location.protocol + ' ' + window.isSecureContext + ' ' + "
+                    "(typeof crypto.subtle)", v, sizeof v);
+    assert_string_equal(v, "https: true object");
+    page_token(wdp);
+    wait_page(wdp, "nframes", at_least, 1, "a frame over wss");
+    wait_page(wdp, "idle", is_one, 0, "rest after the first frame");
+    assert_true(log_has(f, "hello from 'splat-web 0.1', protocol 1, authenticated"));
+    tu_wd_stop(wdp);
+}
+
 static void test_chromium_page(void **state)
 {
     fx *f = *state;
@@ -730,22 +806,8 @@ static void test_chromium_page(void **state)
     snprintf(url, sizeof url, "http://127.0.0.1:%d/?cloud=bun&size=320x240", f->http_port);
     assert_int_equal(tu_wd_go(wdp, url), 0);
     /* The server has a token: the page asks for it and answers the challenge with WebCrypto. */
-    char js[200];
-    for (int i = 0; i < 300; i++) {
-        tu_wd_eval(wdp, "return document.getElementById('token-box').hidden ? 'no' : 'yes'", v,
-                   sizeof v);
-        if (!strcmp(v, "yes")) break;
-        usleep(20000);
-    }
-    assert_string_equal(v, "yes");
-    assert_int_equal(tu_wd_element(wdp, "#token", tid, sizeof tid), 0);
-    snprintf(js, sizeof js, "{\"text\":\"%s\"}", token);
     char path[400];
-    snprintf(path, sizeof path, "element/%s/value", tid);
-    assert_int_equal(tu_wd_post(wdp, path, js), 0);
-    assert_int_equal(tu_wd_element(wdp, "#token-go", tid, sizeof tid), 0);
-    snprintf(path, sizeof path, "element/%s/click", tid);
-    assert_int_equal(tu_wd_post(wdp, path, "{}"), 0);
+    page_token(wdp);
     wait_page(wdp, "nframes", at_least, 1, "a first frame");
     wait_page(wdp, "idle", is_one, 0, "rest after the first frame");
 
@@ -896,6 +958,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_trickled_frame, setup, teardown),
         cmocka_unit_test_setup_teardown(test_https_wss, setup, teardown),
         cmocka_unit_test_setup_teardown(test_chromium_page, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_chromium_https, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -127,7 +127,8 @@ static double now_s(void)
     return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
 }
 
-int tu_wd_start(tu_wd *wd, const char *dir, int width, int height, char *why, size_t len)
+static int wd_start(tu_wd *wd, const char *dir, int width, int height, int insecure, char *why,
+                    size_t len)
 {
     memset(wd, 0, sizeof *wd);
     /* A free port for chromedriver: bound once by us, then handed over. */
@@ -179,10 +180,10 @@ int tu_wd_start(tu_wd *wd, const char *dir, int width, int height, char *why, si
     }
     char caps[1024];
     snprintf(caps, sizeof caps,
-             "{\"capabilities\":{\"alwaysMatch\":{\"goog:chromeOptions\":{\"binary\":\"%s\","
+             "{\"capabilities\":{\"alwaysMatch\":{%s\"goog:chromeOptions\":{\"binary\":\"%s\","
              "\"args\":[\"--headless\",\"--no-sandbox\",\"--disable-gpu\",\"--disable-extensions\","
              "\"--no-first-run\",\"--window-size=%d,%d\",\"--force-device-scale-factor=1\"]}}}}",
-             browser_bin(), width, height);
+             insecure ? "\"acceptInsecureCerts\":true," : "", browser_bin(), width, height);
     int st = request(wd, "POST", "/session", caps, &body, 30000);
     if (st != 200 || json_string(body, "sessionId", wd->session, sizeof wd->session) != 0) {
         snprintf(why, len, "no WebDriver session (HTTP %d): %.300s", st, body ? body : "");
@@ -289,4 +290,15 @@ void tu_wd_stop(tu_wd *wd)
         }
         wd->pid = 0;
     }
+}
+
+int tu_wd_start(tu_wd *wd, const char *dir, int width, int height, char *why, size_t len)
+{
+    return wd_start(wd, dir, width, height, 0, why, len);
+}
+
+int tu_wd_start_insecure(tu_wd *wd, const char *dir, int width, int height, char *why,
+                         size_t len)
+{
+    return wd_start(wd, dir, width, height, 1, why, len);
 }

@@ -19,6 +19,10 @@ int tu_wd_available(char *why, size_t len);
 /* tu_wd_start: starts chromedriver (log in dir) and a headless Chromium session whose window
  * is width x height CSS pixels at device scale 1. Returns 0 or -1 with why filled. */
 int tu_wd_start(tu_wd *wd, const char *dir, int width, int height, char *why, size_t len);
+/* tu_wd_start_insecure: tu_wd_start with WebDriver's acceptInsecureCerts, so an https page whose
+ * certificate the browser does not trust (a test's self-signed one) loads. */
+int tu_wd_start_insecure(tu_wd *wd, const char *dir, int width, int height, char *why,
+                         size_t len);
 
 /* tu_wd_go: navigates to url and waits for its load. 0 or -1. */
 int tu_wd_go(tu_wd *wd, const char *url);
