@@ -85,7 +85,9 @@ static int handshake_error(spc_client *c, int r, const char *name, const char *c
                          ca_file ? ca_file : "");
     if (e == SSL_ERROR_SYSCALL || e == SSL_ERROR_ZERO_RETURN)
         return spc__fail(c, SPC_E_IO, "the server closed the connection during the TLS "
-                         "handshake%s%s", errno ? ": " : "", errno ? strerror(errno) : "");
+                         "handshake%s%s (a TLS server that is full, or has too many connections "
+                         "from your address, closes new ones at once: retry later)",
+                         errno ? ": " : "", errno ? strerror(errno) : "");
     return spc__fail(c, SPC_E_IO, "TLS handshake with the server failed: %s", why);
 }
 

@@ -252,12 +252,14 @@ static void test_tls_mismatch(void **state)
 }
 
 /* A client that starts a TLS handshake and stalls is closed at the handshake deadline, like
- * one that never sends HELLO. */
+ * one that never sends HELLO. A connection over --max-per-addr is closed at once (a BUSY answer
+ * would need the handshake first), and the client says what that may mean. */
 static void test_tls_handshake_deadline(void **state)
 {
     fx *f = *state;
     const char *a[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--tls-cert", f->cert,
-                       "--tls-key", f->key, "--handshake-timeout", "1", NULL};
+                       "--tls-key", f->key, "--handshake-timeout", "1", "--max-per-addr", "1",
+                       NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, a), 0);
     int fd = socket(AF_INET, SOCK_STREAM, 0);
     struct sockaddr_in sa = {.sin_family = AF_INET, .sin_port = htons((uint16_t)f->d.port)};
@@ -278,6 +280,16 @@ static void test_tls_handshake_deadline(void **state)
     assert_int_equal(r, 0); /* closed by the daemon, not our receive timeout */
     assert_true(secs > 0.8 && secs < 5);
     assert_true(log_wait(&f->d, "closed: no HELLO within 1 s"));
+    char err[1024];
+    spc_client *c1 = NULL, *c2 = NULL;
+    spc_options o = {.port = f->d.port, .tls_ca = f->cert};
+    if (spc_connect(&o, &c1, err, sizeof err) != 0) fail_msg("first client: %s", err);
+    assert_int_equal(spc_connect(&o, &c2, err, sizeof err), SPC_E_IO);
+    if (!strstr(err, "closed the connection during the TLS handshake") ||
+        !strstr(err, "too many connections from your address"))
+        fail_msg("second client: %s", err);
+    assert_true(log_wait(&f->d, "(--max-per-addr)"));
+    spc_close(c1);
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
