@@ -470,6 +470,40 @@ static uint8_t *bunny_frame(tu_ws *w, size_t *len)
     return out;
 }
 
+/* raw_frame: after bunny_frame, PARAMS format=raw and a 1024x768 RENDER (3 MiB: many TLS
+ * records and partial writes under one WebSocket frame); returns the pixels (malloc'd, *len). */
+static uint8_t *raw_frame(tu_ws *w, size_t *len)
+{
+    sp_params sp;
+    sp_params_defaults(&sp);
+    char err[128];
+    assert_int_equal(sp_param_set_kv(&sp, "format=raw", err, sizeof err), 0);
+    proto_param_rec rec;
+    proto_param_rec_from(&sp, sp_param_find("format"), &rec);
+    proto_buf b = {0};
+    proto_header h;
+    assert_int_equal(proto_enc_params(&b, 5, &rec, 1), 0);
+    ws_send_msg(w, &b);
+    ws_expect(w, PROTO_MSG_OK, &h, NULL, 0);
+    proto_camera cam = {.eye = {0.3, 0.4, 0.2}, .target = {-0.017, 0.11, 0}, .up = {0, 0, 1},
+                        .fov_deg = 45, .width = 1024, .height = 768};
+    proto_enc_camera(&b, 6, &cam);
+    ws_send_msg(w, &b);
+    proto_enc_empty(&b, PROTO_MSG_RENDER, 7);
+    ws_send_msg(w, &b);
+    ws_expect(w, PROTO_MSG_FRAME, &h, NULL, 0);
+    proto_frame fr;
+    proto_error e;
+    assert_int_equal(proto_parse_frame(w->msg + PROTO_HEADER_LEN, h.len, &fr, &e), 0);
+    assert_int_equal(fr.format, SP_FMT_RAW);
+    assert_int_equal(fr.data_len, 1024 * 768 * 4);
+    uint8_t *out = malloc(fr.data_len);
+    assert_non_null(out);
+    memcpy(out, fr.data, fr.data_len);
+    *len = fr.data_len;
+    return out;
+}
+
 static void test_https_wss(void **state)
 {
     fx *f = *state;
@@ -478,8 +512,8 @@ static void test_https_wss(void **state)
     /* The reference: the same frame over plain ws from a daemon without TLS. */
     start(f, 0);
     assert_int_equal(tu_ws_open(&w, f->http_port, NULL, NULL, resp, sizeof resp), 0);
-    size_t plain_len, tls_len;
-    uint8_t *plain = bunny_frame(&w, &plain_len);
+    size_t plain_len, tls_len, praw_len, traw_len;
+    uint8_t *plain = bunny_frame(&w, &plain_len), *praw = raw_frame(&w, &praw_len);
     tu_ws_close(&w);
     assert_int_equal(tu_daemon_stop(&f->d), 0);
     f->d.port = f->http_port = 0;
@@ -518,11 +552,20 @@ static void test_https_wss(void **state)
      * plain ws (TLS changes the transport only), a ping and the closing handshake. */
     snprintf(origin, sizeof origin, "https://127.0.0.1:%d", p);
     assert_int_equal(tu_ws_open_tls(&w, p, f->cert, NULL, origin, resp, sizeof resp), 0);
-    uint8_t *tls = bunny_frame(&w, &tls_len);
+    uint8_t *tls = bunny_frame(&w, &tls_len), *traw = raw_frame(&w, &traw_len);
     assert_int_equal(tls_len, plain_len);
     assert_memory_equal(tls, plain, plain_len);
+    assert_int_equal(traw_len, praw_len);
+    assert_memory_equal(traw, praw, praw_len);
+    size_t lit = 0;
+    for (size_t i = 0; i < traw_len; i += 4) lit += traw[i] | traw[i + 1] | traw[i + 2] ? 1 : 0;
+    printf("wss: a 1024x768 raw frame (%zu bytes, %zu pixels lit) equal to the ws one\n",
+           traw_len, lit);
+    assert_true(lit > 1000); /* the bunny is in the picture, not an empty frame twice */
     free(tls);
     free(plain);
+    free(traw);
+    free(praw);
     assert_int_equal(tu_ws_send(&w, WS_OP_PING, "tls", 3), 0);
     assert_int_equal(tu_ws_recv(&w, 5000), WS_EV_PONG);
     assert_memory_equal(w.ev.payload, "tls", 3);
