@@ -44,6 +44,7 @@ LIBS="-lflann -lturbojpeg -llz4 -lxxhash -llzf -lcrypto -lpthread -lm"
 DISPATCH_SRCS="$(ls server/*/*.c | grep -v -e '^server/cmd/main.c$' -e '^server/io/' -e '^server/prep/' \
                  -e '^server/util/' -e '^server/mpi/' -e '^server/net/ws.c$' -e '^server/net/http.c$') \
                build/gen/shaders_gen.c build/gen/page_gen.c tests/common/fuzz_dispatch.c"
+DISPATCH_SRCS=$(echo $DISPATCH_SRCS) # one line, single spaces: the case below matches " $s "
 DISPATCH_LIBS="$(pkg-config --libs egl opengl osmesa libpng libssl libcrypto) -lOpenEXRCore"
 case " $targets " in
     *" dispatch "*)
