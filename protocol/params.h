@@ -34,8 +34,11 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(LAMBDA,       "lambda",       SP_T_FLOAT, lambda,       0,    1,        "0.5",    NULL)     \
     X(T,            "t",            SP_T_FLOAT, t,            0,    1,        "0.5",    NULL)     \
     X(L_M,          "l_m",          SP_T_FLOAT, l_m,          0,    1,        "0",      NULL)     \
-    X(FIELD,        "field",        SP_T_ENUM,  field,        0,    0,        "uncertainty", "uncertainty|height|intensity") \
-    X(ORDER,        "order",        SP_T_ENUM,  order,        0,    0,        "axis",   "axis|tile")
+    X(FIELD,        "field",        SP_T_ENUM,  field,        0,    0,        "uncertainty", "uncertainty|height|intensity|scalar|quality|confidence|class|axis-distance") \
+    X(ORDER,        "order",        SP_T_ENUM,  order,        0,    0,        "axis",   "axis|tile") \
+    X(CLASSES,      "classes",      SP_T_INT,   classes,      0,    4294967295, "0",    NULL)     \
+    X(AXIS_A,       "axis_a",       SP_T_VEC3,  axis_a,       -1e9, 1e9,      "0,0,0",  NULL)     \
+    X(AXIS_B,       "axis_b",       SP_T_VEC3,  axis_b,       -1e9, 1e9,      "0,0,1",  NULL)
 
 enum {
 #define SP_ID_(id, name, type, field, lo, hi, def, vals) SP_##id,
@@ -61,11 +64,21 @@ enum { SP_SHADING_LAMBERT = 0, SP_SHADING_EDL };
 /* model: the Soft Transparency density model; only the Express-Model (eq. 19) is implemented,
  * so the Base- and Concentric-Models are refused as unknown enum values. */
 enum { SP_MODEL_EXPRESS = 0 };
-/* field: the scalar F of the solid/soft split, each in [0, 1]: uncertainty = prep's eq. 21
- * (already normalised by the cloud's 99th percentile and clamped); height = (z - zmin) / (zmax -
- * zmin) over the cloud's local bounds; intensity = the file's intensity normalised by its range
- * at upload (render.c). */
-enum { SP_FIELD_UNCERTAINTY = 0, SP_FIELD_HEIGHT, SP_FIELD_INTENSITY };
+/* field: the scalar F of the solid/soft split, each in [0, 1] (soft_field.c computes them):
+ *   uncertainty   prep's eq. 21, normalised by the cloud's 99th percentile and clamped;
+ *   height        (z - zmin) / (zmax - zmin) over the cloud's bounds;
+ *   intensity     (I - Imin) / (Imax - Imin) over the cloud (render.c, at upload);
+ *   scalar        the file's scalar property (PLY: quality, else confidence, else the first
+ *                 scalar_*), (s - smin) / (smax - smin) over the cloud;
+ *   quality, confidence  that property when it has this name, 1 - the normalised value (low
+ *                 quality or confidence is soft); refused naming the property when not;
+ *   class         1 for LAS classes in the bit mask `classes` (bit c: class c, 0-31), else 0;
+ *   axis-distance the distance to the line through axis_a and axis_b divided by the largest
+ *                 such distance of any point of the cloud. */
+enum {
+    SP_FIELD_UNCERTAINTY = 0, SP_FIELD_HEIGHT, SP_FIELD_INTENSITY, SP_FIELD_SCALAR,
+    SP_FIELD_QUALITY, SP_FIELD_CONFIDENCE, SP_FIELD_CLASS, SP_FIELD_AXIS
+};
 /* order: both composite the soft discs back to front in the order of the axis-sorted index
  * arrays (pipe_soft.c); axis = as GL point sprites blended in primitive order, tile = a compute
  * compositor that bins them into 16x16 pixel tiles keeping that order and blends per pixel. */
@@ -95,6 +108,9 @@ typedef struct sp_params {
     float l_m;              /* soft: transparency modulation range (eq. 22); <= t: off */
     int32_t field;          /* soft, olt: SP_FIELD_*, the source of F */
     int32_t order;          /* soft: SP_ORDER_*, how the soft discs are composited */
+    int64_t classes;        /* soft, olt with field=class: bit c makes LAS class c soft */
+    float axis_a[3];        /* soft, olt with field=axis-distance: two points of the axis, */
+    float axis_b[3];        /*   file coordinates minus the cloud's bounding-box centre */
 } sp_params;
 
 typedef struct sp_param_info {

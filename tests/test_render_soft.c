@@ -36,19 +36,13 @@ static rnd_ctx *g_ctx;
 static int setup(void **state)
 {
     (void)state;
-    rnd_desc d = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS")};
-    sd_err err = {0};
-    g_ctx = rnd_create(&d, &err);
-    if (!g_ctx) fprintf(stderr, "rnd_create: %s\n", err.msg);
-    return g_ctx ? 0 : -1;
+    return tu_egl_setup(&g_ctx);
 }
 
 static int teardown(void **state)
 {
     (void)state;
-    rnd_destroy(g_ctx);
-    g_ctx = NULL;
-    return 0;
+    return tu_egl_teardown(&g_ctx);
 }
 
 /* A camera at local (0, 0, ez) looking at the local origin, up +y, fov 40, explicit clip

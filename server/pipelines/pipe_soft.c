@@ -69,6 +69,7 @@
 
 #include "pipe.h"
 #include "shaders.h"
+#include "soft_field.h"
 #include "splat_passes.h"
 
 /* Uniform slots of the sprite program (soft.vert/.frag), looked up by name. */
@@ -109,8 +110,6 @@ typedef struct soft_state {
 /* Per buffer set of a cloud: what the split needs on the CPU and the soft index arrays. */
 typedef struct soft_set {
     uint32_t n;
-    float *z;                  /* local z per point (field=height) */
-    float *f_unc, *f_int;      /* F per point: uncertainty, intensity */
     uint32_t *sorted[3];       /* point indices sorted along x, y, z */
     uint32_t *runs;            /* solid runs: (first, count) pairs, in point order */
     uint32_t nruns;
@@ -122,8 +121,8 @@ typedef struct soft_set {
 typedef struct soft_cloud {
     uint32_t nsets;
     soft_set *sets;
-    int have_split;            /* the split below has been made */
-    int field;
+    soft_fields fields;        /* F per point (soft_field.h) */
+    int have_split;            /* the split below has been made for fields' current F */
     float t;
 } soft_cloud;
 
@@ -219,11 +218,12 @@ static void soft_detach(rnd_kit *k, void *state, void *cloud_data)
     if (!sc) return;
     for (uint32_t i = 0; i < sc->nsets; i++) {
         soft_set *ss = &sc->sets[i];
-        free(ss->z), free(ss->f_unc), free(ss->f_int), free(ss->runs);
+        free(ss->runs);
         for (int a = 0; a < 3; a++) free(ss->sorted[a]);
         if (ss->idx_buf) k->gl->DeleteBuffers(1, &ss->idx_buf);
     }
     free(sc->sets);
+    soft_fields_free(k->gl, &sc->fields);
     free(sc);
 }
 
@@ -254,17 +254,6 @@ static void sort_axis(const uint32_t *key, uint32_t n, uint32_t *out, uint32_t *
     }
 }
 
-/* read_buffer: n * comps 4-byte values of GL buffer buf into a new array (NULL: no memory). */
-static void *read_buffer(const gl_api *gl, GLuint buf, uint64_t words)
-{
-    void *p = malloc(words ? words * 4 : 4);
-    if (!p) return NULL;
-    gl->BindBuffer(GL_COPY_READ_BUFFER, buf);
-    gl->GetBufferSubData(GL_COPY_READ_BUFFER, 0, (GLsizeiptr)(words * 4), p);
-    gl->BindBuffer(GL_COPY_READ_BUFFER, 0);
-    return p;
-}
-
 /* attach: reads back each set's positions, F and intensity once, and sorts its points along the
  * three axes. The split itself waits for the first frame (it depends on field and t). */
 static int soft_attach(rnd_kit *k, void *state, const rnd_gpu_cloud *c, void **cloud_data,
@@ -281,18 +270,20 @@ static int soft_attach(rnd_kit *k, void *state, const rnd_gpu_cloud *c, void **c
         return sd_errf(err, SD_ENOMEM, "out of memory attaching a cloud to soft");
     }
     sc->nsets = c->nsets;
+    int frc = soft_fields_attach(gl, c, &sc->fields, err);
+    if (frc < 0) {
+        free(sc->sets), free(sc);
+        return frc;
+    }
     for (uint32_t si = 0; si < c->nsets; si++) {
         const rnd_bufset *b = &c->sets[si];
         soft_set *ss = &sc->sets[si];
         uint32_t n = b->n;
         ss->n = n;
-        float *pos = read_buffer(gl, b->buf[RND_ATTR_POS], (uint64_t)n * 3);
+        const float *pos = sc->fields.sets[si].pos;
         uint32_t *keys = malloc((size_t)(n ? n : 1) * 4 * 4);
-        ss->z = malloc((size_t)(n ? n : 1) * 4);
-        ss->f_unc = read_buffer(gl, b->buf[RND_ATTR_FIELD], n);
-        ss->f_int = read_buffer(gl, b->buf[RND_ATTR_INTENSITY], n);
         for (int a = 0; a < 3; a++) ss->sorted[a] = malloc((size_t)(n ? n : 1) * 4);
-        int ok = pos && keys && ss->z && ss->f_unc && ss->f_int && ss->sorted[0] &&
+        int ok = keys && ss->sorted[0] &&
                  ss->sorted[1] && ss->sorted[2];
         if (ok) {
             float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
@@ -306,9 +297,7 @@ static int soft_attach(rnd_kit *k, void *state, const rnd_gpu_cloud *c, void **c
                           keys + 3 * (size_t)n);
                 ss->centre[a] = n ? 0.5f * (lo[a] + hi[a]) : 0.0f;
             }
-            for (uint32_t i = 0; i < n; i++) ss->z[i] = pos[3 * (size_t)i + 2];
         }
-        free(pos);
         free(keys);
         if (!ok) {
             soft_detach(k, state, sc);
@@ -324,23 +313,10 @@ static int soft_attach(rnd_kit *k, void *state, const rnd_gpu_cloud *c, void **c
     return 0;
 }
 
-/* field_of: F of point i of set ss for source field (params.h SP_FIELD_*), in [0, 1]. */
-static float field_of(const soft_set *ss, int field, float z0, float zinv, uint32_t i)
+/* make_split: the solid runs and the uploaded soft index arrays of every set for the fields'
+ * current F and t. Returns 0 or SD_ENOMEM. */
+static int make_split(const gl_api *gl, soft_cloud *sc, float t, sd_err *err)
 {
-    if (field == SP_FIELD_HEIGHT) {
-        float f = (ss->z[i] - z0) * zinv;
-        return f < 0.0f ? 0.0f : f > 1.0f ? 1.0f : f;
-    }
-    return field == SP_FIELD_INTENSITY ? ss->f_int[i] : ss->f_unc[i];
-}
-
-/* make_split: the solid runs and the uploaded soft index arrays of every set for (field, t).
- * Returns 0 or SD_ENOMEM. */
-static int make_split(const gl_api *gl, const rnd_gpu_cloud *c, soft_cloud *sc, int field,
-                      float t, sd_err *err)
-{
-    float z0 = c->bmin[2], dz = c->bmax[2] - c->bmin[2];
-    float zinv = dz > 0.0f ? 1.0f / dz : 0.0f;
     for (uint32_t si = 0; si < sc->nsets; si++) {
         soft_set *ss = &sc->sets[si];
         uint32_t n = ss->n;
@@ -348,7 +324,7 @@ static int make_split(const gl_api *gl, const rnd_gpu_cloud *c, soft_cloud *sc, 
         if (!soft) return sd_errf(err, SD_ENOMEM, "out of memory splitting a cloud");
         uint32_t nsoft = 0, nruns = 0;
         for (uint32_t i = 0; i < n; i++) {
-            soft[i] = field_of(ss, field, z0, zinv, i) > t;
+            soft[i] = sc->fields.sets[si].f[i] > t;
             nsoft += soft[i];
             nruns += !soft[i] && (i == 0 || soft[i - 1]);
         }
@@ -381,7 +357,7 @@ static int make_split(const gl_api *gl, const rnd_gpu_cloud *c, soft_cloud *sc, 
         free(idx);
         free(soft);
     }
-    sc->have_split = 1, sc->field = field, sc->t = t;
+    sc->have_split = 1, sc->t = t;
     return 0;
 }
 
@@ -476,7 +452,6 @@ static void set_view_uniforms(const gl_api *gl, GLuint prog, const rnd_draw *d, 
 {
     const rnd_view *v = d->view;
     const sp_params *p = d->params;
-    float dz = d->cloud->bmax[2] - d->cloud->bmin[2];
     gl->UseProgram(prog);
     GLint l;
     if ((l = gl_uniform(gl, prog, "u_view")) >= 0) gl->UniformMatrix4fv(l, 1, GL_FALSE, v->view);
@@ -486,9 +461,6 @@ static void set_view_uniforms(const gl_api *gl, GLuint prog, const rnd_draw *d, 
     if ((l = gl_uniform(gl, prog, "u_color")) >= 0) gl->Uniform1i(l, p->color);
     if ((l = gl_uniform(gl, prog, "u_znear")) >= 0) gl->Uniform1f(l, v->znear);
     if ((l = gl_uniform(gl, prog, "u_zfar")) >= 0) gl->Uniform1f(l, v->zfar);
-    if ((l = gl_uniform(gl, prog, "u_field")) >= 0) gl->Uniform1i(l, p->field);
-    if ((l = gl_uniform(gl, prog, "u_zrange")) >= 0)
-        gl->Uniform2f(l, d->cloud->bmin[2], dz > 0 ? 1.0f / dz : 0.0f);
     if ((l = gl_uniform(gl, prog, "u_t")) >= 0) gl->Uniform1f(l, p->t);
     if ((l = gl_uniform(gl, prog, "u_lm")) >= 0) gl->Uniform1f(l, p->l_m);
     if ((l = gl_uniform(gl, prog, "u_rev")) >= 0) gl->Uniform1i(l, o->rev);
@@ -510,9 +482,7 @@ static void bind_soft_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const so
     rnd_kit_bind_set(k, &d->cloud->sets[si], p->color);
     gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_F);
     gl->BindTexture(GL_TEXTURE_BUFFER, s->f_tex);
-    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI,
-                  d->cloud->sets[si].buf[p->field == SP_FIELD_INTENSITY ? RND_ATTR_INTENSITY
-                                                                         : RND_ATTR_FIELD]);
+    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, sc->fields.sets[si].f_buf);
     gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_IDX);
     gl->BindTexture(GL_TEXTURE_BUFFER, s->idx_tex);
     gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, sc->sets[si].idx_buf);
@@ -699,8 +669,10 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     if (p->model != SP_MODEL_EXPRESS)
         return sd_errf(err, SD_EINVAL, "soft: only model=express is implemented");
     int rc = 0;
-    if (!sc->have_split || sc->field != p->field || sc->t != p->t)
-        if ((rc = make_split(k->gl, d->cloud, sc, p->field, p->t, err)) < 0) return rc;
+    int changed = soft_fields_update(k->gl, d->cloud, &sc->fields, p, err);
+    if (changed < 0) return changed;
+    if (changed || !sc->have_split || sc->t != p->t)
+        if ((rc = make_split(k->gl, sc, p->t, err)) < 0) return rc;
     /* The split (see the file comment): one buffer set, the splat programs' filter; several,
      * the solid runs. */
     int one = sc->nsets == 1;
@@ -720,15 +692,11 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     int nstripes = splat__frame_begin(k, s->splat, &sd, &f, err);
     rc = nstripes < 0 ? nstripes : 0;
     if (nstripes > 0) {
-        float dz = d->cloud->bmax[2] - d->cloud->bmin[2];
-        splat__set_filter(k, s->splat, p->field, one ? p->t : 2.0f, d->cloud->bmin[2],
-                          dz > 0.0f ? 1.0f / dz : 0.0f);
+        splat__set_filter(k, s->splat, SPLAT_SKIP_SOFT, one ? p->t : 2.0f);
         if (one) {
             k->gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_F);
             k->gl->BindTexture(GL_TEXTURE_BUFFER, s->f_tex);
-            k->gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI,
-                             d->cloud->sets[0].buf[p->field == SP_FIELD_INTENSITY
-                                                       ? RND_ATTR_INTENSITY : RND_ATTR_FIELD]);
+            k->gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, sc->fields.sets[0].f_buf);
             k->gl->ActiveTexture(GL_TEXTURE0);
         }
     }
@@ -759,7 +727,8 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
 const rnd_pipeline pipe_soft = {
     .name = "soft",
     .needs = 1u << RND_ATTR_POS | 1u << RND_ATTR_NORMAL | 1u << RND_ATTR_RADIUS |
-             1u << RND_ATTR_RGBA | 1u << RND_ATTR_FIELD | 1u << RND_ATTR_INTENSITY,
+             1u << RND_ATTR_RGBA | 1u << RND_ATTR_FIELD | 1u << RND_ATTR_INTENSITY |
+             1u << RND_ATTR_CLASS | 1u << RND_ATTR_SCALAR,
     .create = soft_create,
     .destroy = soft_destroy,
     .attach = soft_attach,

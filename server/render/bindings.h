@@ -49,7 +49,9 @@
     X(SOFT_PROJ)     /* soft: SOFT_PROJ as RGBA32F */                                          \
     X(SOFT_LIST)     /* soft: SOFT_LIST as R32UI */                                             \
     X(SOFT_CELLS)    /* soft: SOFT_CELLS as R32UI */                                            \
-    X(SOFT_LAYER)    /* soft: SOFT_LAYER as RGBA32F */
+    X(SOFT_LAYER)    /* soft: SOFT_LAYER as RGBA32F */                                        \
+    X(OLT_KEYS)      /* olt: R32UI, the first soft layer's visibility keys (splat's layout) */ \
+    X(OLT_COLOR)     /* olt: sampler2D, the first soft layer's resolved colour */
 
 enum {
 #define RND_B_ENUM_(name) RND_B_##name,

@@ -32,7 +32,10 @@
     X(RADIUS, "radius", 1, GL_R32F)    /* splat radius */                                     \
     X(RGBA, "rgba", 1, GL_R32UI)       /* RGBA8 packed, r in the low byte; white if absent */ \
     X(FIELD, "field", 1, GL_R32UI)     /* float bits of F in [0,1] */                         \
-    X(INTENSITY, "intensity", 1, GL_R32UI) /* float bits, normalised to [0,1]; 0 if absent */
+    X(INTENSITY, "intensity", 1, GL_R32UI) /* float bits, normalised to [0,1]; 0 if absent */ \
+    X(CLASS, "class", 1, GL_R32UI)     /* LAS classification 0-255; one word if absent */     \
+    X(SCALAR, "scalar", 1, GL_R32UI)   /* float bits of the file's scalar property, normalised \
+                                          to [0,1] by its range; one word if absent */
 
 enum {
 #define RND_ATTR_ENUM_(id, name, comps, fmt) RND_ATTR_##id,
@@ -68,6 +71,7 @@ typedef struct rnd_chunk {
 typedef struct rnd_gpu_cloud {
     uint64_t n;
     uint32_t attrs;            /* PC_ATTR_* the file had (normals, radius, F always) */
+    char scalar_name[32];      /* the file property RND_ATTR_SCALAR holds ("" if none) */
     double offset[3];          /* file coordinates = local + offset */
     float bmin[3], bmax[3];    /* local bounds */
     float sigma, radius_median;

@@ -8,7 +8,25 @@
 #include "rndtest.h"
 
 #include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
+
+int tu_egl_setup(rnd_ctx **ctx)
+{
+    rnd_desc d = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS")};
+    sd_err err = {0};
+    *ctx = rnd_create(&d, &err);
+    if (!*ctx) fprintf(stderr, "rnd_create: %s\n", err.msg);
+    return *ctx ? 0 : -1;
+}
+
+int tu_egl_teardown(rnd_ctx **ctx)
+{
+    rnd_destroy(*ctx);
+    *ctx = NULL;
+    return 0;
+}
 
 uint32_t tu_upload(rnd_ctx *r, const pc_prepared *pc)
 {

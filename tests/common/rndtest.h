@@ -5,6 +5,11 @@
 
 #include "render.h"
 
+/* tu_egl_setup, tu_egl_teardown: cmocka group setup/teardown making and destroying an EGL
+ * renderer (shaders from $SPLATD_SHADERS) in *ctx; setup prints the error and returns -1. */
+int tu_egl_setup(rnd_ctx **ctx);
+int tu_egl_teardown(rnd_ctx **ctx);
+
 /* tu_upload: rnd_upload of pc; fails the test when it returns no id. */
 uint32_t tu_upload(rnd_ctx *r, const pc_prepared *pc);
 
