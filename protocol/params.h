@@ -30,7 +30,7 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(SHADING,      "shading",      SP_T_ENUM,  shading,      0,    0,        "lambert", "lambert|edl") \
     X(EDL_STRENGTH, "edl_strength", SP_T_FLOAT, edl_strength, 0,    100,      "1",      NULL)     \
     X(EDL_RADIUS,   "edl_radius",   SP_T_FLOAT, edl_radius,   0.5,  16,       "1",      NULL)     \
-    X(MODEL,        "model",        SP_T_ENUM,  model,        0,    0,        "express", "express") \
+    X(MODEL,        "model",        SP_T_ENUM,  model,        0,    0,        "express", "express|base|concentric") \
     X(LAMBDA,       "lambda",       SP_T_FLOAT, lambda,       0,    1,        "0.5",    NULL)     \
     X(T,            "t",            SP_T_FLOAT, t,            0,    1,        "0.5",    NULL)     \
     X(L_M,          "l_m",          SP_T_FLOAT, l_m,          0,    1,        "0",      NULL)     \
@@ -38,7 +38,8 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(ORDER,        "order",        SP_T_ENUM,  order,        0,    0,        "axis",   "axis|tile") \
     X(CLASSES,      "classes",      SP_T_INT,   classes,      0,    4294967295, "0",    NULL)     \
     X(AXIS_A,       "axis_a",       SP_T_VEC3,  axis_a,       -1e9, 1e9,      "0,0,0",  NULL)     \
-    X(AXIS_B,       "axis_b",       SP_T_VEC3,  axis_b,       -1e9, 1e9,      "0,0,1",  NULL)
+    X(AXIS_B,       "axis_b",       SP_T_VEC3,  axis_b,       -1e9, 1e9,      "0,0,1",  NULL)     \
+    X(SOFT_FRAG_MIB, "soft_frag_mib", SP_T_INT, soft_frag_mib, 1,   65536,    "512",    NULL)
 
 enum {
 #define SP_ID_(id, name, type, field, lo, hi, def, vals) SP_##id,
@@ -61,9 +62,11 @@ enum { SP_SUB_444 = 0, SP_SUB_422, SP_SUB_420, SP_SUB_GRAY };
  * edl = that, times Eye-Dome Lighting over the frame's eye depth (render.c, edl.c), for every
  * pipeline: the depth cue that needs no normals at all. */
 enum { SP_SHADING_LAMBERT = 0, SP_SHADING_EDL };
-/* model: the Soft Transparency density model; only the Express-Model (eq. 19) is implemented,
- * so the Base- and Concentric-Models are refused as unknown enum values. */
-enum { SP_MODEL_EXPRESS = 0 };
+/* model: the Soft Transparency density model: express = view-facing discs with eq. 19 (the
+ * default, pipe_soft.c); base = spheres with the exact density integral (eq. 4-12); concentric =
+ * N concentric spheres of constant density (eq. 13-18); the last two through per-pixel fragment
+ * lists (soft_lists.h). */
+enum { SP_MODEL_EXPRESS = 0, SP_MODEL_BASE, SP_MODEL_CONCENTRIC };
 /* field: the scalar F of the solid/soft split, each in [0, 1] (soft_field.c computes them):
  *   uncertainty   prep's eq. 21, normalised by the cloud's 99th percentile and clamped;
  *   height        (z - zmin) / (zmax - zmin) over the cloud's bounds;
@@ -102,7 +105,7 @@ typedef struct sp_params {
     int32_t shading;        /* SP_SHADING_* */
     float edl_strength;     /* EDL: 0 leaves the frame unchanged */
     float edl_radius;       /* EDL: neighbour distance in pixels */
-    int32_t model;          /* soft: SP_MODEL_* (only the Express-Model exists) */
+    int32_t model;          /* soft: SP_MODEL_* */
     float lambda;           /* soft, olt: opacity scale lambda (Soft Transparency eq. 19) */
     float t;                /* soft, olt: points with field value F <= t are solid */
     float l_m;              /* soft: transparency modulation range (eq. 22); <= t: off */
@@ -111,6 +114,7 @@ typedef struct sp_params {
     int64_t classes;        /* soft, olt with field=class: bit c makes LAS class c soft */
     float axis_a[3];        /* soft, olt with field=axis-distance: two points of the axis, */
     float axis_b[3];        /*   file coordinates minus the cloud's bounding-box centre */
+    int64_t soft_frag_mib;  /* soft base/concentric: fragment memory cap, MiB (soft_lists.h) */
 } sp_params;
 
 typedef struct sp_param_info {

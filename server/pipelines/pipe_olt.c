@@ -141,20 +141,7 @@ static void compose(rnd_kit *k, olt_state *s, const rnd_draw *d, int y0, int n, 
     gl->Uniform2i(gl_uniform(gl, s->compose, "u_size"), v->width, v->height);
     gl->Uniform2i(gl_uniform(gl, s->compose, "u_stripe"), yb, nb);
     gl->Uniform1f(gl_uniform(gl, s->compose, "u_lambda"), d->params->lambda);
-    gl->BindFramebuffer(GL_FRAMEBUFFER, d->target->fbo);
-    gl->Viewport(0, 0, v->width, v->height);
-    gl->Enable(GL_SCISSOR_TEST);
-    gl->Scissor(0, y0, v->width, n);
-    gl->Disable(GL_DEPTH_TEST);
-    gl->Enable(GL_BLEND);
-    gl->BlendFuncSeparate(GL_ONE, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
-    gl->ColorMaski(1, GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE); /* the depth stays behind's */
-    gl->BindVertexArray(s->vao);
-    gl->DrawArrays(GL_TRIANGLES, 0, 6);
-    gl->BindVertexArray(0);
-    gl->ColorMaski(1, GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
-    gl->Disable(GL_BLEND);
-    gl->Disable(GL_SCISSOR_TEST);
+    rnd_kit_over_rows(k, s->vao, d->target, v->width, v->height, y0, n); /* depth: behind's */
     gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
 }
 

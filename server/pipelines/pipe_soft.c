@@ -1,9 +1,7 @@
 /* pipe_soft.c — the `soft` pipeline: Soft Transparency (Seemann et al.), the Express-Model.
  *
  * The solid/soft split. Each point has a scalar F in [0, 1] from the source `field`
- * (uncertainty: prep's eq. 21, already normalised by the cloud's 99th percentile; height:
- * (z - zmin) / (zmax - zmin) over the cloud's local bounds; intensity: the file's intensity,
- * normalised by its range at upload). Points with F <= t are solid and are drawn by the `splat`
+ * (soft_field.h; the normalisation of each source is in params.h). Points with F <= t are solid and are drawn by the `splat`
  * pipeline's own passes (splat_passes.h), F > t are soft. Two forms of the split, measured:
  *   filter  (a cloud in one buffer set, the usual case) splat__create_filtered's raster
  *           programs skip soft points at the start of both passes (one texel fetch a point);
@@ -56,10 +54,13 @@
  * and the colour step between solid and soft regions shrinks (test_modulation measures it).
  * l_m <= t turns the modulation off.
  *
- * What is not here: model=base and model=concentric (the enum only has express, so they are
- * refused as unknown values naming what exists), field sources beyond uncertainty, height and
- * intensity, and soft discs larger than the GL's point size limit (llvmpipe: 255 pixels) are
- * drawn at that size. Culling: soft points are drawn whether or not their chunk was culled
+ * model=base and model=concentric replace the soft discs by spheres composited through per-pixel
+ * fragment lists (soft_lists.h), per stripe after the splat resolve, clipped by the same
+ * visibility keys; clouds in one buffer set only, and l_m does not apply to them. F comes from
+ * soft_field.h for every `field` source.
+ *
+ * What is not here: soft discs larger than the GL's point size limit (llvmpipe: 255 pixels) are
+ * drawn at that size by order=axis. Culling: soft points are drawn whether or not their chunk was culled
  * (the GL clips them); the point budget applies to solid points only. */
 #include <math.h>
 #include <stdint.h>
@@ -70,6 +71,7 @@
 #include "pipe.h"
 #include "shaders.h"
 #include "soft_field.h"
+#include "soft_lists.h"
 #include "splat_passes.h"
 
 /* Uniform slots of the sprite program (soft.vert/.frag), looked up by name. */
@@ -105,6 +107,7 @@ typedef struct soft_state {
     GLuint proj_buf, cells_buf, list_buf, layer_buf;
     uint64_t proj_bytes, cells_bytes, list_bytes, layer_bytes;
     GLuint proj_tex, cells_tex, list_tex, layer_tex;
+    soft_lists lists;          /* model=base|concentric (soft_lists.h) */
 } soft_state;
 
 /* Per buffer set of a cloud: what the split needs on the CPU and the soft index arrays. */
@@ -132,6 +135,7 @@ static void soft_destroy(rnd_kit *k, void *state)
     if (!s) return;
     const gl_api *gl = k->gl;
     if (s->splat) splat__destroy(k, s->splat);
+    soft_lists_destroy(k, &s->lists);
     if (s->prog) gl->DeleteProgram(s->prog);
     if (s->vao) gl->DeleteVertexArrays(1, &s->vao);
     if (s->f_tex) gl->DeleteTextures(1, &s->f_tex);
@@ -190,6 +194,10 @@ static int soft_create(rnd_kit *k, void **state, sd_err *err)
             soft_destroy(k, s);
             return err ? err->code : SD_EGL;
         }
+    }
+    if ((rc = soft_lists_create(k, &s->lists, err)) < 0) {
+        soft_destroy(k, s);
+        return rc;
     }
     GLuint *texs[4] = {&s->proj_tex, &s->cells_tex, &s->list_tex, &s->layer_tex};
     for (int i = 0; i < 4; i++) gl->GenTextures(1, texs[i]);
@@ -642,20 +650,7 @@ static void tile_blend(rnd_kit *k, soft_state *s, const rnd_draw *d, int keys, i
     gl->UseProgram(pr);
     gl->Uniform2i(gl_uniform(gl, pr, "u_size"), v->width, v->height);
     gl->Uniform2i(gl_uniform(gl, pr, "u_rows"), y0, n);
-    gl->BindFramebuffer(GL_FRAMEBUFFER, d->target->fbo);
-    gl->Viewport(0, 0, v->width, v->height);
-    gl->Enable(GL_SCISSOR_TEST);
-    gl->Scissor(0, y0, v->width, n);
-    gl->Disable(GL_DEPTH_TEST);
-    gl->Enable(GL_BLEND);
-    gl->BlendFuncSeparate(GL_ONE, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
-    gl->ColorMaski(1, GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE); /* no depth writes */
-    gl->BindVertexArray(s->vao);
-    gl->DrawArrays(GL_TRIANGLES, 0, 6);
-    gl->BindVertexArray(0);
-    gl->ColorMaski(1, GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
-    gl->Disable(GL_BLEND);
-    gl->Disable(GL_SCISSOR_TEST);
+    rnd_kit_over_rows(k, s->vao, d->target, v->width, v->height, y0, n);
 }
 
 /* render: the split (remade when field or t changed), the splat passes over the solid runs,
@@ -666,8 +661,10 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     soft_cloud *sc = d->cloud_data;
     const sp_params *p = d->params;
     if (!sc) return sd_errf(err, SD_EINVAL, "soft: the cloud was not attached");
-    if (p->model != SP_MODEL_EXPRESS)
-        return sd_errf(err, SD_EINVAL, "soft: only model=express is implemented");
+    int lists = p->model != SP_MODEL_EXPRESS, concentric = p->model == SP_MODEL_CONCENTRIC;
+    if (lists && sc->nsets != 1)
+        return sd_errf(err, SD_ELIMIT, "soft: model=%s takes a cloud in one buffer set (this one "
+                       "has %u)", concentric ? "concentric" : "base", sc->nsets);
     int rc = 0;
     int changed = soft_fields_update(k->gl, d->cloud, &sc->fields, p, err);
     if (changed < 0) return changed;
@@ -682,10 +679,11 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     sd.view = &sv;
     soft_order o;
     order_sets(d->view, sc, &o);
-    int draw = p->lambda > 0.0f || p->l_m > p->t;
+    int draw = p->lambda > 0.0f || (!lists && p->l_m > p->t);
     /* order=tile: the compositor, for one buffer set (the usual case); several take the
      * sprites. */
-    int tile = draw && p->order == SP_ORDER_TILE && sc->nsets == 1 && sc->sets[0].nsoft > 0;
+    int tile = !lists && draw && p->order == SP_ORDER_TILE && sc->nsets == 1 &&
+               sc->sets[0].nsoft > 0;
     if (tile && (rc = tile_bin(k, s, d, sc, &o, err)) < 0) return rc;
 
     splat_frame f;
@@ -708,15 +706,26 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
             int height = d->view->height;
             int yb = f.y0 > 0 ? f.y0 - 1 : 0; /* the keys' first row (splat's halo) */
             int nb = (f.y0 + f.n < height ? f.y0 + f.n + 1 : f.y0 + f.n) - yb;
-            if (tile) tile_blend(k, s, d, 1, f.y0, f.n, yb, nb);
-            else if (draw) rc = draw_soft(k, s, d, sc, &o, 1, f.y0, f.n, yb, nb, err);
+            if (lists && draw) {
+                bind_soft_set(k, s, d, sc, 0);
+                rc = soft_lists_draw(k, &s->lists, d, sc->sets[0].nsoft, concentric, 1, f.y0, f.n,
+                                     yb, nb, err);
+            } else if (tile) {
+                tile_blend(k, s, d, 1, f.y0, f.n, yb, nb);
+            } else if (draw) {
+                rc = draw_soft(k, s, d, sc, &o, 1, f.y0, f.n, yb, nb, err);
+            }
             /* draw_soft bound its sets' buffers; splat binds one set once per frame, so give
              * it back (several sets are rebound by the splat passes themselves). */
             if (f.one_set) rnd_kit_bind_set(k, &d->cloud->sets[0], p->color);
         }
     }
     int whole_fits = (uint64_t)d->view->width * d->view->height * 16 <= (uint64_t)k->max_ssbo;
-    if (nstripes == 0 && tile && whole_fits)
+    if (nstripes == 0 && lists && draw) {
+        bind_soft_set(k, s, d, sc, 0);
+        rc = soft_lists_draw(k, &s->lists, d, sc->sets[0].nsoft, concentric, 0, 0,
+                             d->view->height, 0, d->view->height, err);
+    } else if (nstripes == 0 && tile && whole_fits)
         tile_blend(k, s, d, 0, 0, d->view->height, 0, d->view->height);
     else if (nstripes == 0 && draw)
         rc = draw_soft(k, s, d, sc, &o, 0, 0, d->view->height, 0, d->view->height, err);

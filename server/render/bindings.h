@@ -15,6 +15,8 @@
     X(SPLAT_BIG)     /* splat: dispatch header + splats with a big pixel box */                \
     X(SPLAT_RAS)     /* splat: dispatch header + sampled (not deposited) splats */             \
     X(SPLAT_RECT)    /* splat: ivec4, the pixels pass 1 touched */                             \
+    X(SOFT_FILL)     /* soft base/concentric: uint per pixel, store cursors; + lost spheres */ \
+    X(SOFT_FRAGS)    /* soft base/concentric: vec4 per sample (soft_frag.comp) */              \
     X(POINTS_DEPTH)  /* points: uint per pixel, the packed key or the depth bits */            \
     X(POINTS_INDEX)  /* points: uint per pixel, the exact form's winning point */ \
     X(KAWATA_DEPTH)  /* kawata: uint per buffer pixel, pass 1's nearest depth (float bits) */ \

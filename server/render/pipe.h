@@ -171,6 +171,13 @@ void rnd_kit_bind_set(rnd_kit *k, const rnd_bufset *s, int color);
 int64_t rnd_kit_set_ranges(rnd_kit *k, const rnd_view *v, uint32_t set, uint32_t *nranges,
                            uint32_t *first, sd_err *err);
 
+/* rnd_kit_over_rows: draws 6 vertices with the bound program and vertex array vao (two
+ * full-frame triangles, e.g. soft_resolve.vert) into target t over rows [y0, y0 + n) of a
+ * width x height frame with the premultiplied "over" (ONE, ONE_MINUS_SRC_ALPHA), no depth test
+ * and no writes to draw buffer 1 (the eye depth); restores that state. */
+void rnd_kit_over_rows(rnd_kit *k, GLuint vao, const rnd_target *t, int width, int height, int y0,
+                       int n);
+
 /* rnd_kit_unbind: unbinds every texture unit of bindings.h. */
 void rnd_kit_unbind(rnd_kit *k);
 
@@ -180,6 +187,7 @@ void rnd_kit_unbind(rnd_kit *k);
 typedef struct rnd_draw_out {
     uint64_t splats;           /* kawata: splats drawn (valid image-buffer pixels) */
     int buffer_w, buffer_h;    /* kawata: the image buffer's size */
+    uint32_t flags;            /* RND_FRAME_* (render.h): how the frame was degraded */
 } rnd_draw_out;
 
 /* What one frame asks of a pipeline. */

@@ -806,6 +806,7 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     frame->points_drawn = v.points_visible;
     frame->splats_drawn = out.splats;
     frame->buffer_w = out.buffer_w;
+    frame->flags = out.flags;
     frame->buffer_h = out.buffer_h;
     return gl_check(gl, "rendering a frame", err);
 }
