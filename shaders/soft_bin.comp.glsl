@@ -41,9 +41,9 @@ uniform int u_tile, u_ntx, u_nty;
 void main()
 {
 #if PASS == 0
-    uint k = gl_GlobalInvocationID.x;
-    if (k >= u_n) return;
-    {
+    // a grid of at most 4096 groups (pipe_soft.c): each invocation takes every stride-th disc
+    uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+    for (uint k = gl_GlobalInvocationID.x; k < u_n; k += stride) {
         uint i = texelFetch(u_idx, int(u_base + (u_rev != 0 ? u_n - 1u - k : k))).x;
         vec3 p = fetch3(u_pos, i);
         vec4 e = u_view * vec4(p, 1.0);

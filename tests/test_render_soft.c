@@ -589,6 +589,52 @@ static void test_buffer_sets(void **state)
     rnd_destroy(r4);
 }
 
+/* More soft discs than one dispatch of the projection covers (4096 groups of 32 = 131072): a
+ * 420 x 420 plane of soft points (176400, F = 1) facing the camera, lambda = 0.5, both orders.
+ * Every pixel inside the plane's screen square must be covered (not the background): the
+ * projection walks all discs (before the fix, the discs past 131072 in the sorted order were
+ * left unprojected and the plane had a hole at one end). Tolerance: none of the pixels inside
+ * the square, 2 pixels in from its edges, is background. */
+static void test_many_soft_points(void **state)
+{
+    (void)state;
+    enum { NX = 420 };
+    pc_prepared pc;
+    tu_new_cloud(&pc, (uint64_t)NX * NX, 0);
+    const float h = 0.005f;
+    for (int j = 0; j < NX; j++)
+        for (int i = 0; i < NX; i++) {
+            uint64_t k = (uint64_t)j * NX + i;
+            pc.pos[3 * k] = (i - 0.5f * (NX - 1)) * h;
+            pc.pos[3 * k + 1] = (j - 0.5f * (NX - 1)) * h;
+            pc.radius[k] = 2.0f * h;
+            pc.F[k] = 1.0f;
+        }
+    tu_finish_cloud(&pc, OFF);
+    uint32_t id = tu_upload(g_ctx, &pc);
+    pc_prepared_free(&pc);
+    rnd_camera cam = cam_z(3.0);
+    sp_params p;
+    sp_params_defaults(&p);
+    p.pipeline = SP_PIPE_SOFT, p.t = 0.5f, p.lambda = 0.5f;
+    double half = 0.5 * (NX - 1) * h, px = disc_px(half, 3.0);
+    int x0 = (int)ceil(0.5 * W - px) + 2, x1 = (int)floor(0.5 * W + px) - 2;
+    for (int ord = 0; ord < 2; ord++) {
+        p.order = ord;
+        rnd_frame f = {0};
+        tu_render(g_ctx, id, &cam, &p, 0, &f);
+        int empty = 0, n = 0;
+        for (int y = x0; y <= x1; y++)
+            for (int x = x0; x <= x1; x++, n++) empty += pix(&f, x, y)[0] == 0;
+        printf("many soft points, order=%s: %d of %d pixels in the plane's square empty\n",
+               ord ? "tile" : "axis", empty, n);
+        assert_true(n > 5000);
+        assert_int_equal(empty, 0);
+        rnd_frame_free(&f);
+    }
+    rnd_release(g_ctx, id);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -600,6 +646,7 @@ int main(void)
         cmocka_unit_test(test_field_height),
         cmocka_unit_test(test_tile_matches_axis),
         cmocka_unit_test(test_buffer_sets),
+        cmocka_unit_test(test_many_soft_points),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }

@@ -13,7 +13,7 @@ enum { FRAG_BYTES = 16 };
 
 void soft_lists_kappa(float k[65])
 {
-    enum { RINGS = 4000 };
+    enum { RINGS = 1000 };
     k[0] = 0.0f;
     for (int n = 1; n <= 64; n++) {
         double mass = 0.0;

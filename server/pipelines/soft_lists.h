@@ -42,7 +42,7 @@ typedef struct soft_lists {
 
 /* soft_lists_kappa: K[N] for N = 1..64 (k[0] = 0): the ratio of the Base-Model's integral of
  * the optical depth over a unit sphere's disc (1/6 of 2 pi) to the Concentric-Model's with N
- * shells, by the midpoint rule over 4000 rings. */
+ * shells, by the midpoint rule over 1000 rings. */
 void soft_lists_kappa(float k[65]);
 
 int soft_lists_create(rnd_kit *k, soft_lists *s, sd_err *err);
