@@ -84,7 +84,7 @@ enum {
 };
 /* order: both composite the soft discs back to front in the order of the axis-sorted index
  * arrays (pipe_soft.c); axis = as GL point sprites blended in primitive order, tile = a compute
- * compositor that bins them into 16x16 pixel tiles keeping that order and blends per pixel. */
+ * compositor that bins them into 8x8 pixel tiles keeping that order and blends per pixel. */
 enum { SP_ORDER_AXIS = 0, SP_ORDER_TILE };
 
 typedef struct sp_params {

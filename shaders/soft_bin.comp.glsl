@@ -1,16 +1,17 @@
 #version 430
 #include "lib_bindings.glsl"
 // soft_bin.comp — the soft compositor's binning (pipe_soft.c), order-preserving without a sort.
-//   PASS 0  one invocation per soft point in back-to-front order k (the sorted index array of
-//           the axis nearest the view direction, read forwards or backwards): projects it
-//           (centre and radius in pixels, eye depth, colour, W of eq. 22) into the draw-order
-//           array proj, which order=axis's sprites (soft.vert) and the passes below read.
+//   PASS 0  one invocation per soft point j, in point order: projects it (centre and radius in
+//           pixels, eye depth, colour, W of eq. 22) into proj[2 j], proj[2 j + 1]. The
+//           back-to-front order is the index array of the axis nearest the view direction
+//           (u_base), read forwards or backwards: the k-th disc is proj of j = idx[u_base + k]
+//           (order=axis's sprites, soft.vert, and the passes below read them so).
 // The ordered points are cut into u_nblocks consecutive blocks, one invocation each, which walks
 // its block serially, so within a block the order is kept.
 //   PASS 1  counts per (tile, block) cell the points whose disc touches the tile's pixel
 //           centres; each cell belongs to one invocation (no atomics).
 //   PASS 3  (after soft_scan.comp turned the counts into tile-major offsets) writes each
-//           point's draw-order number into the tile lists at its cell's offset, incrementing it.
+//           point's number j into the tile lists at its cell's offset, incrementing it.
 // A tile's list is then its cells' ranges in block order, each in point order: back to front.
 layout(local_size_x = 32) in;
 
@@ -43,8 +44,9 @@ void main()
 #if PASS == 0
     // a grid of at most 4096 groups (pipe_soft.c): each invocation takes every stride-th disc
     uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
-    for (uint k = gl_GlobalInvocationID.x; k < u_n; k += stride) {
-        uint i = texelFetch(u_idx, int(u_base + (u_rev != 0 ? u_n - 1u - k : k))).x;
+    // soft point j in point order: sequential reads and writes (proj[2 j], proj[2 j + 1])
+    for (uint j = gl_GlobalInvocationID.x; j < u_n; j += stride) {
+        uint i = texelFetch(u_idx, int(j)).x;
         vec3 p = fetch3(u_pos, i);
         vec4 e = u_view * vec4(p, 1.0);
         float depth = -e.z;
@@ -60,8 +62,8 @@ void main()
         else if (u_color == 4) col = vec3(clamp(uintBitsToFloat(texelFetch(u_src, int(i)).x), 0.0, 1.0));
         else if (u_color == 3) col = vec3(1.0 - clamp((depth - u_znear) / (u_zfar - u_znear), 0.0, 1.0));
         else col = vec3(0.5, 0.5, 1.0);
-        proj[2u * k] = vec4(px, rpx, depth);
-        proj[2u * k + 1u] = vec4(col, w);
+        proj[2u * j] = vec4(px, rpx, depth);
+        proj[2u * j + 1u] = vec4(col, w);
     }
 #else
     uint b = gl_GlobalInvocationID.x;
@@ -69,7 +71,8 @@ void main()
     uint per = (u_n + u_nblocks - 1u) / u_nblocks;
     uint k0 = min(u_n, b * per), k1 = min(u_n, k0 + per);
     for (uint k = k0; k < k1; k++) {
-        vec4 q = proj[2u * k];
+        uint j = texelFetch(u_idx, int(u_base + (u_rev != 0 ? u_n - 1u - k : k))).x;
+        vec4 q = proj[2u * j];
         vec2 px = q.xy;
         float rpx = q.z;
         if (!(rpx > 0.0)) continue;
@@ -83,7 +86,7 @@ void main()
 #if PASS == 1
                 cells[cell] += 1u;
 #else
-                list[cells[cell]] = k;
+                list[cells[cell]] = j;
                 cells[cell] += 1u;
 #endif
             }
