@@ -42,12 +42,13 @@
  *         stays in back-to-front order without a sort); one work group per tile blends its list
  *         per pixel in float, and one blend puts the result over the target. Same order, one
  *         rounding to 8 bits instead of one per disc (test_tile_matches_axis).
- * Measured on llvmpipe (2 shared cores, Guanyin 1280x720, process CPU per frame): the sprites
- * cost about 1 us a soft disc whatever its size (1-pixel sprites cost the same); the compositor
- * more: t = 0.9: splat 47.9 ms, axis 59.9, tile 96.9; t = 0.7 (31k soft discs): splat 49.6,
- * axis 83.5, tile 152.7, of which its per-pixel loop over the tile lists ~70 ms and the serial
- * binning ~30 ms. So axis is the default; tile is kept as the measured alternative and the
- * place to make faster (parallel projection, smaller tiles).
+ * Measured on llvmpipe (2 shared cores, Guanyin 1280x720, t = 0.5, 157k soft discs, process
+ * CPU per frame): splat ~50 ms, axis ~220-230, tile ~210 (16x16 tiles: ~385, every pixel
+ * testing every disc of its tile; 8x8: binning ~75 ms of which the projection ~30, the serial
+ * per-block count and scatter ~40, the per-pixel blend the rest). The sprites cost about 1 us a
+ * soft disc whatever its size (1-pixel sprites cost the same; two triangles a disc instead of a
+ * point sprite: 275 against 193 ms). axis stays the default (the two are within the noise of a
+ * shared machine); tile is the compute path to make faster.
  *
  * Transparency modulation (eq. 22). For t < F < l_m the opacity is interpolated between the
  * model's Phi and a near-solid disc, with W = (F - t) / (l_m - t): Phi_f = (1 - d/r)(1 - W) +
