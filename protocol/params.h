@@ -76,6 +76,7 @@ enum { SP_MODEL_EXPRESS = 0, SP_MODEL_BASE, SP_MODEL_CONCENTRIC };
  *   quality, confidence  that property when it has this name, 1 - the normalised value (low
  *                 quality or confidence is soft); refused naming the property when not;
  *   class         1 for LAS classes in the bit mask `classes` (bit c: class c, 0-31), else 0;
+ *                 the text form field=class:3,4,5 (sp_param_set_text) sets both parameters;
  *   axis-distance the distance to the line through axis_a and axis_b divided by the largest
  *                 such distance of any point of the cloud. */
 enum {
