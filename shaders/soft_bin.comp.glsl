@@ -44,23 +44,32 @@ void main()
 #if PASS == 0
     // a grid of at most 4096 groups (pipe_soft.c): each invocation takes every stride-th disc
     uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
-    // soft point j in point order: sequential reads and writes (proj[2 j], proj[2 j + 1])
-    for (uint j = gl_GlobalInvocationID.x; j < u_n; j += stride) {
+    // soft point j in point order: sequential reads and writes (proj[2 j], proj[2 j + 1]).
+    // The uniforms are read once into locals: llvmpipe reloads a uniform at every use inside a
+    // loop (see splat_raster.comp).
+    mat4 view = u_view, projm = u_proj;
+    vec2 size = vec2(u_size);
+    float scale = u_scale, znear = u_znear, zfar = u_zfar, t = u_t, lm = u_lm;
+    int color = u_color;
+    uint n = u_n;
+    float rscale = projm[1][1] * 0.5 * size.y;
+    for (uint j = gl_GlobalInvocationID.x; j < n; j += stride) {
         uint i = texelFetch(u_idx, int(j)).x;
         vec3 p = fetch3(u_pos, i);
-        vec4 e = u_view * vec4(p, 1.0);
+        vec4 e = view * vec4(p, 1.0);
         float depth = -e.z;
-        float r = texelFetch(u_rad, int(i)).x * u_scale;
-        vec4 c = u_proj * e;
-        float rpx = depth > u_znear ? r * u_proj[1][1] * 0.5 * float(u_size.y) / depth : 0.0;
-        vec2 px = depth > u_znear ? (c.xy / c.w * 0.5 + 0.5) * vec2(u_size) : vec2(-1e9);
+        float r = texelFetch(u_rad, int(i)).x * scale;
+        vec4 c = projm * e;
+        float rpx = depth > znear ? r * rscale / depth : 0.0;
+        vec2 px = depth > znear ? (c.xy / c.w * 0.5 + 0.5) * size : vec2(-1e9);
         float f = uintBitsToFloat(texelFetch(u_f, int(i)).x);
-        float w = u_lm > u_t ? clamp((f - u_t) / (u_lm - u_t), 0.0, 1.0) : 1.0;
+        float w = lm > t ? clamp((f - t) / (lm - t), 0.0, 1.0) : 1.0;
         vec3 col;
-        if (u_color == 0) col = unpackUnorm4x8(texelFetch(u_src, int(i)).x).rgb;
-        else if (u_color == 1) col = colormap(uintBitsToFloat(texelFetch(u_src, int(i)).x));
-        else if (u_color == 4) col = vec3(clamp(uintBitsToFloat(texelFetch(u_src, int(i)).x), 0.0, 1.0));
-        else if (u_color == 3) col = vec3(1.0 - clamp((depth - u_znear) / (u_zfar - u_znear), 0.0, 1.0));
+        uint src = texelFetch(u_src, int(i)).x;
+        if (color == 0) col = unpackUnorm4x8(src).rgb;
+        else if (color == 1) col = colormap(uintBitsToFloat(src));
+        else if (color == 4) col = vec3(clamp(uintBitsToFloat(src), 0.0, 1.0));
+        else if (color == 3) col = vec3(1.0 - clamp((depth - znear) / (zfar - znear), 0.0, 1.0));
         else col = vec3(0.5, 0.5, 1.0);
         proj[2u * j] = vec4(px, rpx, depth);
         proj[2u * j + 1u] = vec4(col, w);
