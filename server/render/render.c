@@ -348,12 +348,18 @@ static int upload_attr(const gl_api *gl, GLuint *b, int a, const pc_prepared *pc
     return 0;
 }
 
-/* cloud_bytes: the GPU bytes of a cloud of n points (every attribute, 4 bytes a component). */
-static uint64_t cloud_bytes(uint64_t n)
+/* cloud_bytes: the GPU bytes of cloud pc (every attribute, 4 bytes a component; class and
+ * scalar only when the cloud has them, upload_attr gives the others one word). */
+static uint64_t cloud_bytes(const pc_prepared *pc)
 {
     uint64_t per = 0;
-    for (int a = 0; a < RND_ATTR_COUNT; a++) per += 4 * (uint64_t)rnd_attrs[a].components;
-    return n * per;
+    for (int a = 0; a < RND_ATTR_COUNT; a++) {
+        if ((a == RND_ATTR_CLASS && !(pc->attrs & PC_ATTR_CLASS)) ||
+            (a == RND_ATTR_SCALAR && !(pc->attrs & PC_ATTR_SCALAR)))
+            continue;
+        per += 4 * (uint64_t)rnd_attrs[a].components;
+    }
+    return pc->n * per;
 }
 
 /* make_chunks: the slot's chunks from pc's batches (one batch covering everything when it has
@@ -515,7 +521,7 @@ static int64_t add_cloud(rnd_ctx *r, const pc_prepared *pc, pc_prepared *src, sd
     for (uint64_t i = 0; i < pc->n; i++)
         for (int k = 0; k < 3; k++) sum[k] += pc->pos[3 * i + k];
     for (int k = 0; k < 3; k++) c->centroid[k] = (float)(sum[k] / (double)pc->n);
-    slot->bytes = cloud_bytes(pc->n);
+    slot->bytes = cloud_bytes(pc);
     slot->last_used = ++r->clock;
     int rc = make_chunks(slot, pc, r->max_set_points, err);
     if (rc >= 0) rc = make_resident(r, slot, pc, err);
