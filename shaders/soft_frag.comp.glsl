@@ -14,7 +14,8 @@
 //           R (1 - i / N), i.e. one more every 4 pixels of screen radius.
 //   PASS 2  (counts scanned into offsets by soft_scan.comp) writes the samples at
 //           offsets[pixel] - u_base + atomicAdd(fill[pixel]); samples at or past u_cap are
-//           dropped (the frame is then flagged, soft_lists.c).
+//           dropped (the frame is then flagged, soft_lists.c); so are samples past a pixel's
+//           range, which PASS 1 keeps under u_pxcap (the sphere is counted in fill[u_npx]).
 // A sample is a vec4: x = +s (enter) or -s (exit); Base: y = z^m (the chord's midpoint), z = d
 // (the ray's distance from the centre), w = the point index's bits; Concentric: y = the step of
 // the point's density on entering shell i, kappa (mu'_i - mu'_(i-1)), mu' of eq. 13 and 15:
@@ -44,6 +45,8 @@ uniform uint u_n;          // soft points
 uniform uint u_base, u_cap;
 uniform int u_concentric;
 uniform int u_row0;        // the counts' first row (the stripe's)
+uniform uint u_pxcap;      // samples a pixel may count (soft_lists.c)
+uniform uint u_npx;        // the stripe's pixels: fill[u_npx] counts lost spheres
 uniform float u_kappa[65]; // Concentric: the density scale per N (soft_lists.c)
 
 void sphere(uint k)
@@ -99,9 +102,15 @@ void sphere(uint k)
             }
             if (nsamp == 0u) continue;
 #if PASS == 1
-            atomicAdd(counts[px], nsamp);
+            // at most about u_pxcap samples a pixel, so that the frame's total stays a uint
+            // (the check and the add are not one atomic: a pixel may pass it by what its
+            // concurrent spheres add); past it the sphere is counted as lost
+            if (counts[px] < u_pxcap) atomicAdd(counts[px], nsamp);
+            else atomicAdd(fill[u_npx], 1u);
 #else
             uint at = counts[px] - u_base + atomicAdd(fill[px], nsamp);
+            uint end = counts[px + 1u] - u_base; // this pixel's samples end here
+            if (at + nsamp > end) atomicAdd(fill[u_npx], 1u);
             for (int j = 0; j < N; j++) {
                 float rj = R * (1.0 - float(j) / float(N));
                 if (dd >= rj) break;
@@ -119,8 +128,8 @@ void sphere(uint k)
                 } else {
                     yz = vec2(zm, dd);
                 }
-                if (at < u_cap) frags[at] = vec4(a, yz, uintBitsToFloat(ibits));
-                if (at + 1u < u_cap) frags[at + 1u] = vec4(-e, yz, uintBitsToFloat(ibits));
+                if (at < min(u_cap, end)) frags[at] = vec4(a, yz, uintBitsToFloat(ibits));
+                if (at + 1u < min(u_cap, end)) frags[at + 1u] = vec4(-e, yz, uintBitsToFloat(ibits));
                 at += 2u;
             }
 #endif

@@ -94,7 +94,8 @@ static GLint U(const gl_api *gl, GLuint prog, const char *name)
 
 /* frag_uniforms: what soft_frag.comp's two passes share. */
 static void frag_uniforms(const gl_api *gl, GLuint prog, const rnd_draw *d, uint32_t nsoft,
-                          int concentric, int keys, int y0, int yb, int nb, const float *kappa)
+                          int concentric, int keys, int y0, int yb, int nb, const float *kappa,
+                          uint64_t npx)
 {
     const rnd_view *v = d->view;
     float rayo[4], rayd[4];
@@ -114,6 +115,10 @@ static void frag_uniforms(const gl_api *gl, GLuint prog, const rnd_draw *d, uint
     gl->Uniform1i(U(gl, prog, "u_row0"), y0);
     GLint lk = U(gl, prog, "u_kappa");
     if (lk >= 0) gl->Uniform1fv(lk, 65, kappa);
+    /* samples a pixel may count: the stripe's total stays under 2^31 */
+    uint64_t pxcap = ((uint64_t)1 << 31) / (npx ? npx : 1);
+    gl->Uniform1ui(U(gl, prog, "u_pxcap"), (GLuint)(pxcap > 0xFFFF0000u ? 0xFFFF0000u : pxcap));
+    gl->Uniform1ui(U(gl, prog, "u_npx"), (GLuint)npx);
 }
 
 static GLuint point_groups(uint32_t nsoft)
@@ -126,7 +131,7 @@ static GLuint point_groups(uint32_t nsoft)
  * and number `count` (the cap already applied by the caller's choice of cap). */
 static int band(rnd_kit *k, soft_lists *s, const rnd_draw *d, uint32_t nsoft, int concentric,
                 int keys, int y0, int ya, int m, int yb, int nb, uint64_t base, uint64_t cap,
-                uint64_t count, sd_err *err)
+                uint64_t count, uint64_t npx, sd_err *err)
 {
     const gl_api *gl = k->gl;
     const rnd_view *v = d->view;
@@ -138,16 +143,16 @@ static int band(rnd_kit *k, soft_lists *s, const rnd_draw *d, uint32_t nsoft, in
         gl->TexBuffer(GL_TEXTURE_BUFFER, GL_RGBA32F, s->layer_buf);
         gl->ActiveTexture(GL_TEXTURE0);
     }
-    /* the per-pixel cursors (the last word, the open-sphere overflow count, is kept) */
+    /* the per-pixel cursors (the word after them, the lost-sphere count, is kept) */
     const GLuint z = 0;
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->fill_buf);
-    gl->ClearBufferSubData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, 0,
-                           (GLsizeiptr)(s->fill_bytes - 4), GL_RED_INTEGER, GL_UNSIGNED_INT, &z);
+    gl->ClearBufferSubData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, 0, (GLsizeiptr)(npx * 4),
+                           GL_RED_INTEGER, GL_UNSIGNED_INT, &z);
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_FRAGS, s->frags_buf);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_LAYER, s->layer_buf);
     GLuint ps = s->prog[L_STORE];
-    frag_uniforms(gl, ps, d, nsoft, concentric, keys, y0, yb, nb, s->kappa);
+    frag_uniforms(gl, ps, d, nsoft, concentric, keys, y0, yb, nb, s->kappa, npx);
     gl->Uniform2i(U(gl, ps, "u_rows"), ya, m);
     gl->Uniform1ui(U(gl, ps, "u_base"), (GLuint)base);
     gl->Uniform1ui(U(gl, ps, "u_cap"), (GLuint)cap);
@@ -164,7 +169,7 @@ static int band(rnd_kit *k, soft_lists *s, const rnd_draw *d, uint32_t nsoft, in
     gl->Uniform1i(U(gl, pb, "u_row0"), y0);
     gl->Uniform1ui(U(gl, pb, "u_base"), (GLuint)base);
     gl->Uniform1ui(U(gl, pb, "u_cap"), (GLuint)cap);
-    gl->Uniform1ui(U(gl, pb, "u_npx"), (GLuint)(s->fill_bytes / 4 - 1));
+    gl->Uniform1ui(U(gl, pb, "u_npx"), (GLuint)npx);
     gl->Uniform1f(U(gl, pb, "u_k"), p->lambda / (unit * unit));
     gl->Uniform1f(U(gl, pb, "u_scale"), p->splat_scale);
     gl->Uniform1i(U(gl, pb, "u_color"), p->color);
@@ -223,7 +228,7 @@ int soft_lists_draw(rnd_kit *k, soft_lists *s, const rnd_draw *d, uint32_t nsoft
 
     /* 1: counts */
     GLuint pc = s->prog[L_COUNT];
-    frag_uniforms(gl, pc, d, nsoft, concentric, keys, y0, yb, nb, s->kappa);
+    frag_uniforms(gl, pc, d, nsoft, concentric, keys, y0, yb, nb, s->kappa, npx);
     gl->Uniform2i(U(gl, pc, "u_rows"), y0, n);
     gl->DispatchCompute(point_groups(nsoft), 1, 1);
     gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
@@ -240,7 +245,7 @@ int soft_lists_draw(rnd_kit *k, soft_lists *s, const rnd_draw *d, uint32_t nsoft
     s->samples += total;
     int rc = 0;
     if (total <= cap && (uint64_t)n <= max_band) {
-        rc = band(k, s, d, nsoft, concentric, keys, y0, y0, n, yb, nb, 0, cap, total, err);
+        rc = band(k, s, d, nsoft, concentric, keys, y0, y0, n, yb, nb, 0, cap, total, npx, err);
         return rc < 0 ? rc : lost_spheres(gl, s, d, npx);
     }
     /* 3: bands of rows that fit (see soft_lists.h) */
@@ -261,7 +266,8 @@ int soft_lists_draw(rnd_kit *k, soft_lists *s, const rnd_draw *d, uint32_t nsoft
             m++;
         uint64_t count = s->offs[(uint64_t)(ya + m) * W] - base;
         if (count > cap) d->out->flags |= RND_FRAME_SOFT_TRUNCATED;
-        rc = band(k, s, d, nsoft, concentric, keys, y0, y0 + ya, m, yb, nb, base, cap, count, err);
+        rc = band(k, s, d, nsoft, concentric, keys, y0, y0 + ya, m, yb, nb, base, cap, count, npx,
+                  err);
         ya += m;
     }
     return rc < 0 ? rc : lost_spheres(gl, s, d, npx);

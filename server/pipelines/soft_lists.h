@@ -22,7 +22,9 @@
  * exceeds the cap keeps the samples that fit, in the order the store pass wrote them (the rest of
  * the row loses soft samples: wrong there), and the frame carries RND_FRAME_SOFT_TRUNCATED; so
  * does a Base-Model pixel where more than 32 spheres overlap (the spheres past 32 are left out
- * of that pixel). Never a silent wrong image, never a crash. */
+ * of that pixel), and a pixel past 2^31 / (the stripe's pixels) samples (2330 at 1280x720,
+ * 1165 Base spheres; the counts are 32-bit; the spheres past it are left out of that pixel).
+ * Never a silent wrong image, never a crash. */
 #pragma once
 #include <stdint.h>
 
