@@ -298,7 +298,8 @@ static void test_models_alike(void **state)
  *     at once but not for a row, so bands: the image equals the uncapped one (tolerance 1
  *     level: the sort of equal keys may differ) and flags stay 0;
  *   - Concentric on 60 spheres r = 2 at cap 1 MiB: a middle row alone needs more: flagged;
- *   - Base on the 60 spheres with the default cap: more than 32 overlap in a pixel: flagged. */
+ *   - Base on the 60 spheres with the default cap, after a larger frame: more than 32 overlap
+ *     in a pixel: flagged. */
 static void test_memory_cap(void **state)
 {
     (void)state;
@@ -330,6 +331,13 @@ static void test_memory_cap(void **state)
     assert_int_equal(b.flags & RND_FRAME_SOFT_TRUNCATED, RND_FRAME_SOFT_TRUNCATED);
     p.model = SP_MODEL_BASE;
     p.soft_frag_mib = 512;
+    /* a larger frame first: its buffers stay, and the flag must still be read where this
+     * frame's blend writes it */
+    rnd_camera big = cam;
+    big.width = 2 * W, big.height = 2 * H;
+    rnd_frame c2 = {0};
+    tu_render(g_ctx, id20, &big, &p, 0, &c2);
+    rnd_frame_free(&c2);
     tu_render(g_ctx, id60, &cam, &p, 0, &b);
     printf("memory cap: 60 spheres, base: flags %u\n", b.flags);
     assert_int_equal(b.flags & RND_FRAME_SOFT_TRUNCATED, RND_FRAME_SOFT_TRUNCATED);
