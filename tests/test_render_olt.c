@@ -26,20 +26,6 @@
 enum { W = 160, H = 160, NX = 70 };
 static const double OFF[3] = {500000.0, 4100000.0, 120.0};
 
-static rnd_ctx *g_ctx;
-
-static int setup(void **state)
-{
-    (void)state;
-    return tu_egl_setup(&g_ctx);
-}
-
-static int teardown(void **state)
-{
-    (void)state;
-    return tu_egl_teardown(&g_ctx);
-}
-
 /* A plane's worth of layers: layer j is an NX x NX grid at z[j], spacing 0.02, colour rgb[j],
  * field value F[j]; only the layers whose bit is in mask are put in the cloud. */
 typedef struct layer {
@@ -68,7 +54,7 @@ static uint32_t upload_layers(const layer *ls, int n, unsigned mask)
             }
     }
     tu_finish_cloud(&pc, OFF);
-    uint32_t id = tu_upload(g_ctx, &pc);
+    uint32_t id = tu_upload(tu_ctx, &pc);
     pc_prepared_free(&pc);
     return id;
 }
@@ -108,9 +94,9 @@ static void test_two_soft_layers(void **state)
     sp_params p;
     sp_params_defaults(&p);
     rnd_frame fr = {0}, fg = {0}, fb = {0};
-    tu_render(g_ctx, red, &cam, &p, 0, &fr);
-    tu_render(g_ctx, green, &cam, &p, 0, &fg);
-    tu_render(g_ctx, both, &cam, &p, 0, &fb);
+    tu_render(tu_ctx, red, &cam, &p, 0, &fr);
+    tu_render(tu_ctx, green, &cam, &p, 0, &fg);
+    tu_render(tu_ctx, both, &cam, &p, 0, &fb);
     double R = centre_mean(&fr, 0), G = centre_mean(&fg, 1);
     assert_true(R > 100 && G > 100);
     const float lambdas[3] = {0.1f, 0.5f, 0.0f};
@@ -118,9 +104,9 @@ static void test_two_soft_layers(void **state)
         p.t = 0.5f, p.lambda = lambdas[i];
         rnd_frame fo = {0}, fe = {0};
         p.pipeline = SP_PIPE_OLT;
-        tu_render(g_ctx, both, &cam, &p, 0, &fo);
+        tu_render(tu_ctx, both, &cam, &p, 0, &fo);
         p.pipeline = SP_PIPE_SOFT;
-        tu_render(g_ctx, both, &cam, &p, 0, &fe);
+        tu_render(tu_ctx, both, &cam, &p, 0, &fe);
         double or_ = centre_mean(&fo, 0), og = centre_mean(&fo, 1);
         double er = centre_mean(&fe, 0), eg = centre_mean(&fe, 1);
         double wr = p.lambda * R, wg = (1 - p.lambda) * G;
@@ -132,11 +118,11 @@ static void test_two_soft_layers(void **state)
     }
     p.pipeline = SP_PIPE_OLT, p.t = 1.0f, p.lambda = 0.5f;
     rnd_frame f1 = {0};
-    tu_render(g_ctx, both, &cam, &p, 0, &f1);
+    tu_render(tu_ctx, both, &cam, &p, 0, &f1);
     assert_memory_equal(f1.rgba8, fb.rgba8, (size_t)W * H * 4);
     rnd_frame_free(&f1);
     rnd_frame_free(&fr), rnd_frame_free(&fg), rnd_frame_free(&fb);
-    rnd_release(g_ctx, both), rnd_release(g_ctx, red), rnd_release(g_ctx, green);
+    rnd_release(tu_ctx, both), rnd_release(tu_ctx, red), rnd_release(tu_ctx, green);
 }
 
 /* A solid blue plane (F = 0) at z = 0.6 in front of the soft red plane at z = 0.3 and the green
@@ -152,16 +138,16 @@ static void test_solid_in_front(void **state)
     sp_params p;
     sp_params_defaults(&p);
     rnd_frame fb = {0}, fo = {0};
-    tu_render(g_ctx, blue, &cam, &p, 0, &fb);
+    tu_render(tu_ctx, blue, &cam, &p, 0, &fb);
     p.pipeline = SP_PIPE_OLT, p.t = 0.5f, p.lambda = 0.5f;
-    tu_render(g_ctx, all, &cam, &p, 0, &fo);
+    tu_render(tu_ctx, all, &cam, &p, 0, &fo);
     for (int c = 0; c < 3; c++) {
         double a = centre_mean(&fb, c), b = centre_mean(&fo, c);
         printf("solid in front, channel %d: splat of the plane %.2f, olt %.2f\n", c, a, b);
         assert_true(fabs(a - b) <= 1.0);
     }
     rnd_frame_free(&fb), rnd_frame_free(&fo);
-    rnd_release(g_ctx, all), rnd_release(g_ctx, blue);
+    rnd_release(tu_ctx, all), rnd_release(tu_ctx, blue);
 }
 
 int main(void)
@@ -170,5 +156,5 @@ int main(void)
         cmocka_unit_test(test_two_soft_layers),
         cmocka_unit_test(test_solid_in_front),
     };
-    return cmocka_run_group_tests(tests, setup, teardown);
+    return cmocka_run_group_tests(tests, tu_egl_group_setup, tu_egl_group_teardown);
 }

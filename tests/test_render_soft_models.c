@@ -34,20 +34,6 @@ enum { W = 161, H = 161 }; /* odd: the middle pixel's centre ray is the view axi
 static const double OFF[3] = {500000.0, 4100000.0, 120.0};
 static const double EZ = 6.0; /* camera at local (0, 0, EZ) looking at the origin */
 
-static rnd_ctx *g_ctx;
-
-static int setup(void **state)
-{
-    (void)state;
-    return tu_egl_setup(&g_ctx);
-}
-
-static int teardown(void **state)
-{
-    (void)state;
-    return tu_egl_teardown(&g_ctx);
-}
-
 typedef struct sphere {
     float x, y, z, r;
     float rgb[3];
@@ -65,7 +51,7 @@ static uint32_t upload_spheres(const sphere *s, int n, float median)
     }
     pc.radius_median = median;
     tu_finish_cloud(&pc, OFF);
-    uint32_t id = tu_upload(g_ctx, &pc);
+    uint32_t id = tu_upload(tu_ctx, &pc);
     pc_prepared_free(&pc);
     return id;
 }
@@ -123,7 +109,7 @@ static void test_base_one_sphere(void **state)
     rnd_camera cam = cam_z();
     sp_params p = base_params(SP_MODEL_BASE, 0.8f);
     rnd_frame f = {0};
-    tu_render(g_ctx, id, &cam, &p, 1, &f);
+    tu_render(tu_ctx, id, &cam, &p, 1, &f);
     assert_int_equal(f.flags, 0);
     float c[4];
     fpix(&f, W / 2, H / 2, c);
@@ -152,7 +138,7 @@ static void test_base_one_sphere(void **state)
     assert_true(n > 3000);
     assert_true(worst <= 0.01);
     rnd_frame_free(&f);
-    rnd_release(g_ctx, id);
+    rnd_release(tu_ctx, id);
 }
 
 /* Two spheres r = 1 overlapping: red at (-0.5, 0, 0.3), green at (0.5, 0, -0.3), lambda = 0.7,
@@ -170,7 +156,7 @@ static void test_base_two_spheres(void **state)
     const double lambda = 0.7;
     sp_params p = base_params(SP_MODEL_BASE, (float)lambda);
     rnd_frame f = {0};
-    tu_render(g_ctx, id, &cam, &p, 1, &f);
+    tu_render(tu_ctx, id, &cam, &p, 1, &f);
     double worst = 0;
     int n = 0, both = 0;
     for (int y = 0; y < H; y += 5)
@@ -227,7 +213,7 @@ static void test_base_two_spheres(void **state)
     assert_true(n > 200 && both > 50);
     assert_true(worst <= 0.002);
     rnd_frame_free(&f);
-    rnd_release(g_ctx, id);
+    rnd_release(tu_ctx, id);
 }
 
 static double mad8(const rnd_frame *a, const rnd_frame *b, int *covered)
@@ -274,11 +260,11 @@ static void test_models_alike(void **state)
     rnd_camera cam = cam_z();
     rnd_frame fb = {0}, fc = {0}, fe = {0};
     sp_params p = base_params(SP_MODEL_BASE, 0.5f);
-    tu_render(g_ctx, id, &cam, &p, 0, &fb);
+    tu_render(tu_ctx, id, &cam, &p, 0, &fb);
     p.model = SP_MODEL_CONCENTRIC;
-    tu_render(g_ctx, id, &cam, &p, 0, &fc);
+    tu_render(tu_ctx, id, &cam, &p, 0, &fc);
     p.model = SP_MODEL_EXPRESS;
-    tu_render(g_ctx, id, &cam, &p, 0, &fe);
+    tu_render(tu_ctx, id, &cam, &p, 0, &fe);
     int nc, ne;
     double dc = mad8(&fc, &fb, &nc), de = mad8(&fe, &fb, &ne);
     printf("random spheres: concentric vs base %.2f levels (%d px), express vs base %.2f (%d px)\n",
@@ -289,7 +275,7 @@ static void test_models_alike(void **state)
     assert_int_equal(fb.flags, 0);
     assert_int_equal(fc.flags, 0);
     rnd_frame_free(&fb), rnd_frame_free(&fc), rnd_frame_free(&fe);
-    rnd_release(g_ctx, id);
+    rnd_release(tu_ctx, id);
 }
 
 /* The memory cap (soft_frag_mib). 60 spheres r = 1 stacked along the view axis (every ray
@@ -313,9 +299,9 @@ static void test_memory_cap(void **state)
     rnd_camera cam = cam_z();
     sp_params p = base_params(SP_MODEL_CONCENTRIC, 0.1f);
     rnd_frame a = {0}, b = {0};
-    tu_render(g_ctx, id20, &cam, &p, 0, &a);
+    tu_render(tu_ctx, id20, &cam, &p, 0, &a);
     p.soft_frag_mib = 1;
-    tu_render(g_ctx, id20, &cam, &p, 0, &b);
+    tu_render(tu_ctx, id20, &cam, &p, 0, &b);
     int worst = 0;
     for (size_t i = 0; i < (size_t)W * H * 4; i++) {
         int d = abs(a.rgba8[i] - b.rgba8[i]);
@@ -326,7 +312,7 @@ static void test_memory_cap(void **state)
     assert_true(worst <= 1);
     assert_int_equal(a.flags, 0);
     assert_int_equal(b.flags, 0);
-    tu_render(g_ctx, id60, &cam, &p, 0, &b);
+    tu_render(tu_ctx, id60, &cam, &p, 0, &b);
     printf("memory cap: 60 spheres, concentric at 1 MiB: flags %u\n", b.flags);
     assert_int_equal(b.flags & RND_FRAME_SOFT_TRUNCATED, RND_FRAME_SOFT_TRUNCATED);
     p.model = SP_MODEL_BASE;
@@ -336,13 +322,13 @@ static void test_memory_cap(void **state)
     rnd_camera big = cam;
     big.width = 2 * W, big.height = 2 * H;
     rnd_frame c2 = {0};
-    tu_render(g_ctx, id20, &big, &p, 0, &c2);
+    tu_render(tu_ctx, id20, &big, &p, 0, &c2);
     rnd_frame_free(&c2);
-    tu_render(g_ctx, id60, &cam, &p, 0, &b);
+    tu_render(tu_ctx, id60, &cam, &p, 0, &b);
     printf("memory cap: 60 spheres, base: flags %u\n", b.flags);
     assert_int_equal(b.flags & RND_FRAME_SOFT_TRUNCATED, RND_FRAME_SOFT_TRUNCATED);
     rnd_frame_free(&a), rnd_frame_free(&b);
-    rnd_release(g_ctx, id20), rnd_release(g_ctx, id60);
+    rnd_release(tu_ctx, id20), rnd_release(tu_ctx, id60);
 }
 
 int main(void)
@@ -353,5 +339,5 @@ int main(void)
         cmocka_unit_test(test_models_alike),
         cmocka_unit_test(test_memory_cap),
     };
-    return cmocka_run_group_tests(tests, setup, teardown);
+    return cmocka_run_group_tests(tests, tu_egl_group_setup, tu_egl_group_teardown);
 }

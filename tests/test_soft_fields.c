@@ -30,20 +30,6 @@
 
 enum { S = 256 };
 
-static rnd_ctx *g_ctx;
-
-static int setup(void **state)
-{
-    (void)state;
-    return tu_egl_setup(&g_ctx);
-}
-
-static int teardown(void **state)
-{
-    (void)state;
-    return tu_egl_teardown(&g_ctx);
-}
-
 /* load_prepared: file name in tests/data (or a path) loaded and prepared. */
 static void load_prepared(const char *path, pc_prepared *pc)
 {
@@ -71,7 +57,7 @@ static uint32_t upload_solid(const pc_prepared *pc, const uint8_t *soft)
         j++;
     }
     tu_finish_cloud(&s, pc->offset);
-    uint32_t id = tu_upload(g_ctx, &s);
+    uint32_t id = tu_upload(tu_ctx, &s);
     pc_prepared_free(&s);
     return id;
 }
@@ -94,11 +80,11 @@ static void check_split(const char *what, const pc_prepared *pc, uint32_t id, sp
     sp_params ps;
     sp_params_defaults(&ps);
     rnd_frame ref = {0}, got = {0}, olt = {0};
-    tu_render(g_ctx, sid, cam, &ps, 0, &ref);
+    tu_render(tu_ctx, sid, cam, &ps, 0, &ref);
     p.pipeline = SP_PIPE_SOFT, p.lambda = 0.0f, p.l_m = 0.0f;
-    tu_render(g_ctx, id, cam, &p, 0, &got);
+    tu_render(tu_ctx, id, cam, &p, 0, &got);
     p.pipeline = SP_PIPE_OLT;
-    tu_render(g_ctx, id, cam, &p, 0, &olt);
+    tu_render(tu_ctx, id, cam, &p, 0, &olt);
     int worst = 0, ndiff = 0, nolt = 0;
     for (size_t i = 0; i < (size_t)S * S; i++) {
         int any = 0, anyo = 0;
@@ -115,7 +101,7 @@ static void check_split(const char *what, const pc_prepared *pc, uint32_t id, sp
     assert_true(worst <= 1 && ndiff <= S * S / 200);
     if (layered) assert_true(nolt > 100);
     rnd_frame_free(&ref), rnd_frame_free(&got), rnd_frame_free(&olt);
-    rnd_release(g_ctx, sid);
+    rnd_release(tu_ctx, sid);
 }
 
 /* The LAS sources on one upload: class (classes 3, 4, 5: low, medium and high vegetation),
@@ -130,7 +116,7 @@ static void test_las_sources(void **state)
     load_prepared(path, &pc);
     assert_true(pc.attrs & PC_ATTR_CLASS);
     assert_true(pc.attrs & PC_ATTR_INTENSITY);
-    uint32_t id = tu_upload(g_ctx, &pc);
+    uint32_t id = tu_upload(tu_ctx, &pc);
     rnd_camera cam;
     rnd_camera_frame(pc.bmin, pc.bmax, S, S, &cam);
     float *f = malloc(pc.n * sizeof *f);
@@ -170,16 +156,16 @@ static void test_las_sources(void **state)
     p.axis_b[2] = 0.0f, p.pipeline = SP_PIPE_SOFT;
     rnd_frame fr = {0};
     sd_err err = {0};
-    assert_true(rnd_render(g_ctx, (uint32_t)id, &cam, &p, 0, &fr, &err) < 0);
+    assert_true(rnd_render(tu_ctx, (uint32_t)id, &cam, &p, 0, &fr, &err) < 0);
     printf("degenerate axis: %s\n", err.msg);
     assert_non_null(strstr(err.msg, "same point"));
     p.field = SP_FIELD_QUALITY;
-    assert_true(rnd_render(g_ctx, (uint32_t)id, &cam, &p, 0, &fr, &err) < 0);
+    assert_true(rnd_render(tu_ctx, (uint32_t)id, &cam, &p, 0, &fr, &err) < 0);
     printf("quality on a LAS: %s\n", err.msg);
     assert_non_null(strstr(err.msg, "quality"));
     rnd_frame_free(&fr);
     free(f);
-    rnd_release(g_ctx, id);
+    rnd_release(tu_ctx, id);
     pc_prepared_free(&pc);
 }
 
@@ -216,7 +202,7 @@ static void test_ply_quality(void **state)
     tu_rm_rf(dir);
     assert_true(pc.attrs & PC_ATTR_SCALAR);
     assert_string_equal(pc.scalar_name, "quality");
-    uint32_t id = tu_upload(g_ctx, &pc);
+    uint32_t id = tu_upload(tu_ctx, &pc);
     rnd_camera cam;
     rnd_camera_frame(pc.bmin, pc.bmax, S, S, &cam);
     float *f = malloc(pc.n * sizeof *f);
@@ -234,13 +220,13 @@ static void test_ply_quality(void **state)
     p.field = SP_FIELD_CONFIDENCE, p.pipeline = SP_PIPE_SOFT;
     rnd_frame fr = {0};
     sd_err err = {0};
-    assert_true(rnd_render(g_ctx, id, &cam, &p, 0, &fr, &err) < 0);
+    assert_true(rnd_render(tu_ctx, id, &cam, &p, 0, &fr, &err) < 0);
     printf("confidence on a quality PLY: %s\n", err.msg);
     assert_non_null(strstr(err.msg, "'confidence'"));
     assert_non_null(strstr(err.msg, "quality"));
     rnd_frame_free(&fr);
     free(f);
-    rnd_release(g_ctx, id);
+    rnd_release(tu_ctx, id);
     pc_prepared_free(&pc);
 }
 
@@ -250,5 +236,5 @@ int main(void)
         cmocka_unit_test(test_las_sources),
         cmocka_unit_test(test_ply_quality),
     };
-    return cmocka_run_group_tests(tests, setup, teardown);
+    return cmocka_run_group_tests(tests, tu_egl_group_setup, tu_egl_group_teardown);
 }

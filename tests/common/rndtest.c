@@ -12,19 +12,23 @@
 #include <stdlib.h>
 #include <string.h>
 
-int tu_egl_setup(rnd_ctx **ctx)
+rnd_ctx *tu_ctx;
+
+int tu_egl_group_setup(void **state)
 {
+    (void)state;
     rnd_desc d = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS")};
     sd_err err = {0};
-    *ctx = rnd_create(&d, &err);
-    if (!*ctx) fprintf(stderr, "rnd_create: %s\n", err.msg);
-    return *ctx ? 0 : -1;
+    tu_ctx = rnd_create(&d, &err);
+    if (!tu_ctx) fprintf(stderr, "rnd_create: %s\n", err.msg);
+    return tu_ctx ? 0 : -1;
 }
 
-int tu_egl_teardown(rnd_ctx **ctx)
+int tu_egl_group_teardown(void **state)
 {
-    rnd_destroy(*ctx);
-    *ctx = NULL;
+    (void)state;
+    rnd_destroy(tu_ctx);
+    tu_ctx = NULL;
     return 0;
 }
 

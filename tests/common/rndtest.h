@@ -5,10 +5,12 @@
 
 #include "render.h"
 
-/* tu_egl_setup, tu_egl_teardown: cmocka group setup/teardown making and destroying an EGL
- * renderer (shaders from $SPLATD_SHADERS) in *ctx; setup prints the error and returns -1. */
-int tu_egl_setup(rnd_ctx **ctx);
-int tu_egl_teardown(rnd_ctx **ctx);
+/* tu_ctx: the EGL renderer (shaders from $SPLATD_SHADERS) of a test binary's group, made by
+ * tu_egl_group_setup (which prints the error and returns -1 when it cannot) and destroyed by
+ * tu_egl_group_teardown: pass both to cmocka_run_group_tests. */
+extern rnd_ctx *tu_ctx;
+int tu_egl_group_setup(void **state);
+int tu_egl_group_teardown(void **state);
 
 /* tu_upload: rnd_upload of pc; fails the test when it returns no id. */
 uint32_t tu_upload(rnd_ctx *r, const pc_prepared *pc);
