@@ -16,6 +16,7 @@
 layout(local_size_x = 32) in;
 
 layout(binding = T_POS) uniform samplerBuffer u_pos;
+layout(binding = T_NRM) uniform samplerBuffer u_nrm;
 layout(binding = T_RAD) uniform samplerBuffer u_rad;
 layout(binding = T_SRC) uniform usamplerBuffer u_src;
 layout(binding = T_SOFT_F) uniform usamplerBuffer u_f;
@@ -27,6 +28,7 @@ layout(std430, binding = B_SOFT_LIST) buffer List { uint list[]; };
 
 #include "lib_fetch.glsl"
 #include "lib_colormap.glsl"
+#include "lib_shade.glsl"
 
 uniform mat4 u_view, u_proj;
 uniform ivec2 u_size;
@@ -34,6 +36,7 @@ uniform float u_scale;
 uniform int u_color;
 uniform float u_znear, u_zfar;
 uniform float u_t, u_lm;
+uniform vec3 u_light;      // unit, eye space (splat's)
 uniform uint u_base, u_n;
 uniform int u_rev;
 uniform uint u_nblocks;
@@ -52,6 +55,8 @@ void main()
     float scale = u_scale, znear = u_znear, zfar = u_zfar, t = u_t, lm = u_lm;
     int color = u_color;
     uint n = u_n;
+    vec3 light = u_light;
+    bool persp = projm[3][3] == 0.0;
     float rscale = projm[1][1] * 0.5 * size.y;
     for (uint j = gl_GlobalInvocationID.x; j < n; j += stride) {
         uint i = texelFetch(u_idx, int(j)).x;
@@ -71,6 +76,15 @@ void main()
         else if (color == 4) col = vec3(clamp(uintBitsToFloat(src), 0.0, 1.0));
         else if (color == 3) col = vec3(1.0 - clamp((depth - znear) / (zfar - znear), 0.0, 1.0));
         else col = vec3(0.5, 0.5, 1.0);
+        if (color == 0 || color == 1 || color == 4) {
+            // Lambert shading as splat's resolve (the paper shades all points), from the
+            // point's normal turned towards the viewer
+            vec3 nn = mat3(view) * fetch3(u_nrm, i);
+            float nl2 = dot(nn, nn);
+            nn = nl2 > 0.0 ? nn * inversesqrt(nl2) : vec3(0.0, 0.0, 1.0);
+            if (dot(nn, persp ? e.xyz : vec3(0.0, 0.0, -1.0)) > 0.0) nn = -nn;
+            col *= shade(nn, light);
+        }
         proj[2u * j] = vec4(px, rpx, depth);
         proj[2u * j + 1u] = vec4(col, w);
     }

@@ -18,6 +18,8 @@
 //     length (eq. 14-18); running sums, no array.
 layout(local_size_x = 8, local_size_y = 8) in;
 
+layout(binding = T_POS) uniform samplerBuffer u_pos;
+layout(binding = T_NRM) uniform samplerBuffer u_nrm;
 layout(binding = T_RAD) uniform samplerBuffer u_rad;
 layout(binding = T_SRC) uniform usamplerBuffer u_src;
 layout(std430, binding = B_SOFT_CELLS) buffer Counts { uint offs[]; };
@@ -25,6 +27,8 @@ layout(std430, binding = B_SOFT_FILL) buffer Fill { uint fill[]; };
 layout(std430, binding = B_SOFT_FRAGS) buffer Frags { vec4 frags[]; };
 layout(std430, binding = B_SOFT_LAYER) buffer Layer { vec4 layer[]; };
 #include "lib_colormap.glsl"
+#include "lib_fetch.glsl"
+#include "lib_shade.glsl"
 
 uniform ivec2 u_size;
 uniform ivec2 u_rows;      // rows of this pass (the layer's rows)
@@ -33,15 +37,27 @@ uniform uint u_base, u_cap, u_npx;
 uniform float u_k;         // lambda / u^2
 uniform float u_scale;
 uniform int u_color;
+uniform mat4 u_view, u_proj;
+uniform vec3 u_light;      // unit, eye space (splat's)
 
 #define MAXOPEN 32
 
+// The colour of point i, Lambert-shaded as splat's resolve (the paper shades all points) from
+// its normal turned towards the viewer.
 vec3 colour_of(uint i)
 {
-    if (u_color == 0) return unpackUnorm4x8(texelFetch(u_src, int(i)).x).rgb;
-    if (u_color == 1) return colormap(uintBitsToFloat(texelFetch(u_src, int(i)).x));
-    if (u_color == 4) return vec3(clamp(uintBitsToFloat(texelFetch(u_src, int(i)).x), 0.0, 1.0));
-    return vec3(1.0);
+    vec3 c;
+    if (u_color == 0) c = unpackUnorm4x8(texelFetch(u_src, int(i)).x).rgb;
+    else if (u_color == 1) c = colormap(uintBitsToFloat(texelFetch(u_src, int(i)).x));
+    else if (u_color == 4) c = vec3(clamp(uintBitsToFloat(texelFetch(u_src, int(i)).x), 0.0, 1.0));
+    else return vec3(1.0);
+    mat3 v = mat3(u_view);
+    vec3 n = v * fetch3(u_nrm, i);
+    float nl2 = dot(n, n);
+    n = nl2 > 0.0 ? n * inversesqrt(nl2) : vec3(0.0, 0.0, 1.0);
+    vec3 e = (u_view * vec4(fetch3(u_pos, i), 1.0)).xyz;
+    if (dot(n, u_proj[3][3] == 0.0 ? e : vec3(0.0, 0.0, -1.0)) > 0.0) n = -n;
+    return c * shade(n, u_light);
 }
 
 float key(uint j) { return abs(frags[j].x); }

@@ -230,6 +230,9 @@ static void test_disc_opacity_eq19(void **state)
     sp_params p;
     sp_params_defaults(&p);
     p.pipeline = SP_PIPE_SOFT, p.t = 0.5f, p.lambda = 0.7f;
+    /* the light along the view axis: the shading of the disc (its normal faces the camera) is
+     * exactly 1, so the colour is eq. 19's opacity alone */
+    p.light[0] = 0.0f, p.light[1] = 0.0f, p.light[2] = 1.0f;
     for (int ord = 0; ord < 2; ord++) {
     p.order = ord;
     rnd_frame f = {0};
@@ -279,6 +282,7 @@ static void test_two_layers_order(void **state)
     sp_params p;
     sp_params_defaults(&p);
     p.pipeline = SP_PIPE_SOFT, p.t = 0.5f, p.lambda = 0.8f;
+    p.light[0] = 0.0f, p.light[1] = 0.0f, p.light[2] = 1.0f; /* shading 1 (test_disc_opacity_eq19) */
     for (int side = 0; side < 4; side++) {
         p.order = side / 2; /* axis, then tile */
         double ez = side % 2 == 0 ? 4.0 : -4.0;

@@ -92,6 +92,9 @@ static sp_params base_params(int model, float lambda)
     sp_params_defaults(&p);
     p.pipeline = SP_PIPE_SOFT, p.model = model, p.t = 0.5f, p.lambda = lambda;
     p.background[0] = p.background[1] = p.background[2] = 0.0f;
+    /* the light along the view axis: the spheres' normals (+z) face it, so the shading is
+     * exactly 1 and the colours are the model's alone */
+    p.light[0] = 0.0f, p.light[1] = 0.0f, p.light[2] = 1.0f;
     return p;
 }
 

@@ -16,8 +16,10 @@
  *
  * The soft points (Express-Model, eq. 19). Each is a view-facing disc of the splat radius times
  * splat_scale, drawn as one GL point sprite (soft.vert/.frag) whose fragments get the opacity
- * Phi = lambda (cos(pi d / r) + 1) / 2 at distance d from the centre, composited with the
- * premultiplied "over" (ONE, ONE_MINUS_SRC_ALPHA) after the splat resolve of each stripe,
+ * Phi = lambda (cos(pi d / r) + 1) / 2 at distance d from the centre, its colour Lambert-shaded
+ * from the point's normal as splat's resolve does (lib_shade.glsl; the paper shades all points),
+ * composited with the premultiplied "over" (ONE, ONE_MINUS_SRC_ALPHA) after the splat resolve of
+ * each stripe,
  * tested against the solid surface's depth (splat__keys_texture) and writing no depth.
  *
  * Order: the paper's pre-sorted index arrays. At attach, the points of every buffer set are
@@ -481,6 +483,11 @@ static void set_view_uniforms(const gl_api *gl, GLuint prog, const rnd_draw *d, 
     if ((l = gl_uniform(gl, prog, "u_znear")) >= 0) gl->Uniform1f(l, v->znear);
     if ((l = gl_uniform(gl, prog, "u_zfar")) >= 0) gl->Uniform1f(l, v->zfar);
     if ((l = gl_uniform(gl, prog, "u_t")) >= 0) gl->Uniform1f(l, p->t);
+    if ((l = gl_uniform(gl, prog, "u_light")) >= 0) {
+        float light[3];
+        soft_light(p, light);
+        gl->Uniform3fv(l, 1, light);
+    }
     if ((l = gl_uniform(gl, prog, "u_lm")) >= 0) gl->Uniform1f(l, p->l_m);
     if ((l = gl_uniform(gl, prog, "u_rev")) >= 0) gl->Uniform1i(l, o->rev);
     if ((l = gl_uniform(gl, prog, "u_base")) >= 0)

@@ -11,6 +11,13 @@
 enum { L_COUNT = 0, L_STORE, L_SCAN, L_RESOLVE, L_NPROG };
 enum { FRAG_BYTES = 16 };
 
+void soft_light(const sp_params *p, float light[3])
+{
+    float ll = sqrtf(p->light[0] * p->light[0] + p->light[1] * p->light[1] +
+                     p->light[2] * p->light[2]);
+    for (int i = 0; i < 3; i++) light[i] = ll > 0.0f ? p->light[i] / ll : (i == 2 ? 1.0f : 0.0f);
+}
+
 void soft_lists_kappa(float k[65])
 {
     enum { RINGS = 1000 };
@@ -173,6 +180,11 @@ static int band(rnd_kit *k, soft_lists *s, const rnd_draw *d, uint32_t nsoft, in
     gl->Uniform1f(U(gl, pb, "u_k"), p->lambda / (unit * unit));
     gl->Uniform1f(U(gl, pb, "u_scale"), p->splat_scale);
     gl->Uniform1i(U(gl, pb, "u_color"), p->color);
+    float light[3];
+    soft_light(p, light);
+    gl->Uniform3fv(U(gl, pb, "u_light"), 1, light);
+    gl->UniformMatrix4fv(U(gl, pb, "u_view"), 1, GL_FALSE, v->view);
+    gl->UniformMatrix4fv(U(gl, pb, "u_proj"), 1, GL_FALSE, v->proj);
     gl->DispatchCompute((GLuint)((v->width + 7) / 8), (GLuint)((m + 7) / 8), 1);
     gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
 

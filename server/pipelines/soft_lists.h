@@ -47,6 +47,9 @@ typedef struct soft_lists {
  * shells, by the midpoint rule over 1000 rings. */
 void soft_lists_kappa(float k[65]);
 
+/* soft_light: the unit light direction of p (eye space, +z when p->light is zero): splat's. */
+void soft_light(const sp_params *p, float light[3]);
+
 int soft_lists_create(rnd_kit *k, soft_lists *s, sd_err *err);
 void soft_lists_destroy(rnd_kit *k, soft_lists *s);
 
