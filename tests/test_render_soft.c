@@ -518,8 +518,13 @@ static void test_tile_matches_axis(void **state)
     sp_params p;
     sp_params_defaults(&p);
     p.pipeline = SP_PIPE_SOFT, p.t = 0.4f, p.lambda = 0.5f, p.l_m = 0.6f;
-    rnd_frame a = {0}, b = {0};
+    rnd_frame a = {0}, b = {0}, c = {0};
+    p.order = SP_ORDER_AXIS;
     tu_render(tu_ctx, id, &cam, &p, 0, &a);
+    p.order = SP_ORDER_AUTO; /* few soft points: auto is axis, exactly */
+    tu_render(tu_ctx, id, &cam, &p, 0, &c);
+    assert_memory_equal(a.rgba8, c.rgba8, (size_t)W * H * 4);
+    rnd_frame_free(&c);
     p.order = SP_ORDER_TILE;
     tu_render(tu_ctx, id, &cam, &p, 0, &b);
     int n, m = max_diff(&a, &b, &n), cov = 0;
@@ -580,18 +585,20 @@ static void test_buffer_sets(void **state)
 }
 
 /* More soft discs than one dispatch of the projection covers (4096 groups of 32 = 131072): a
- * 420 x 420 plane of soft points (176400, F = 1) facing the camera, lambda = 0.5, both orders.
+ * 460 x 460 plane of soft points (211600, F = 1) facing the camera, lambda = 0.5, both orders.
  * Every pixel inside the plane's screen square must be covered (not the background): the
  * projection walks all discs (before the fix, the discs past 131072 in the sorted order were
  * left unprojected and the plane had a hole at one end). Tolerance: none of the pixels inside
- * the square, 2 pixels in from its edges, is background. */
+ * the square, 2 pixels in from its edges, is background. With more than 200000 soft points,
+ * order=auto is the tile compositor on a software renderer (the image equals order=tile's
+ * exactly) and the sprites on a GPU. */
 static void test_many_soft_points(void **state)
 {
     (void)state;
-    enum { NX = 420 };
+    enum { NX = 460 };
     pc_prepared pc;
     tu_new_cloud(&pc, (uint64_t)NX * NX, 0);
-    const float h = 0.005f;
+    const float h = 0.0045f; /* the plane stays inside the frame (90 of 96 px half width) */
     for (int j = 0; j < NX; j++)
         for (int i = 0; i < NX; i++) {
             uint64_t k = (uint64_t)j * NX + i;
@@ -609,10 +616,18 @@ static void test_many_soft_points(void **state)
     p.pipeline = SP_PIPE_SOFT, p.t = 0.5f, p.lambda = 0.5f;
     double half = 0.5 * (NX - 1) * h, px = disc_px(half, 3.0);
     int x0 = (int)ceil(0.5 * W - px) + 2, x1 = (int)floor(0.5 * W + px) - 2;
+    assert_true(x0 >= 0 && x1 < W); /* the square is inside the frame */
+    const char *rs = rnd_renderer_string(tu_ctx);
+    int software = strstr(rs, "llvmpipe") || strstr(rs, "softpipe") || strstr(rs, "swrast");
+    rnd_frame same = {0};
+    p.order = SP_ORDER_AUTO;
+    tu_render(tu_ctx, id, &cam, &p, 0, &same);
     for (int ord = 0; ord < 2; ord++) {
         p.order = ord;
         rnd_frame f = {0};
         tu_render(tu_ctx, id, &cam, &p, 0, &f);
+        if (ord == (software ? SP_ORDER_TILE : SP_ORDER_AXIS))
+            assert_memory_equal(f.rgba8, same.rgba8, (size_t)W * H * 4);
         int empty = 0, n = 0;
         for (int y = x0; y <= x1; y++)
             for (int x = x0; x <= x1; x++, n++) empty += pix(&f, x, y)[0] == 0;
@@ -622,6 +637,7 @@ static void test_many_soft_points(void **state)
         assert_int_equal(empty, 0);
         rnd_frame_free(&f);
     }
+    rnd_frame_free(&same);
     rnd_release(tu_ctx, id);
 }
 
