@@ -235,6 +235,13 @@ int spc_set_params(spc_client *c, const char *const *kvs, int n)
         if (id < 0) return id;
         mask |= 1ull << id;
     }
+    /* a text form may set more than its own parameter (field=class:3,4,5 sets classes too) */
+    for (int id = 0; id < SP_PARAM_COUNT; id++) {
+        char a[160], b[160];
+        sp_param_get_text(&p, id, a, sizeof a);
+        sp_param_get_text(&c->params, id, b, sizeof b);
+        if (strcmp(a, b)) mask |= 1ull << id;
+    }
     if (!mask) return 0;
     return send_params(c, &p, mask);
 }

@@ -72,6 +72,29 @@ static int parse_double(const char *s, double *out)
     return 0;
 }
 
+/* set_class_list: the text form "class:3,4,5" of field: field=class and classes = the bits of
+ * the listed classes (each 0-31). Returns 0, or -1 with err. */
+static int set_class_list(sp_params *p, const char *list, char *err, size_t errlen)
+{
+    int64_t mask = 0;
+    const char *s = list;
+    do {
+        char *end;
+        errno = 0;
+        long c = strtol(s, &end, 10);
+        if (end == s || errno || c < 0 || c > 31 || (*end && *end != ',')) {
+            snprintf(err, errlen, "parameter 'field': 'class:%s' is not a list of LAS classes "
+                     "0-31 like class:3,4,5", list);
+            return -1;
+        }
+        mask |= (int64_t)1 << c;
+        s = *end ? end + 1 : end;
+    } while (*s);
+    p->field = SP_FIELD_CLASS;
+    p->classes = mask;
+    return 0;
+}
+
 int sp_param_set_text(sp_params *p, const char *name, const char *value, char *err, size_t errlen)
 {
     int id = sp_param_find(name);
@@ -79,6 +102,7 @@ int sp_param_set_text(sp_params *p, const char *name, const char *value, char *e
         snprintf(err, errlen, "unknown parameter '%s'", name);
         return -1;
     }
+    if (id == SP_FIELD && !strncmp(value, "class:", 6)) return set_class_list(p, value + 6, err, errlen);
     const sp_param_info *in = &sp_param_table[id];
     void *f = field_ptr(p, id);
     switch (in->type) {

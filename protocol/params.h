@@ -30,12 +30,16 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(SHADING,      "shading",      SP_T_ENUM,  shading,      0,    0,        "lambert", "lambert|edl") \
     X(EDL_STRENGTH, "edl_strength", SP_T_FLOAT, edl_strength, 0,    100,      "1",      NULL)     \
     X(EDL_RADIUS,   "edl_radius",   SP_T_FLOAT, edl_radius,   0.5,  16,       "1",      NULL)     \
-    X(MODEL,        "model",        SP_T_ENUM,  model,        0,    0,        "express", "express") \
+    X(MODEL,        "model",        SP_T_ENUM,  model,        0,    0,        "express", "express|base|concentric") \
     X(LAMBDA,       "lambda",       SP_T_FLOAT, lambda,       0,    1,        "0.5",    NULL)     \
     X(T,            "t",            SP_T_FLOAT, t,            0,    1,        "0.5",    NULL)     \
     X(L_M,          "l_m",          SP_T_FLOAT, l_m,          0,    1,        "0",      NULL)     \
-    X(FIELD,        "field",        SP_T_ENUM,  field,        0,    0,        "uncertainty", "uncertainty|height|intensity") \
-    X(ORDER,        "order",        SP_T_ENUM,  order,        0,    0,        "axis",   "axis|tile")
+    X(FIELD,        "field",        SP_T_ENUM,  field,        0,    0,        "uncertainty", "uncertainty|height|intensity|scalar|quality|confidence|class|axis-distance") \
+    X(ORDER,        "order",        SP_T_ENUM,  order,        0,    0,        "auto",   "axis|tile|auto") \
+    X(CLASSES,      "classes",      SP_T_INT,   classes,      0,    4294967295, "0",    NULL)     \
+    X(AXIS_A,       "axis_a",       SP_T_VEC3,  axis_a,       -1e9, 1e9,      "0,0,0",  NULL)     \
+    X(AXIS_B,       "axis_b",       SP_T_VEC3,  axis_b,       -1e9, 1e9,      "0,0,1",  NULL)     \
+    X(SOFT_FRAG_MIB, "soft_frag_mib", SP_T_INT, soft_frag_mib, 1,   65536,    "512",    NULL)
 
 enum {
 #define SP_ID_(id, name, type, field, lo, hi, def, vals) SP_##id,
@@ -58,18 +62,34 @@ enum { SP_SUB_444 = 0, SP_SUB_422, SP_SUB_420, SP_SUB_GRAY };
  * edl = that, times Eye-Dome Lighting over the frame's eye depth (render.c, edl.c), for every
  * pipeline: the depth cue that needs no normals at all. */
 enum { SP_SHADING_LAMBERT = 0, SP_SHADING_EDL };
-/* model: the Soft Transparency density model; only the Express-Model (eq. 19) is implemented,
- * so the Base- and Concentric-Models are refused as unknown enum values. */
-enum { SP_MODEL_EXPRESS = 0 };
-/* field: the scalar F of the solid/soft split, each in [0, 1]: uncertainty = prep's eq. 21
- * (already normalised by the cloud's 99th percentile and clamped); height = (z - zmin) / (zmax -
- * zmin) over the cloud's local bounds; intensity = the file's intensity normalised by its range
- * at upload (render.c). */
-enum { SP_FIELD_UNCERTAINTY = 0, SP_FIELD_HEIGHT, SP_FIELD_INTENSITY };
+/* model: the Soft Transparency density model: express = view-facing discs with eq. 19 (the
+ * default, pipe_soft.c); base = spheres with the exact density integral (eq. 4-12); concentric =
+ * N concentric spheres of constant density (eq. 13-18); the last two through per-pixel fragment
+ * lists (soft_lists.h). */
+enum { SP_MODEL_EXPRESS = 0, SP_MODEL_BASE, SP_MODEL_CONCENTRIC };
+/* field: the scalar F of the solid/soft split, each in [0, 1] (soft_field.c computes them):
+ *   uncertainty   prep's eq. 21, normalised by the cloud's 99th percentile and clamped;
+ *   height        (z - zmin) / (zmax - zmin) over the cloud's bounds;
+ *   intensity     (I - Imin) / (Imax - Imin) over the cloud (render.c, at upload);
+ *   scalar        the file's scalar property (PLY: quality, else confidence, else the first
+ *                 scalar_*), (s - smin) / (smax - smin) over the cloud;
+ *   quality, confidence  that property when it has this name, 1 - the normalised value (low
+ *                 quality or confidence is soft); refused naming the property when not;
+ *   class         1 for LAS classes in the bit mask `classes` (bit c: class c, 0-31), else 0;
+ *                 the text form field=class:3,4,5 (sp_param_set_text) sets both parameters;
+ *   axis-distance the distance to the line through axis_a and axis_b divided by the largest
+ *                 such distance of any point of the cloud. */
+enum {
+    SP_FIELD_UNCERTAINTY = 0, SP_FIELD_HEIGHT, SP_FIELD_INTENSITY, SP_FIELD_SCALAR,
+    SP_FIELD_QUALITY, SP_FIELD_CONFIDENCE, SP_FIELD_CLASS, SP_FIELD_AXIS
+};
 /* order: both composite the soft discs back to front in the order of the axis-sorted index
  * arrays (pipe_soft.c); axis = as GL point sprites blended in primitive order, tile = a compute
- * compositor that bins them into 16x16 pixel tiles keeping that order and blends per pixel. */
-enum { SP_ORDER_AXIS = 0, SP_ORDER_TILE };
+ * compositor that bins them into 8x8 pixel tiles keeping that order and blends per pixel;
+ * auto = tile on a software renderer for clouds with more than SOFT_AUTO_TILE soft points
+ * (pipe_soft.c: there its compute passes use every core, the sprites' front end one), axis
+ * otherwise. */
+enum { SP_ORDER_AXIS = 0, SP_ORDER_TILE, SP_ORDER_AUTO };
 
 typedef struct sp_params {
     int32_t pipeline;
@@ -89,12 +109,16 @@ typedef struct sp_params {
     int32_t shading;        /* SP_SHADING_* */
     float edl_strength;     /* EDL: 0 leaves the frame unchanged */
     float edl_radius;       /* EDL: neighbour distance in pixels */
-    int32_t model;          /* soft: SP_MODEL_* (only the Express-Model exists) */
+    int32_t model;          /* soft: SP_MODEL_* */
     float lambda;           /* soft, olt: opacity scale lambda (Soft Transparency eq. 19) */
     float t;                /* soft, olt: points with field value F <= t are solid */
     float l_m;              /* soft: transparency modulation range (eq. 22); <= t: off */
     int32_t field;          /* soft, olt: SP_FIELD_*, the source of F */
     int32_t order;          /* soft: SP_ORDER_*, how the soft discs are composited */
+    int64_t classes;        /* soft, olt with field=class: bit c makes LAS class c soft */
+    float axis_a[3];        /* soft, olt with field=axis-distance: two points of the axis, */
+    float axis_b[3];        /*   file coordinates minus the cloud's bounding-box centre */
+    int64_t soft_frag_mib;  /* soft base/concentric: fragment memory cap, MiB (soft_lists.h) */
 } sp_params;
 
 typedef struct sp_param_info {

@@ -11,7 +11,8 @@
     X(POINTS, points)       \
     X(SPLAT, splat)         \
     X(KAWATA, kawata)       \
-    X(SOFT, soft)
+    X(SOFT, soft)           \
+    X(OLT, olt)
 
 enum {
 #define SP_PIPE_ID_(id, name) SP_PIPE_##id,

@@ -340,7 +340,7 @@ typedef struct proto_frame {          /* FRAME, server -> client */
     uint32_t camera_seq;                /* sequence of the CAMERA it renders, 0 = default camera */
     uint8_t pipeline;                   /* params.h pipeline index */
     uint8_t format;                     /* params.h format index: SP_FMT_* */
-    uint16_t flags;                     /* reserved, 0 */
+    uint16_t flags;                     /* bit 0: soft samples dropped (PROTOCOL.md) */
     uint32_t width, height;             /* pixels */
     uint64_t render_us, readback_us, encode_us; /* microseconds */
     uint64_t points_drawn;

@@ -8,6 +8,9 @@
 // radius 0 and is moved outside the clip volume.
 
 layout(binding = T_SOFT_PROJ) uniform samplerBuffer u_projt; // RGBA32F, 2 texels a disc
+layout(binding = T_SOFT_IDX) uniform usamplerBuffer u_idx;    // the axis order (soft_bin.comp)
+uniform uint u_base, u_n;
+uniform int u_rev;
 
 uniform ivec2 u_size;      // frame width, height
 uniform float u_maxsize;   // the largest point size the GL allows
@@ -19,7 +22,8 @@ flat out float v_w;        // W(F) of eq. 22, 1 when the modulation is off
 
 void main()
 {
-    int k = gl_VertexID;
+    uint kk = uint(gl_VertexID);
+    int k = int(texelFetch(u_idx, int(u_base + (u_rev != 0 ? u_n - 1u - kk : kk))).x);
     vec4 g = texelFetch(u_projt, 2 * k), cw = texelFetch(u_projt, 2 * k + 1);
     v_disc = g.xyz;
     v_depth = g.w;

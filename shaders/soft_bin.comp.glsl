@@ -1,20 +1,22 @@
 #version 430
 #include "lib_bindings.glsl"
 // soft_bin.comp — the soft compositor's binning (pipe_soft.c), order-preserving without a sort.
-//   PASS 0  one invocation per soft point in back-to-front order k (the sorted index array of
-//           the axis nearest the view direction, read forwards or backwards): projects it
-//           (centre and radius in pixels, eye depth, colour, W of eq. 22) into the draw-order
-//           array proj, which order=axis's sprites (soft.vert) and the passes below read.
+//   PASS 0  one invocation per soft point j, in point order: projects it (centre and radius in
+//           pixels, eye depth, colour, W of eq. 22) into proj[2 j], proj[2 j + 1]. The
+//           back-to-front order is the index array of the axis nearest the view direction
+//           (u_base), read forwards or backwards: the k-th disc is proj of j = idx[u_base + k]
+//           (order=axis's sprites, soft.vert, and the passes below read them so).
 // The ordered points are cut into u_nblocks consecutive blocks, one invocation each, which walks
 // its block serially, so within a block the order is kept.
 //   PASS 1  counts per (tile, block) cell the points whose disc touches the tile's pixel
 //           centres; each cell belongs to one invocation (no atomics).
 //   PASS 3  (after soft_scan.comp turned the counts into tile-major offsets) writes each
-//           point's draw-order number into the tile lists at its cell's offset, incrementing it.
+//           point's number j into the tile lists at its cell's offset, incrementing it.
 // A tile's list is then its cells' ranges in block order, each in point order: back to front.
 layout(local_size_x = 32) in;
 
 layout(binding = T_POS) uniform samplerBuffer u_pos;
+layout(binding = T_NRM) uniform samplerBuffer u_nrm;
 layout(binding = T_RAD) uniform samplerBuffer u_rad;
 layout(binding = T_SRC) uniform usamplerBuffer u_src;
 layout(binding = T_SOFT_F) uniform usamplerBuffer u_f;
@@ -26,15 +28,15 @@ layout(std430, binding = B_SOFT_LIST) buffer List { uint list[]; };
 
 #include "lib_fetch.glsl"
 #include "lib_colormap.glsl"
+#include "lib_shade.glsl"
 
 uniform mat4 u_view, u_proj;
 uniform ivec2 u_size;
 uniform float u_scale;
 uniform int u_color;
 uniform float u_znear, u_zfar;
-uniform int u_field;
-uniform vec2 u_zrange;
 uniform float u_t, u_lm;
+uniform vec3 u_light;      // unit, eye space (splat's)
 uniform uint u_base, u_n;
 uniform int u_rev;
 uniform uint u_nblocks;
@@ -43,29 +45,48 @@ uniform int u_tile, u_ntx, u_nty;
 void main()
 {
 #if PASS == 0
-    uint k = gl_GlobalInvocationID.x;
-    if (k >= u_n) return;
-    {
-        uint i = texelFetch(u_idx, int(u_base + (u_rev != 0 ? u_n - 1u - k : k))).x;
+    // a grid of at most 4096 groups (pipe_soft.c): each invocation takes every stride-th disc
+    uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+    // soft point j in point order: sequential reads and writes (proj[2 j], proj[2 j + 1]).
+    // The uniforms are read once into locals: llvmpipe reloads a uniform at every use inside a
+    // loop (see splat_raster.comp).
+    mat4 view = u_view, projm = u_proj;
+    vec2 size = vec2(u_size);
+    float scale = u_scale, znear = u_znear, zfar = u_zfar, t = u_t, lm = u_lm;
+    int color = u_color;
+    uint n = u_n;
+    vec3 light = u_light;
+    bool persp = projm[3][3] == 0.0;
+    float rscale = projm[1][1] * 0.5 * size.y;
+    for (uint j = gl_GlobalInvocationID.x; j < n; j += stride) {
+        uint i = texelFetch(u_idx, int(j)).x;
         vec3 p = fetch3(u_pos, i);
-        vec4 e = u_view * vec4(p, 1.0);
+        vec4 e = view * vec4(p, 1.0);
         float depth = -e.z;
-        float r = texelFetch(u_rad, int(i)).x * u_scale;
-        vec4 c = u_proj * e;
-        float rpx = depth > u_znear ? r * u_proj[1][1] * 0.5 * float(u_size.y) / depth : 0.0;
-        vec2 px = depth > u_znear ? (c.xy / c.w * 0.5 + 0.5) * vec2(u_size) : vec2(-1e9);
-        float f;
-        if (u_field == 1) f = clamp((p.z - u_zrange.x) * u_zrange.y, 0.0, 1.0);
-        else f = uintBitsToFloat(texelFetch(u_f, int(i)).x);
-        float w = u_lm > u_t ? clamp((f - u_t) / (u_lm - u_t), 0.0, 1.0) : 1.0;
+        float r = texelFetch(u_rad, int(i)).x * scale;
+        vec4 c = projm * e;
+        float rpx = depth > znear ? r * rscale / depth : 0.0;
+        vec2 px = depth > znear ? (c.xy / c.w * 0.5 + 0.5) * size : vec2(-1e9);
+        float f = uintBitsToFloat(texelFetch(u_f, int(i)).x);
+        float w = lm > t ? clamp((f - t) / (lm - t), 0.0, 1.0) : 1.0;
         vec3 col;
-        if (u_color == 0) col = unpackUnorm4x8(texelFetch(u_src, int(i)).x).rgb;
-        else if (u_color == 1) col = colormap(uintBitsToFloat(texelFetch(u_src, int(i)).x));
-        else if (u_color == 4) col = vec3(clamp(uintBitsToFloat(texelFetch(u_src, int(i)).x), 0.0, 1.0));
-        else if (u_color == 3) col = vec3(1.0 - clamp((depth - u_znear) / (u_zfar - u_znear), 0.0, 1.0));
+        uint src = texelFetch(u_src, int(i)).x;
+        if (color == 0) col = unpackUnorm4x8(src).rgb;
+        else if (color == 1) col = colormap(uintBitsToFloat(src));
+        else if (color == 4) col = vec3(clamp(uintBitsToFloat(src), 0.0, 1.0));
+        else if (color == 3) col = vec3(1.0 - clamp((depth - znear) / (zfar - znear), 0.0, 1.0));
         else col = vec3(0.5, 0.5, 1.0);
-        proj[2u * k] = vec4(px, rpx, depth);
-        proj[2u * k + 1u] = vec4(col, w);
+        if (color == 0 || color == 1 || color == 4) {
+            // Lambert shading as splat's resolve (the paper shades all points), from the
+            // point's normal turned towards the viewer
+            vec3 nn = mat3(view) * fetch3(u_nrm, i);
+            float nl2 = dot(nn, nn);
+            nn = nl2 > 0.0 ? nn * inversesqrt(nl2) : vec3(0.0, 0.0, 1.0);
+            if (dot(nn, persp ? e.xyz : vec3(0.0, 0.0, -1.0)) > 0.0) nn = -nn;
+            col *= shade(nn, light);
+        }
+        proj[2u * j] = vec4(px, rpx, depth);
+        proj[2u * j + 1u] = vec4(col, w);
     }
 #else
     uint b = gl_GlobalInvocationID.x;
@@ -73,7 +94,8 @@ void main()
     uint per = (u_n + u_nblocks - 1u) / u_nblocks;
     uint k0 = min(u_n, b * per), k1 = min(u_n, k0 + per);
     for (uint k = k0; k < k1; k++) {
-        vec4 q = proj[2u * k];
+        uint j = texelFetch(u_idx, int(u_base + (u_rev != 0 ? u_n - 1u - k : k))).x;
+        vec4 q = proj[2u * j];
         vec2 px = q.xy;
         float rpx = q.z;
         if (!(rpx > 0.0)) continue;
@@ -87,7 +109,7 @@ void main()
 #if PASS == 1
                 cells[cell] += 1u;
 #else
-                list[cells[cell]] = k;
+                list[cells[cell]] = j;
                 cells[cell] += 1u;
 #endif
             }

@@ -6,7 +6,7 @@
 // (premultiplied colour, alpha), starting from nothing: L = Phi c + (1 - Phi) L. Eq. 19 and 22
 // as in soft.frag.glsl; discs at or behind the solid surface (the splat keys) are skipped. L is
 // stored per pixel of the stripe; soft_resolve.frag puts it over the target in one blend.
-layout(local_size_x = 16, local_size_y = 16) in;
+layout(local_size_x = 8, local_size_y = 8) in;
 
 layout(binding = T_SOFT_PROJ) uniform samplerBuffer u_projt;   // RGBA32F, 2 texels a point
 layout(binding = T_SOFT_LIST) uniform usamplerBuffer u_list;   // R32UI
@@ -24,8 +24,8 @@ uniform int u_ntx, u_ty0;
 
 void main()
 {
-    ivec2 q = ivec2(gl_WorkGroupID.x * 16u + gl_LocalInvocationID.x,
-                    (uint(u_ty0) + gl_WorkGroupID.y) * 16u + gl_LocalInvocationID.y);
+    ivec2 q = ivec2(gl_WorkGroupID.x * 8u + gl_LocalInvocationID.x,
+                    (uint(u_ty0) + gl_WorkGroupID.y) * 8u + gl_LocalInvocationID.y);
     bool inside = q.x < u_size.x && q.y >= u_rows.x && q.y < u_rows.x + u_rows.y;
     int tile = (u_ty0 + int(gl_WorkGroupID.y)) * u_ntx + int(gl_WorkGroupID.x);
     uint last = uint(tile + 1) * u_nblocks - 1u;

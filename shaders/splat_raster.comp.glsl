@@ -61,23 +61,6 @@ layout(binding = T_RAD) uniform samplerBuffer u_rad;   // R32F
 layout(binding = T_SRC) uniform usamplerBuffer u_src;  // R32UI: rgba8 (u_color 0) or float bits of field/intensity
 #include "lib_fetch.glsl"
 
-#ifdef SOFT_FILTER
-// The `soft` pipeline's splat programs (splat__create_filtered) draw only its solid points:
-// a point whose field value F exceeds u_st is soft and skipped here, at the start of both
-// passes (the raster and big lists are made of points that passed). F comes from the field
-// source bound on T_SOFT_F (float bits) or, for u_sfield 1 (height), from z normalised by
-// u_szr = (z min, 1 / (z max - z min)). The `splat` pipeline's own programs do not have this.
-layout(binding = T_SOFT_F) uniform usamplerBuffer u_sf;
-uniform int u_sfield;
-uniform float u_st;
-uniform vec2 u_szr;
-bool soft_point(uint i)
-{
-    float f = u_sfield == 1 ? clamp((texelFetch(u_pos, 3 * int(i) + 2).x - u_szr.x) * u_szr.y, 0.0, 1.0)
-                            : uintBitsToFloat(texelFetch(u_sf, int(i)).x);
-    return f > u_st;
-}
-#endif
 
 // One pixel of the stripe: accumulated attributes (32 bytes, one cache-line half), and apart
 // from them, in a compact array that pass 1's many reads keep in cache, the visibility key:
@@ -326,6 +309,38 @@ void grow_rect(ivec4 bb)
 #define COLOUR(i) vec3(0.0)
 #endif
 
+#ifdef SOFT_FILTER
+// The `soft` and `olt` pipelines' splat programs (splat__create_filtered) draw part of the
+// points, chosen by F (float bits on T_SOFT_F, soft_field.c) against u_st and u_smode
+// (splat_passes.h SPLAT_*): 0 skips soft points (F > u_st), 1 skips solid ones, 2 skips the
+// soft points of the first soft layer: those whose centre depth lies within the pass-2 depth
+// tolerance of the nearest soft depth at their centre pixel (the keys of an earlier soft-only
+// pass, T_OLT_KEYS, same layout as the stripe's keys). The test is made at the start of both
+// passes (the raster and big lists are made of points that passed). The `splat` pipeline's own
+// programs do not have this.
+layout(binding = T_SOFT_F) uniform usamplerBuffer u_sf;
+layout(binding = T_OLT_KEYS) uniform usamplerBuffer u_oltkeys;
+uniform int u_smode;
+uniform float u_st;
+bool is_soft(uint i)
+{
+    return uintBitsToFloat(texelFetch(u_sf, int(i)).x) > u_st;
+}
+bool skip_point(uint i)
+{
+    return u_smode == 0 ? is_soft(i) : u_smode == 1 ? !is_soft(i) : false;
+}
+bool peeled(Uni U, uint i, Splat s)
+{
+    if (u_smode != 2 || !is_soft(i)) return false;
+    vec2 f = floor(s.ctr);
+    if (!(f.x >= 0.0 && f.x < float(U.size.x) && f.y >= float(U.stripe.x) &&
+          f.y < float(U.stripe.x + U.stripe.y))) return false;
+    uint key = texelFetch(u_oltkeys, int((uint(f.y) - uint(U.stripe.x)) * uint(U.size.x) + uint(f.x))).x;
+    return key != 0u && s.dc <= uintBitsToFloat(~key) + U.eps * s.r;
+}
+#endif
+
 void main()
 {
     Uni U = load_uniforms();
@@ -336,10 +351,13 @@ void main()
     for (uint g = gl_GlobalInvocationID.x; g < U.total; g += stride) {
         uint i = U.nranges == 1u ? first + g : point_of(u_ranges, U.nranges, g);
 #ifdef SOFT_FILTER
-        if (soft_point(i)) continue;
+        if (skip_point(i)) continue;
 #endif
         Splat s;
         if (!setup_core(U, i, s)) continue;
+#ifdef SOFT_FILTER
+        if (peeled(U, i, s)) continue;
+#endif
         if (s.dep) {
             BOX_ADD(s.box);
             put(U, s.box.x, s.box.y, s.dc, 1.0, COLOUR(i), s.n, s.r);

@@ -1,5 +1,6 @@
 #version 430
 #include "lib_bindings.glsl"
+#include "lib_shade.glsl"
 // splat_resolve.frag — EWA splatting pass 3, a fragment pass over the rectangle of pixels pass 1
 // touched, grown by one pixel (splat_resolve.vert; the stripe's rows by the scissor): llvmpipe
 // shades whole pixel quads at once, where compute image stores go lane by lane. Per pixel:
@@ -107,15 +108,9 @@ void main()
         float znear = u_znear, zfar = u_zfar;
         col = vec3(1.0 - clamp((zc - znear) / (zfar - znear), 0.0, 1.0));
     } else {
-        // Ambient + Lambert + Blinn-Phong with an infinite viewer (v = +z), weights summing to 1,
-        // and the specular term scaled by the colour: a surface facing a light along the view
-        // axis keeps exactly its colour; nothing exceeds it.
-        vec3 l = u_light;
-        vec3 hv = l + vec3(0.0, 0.0, 1.0);
-        float hl = dot(hv, hv);
-        float ndl = max(dot(n, l), 0.0);
-        float ndh = hl > 0.0 ? max(dot(n, hv * inversesqrt(hl)), 0.0) : 0.0;
-        col *= 0.2 + 0.7 * ndl + 0.1 * pow(ndh, 32.0);
+        // lib_shade.glsl, the specular term scaled by the colour: a surface facing a light along
+        // the view axis keeps exactly its colour; nothing exceeds it.
+        col *= shade(n, u_light);
     }
     o_color = vec4(col, 1.0);
     o_depth = zc;

@@ -290,6 +290,8 @@ static void test_session(void **state)
     float light[3] = {0, 0.5f, -1};
     assert_int_equal(spc_set_param_vec3(c, "light", light), 0);
     assert_int_equal(spc_set_param_enum(c, "color", "normal"), 0);
+    /* a text form that sets two parameters sends both (field=class and classes) */
+    assert_int_equal(spc_set_param(c, "field=class:3,4,5"), 0);
     char val[64];
     assert_int_equal(spc_get_param(c, "quality", val, sizeof val), 0);
     assert_string_equal(val, "77");
@@ -357,8 +359,10 @@ static void test_session(void **state)
     spc_close(c);
     fake_join(&f);
     assert_int_equal(f.bye, 1);
-    /* what reached the server: only the 6 valid PARAMS, applied */
-    assert_int_equal(f.n_params, 6);
+    /* what reached the server: only the 7 valid PARAMS, applied */
+    assert_int_equal(f.n_params, 7);
+    assert_int_equal(f.params.field, SP_FIELD_CLASS);
+    assert_int_equal(f.params.classes, 56);
     assert_int_equal(f.params.quality, 77);
     assert_int_equal(f.params.color, SP_COLOR_NORMAL);
     assert_true(f.params.light[2] == -1.0f);

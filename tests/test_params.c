@@ -68,6 +68,28 @@ static void test_set_and_errors(void **state)
     assert_non_null(strstr(err, "key=value"));
 }
 
+/* field=class:3,4,5 (the text form) sets field=class and classes = bits 3, 4, 5 = 56; a class
+ * past 31, an empty list or junk are refused naming the form. */
+static void test_field_class_list(void **state)
+{
+    (void)state;
+    sp_params p;
+    sp_params_defaults(&p);
+    char err[256];
+    assert_int_equal(sp_param_set_kv(&p, "field=class:3,4,5", err, sizeof err), 0);
+    assert_int_equal(p.field, SP_FIELD_CLASS);
+    assert_int_equal(p.classes, 56);
+    assert_int_equal(sp_param_set_kv(&p, "field=class:0,31", err, sizeof err), 0);
+    assert_int_equal(p.classes, (int64_t)1 | ((int64_t)1 << 31));
+    const char *bad[4] = {"field=class:32", "field=class:", "field=class:3,,4", "field=class:x"};
+    for (int i = 0; i < 4; i++) {
+        sp_params q = p;
+        assert_int_equal(sp_param_set_kv(&q, bad[i], err, sizeof err), -1);
+        assert_non_null(strstr(err, "class:3,4,5"));
+        assert_memory_equal(&q, &p, sizeof p);
+    }
+}
+
 static void test_enum_names(void **state)
 {
     (void)state;
@@ -179,6 +201,7 @@ int main(void)
         cmocka_unit_test(test_defaults_valid_and_round_trip),
         cmocka_unit_test(test_set_and_errors),
         cmocka_unit_test(test_enum_names),
+        cmocka_unit_test(test_field_class_list),
         cmocka_unit_test(test_pipeline_list_matches_table),
         cmocka_unit_test(test_ranges_match_protocol_md),
         cmocka_unit_test(test_enum_exact_names),

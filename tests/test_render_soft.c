@@ -31,26 +31,6 @@
 enum { W = 192, H = 192 };
 static const double OFF[3] = {500000.0, 4100000.0, 120.0}; /* a UTM-like offset */
 
-static rnd_ctx *g_ctx;
-
-static int setup(void **state)
-{
-    (void)state;
-    rnd_desc d = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS")};
-    sd_err err = {0};
-    g_ctx = rnd_create(&d, &err);
-    if (!g_ctx) fprintf(stderr, "rnd_create: %s\n", err.msg);
-    return g_ctx ? 0 : -1;
-}
-
-static int teardown(void **state)
-{
-    (void)state;
-    rnd_destroy(g_ctx);
-    g_ctx = NULL;
-    return 0;
-}
-
 /* A camera at local (0, 0, ez) looking at the local origin, up +y, fov 40, explicit clip
  * distances (so that clouds with other bounds get the same projection). */
 static rnd_camera cam_z(double ez)
@@ -126,25 +106,25 @@ static void test_t1_equals_splat(void **state)
     pc_prepared pc;
     random_plane(&pc, 90, 90, 0.02f, 1);
     tu_finish_cloud(&pc, OFF);
-    uint32_t id = tu_upload(g_ctx, &pc);
+    uint32_t id = tu_upload(tu_ctx, &pc);
     pc_prepared_free(&pc);
     rnd_camera cam = cam_z(3.0);
     cam.eye[0] += 0.7; /* an oblique view */
     sp_params p;
     sp_params_defaults(&p);
     rnd_frame a = {0}, b = {0};
-    tu_render(g_ctx, id, &cam, &p, 0, &a);
+    tu_render(tu_ctx, id, &cam, &p, 0, &a);
     const float lambdas[2] = {0.5f, 1.0f};
     for (int i = 0; i < 2; i++) {
         p.pipeline = SP_PIPE_SOFT, p.t = 1.0f, p.lambda = lambdas[i], p.l_m = 1.0f;
-        tu_render(g_ctx, id, &cam, &p, 0, &b);
+        tu_render(tu_ctx, id, &cam, &p, 0, &b);
         int n, m = max_diff(&a, &b, &n);
         printf("t = 1, lambda %.1f: max difference to splat %d (%d pixels)\n", lambdas[i], m, n);
         assert_int_equal(m, 0);
         rnd_frame_free(&b);
     }
     rnd_frame_free(&a);
-    rnd_release(g_ctx, id);
+    rnd_release(tu_ctx, id);
 }
 
 /* lambda = 0 (and no modulation): the soft points are invisible, and the solid ones are drawn
@@ -178,7 +158,7 @@ static void test_lambda0_is_solid_splat(void **state)
     }
     tu_finish_cloud(&pc, OFF);
     tu_finish_cloud(&solid, OFF);
-    uint32_t id = tu_upload(g_ctx, &pc), sid = tu_upload(g_ctx, &solid);
+    uint32_t id = tu_upload(tu_ctx, &pc), sid = tu_upload(tu_ctx, &solid);
     printf("lambda = 0: %llu solid of %llu points\n", (unsigned long long)m,
            (unsigned long long)pc.n);
     pc_prepared_free(&pc);
@@ -187,23 +167,23 @@ static void test_lambda0_is_solid_splat(void **state)
     sp_params p;
     sp_params_defaults(&p);
     rnd_frame ref = {0}, f = {0};
-    tu_render(g_ctx, sid, &cam, &p, 0, &ref);
+    tu_render(tu_ctx, sid, &cam, &p, 0, &ref);
     p.pipeline = SP_PIPE_SOFT, p.t = t, p.lambda = 0.0f;
-    tu_render(g_ctx, id, &cam, &p, 0, &f);
+    tu_render(tu_ctx, id, &cam, &p, 0, &f);
     int n, md = max_diff(&ref, &f, &n);
     printf("lambda = 0: max difference to splat of the solid points %d (%d pixels)\n", md, n);
     assert_true(md <= 1);
     assert_true(n <= W * H / 200);
     rnd_frame_free(&f);
     p.lambda = 0.5f;
-    tu_render(g_ctx, id, &cam, &p, 0, &f);
+    tu_render(tu_ctx, id, &cam, &p, 0, &f);
     md = max_diff(&ref, &f, &n);
     printf("lambda = 0.5: %d pixels differ from splat of the solid points\n", n);
     assert_true(n >= W * H / 20);
     rnd_frame_free(&f);
     rnd_frame_free(&ref);
-    rnd_release(g_ctx, id);
-    rnd_release(g_ctx, sid);
+    rnd_release(tu_ctx, id);
+    rnd_release(tu_ctx, sid);
 }
 
 /* One cloud of soft single points (F = 1, t = 0.5): (x, y, z, radius, rgb). */
@@ -224,7 +204,7 @@ static uint32_t upload_discs(const disc *d, int n)
         pc.F[i] = d[i].F;
     }
     tu_finish_cloud(&pc, OFF);
-    uint32_t id = tu_upload(g_ctx, &pc);
+    uint32_t id = tu_upload(tu_ctx, &pc);
     pc_prepared_free(&pc);
     return id;
 }
@@ -250,10 +230,13 @@ static void test_disc_opacity_eq19(void **state)
     sp_params p;
     sp_params_defaults(&p);
     p.pipeline = SP_PIPE_SOFT, p.t = 0.5f, p.lambda = 0.7f;
+    /* the light along the view axis: the shading of the disc (its normal faces the camera) is
+     * exactly 1, so the colour is eq. 19's opacity alone */
+    p.light[0] = 0.0f, p.light[1] = 0.0f, p.light[2] = 1.0f;
     for (int ord = 0; ord < 2; ord++) {
     p.order = ord;
     rnd_frame f = {0};
-    tu_render(g_ctx, id, &cam, &p, 0, &f);
+    tu_render(tu_ctx, id, &cam, &p, 0, &f);
     double rpx = disc_px(0.5, 4.0), cx = 0.5 * W, cy = 0.5 * H;
     int worst = 0, nin = 0;
     double at_half = -1, best_half = 1e9;
@@ -279,7 +262,7 @@ static void test_disc_opacity_eq19(void **state)
     assert_true(worst <= 1);
     rnd_frame_free(&f);
     }
-    rnd_release(g_ctx, id);
+    rnd_release(tu_ctx, id);
 }
 
 /* Two soft discs on the z axis, red at z = +0.3 and green at z = -0.3, both larger than the
@@ -299,12 +282,13 @@ static void test_two_layers_order(void **state)
     sp_params p;
     sp_params_defaults(&p);
     p.pipeline = SP_PIPE_SOFT, p.t = 0.5f, p.lambda = 0.8f;
+    p.light[0] = 0.0f, p.light[1] = 0.0f, p.light[2] = 1.0f; /* shading 1 (test_disc_opacity_eq19) */
     for (int side = 0; side < 4; side++) {
         p.order = side / 2; /* axis, then tile */
         double ez = side % 2 == 0 ? 4.0 : -4.0;
         rnd_camera cam = cam_z(ez);
         rnd_frame f = {0};
-        tu_render(g_ctx, id, &cam, &p, 0, &f);
+        tu_render(tu_ctx, id, &cam, &p, 0, &f);
         int worst = 0, wrong_min = 255;
         const int xs[3] = {W / 2, W / 2 + 10, W / 2 + 20};
         for (int q = 0; q < 3; q++) {
@@ -332,7 +316,7 @@ static void test_two_layers_order(void **state)
         assert_true(wrong_min > 40); /* the check can tell the two orders apart */
         rnd_frame_free(&f);
     }
-    rnd_release(g_ctx, id);
+    rnd_release(tu_ctx, id);
     p.order = SP_ORDER_AXIS;
 
     /* A solid plane at z = 0 (blue, F = 0) over x < 0.6, a soft red disc behind it at x = 0.2
@@ -361,14 +345,14 @@ static void test_two_layers_order(void **state)
         pc.F[k] = 1.0f;
     }
     tu_finish_cloud(&pc, OFF);
-    uint32_t pid = tu_upload(g_ctx, &pc);
+    uint32_t pid = tu_upload(tu_ctx, &pc);
     pc_prepared_free(&pc);
     rnd_camera cam = cam_z(3.0);
     rnd_frame fs = {0}, ft = {0};
     sp_params ps = p;
     ps.lambda = 0.0f; /* the plane alone */
-    tu_render(g_ctx, pid, &cam, &ps, 0, &fs);
-    tu_render(g_ctx, pid, &cam, &p, 0, &ft);
+    tu_render(tu_ctx, pid, &cam, &ps, 0, &fs);
+    tu_render(tu_ctx, pid, &cam, &p, 0, &ft);
     /* The disc centres' pixels. */
     double f1 = 1.0 / tan(20.0 * M_PI / 180.0);
     int bx = (int)floor((0.4 * f1 / 3.3 + 1) * 0.5 * W), gx = (int)floor((-0.4 * f1 / 2.7 + 1) * 0.5 * W);
@@ -387,7 +371,7 @@ static void test_two_layers_order(void **state)
     assert_true(abs(front_t[2] - (int)lround((1 - ag) * front_s[2])) <= 2);
     rnd_frame_free(&fs);
     rnd_frame_free(&ft);
-    rnd_release(g_ctx, pid);
+    rnd_release(tu_ctx, pid);
 }
 
 /* Modulation (eq. 22): a dense white plane whose F ramps linearly from 0 at the left edge to 1
@@ -412,7 +396,7 @@ static void test_modulation(void **state)
             pc.F[k] = (float)i / (NX - 1);
         }
     tu_finish_cloud(&pc, OFF);
-    uint32_t id = tu_upload(g_ctx, &pc);
+    uint32_t id = tu_upload(tu_ctx, &pc);
     pc_prepared_free(&pc);
     rnd_camera cam = cam_z(2.2);
     sp_params p;
@@ -425,7 +409,7 @@ static void test_modulation(void **state)
     for (int m = 0; m < 2; m++) {
         p.l_m = lms[m];
         rnd_frame f = {0};
-        tu_render(g_ctx, id, &cam, &p, 0, &f);
+        tu_render(tu_ctx, id, &cam, &p, 0, &f);
         int worst = 0, wx = 0;
         for (int x = x0; x < x1; x++) {
             int s = 0;
@@ -443,7 +427,7 @@ static void test_modulation(void **state)
     }
     assert_true(steps[0] >= 20);
     assert_true(2 * steps[1] <= steps[0]);
-    rnd_release(g_ctx, id);
+    rnd_release(tu_ctx, id);
 }
 
 /* field=height on a real scan (bun000.ply, prepared here): F = (z - zmin) / (zmax - zmin). With
@@ -486,22 +470,22 @@ static void test_field_height(void **state)
     printf("bun000: %llu points, %llu with F <= t = 0.8 in z\n", (unsigned long long)pc.n,
            (unsigned long long)m);
     assert_true(m > pc.n / 10 && m < pc.n - pc.n / 10);
-    uint32_t id = tu_upload(g_ctx, &pc), sid = tu_upload(g_ctx, &solid);
+    uint32_t id = tu_upload(tu_ctx, &pc), sid = tu_upload(tu_ctx, &solid);
     pc_prepared_free(&pc);
     pc_prepared_free(&solid);
     sp_params p;
     sp_params_defaults(&p);
     rnd_frame ref = {0}, f0 = {0}, f1 = {0}, f2 = {0};
-    tu_render(g_ctx, sid, &cam, &p, 0, &ref);
+    tu_render(tu_ctx, sid, &cam, &p, 0, &ref);
     p.pipeline = SP_PIPE_SOFT, p.field = SP_FIELD_HEIGHT, p.t = t, p.lambda = 0.0f;
-    tu_render(g_ctx, id, &cam, &p, 0, &f0);
+    tu_render(tu_ctx, id, &cam, &p, 0, &f0);
     int n0, m0 = max_diff(&ref, &f0, &n0);
     p.lambda = 0.5f;
-    tu_render(g_ctx, id, &cam, &p, 0, &f1);
+    tu_render(tu_ctx, id, &cam, &p, 0, &f1);
     int n1;
     max_diff(&f0, &f1, &n1);
     p.field = SP_FIELD_UNCERTAINTY;
-    tu_render(g_ctx, id, &cam, &p, 0, &f2);
+    tu_render(tu_ctx, id, &cam, &p, 0, &f2);
     int n2;
     max_diff(&f1, &f2, &n2);
     printf("field=height: lambda 0 vs splat of the solid points: max %d (%d pixels); lambda 0.5 "
@@ -510,8 +494,8 @@ static void test_field_height(void **state)
     assert_true(n1 > 500);
     assert_true(n2 > 500);
     rnd_frame_free(&ref), rnd_frame_free(&f0), rnd_frame_free(&f1), rnd_frame_free(&f2);
-    rnd_release(g_ctx, id);
-    rnd_release(g_ctx, sid);
+    rnd_release(tu_ctx, id);
+    rnd_release(tu_ctx, sid);
 }
 
 /* order=tile composites the same discs in the same order as order=axis, in float with one
@@ -527,17 +511,22 @@ static void test_tile_matches_axis(void **state)
     for (uint64_t i = 0; i < pc.n; i++)
         if (pc.F[i] > 0.4f) pc.pos[3 * i + 2] = 0.05f + 0.1f * pc.F[i];
     tu_finish_cloud(&pc, OFF);
-    uint32_t id = tu_upload(g_ctx, &pc);
+    uint32_t id = tu_upload(tu_ctx, &pc);
     pc_prepared_free(&pc);
     rnd_camera cam = cam_z(3.0);
     cam.eye[0] += 1.0, cam.eye[1] += 0.5;
     sp_params p;
     sp_params_defaults(&p);
     p.pipeline = SP_PIPE_SOFT, p.t = 0.4f, p.lambda = 0.5f, p.l_m = 0.6f;
-    rnd_frame a = {0}, b = {0};
-    tu_render(g_ctx, id, &cam, &p, 0, &a);
+    rnd_frame a = {0}, b = {0}, c = {0};
+    p.order = SP_ORDER_AXIS;
+    tu_render(tu_ctx, id, &cam, &p, 0, &a);
+    p.order = SP_ORDER_AUTO; /* few soft points: auto is axis, exactly */
+    tu_render(tu_ctx, id, &cam, &p, 0, &c);
+    assert_memory_equal(a.rgba8, c.rgba8, (size_t)W * H * 4);
+    rnd_frame_free(&c);
     p.order = SP_ORDER_TILE;
-    tu_render(g_ctx, id, &cam, &p, 0, &b);
+    tu_render(tu_ctx, id, &cam, &p, 0, &b);
     int n, m = max_diff(&a, &b, &n), cov = 0;
     for (size_t i = 0; i < (size_t)W * H; i++) cov += a.rgba8[4 * i] || a.rgba8[4 * i + 1] || a.rgba8[4 * i + 2];
     printf("order=tile vs axis, random plane: max difference %d levels (%d of %d covered pixels "
@@ -546,7 +535,7 @@ static void test_tile_matches_axis(void **state)
     assert_true(m <= 4);
     rnd_frame_free(&a);
     rnd_frame_free(&b);
-    rnd_release(g_ctx, id);
+    rnd_release(tu_ctx, id);
 }
 
 /* A cloud in several buffer sets (rnd_desc.max_set_points, as the renderer splits clouds over
@@ -570,7 +559,7 @@ static void test_buffer_sets(void **state)
     for (uint64_t i = 0; i < pc.n; i++)
         if (pc.F[i] > 0.6f) pc.pos[3 * i + 2] = 0.1f;
     tu_finish_cloud(&pc, OFF);
-    uint32_t id1 = tu_upload(g_ctx, &pc), id4 = tu_upload(r4, &pc);
+    uint32_t id1 = tu_upload(tu_ctx, &pc), id4 = tu_upload(r4, &pc);
     pc_prepared_free(&pc);
     rnd_camera cam = cam_z(3.0);
     sp_params p;
@@ -580,7 +569,7 @@ static void test_buffer_sets(void **state)
     for (int l = 0; l < 2; l++) {
         p.lambda = lambdas[l];
         rnd_frame a = {0}, b = {0};
-        tu_render(g_ctx, id1, &cam, &p, 0, &a);
+        tu_render(tu_ctx, id1, &cam, &p, 0, &a);
         tu_render(r4, id4, &cam, &p, 0, &b);
         int n, m = max_diff(&a, &b, &n);
         printf("buffer sets, lambda %.1f: max difference to one set %d levels (%d pixels)\n",
@@ -590,9 +579,66 @@ static void test_buffer_sets(void **state)
         rnd_frame_free(&a);
         rnd_frame_free(&b);
     }
-    rnd_release(g_ctx, id1);
+    rnd_release(tu_ctx, id1);
     rnd_release(r4, id4);
     rnd_destroy(r4);
+}
+
+/* More soft discs than one dispatch of the projection covers (4096 groups of 32 = 131072): a
+ * 460 x 460 plane of soft points (211600, F = 1) facing the camera, lambda = 0.5, both orders.
+ * Every pixel inside the plane's screen square must be covered (not the background): the
+ * projection walks all discs (before the fix, the discs past 131072 in the sorted order were
+ * left unprojected and the plane had a hole at one end). Tolerance: none of the pixels inside
+ * the square, 2 pixels in from its edges, is background. With more than 200000 soft points,
+ * order=auto is the tile compositor on a software renderer (the image equals order=tile's
+ * exactly) and the sprites on a GPU. */
+static void test_many_soft_points(void **state)
+{
+    (void)state;
+    enum { NX = 460 };
+    pc_prepared pc;
+    tu_new_cloud(&pc, (uint64_t)NX * NX, 0);
+    const float h = 0.0045f; /* the plane stays inside the frame (90 of 96 px half width) */
+    for (int j = 0; j < NX; j++)
+        for (int i = 0; i < NX; i++) {
+            uint64_t k = (uint64_t)j * NX + i;
+            pc.pos[3 * k] = (i - 0.5f * (NX - 1)) * h;
+            pc.pos[3 * k + 1] = (j - 0.5f * (NX - 1)) * h;
+            pc.radius[k] = 2.0f * h;
+            pc.F[k] = 1.0f;
+        }
+    tu_finish_cloud(&pc, OFF);
+    uint32_t id = tu_upload(tu_ctx, &pc);
+    pc_prepared_free(&pc);
+    rnd_camera cam = cam_z(3.0);
+    sp_params p;
+    sp_params_defaults(&p);
+    p.pipeline = SP_PIPE_SOFT, p.t = 0.5f, p.lambda = 0.5f;
+    double half = 0.5 * (NX - 1) * h, px = disc_px(half, 3.0);
+    int x0 = (int)ceil(0.5 * W - px) + 2, x1 = (int)floor(0.5 * W + px) - 2;
+    assert_true(x0 >= 0 && x1 < W); /* the square is inside the frame */
+    const char *rs = rnd_renderer_string(tu_ctx);
+    int software = strstr(rs, "llvmpipe") || strstr(rs, "softpipe") || strstr(rs, "swrast");
+    rnd_frame same = {0};
+    p.order = SP_ORDER_AUTO;
+    tu_render(tu_ctx, id, &cam, &p, 0, &same);
+    for (int ord = 0; ord < 2; ord++) {
+        p.order = ord;
+        rnd_frame f = {0};
+        tu_render(tu_ctx, id, &cam, &p, 0, &f);
+        if (ord == (software ? SP_ORDER_TILE : SP_ORDER_AXIS))
+            assert_memory_equal(f.rgba8, same.rgba8, (size_t)W * H * 4);
+        int empty = 0, n = 0;
+        for (int y = x0; y <= x1; y++)
+            for (int x = x0; x <= x1; x++, n++) empty += pix(&f, x, y)[0] == 0;
+        printf("many soft points, order=%s: %d of %d pixels in the plane's square empty\n",
+               ord ? "tile" : "axis", empty, n);
+        assert_true(n > 5000);
+        assert_int_equal(empty, 0);
+        rnd_frame_free(&f);
+    }
+    rnd_frame_free(&same);
+    rnd_release(tu_ctx, id);
 }
 
 int main(void)
@@ -606,6 +652,7 @@ int main(void)
         cmocka_unit_test(test_field_height),
         cmocka_unit_test(test_tile_matches_axis),
         cmocka_unit_test(test_buffer_sets),
+        cmocka_unit_test(test_many_soft_points),
     };
-    return cmocka_run_group_tests(tests, setup, teardown);
+    return cmocka_run_group_tests(tests, tu_egl_group_setup, tu_egl_group_teardown);
 }

@@ -320,6 +320,7 @@ static void *render_main(void *arg)
         job.meta.render_us = f->render_us;
         job.meta.readback_us = f->readback_us;
         job.meta.points_drawn = f->points_drawn;
+        job.meta.flags = f->flags;
         rt->encq[rt->enc_n++] = job;
         pthread_cond_signal(&rt->cv_enc);
     }

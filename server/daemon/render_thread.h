@@ -35,6 +35,7 @@ typedef struct rt_frame_meta {
     int stream;             /* 1: from the latest-wins slot */
     int width, height, pipeline, format;
     uint64_t render_us, readback_us, encode_us, points_drawn;
+    uint32_t flags;                /* rnd_frame.flags: the FRAME's flags */
 } rt_frame_meta;
 
 /* A render request as the loop submits it. */

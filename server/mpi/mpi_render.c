@@ -129,12 +129,17 @@ static int allreduce(mr_ctx *m, const void *in, void *out, int count, MPI_Dataty
 
 int mr_supported(const sp_params *params, sd_err *err)
 {
+    static const char *const names[] = {
+#define MR_PIPE_NAME_(id, name) #name,
+        SP_PIPELINE_LIST(MR_PIPE_NAME_)
+#undef MR_PIPE_NAME_
+    };
     if (params->pipeline != SP_PIPE_POINTS && params->pipeline != SP_PIPE_SPLAT)
         return sd_errf(err, SD_EUNSUP, "pipeline %s is not available with splatd --mpi: only "
                        "points and splat composite from the ranks' parts (kawata fits planes "
-                       "to each pixel's points of the whole cloud and soft sorts every "
-                       "transparent disc back to front)",
-                       params->pipeline == SP_PIPE_KAWATA ? "kawata" : "soft");
+                       "to each pixel's points of the whole cloud; soft and olt order every "
+                       "transparent disc of the whole cloud back to front)",
+                       params->pipeline < SP_PIPE_COUNT ? names[params->pipeline] : "?");
     if (params->shading == SP_SHADING_EDL)
         return sd_errf(err, SD_EUNSUP, "shading=edl is not available with splatd --mpi (it "
                        "needs the composited depth on one GL context)");

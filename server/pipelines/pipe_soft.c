@@ -1,9 +1,7 @@
 /* pipe_soft.c — the `soft` pipeline: Soft Transparency (Seemann et al.), the Express-Model.
  *
  * The solid/soft split. Each point has a scalar F in [0, 1] from the source `field`
- * (uncertainty: prep's eq. 21, already normalised by the cloud's 99th percentile; height:
- * (z - zmin) / (zmax - zmin) over the cloud's local bounds; intensity: the file's intensity,
- * normalised by its range at upload). Points with F <= t are solid and are drawn by the `splat`
+ * (soft_field.h; the normalisation of each source is in params.h). Points with F <= t are solid and are drawn by the `splat`
  * pipeline's own passes (splat_passes.h), F > t are soft. Two forms of the split, measured:
  *   filter  (a cloud in one buffer set, the usual case) splat__create_filtered's raster
  *           programs skip soft points at the start of both passes (one texel fetch a point);
@@ -18,14 +16,20 @@
  *
  * The soft points (Express-Model, eq. 19). Each is a view-facing disc of the splat radius times
  * splat_scale, drawn as one GL point sprite (soft.vert/.frag) whose fragments get the opacity
- * Phi = lambda (cos(pi d / r) + 1) / 2 at distance d from the centre, composited with the
- * premultiplied "over" (ONE, ONE_MINUS_SRC_ALPHA) after the splat resolve of each stripe,
+ * Phi = lambda (cos(pi d / r) + 1) / 2 at distance d from the centre, its colour Lambert-shaded
+ * from the point's normal as splat's resolve does (lib_shade.glsl; the paper shades all points),
+ * composited with the premultiplied "over" (ONE, ONE_MINUS_SRC_ALPHA) after the splat resolve of
+ * each stripe,
  * tested against the solid surface's depth (splat__keys_texture) and writing no depth.
  *
  * Order: the paper's pre-sorted index arrays. At attach, the points of every buffer set are
  * sorted along x, y and z (a stable radix sort of the coordinates' order-preserving bits) on the
- * CPU; when `field` or `t` changes, the soft points of each sorted array are kept (the order
- * stays) and uploaded as one R32UI buffer texture of three arrays. Per frame the axis closest to
+ * CPU; when `field` or `t` changes, the soft points are listed in point order (number j) and,
+ * per axis, their j in the order along that axis, and uploaded as one R32UI buffer texture of
+ * four arrays. The projection (soft_bin.comp PASS 0) runs in point order, reading and writing
+ * sequentially; the sprites and the binning follow the axis order through the index. Projecting
+ * in the axis order instead (random reads, or random writes) cost ~65 ms more CPU on a Guanyin
+ * frame (157k soft points). Per frame the axis closest to
  * the view direction picks the array, read forwards or backwards, so that the first disc is the
  * farthest. Three arrays read both ways are the paper's six (half its memory). The order is
  * exact for discs separated along the chosen axis and the paper's approximation otherwise; a
@@ -35,17 +39,19 @@
  *         order, so the "over" runs back to front with no per-frame sort or list.
  *   tile  a compute compositor (soft_bin.comp, soft_scan.comp, soft_blend.comp,
  *         soft_resolve.frag): the ordered soft points are cut into 64 consecutive blocks whose
- *         invocations walk them serially, count and then scatter each disc into the 16x16 pixel
+ *         invocations walk them serially, count and then scatter each disc into the 8x8 pixel
  *         tiles it touches (per (tile, block) cells in tile-major order, so each tile's list
  *         stays in back-to-front order without a sort); one work group per tile blends its list
  *         per pixel in float, and one blend puts the result over the target. Same order, one
  *         rounding to 8 bits instead of one per disc (test_tile_matches_axis).
- * Measured on llvmpipe (2 shared cores, Guanyin 1280x720, process CPU per frame): the sprites
- * cost about 1 us a soft disc whatever its size (1-pixel sprites cost the same); the compositor
- * more: t = 0.9: splat 47.9 ms, axis 59.9, tile 96.9; t = 0.7 (31k soft discs): splat 49.6,
- * axis 83.5, tile 152.7, of which its per-pixel loop over the tile lists ~70 ms and the serial
- * binning ~30 ms. So axis is the default; tile is kept as the measured alternative and the
- * place to make faster (parallel projection, smaller tiles).
+ * Measured on llvmpipe (2 shared cores, Guanyin 1280x720, t = 0.5, 157k soft discs, process
+ * CPU per frame): splat ~50 ms, axis ~220-230, tile ~210 (16x16 tiles: ~385, every pixel
+ * testing every disc of its tile; 8x8: binning ~75 ms of which the projection ~30, the serial
+ * per-block count and scatter ~40, the per-pixel blend the rest). The sprites cost about 1 us a
+ * soft disc whatever its size (1-pixel sprites cost the same; two triangles a disc instead of a
+ * point sprite: 275 against 193 ms). In wall time the compositor wins where soft points are
+ * many (its compute passes use both cores; the sprites' front end is one thread): order=auto
+ * (the default) takes it on a software renderer above SOFT_AUTO_TILE soft points.
  *
  * Transparency modulation (eq. 22). For t < F < l_m the opacity is interpolated between the
  * model's Phi and a near-solid disc, with W = (F - t) / (l_m - t): Phi_f = (1 - d/r)(1 - W) +
@@ -56,10 +62,13 @@
  * and the colour step between solid and soft regions shrinks (test_modulation measures it).
  * l_m <= t turns the modulation off.
  *
- * What is not here: model=base and model=concentric (the enum only has express, so they are
- * refused as unknown values naming what exists), field sources beyond uncertainty, height and
- * intensity, and soft discs larger than the GL's point size limit (llvmpipe: 255 pixels) are
- * drawn at that size. Culling: soft points are drawn whether or not their chunk was culled
+ * model=base and model=concentric replace the soft discs by spheres composited through per-pixel
+ * fragment lists (soft_lists.h), per stripe after the splat resolve, clipped by the same
+ * visibility keys; clouds in one buffer set only, and l_m does not apply to them. F comes from
+ * soft_field.h for every `field` source.
+ *
+ * What is not here: soft discs larger than the GL's point size limit (llvmpipe: 255 pixels) are
+ * drawn at that size by order=axis. Culling: soft points are drawn whether or not their chunk was culled
  * (the GL clips them); the point budget applies to solid points only. */
 #include <math.h>
 #include <stdint.h>
@@ -69,12 +78,14 @@
 
 #include "pipe.h"
 #include "shaders.h"
+#include "soft_field.h"
+#include "soft_lists.h"
 #include "splat_passes.h"
 
 /* Uniform slots of the sprite program (soft.vert/.frag), looked up by name. */
 #define SOFT_UNIFORMS(X)                                                                     \
     X(SIZE, "u_size") X(MAXSIZE, "u_maxsize") X(STRIPE, "u_stripe") X(KEYS_ON, "u_keys_on")    \
-    X(LAMBDA, "u_lambda")
+    X(LAMBDA, "u_lambda") X(BASE, "u_base") X(N, "u_n") X(REV, "u_rev")
 
 enum {
 #define SOFT_U_ENUM_(id, name) SU_##id,
@@ -86,8 +97,13 @@ enum {
 /* The compositor's programs. */
 enum { C_PROJ = 0, C_BIN1, C_BIN3, C_SCAN, C_BLEND, C_RESOLVE, C_COUNT };
 enum {
-    SOFT_TILE = 16,            /* tile side in pixels: one 16x16 work group of soft_blend */
+    SOFT_TILE = 8,             /* tile side in pixels: one 8x8 work group of soft_blend */
     SOFT_BLOCKS = 64,          /* binning blocks: invocations walking the order serially */
+    /* order=auto takes the compositor on a software renderer above this many soft points:
+     * measured on llvmpipe (2 cores, 1280x720, wall ms/frame, three runs under load): the 1M
+     * cloud with half vegetation, tile 389-822 against axis 838-1341; Guanyin (157k soft) on
+     * par; autzen_trim (fewer) axis 65 against tile 108. On a GPU the sprites stay. */
+    SOFT_AUTO_TILE = 200000,
 };
 
 typedef struct soft_state {
@@ -104,13 +120,12 @@ typedef struct soft_state {
     GLuint proj_buf, cells_buf, list_buf, layer_buf;
     uint64_t proj_bytes, cells_bytes, list_bytes, layer_bytes;
     GLuint proj_tex, cells_tex, list_tex, layer_tex;
+    soft_lists lists;          /* model=base|concentric (soft_lists.h) */
 } soft_state;
 
 /* Per buffer set of a cloud: what the split needs on the CPU and the soft index arrays. */
 typedef struct soft_set {
     uint32_t n;
-    float *z;                  /* local z per point (field=height) */
-    float *f_unc, *f_int;      /* F per point: uncertainty, intensity */
     uint32_t *sorted[3];       /* point indices sorted along x, y, z */
     uint32_t *runs;            /* solid runs: (first, count) pairs, in point order */
     uint32_t nruns;
@@ -122,8 +137,8 @@ typedef struct soft_set {
 typedef struct soft_cloud {
     uint32_t nsets;
     soft_set *sets;
-    int have_split;            /* the split below has been made */
-    int field;
+    soft_fields fields;        /* F per point (soft_field.h) */
+    int have_split;            /* the split below has been made for fields' current F */
     float t;
 } soft_cloud;
 
@@ -133,6 +148,7 @@ static void soft_destroy(rnd_kit *k, void *state)
     if (!s) return;
     const gl_api *gl = k->gl;
     if (s->splat) splat__destroy(k, s->splat);
+    soft_lists_destroy(k, &s->lists);
     if (s->prog) gl->DeleteProgram(s->prog);
     if (s->vao) gl->DeleteVertexArrays(1, &s->vao);
     if (s->f_tex) gl->DeleteTextures(1, &s->f_tex);
@@ -192,6 +208,10 @@ static int soft_create(rnd_kit *k, void **state, sd_err *err)
             return err ? err->code : SD_EGL;
         }
     }
+    if ((rc = soft_lists_create(k, &s->lists, err)) < 0) {
+        soft_destroy(k, s);
+        return rc;
+    }
     GLuint *texs[4] = {&s->proj_tex, &s->cells_tex, &s->list_tex, &s->layer_tex};
     for (int i = 0; i < 4; i++) gl->GenTextures(1, texs[i]);
 
@@ -219,11 +239,12 @@ static void soft_detach(rnd_kit *k, void *state, void *cloud_data)
     if (!sc) return;
     for (uint32_t i = 0; i < sc->nsets; i++) {
         soft_set *ss = &sc->sets[i];
-        free(ss->z), free(ss->f_unc), free(ss->f_int), free(ss->runs);
+        free(ss->runs);
         for (int a = 0; a < 3; a++) free(ss->sorted[a]);
         if (ss->idx_buf) k->gl->DeleteBuffers(1, &ss->idx_buf);
     }
     free(sc->sets);
+    soft_fields_free(k->gl, &sc->fields);
     free(sc);
 }
 
@@ -254,17 +275,6 @@ static void sort_axis(const uint32_t *key, uint32_t n, uint32_t *out, uint32_t *
     }
 }
 
-/* read_buffer: n * comps 4-byte values of GL buffer buf into a new array (NULL: no memory). */
-static void *read_buffer(const gl_api *gl, GLuint buf, uint64_t words)
-{
-    void *p = malloc(words ? words * 4 : 4);
-    if (!p) return NULL;
-    gl->BindBuffer(GL_COPY_READ_BUFFER, buf);
-    gl->GetBufferSubData(GL_COPY_READ_BUFFER, 0, (GLsizeiptr)(words * 4), p);
-    gl->BindBuffer(GL_COPY_READ_BUFFER, 0);
-    return p;
-}
-
 /* attach: reads back each set's positions, F and intensity once, and sorts its points along the
  * three axes. The split itself waits for the first frame (it depends on field and t). */
 static int soft_attach(rnd_kit *k, void *state, const rnd_gpu_cloud *c, void **cloud_data,
@@ -281,18 +291,20 @@ static int soft_attach(rnd_kit *k, void *state, const rnd_gpu_cloud *c, void **c
         return sd_errf(err, SD_ENOMEM, "out of memory attaching a cloud to soft");
     }
     sc->nsets = c->nsets;
+    int frc = soft_fields_attach(gl, c, &sc->fields, err);
+    if (frc < 0) {
+        free(sc->sets), free(sc);
+        return frc;
+    }
     for (uint32_t si = 0; si < c->nsets; si++) {
         const rnd_bufset *b = &c->sets[si];
         soft_set *ss = &sc->sets[si];
         uint32_t n = b->n;
         ss->n = n;
-        float *pos = read_buffer(gl, b->buf[RND_ATTR_POS], (uint64_t)n * 3);
+        const float *pos = sc->fields.sets[si].pos;
         uint32_t *keys = malloc((size_t)(n ? n : 1) * 4 * 4);
-        ss->z = malloc((size_t)(n ? n : 1) * 4);
-        ss->f_unc = read_buffer(gl, b->buf[RND_ATTR_FIELD], n);
-        ss->f_int = read_buffer(gl, b->buf[RND_ATTR_INTENSITY], n);
         for (int a = 0; a < 3; a++) ss->sorted[a] = malloc((size_t)(n ? n : 1) * 4);
-        int ok = pos && keys && ss->z && ss->f_unc && ss->f_int && ss->sorted[0] &&
+        int ok = keys && ss->sorted[0] &&
                  ss->sorted[1] && ss->sorted[2];
         if (ok) {
             float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
@@ -306,9 +318,7 @@ static int soft_attach(rnd_kit *k, void *state, const rnd_gpu_cloud *c, void **c
                           keys + 3 * (size_t)n);
                 ss->centre[a] = n ? 0.5f * (lo[a] + hi[a]) : 0.0f;
             }
-            for (uint32_t i = 0; i < n; i++) ss->z[i] = pos[3 * (size_t)i + 2];
         }
-        free(pos);
         free(keys);
         if (!ok) {
             soft_detach(k, state, sc);
@@ -324,23 +334,10 @@ static int soft_attach(rnd_kit *k, void *state, const rnd_gpu_cloud *c, void **c
     return 0;
 }
 
-/* field_of: F of point i of set ss for source field (params.h SP_FIELD_*), in [0, 1]. */
-static float field_of(const soft_set *ss, int field, float z0, float zinv, uint32_t i)
+/* make_split: the solid runs and the uploaded soft index arrays of every set for the fields'
+ * current F and t. Returns 0 or SD_ENOMEM. */
+static int make_split(const gl_api *gl, soft_cloud *sc, float t, sd_err *err)
 {
-    if (field == SP_FIELD_HEIGHT) {
-        float f = (ss->z[i] - z0) * zinv;
-        return f < 0.0f ? 0.0f : f > 1.0f ? 1.0f : f;
-    }
-    return field == SP_FIELD_INTENSITY ? ss->f_int[i] : ss->f_unc[i];
-}
-
-/* make_split: the solid runs and the uploaded soft index arrays of every set for (field, t).
- * Returns 0 or SD_ENOMEM. */
-static int make_split(const gl_api *gl, const rnd_gpu_cloud *c, soft_cloud *sc, int field,
-                      float t, sd_err *err)
-{
-    float z0 = c->bmin[2], dz = c->bmax[2] - c->bmin[2];
-    float zinv = dz > 0.0f ? 1.0f / dz : 0.0f;
     for (uint32_t si = 0; si < sc->nsets; si++) {
         soft_set *ss = &sc->sets[si];
         uint32_t n = ss->n;
@@ -348,15 +345,16 @@ static int make_split(const gl_api *gl, const rnd_gpu_cloud *c, soft_cloud *sc, 
         if (!soft) return sd_errf(err, SD_ENOMEM, "out of memory splitting a cloud");
         uint32_t nsoft = 0, nruns = 0;
         for (uint32_t i = 0; i < n; i++) {
-            soft[i] = field_of(ss, field, z0, zinv, i) > t;
+            soft[i] = sc->fields.sets[si].f[i] > t;
             nsoft += soft[i];
             nruns += !soft[i] && (i == 0 || soft[i - 1]);
         }
         free(ss->runs);
         ss->runs = malloc((size_t)(nruns ? nruns : 1) * 8);
-        uint32_t *idx = malloc((size_t)(nsoft ? nsoft : 1) * 3 * 4);
-        if (!ss->runs || !idx) {
-            free(soft), free(idx);
+        uint32_t *idx = malloc((size_t)(nsoft ? nsoft : 1) * 4 * 4);
+        uint32_t *at = malloc((size_t)(n ? n : 1) * 4);
+        if (!ss->runs || !idx || !at) {
+            free(soft), free(idx), free(at);
             ss->nruns = 0;
             return sd_errf(err, SD_ENOMEM, "out of memory splitting a cloud");
         }
@@ -367,21 +365,26 @@ static int make_split(const gl_api *gl, const rnd_gpu_cloud *c, soft_cloud *sc, 
             ss->runs[2 * (r - 1) + 1]++;
         }
         ss->nruns = nruns;
+        /* [0, nsoft): the soft points in point order (j -> point); then per axis a, at
+         * (1 + a) nsoft + k, the j of the k-th soft point along a (see the file comment) */
+        uint32_t m = 0;
+        for (uint32_t i = 0; i < n; i++)
+            if (soft[i]) at[i] = m, idx[m++] = i;
         for (int a = 0; a < 3; a++) {
-            uint32_t *o = idx + (size_t)a * nsoft;
+            uint32_t *o = idx + (size_t)(1 + a) * nsoft;
             for (uint32_t j = 0; j < n; j++)
-                if (soft[ss->sorted[a][j]]) *o++ = ss->sorted[a][j];
+                if (soft[ss->sorted[a][j]]) *o++ = at[ss->sorted[a][j]];
         }
         ss->nsoft = nsoft;
         if (!ss->idx_buf) gl->GenBuffers(1, &ss->idx_buf);
         gl->BindBuffer(GL_TEXTURE_BUFFER, ss->idx_buf);
-        gl->BufferData(GL_TEXTURE_BUFFER, (GLsizeiptr)((nsoft ? nsoft : 1) * 3ull * 4), idx,
+        gl->BufferData(GL_TEXTURE_BUFFER, (GLsizeiptr)((nsoft ? nsoft : 1) * 4ull * 4), idx,
                        GL_STATIC_DRAW);
         gl->BindBuffer(GL_TEXTURE_BUFFER, 0);
-        free(idx);
+        free(idx), free(at);
         free(soft);
     }
-    sc->have_split = 1, sc->field = field, sc->t = t;
+    sc->have_split = 1, sc->t = t;
     return 0;
 }
 
@@ -476,7 +479,6 @@ static void set_view_uniforms(const gl_api *gl, GLuint prog, const rnd_draw *d, 
 {
     const rnd_view *v = d->view;
     const sp_params *p = d->params;
-    float dz = d->cloud->bmax[2] - d->cloud->bmin[2];
     gl->UseProgram(prog);
     GLint l;
     if ((l = gl_uniform(gl, prog, "u_view")) >= 0) gl->UniformMatrix4fv(l, 1, GL_FALSE, v->view);
@@ -486,13 +488,16 @@ static void set_view_uniforms(const gl_api *gl, GLuint prog, const rnd_draw *d, 
     if ((l = gl_uniform(gl, prog, "u_color")) >= 0) gl->Uniform1i(l, p->color);
     if ((l = gl_uniform(gl, prog, "u_znear")) >= 0) gl->Uniform1f(l, v->znear);
     if ((l = gl_uniform(gl, prog, "u_zfar")) >= 0) gl->Uniform1f(l, v->zfar);
-    if ((l = gl_uniform(gl, prog, "u_field")) >= 0) gl->Uniform1i(l, p->field);
-    if ((l = gl_uniform(gl, prog, "u_zrange")) >= 0)
-        gl->Uniform2f(l, d->cloud->bmin[2], dz > 0 ? 1.0f / dz : 0.0f);
     if ((l = gl_uniform(gl, prog, "u_t")) >= 0) gl->Uniform1f(l, p->t);
+    if ((l = gl_uniform(gl, prog, "u_light")) >= 0) {
+        float light[3];
+        soft_light(p, light);
+        gl->Uniform3fv(l, 1, light);
+    }
     if ((l = gl_uniform(gl, prog, "u_lm")) >= 0) gl->Uniform1f(l, p->l_m);
     if ((l = gl_uniform(gl, prog, "u_rev")) >= 0) gl->Uniform1i(l, o->rev);
-    if ((l = gl_uniform(gl, prog, "u_base")) >= 0) gl->Uniform1ui(l, (GLuint)((uint64_t)o->axis * nsoft));
+    if ((l = gl_uniform(gl, prog, "u_base")) >= 0)
+        gl->Uniform1ui(l, (GLuint)((uint64_t)(1 + o->axis) * nsoft));
     if ((l = gl_uniform(gl, prog, "u_n")) >= 0) gl->Uniform1ui(l, nsoft);
     if ((l = gl_uniform(gl, prog, "u_nblocks")) >= 0) gl->Uniform1ui(l, SOFT_BLOCKS);
     if ((l = gl_uniform(gl, prog, "u_tile")) >= 0) gl->Uniform1i(l, SOFT_TILE);
@@ -510,9 +515,7 @@ static void bind_soft_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const so
     rnd_kit_bind_set(k, &d->cloud->sets[si], p->color);
     gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_F);
     gl->BindTexture(GL_TEXTURE_BUFFER, s->f_tex);
-    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI,
-                  d->cloud->sets[si].buf[p->field == SP_FIELD_INTENSITY ? RND_ATTR_INTENSITY
-                                                                         : RND_ATTR_FIELD]);
+    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, sc->fields.sets[si].f_buf);
     gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_IDX);
     gl->BindTexture(GL_TEXTURE_BUFFER, s->idx_tex);
     gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, sc->sets[si].idx_buf);
@@ -562,6 +565,9 @@ static int draw_soft(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cl
         if (l[SU_STRIPE] >= 0) gl->Uniform2i(l[SU_STRIPE], yb, nb);
         if (l[SU_KEYS_ON] >= 0) gl->Uniform1i(l[SU_KEYS_ON], keys);
         if (l[SU_LAMBDA] >= 0) gl->Uniform1f(l[SU_LAMBDA], d->params->lambda);
+        gl->Uniform1ui(l[SU_BASE], (GLuint)((uint64_t)(1 + o->axis) * nsoft));
+        gl->Uniform1ui(l[SU_N], nsoft);
+        gl->Uniform1i(l[SU_REV], o->rev);
         gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_PROJ);
         gl->BindTexture(GL_TEXTURE_BUFFER, s->proj_tex);
         gl->ActiveTexture(GL_TEXTURE0 + RND_T_SPLAT_KEYS);
@@ -672,20 +678,7 @@ static void tile_blend(rnd_kit *k, soft_state *s, const rnd_draw *d, int keys, i
     gl->UseProgram(pr);
     gl->Uniform2i(gl_uniform(gl, pr, "u_size"), v->width, v->height);
     gl->Uniform2i(gl_uniform(gl, pr, "u_rows"), y0, n);
-    gl->BindFramebuffer(GL_FRAMEBUFFER, d->target->fbo);
-    gl->Viewport(0, 0, v->width, v->height);
-    gl->Enable(GL_SCISSOR_TEST);
-    gl->Scissor(0, y0, v->width, n);
-    gl->Disable(GL_DEPTH_TEST);
-    gl->Enable(GL_BLEND);
-    gl->BlendFuncSeparate(GL_ONE, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
-    gl->ColorMaski(1, GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE); /* no depth writes */
-    gl->BindVertexArray(s->vao);
-    gl->DrawArrays(GL_TRIANGLES, 0, 6);
-    gl->BindVertexArray(0);
-    gl->ColorMaski(1, GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
-    gl->Disable(GL_BLEND);
-    gl->Disable(GL_SCISSOR_TEST);
+    rnd_kit_over_rows(k, s->vao, d->target, v->width, v->height, y0, n);
 }
 
 /* render: the split (remade when field or t changed), the splat passes over the solid runs,
@@ -696,11 +689,15 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     soft_cloud *sc = d->cloud_data;
     const sp_params *p = d->params;
     if (!sc) return sd_errf(err, SD_EINVAL, "soft: the cloud was not attached");
-    if (p->model != SP_MODEL_EXPRESS)
-        return sd_errf(err, SD_EINVAL, "soft: only model=express is implemented");
+    int lists = p->model != SP_MODEL_EXPRESS, concentric = p->model == SP_MODEL_CONCENTRIC;
+    if (lists && sc->nsets != 1)
+        return sd_errf(err, SD_ELIMIT, "soft: model=%s takes a cloud in one buffer set (this one "
+                       "has %u)", concentric ? "concentric" : "base", sc->nsets);
     int rc = 0;
-    if (!sc->have_split || sc->field != p->field || sc->t != p->t)
-        if ((rc = make_split(k->gl, d->cloud, sc, p->field, p->t, err)) < 0) return rc;
+    int changed = soft_fields_update(k->gl, d->cloud, &sc->fields, p, err);
+    if (changed < 0) return changed;
+    if (changed || !sc->have_split || sc->t != p->t)
+        if ((rc = make_split(k->gl, sc, p->t, err)) < 0) return rc;
     /* The split (see the file comment): one buffer set, the splat programs' filter; several,
      * the solid runs. */
     int one = sc->nsets == 1;
@@ -710,25 +707,24 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     sd.view = &sv;
     soft_order o;
     order_sets(d->view, sc, &o);
-    int draw = p->lambda > 0.0f || p->l_m > p->t;
+    int draw = p->lambda > 0.0f || (!lists && p->l_m > p->t);
     /* order=tile: the compositor, for one buffer set (the usual case); several take the
-     * sprites. */
-    int tile = draw && p->order == SP_ORDER_TILE && sc->nsets == 1 && sc->sets[0].nsoft > 0;
+     * sprites. order=auto: see SOFT_AUTO_TILE. */
+    int want_tile = p->order == SP_ORDER_TILE ||
+                    (p->order == SP_ORDER_AUTO && k->software && sc->nsets == 1 &&
+                     sc->sets[0].nsoft > SOFT_AUTO_TILE);
+    int tile = !lists && draw && want_tile && sc->nsets == 1 && sc->sets[0].nsoft > 0;
     if (tile && (rc = tile_bin(k, s, d, sc, &o, err)) < 0) return rc;
 
     splat_frame f;
     int nstripes = splat__frame_begin(k, s->splat, &sd, &f, err);
     rc = nstripes < 0 ? nstripes : 0;
     if (nstripes > 0) {
-        float dz = d->cloud->bmax[2] - d->cloud->bmin[2];
-        splat__set_filter(k, s->splat, p->field, one ? p->t : 2.0f, d->cloud->bmin[2],
-                          dz > 0.0f ? 1.0f / dz : 0.0f);
+        splat__set_filter(k, s->splat, SPLAT_SKIP_SOFT, one ? p->t : 2.0f);
         if (one) {
             k->gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_F);
             k->gl->BindTexture(GL_TEXTURE_BUFFER, s->f_tex);
-            k->gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI,
-                             d->cloud->sets[0].buf[p->field == SP_FIELD_INTENSITY
-                                                       ? RND_ATTR_INTENSITY : RND_ATTR_FIELD]);
+            k->gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, sc->fields.sets[0].f_buf);
             k->gl->ActiveTexture(GL_TEXTURE0);
         }
     }
@@ -740,15 +736,26 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
             int height = d->view->height;
             int yb = f.y0 > 0 ? f.y0 - 1 : 0; /* the keys' first row (splat's halo) */
             int nb = (f.y0 + f.n < height ? f.y0 + f.n + 1 : f.y0 + f.n) - yb;
-            if (tile) tile_blend(k, s, d, 1, f.y0, f.n, yb, nb);
-            else if (draw) rc = draw_soft(k, s, d, sc, &o, 1, f.y0, f.n, yb, nb, err);
+            if (lists && draw) {
+                bind_soft_set(k, s, d, sc, 0);
+                rc = soft_lists_draw(k, &s->lists, d, sc->sets[0].nsoft, concentric, 1, f.y0, f.n,
+                                     yb, nb, err);
+            } else if (tile) {
+                tile_blend(k, s, d, 1, f.y0, f.n, yb, nb);
+            } else if (draw) {
+                rc = draw_soft(k, s, d, sc, &o, 1, f.y0, f.n, yb, nb, err);
+            }
             /* draw_soft bound its sets' buffers; splat binds one set once per frame, so give
              * it back (several sets are rebound by the splat passes themselves). */
             if (f.one_set) rnd_kit_bind_set(k, &d->cloud->sets[0], p->color);
         }
     }
     int whole_fits = (uint64_t)d->view->width * d->view->height * 16 <= (uint64_t)k->max_ssbo;
-    if (nstripes == 0 && tile && whole_fits)
+    if (nstripes == 0 && lists && draw) {
+        bind_soft_set(k, s, d, sc, 0);
+        rc = soft_lists_draw(k, &s->lists, d, sc->sets[0].nsoft, concentric, 0, 0,
+                             d->view->height, 0, d->view->height, err);
+    } else if (nstripes == 0 && tile && whole_fits)
         tile_blend(k, s, d, 0, 0, d->view->height, 0, d->view->height);
     else if (nstripes == 0 && draw)
         rc = draw_soft(k, s, d, sc, &o, 0, 0, d->view->height, 0, d->view->height, err);
@@ -759,7 +766,8 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
 const rnd_pipeline pipe_soft = {
     .name = "soft",
     .needs = 1u << RND_ATTR_POS | 1u << RND_ATTR_NORMAL | 1u << RND_ATTR_RADIUS |
-             1u << RND_ATTR_RGBA | 1u << RND_ATTR_FIELD | 1u << RND_ATTR_INTENSITY,
+             1u << RND_ATTR_RGBA | 1u << RND_ATTR_FIELD | 1u << RND_ATTR_INTENSITY |
+             1u << RND_ATTR_CLASS | 1u << RND_ATTR_SCALAR,
     .create = soft_create,
     .destroy = soft_destroy,
     .attach = soft_attach,

@@ -137,7 +137,7 @@ typedef struct splat_state {
     GLuint rect_buf;           /* ivec4: the pixels pass 1 touched in the stripe (the resolve's
                                   rectangle) */
     uint64_t rect_bytes;
-    GLint floc[P_COUNT][3];    /* splat__create_filtered: u_sfield, u_st, u_szr */
+    GLint floc[P_COUNT][2];    /* splat__create_filtered: u_smode, u_st */
 } splat_state;
 
 static void splat_destroy(rnd_kit *k, void *state)
@@ -201,9 +201,8 @@ static int splat_create_with(rnd_kit *k, void **state, int filtered, sd_err *err
         for (int u = 0; u < U_COUNT; u++) s->loc[p][u] = gl_uniform(gl, s->prog[p], unames[u]);
     }
     for (int p = 0; p < P_COUNT; p++) {
-        s->floc[p][0] = filtered && p != P_RESOLVE ? gl_uniform(gl, s->prog[p], "u_sfield") : -1;
+        s->floc[p][0] = filtered && p != P_RESOLVE ? gl_uniform(gl, s->prog[p], "u_smode") : -1;
         s->floc[p][1] = filtered && p != P_RESOLVE ? gl_uniform(gl, s->prog[p], "u_st") : -1;
-        s->floc[p][2] = filtered && p != P_RESOLVE ? gl_uniform(gl, s->prog[p], "u_szr") : -1;
     }
     gl->GenVertexArrays(1, &s->vao);
     s->max_rows = k->opts.splat_stripe_rows;
@@ -557,6 +556,13 @@ static int render_sortlast(rnd_kit *k, void *state, const rnd_draw *d, sd_err *e
     return xr < 0 ? xr : rc < 0 ? rc : end;
 }
 
+GLuint splat__keys_buffer(const void *state, uint64_t *bytes)
+{
+    const splat_state *s = state;
+    *bytes = s->key_bytes;
+    return s->key_buf;
+}
+
 /* render: the three passes, per stripe of rows; see the file comment. */
 static int splat_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
 {
@@ -589,15 +595,14 @@ int splat__create_filtered(rnd_kit *k, void **state, sd_err *err)
     return splat_create_with(k, state, 1, err);
 }
 
-void splat__set_filter(rnd_kit *k, void *state, int field, float t, float z0, float zinv)
+void splat__set_filter(rnd_kit *k, void *state, int mode, float t)
 {
     splat_state *s = state;
     for (int p = 0; p < P_RESOLVE; p++) {
         if (s->floc[p][1] < 0) continue;
         k->gl->UseProgram(s->prog[p]);
-        if (s->floc[p][0] >= 0) k->gl->Uniform1i(s->floc[p][0], field);
+        if (s->floc[p][0] >= 0) k->gl->Uniform1i(s->floc[p][0], mode);
         k->gl->Uniform1f(s->floc[p][1], t);
-        if (s->floc[p][2] >= 0) k->gl->Uniform2f(s->floc[p][2], z0, zinv);
     }
 }
 

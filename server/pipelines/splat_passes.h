@@ -30,14 +30,22 @@ typedef struct splat_frame {
 } splat_frame;
 
 int splat__create(rnd_kit *k, void **state, sd_err *err);
-/* splat__create_filtered: the same passes, whose raster programs skip soft points (field value
- * F > t, see splat__set_filter; the field source bound on RND_T_SOFT_F): the `soft` pipeline's
- * solid points. The resolve is the same program as splat's. */
+/* splat__create_filtered: the same passes, whose raster programs draw part of the points by
+ * their field value F (float bits on RND_T_SOFT_F, soft_field.h) and splat__set_filter's mode:
+ * the `soft` pipeline's solid points, the `olt` pipeline's layers. The resolve is splat's. */
 int splat__create_filtered(rnd_kit *k, void **state, sd_err *err);
-/* splat__set_filter: after splat__frame_begin, the filter of a splat__create_filtered state:
- * points whose F (SP_FIELD_* field: the float bits on RND_T_SOFT_F, or for height (z - z0) *
- * zinv clamped to [0, 1]) exceeds t are skipped; t >= 1 skips none. */
-void splat__set_filter(rnd_kit *k, void *state, int field, float t, float z0, float zinv);
+enum {
+    SPLAT_SKIP_SOFT = 0,  /* points with F > t are skipped (t >= 1 skips none) */
+    SPLAT_SKIP_SOLID = 1, /* points with F <= t are skipped */
+    SPLAT_PEEL = 2        /* soft points within the first soft layer are skipped: their centre
+                             depth within the depth tolerance of the keys on RND_T_OLT_KEYS
+                             (a copy of an earlier soft-only pass's keys of the same stripe) */
+};
+/* splat__set_filter: after splat__frame_begin, the filter mode and threshold of a
+ * splat__create_filtered state. */
+void splat__set_filter(rnd_kit *k, void *state, int mode, float t);
+/* splat__keys_buffer: the storage buffer behind splat__keys_texture, and its bytes. */
+GLuint splat__keys_buffer(const void *state, uint64_t *bytes);
 void splat__destroy(rnd_kit *k, void *state);
 
 /* splat__frame_begin: sizes the buffers and sets the frame's uniforms. Returns the number of

@@ -15,6 +15,8 @@
     X(SPLAT_BIG)     /* splat: dispatch header + splats with a big pixel box */                \
     X(SPLAT_RAS)     /* splat: dispatch header + sampled (not deposited) splats */             \
     X(SPLAT_RECT)    /* splat: ivec4, the pixels pass 1 touched */                             \
+    X(SOFT_FILL)     /* soft base/concentric: uint per pixel, store cursors; + lost spheres */ \
+    X(SOFT_FRAGS)    /* soft base/concentric: vec4 per sample (soft_frag.comp) */              \
     X(POINTS_DEPTH)  /* points: uint per pixel, the packed key or the depth bits */            \
     X(POINTS_INDEX)  /* points: uint per pixel, the exact form's winning point */ \
     X(KAWATA_DEPTH)  /* kawata: uint per buffer pixel, pass 1's nearest depth (float bits) */ \
@@ -45,11 +47,13 @@
     X(KAWATA_SPLATS) /* kawata: KAWATA_SPLATS as RGBA32F, 2 texels a buffer pixel */          \
     X(EDL_DEPTH)     /* EDL: a copy of the target's depth_eye as R32F */                      \
     X(SOFT_F)        /* soft: R32UI float bits of the field source (FIELD or INTENSITY) */    \
-    X(SOFT_IDX)      /* soft: R32UI soft point indices sorted along the three axes */         \
+    X(SOFT_IDX)      /* soft: R32UI soft point indices, then their ranks along the 3 axes */  \
     X(SOFT_PROJ)     /* soft: SOFT_PROJ as RGBA32F */                                          \
     X(SOFT_LIST)     /* soft: SOFT_LIST as R32UI */                                             \
     X(SOFT_CELLS)    /* soft: SOFT_CELLS as R32UI */                                            \
-    X(SOFT_LAYER)    /* soft: SOFT_LAYER as RGBA32F */
+    X(SOFT_LAYER)    /* soft: SOFT_LAYER as RGBA32F */                                        \
+    X(OLT_KEYS)      /* olt: R32UI, the first soft layer's visibility keys (splat's layout) */ \
+    X(OLT_COLOR)     /* olt: sampler2D, the first soft layer's resolved colour */
 
 enum {
 #define RND_B_ENUM_(name) RND_B_##name,

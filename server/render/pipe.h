@@ -32,7 +32,10 @@
     X(RADIUS, "radius", 1, GL_R32F)    /* splat radius */                                     \
     X(RGBA, "rgba", 1, GL_R32UI)       /* RGBA8 packed, r in the low byte; white if absent */ \
     X(FIELD, "field", 1, GL_R32UI)     /* float bits of F in [0,1] */                         \
-    X(INTENSITY, "intensity", 1, GL_R32UI) /* float bits, normalised to [0,1]; 0 if absent */
+    X(INTENSITY, "intensity", 1, GL_R32UI) /* float bits, normalised to [0,1]; 0 if absent */ \
+    X(CLASS, "class", 1, GL_R32UI)     /* LAS classification 0-255; one word if absent */     \
+    X(SCALAR, "scalar", 1, GL_R32UI)   /* float bits of the file's scalar property, normalised \
+                                          to [0,1] by its range; one word if absent */
 
 enum {
 #define RND_ATTR_ENUM_(id, name, comps, fmt) RND_ATTR_##id,
@@ -68,6 +71,7 @@ typedef struct rnd_chunk {
 typedef struct rnd_gpu_cloud {
     uint64_t n;
     uint32_t attrs;            /* PC_ATTR_* the file had (normals, radius, F always) */
+    char scalar_name[32];      /* the file property RND_ATTR_SCALAR holds ("" if none) */
     double offset[3];          /* file coordinates = local + offset */
     float bmin[3], bmax[3];    /* local bounds */
     float sigma, radius_median;
@@ -168,6 +172,13 @@ void rnd_kit_bind_set(rnd_kit *k, const rnd_bufset *s, int color);
 int64_t rnd_kit_set_ranges(rnd_kit *k, const rnd_view *v, uint32_t set, uint32_t *nranges,
                            uint32_t *first, sd_err *err);
 
+/* rnd_kit_over_rows: draws 6 vertices with the bound program and vertex array vao (two
+ * full-frame triangles, e.g. soft_resolve.vert) into target t over rows [y0, y0 + n) of a
+ * width x height frame with the premultiplied "over" (ONE, ONE_MINUS_SRC_ALPHA), no depth test
+ * and no writes to draw buffer 1 (the eye depth); restores that state. */
+void rnd_kit_over_rows(rnd_kit *k, GLuint vao, const rnd_target *t, int width, int height, int y0,
+                       int n);
+
 /* rnd_kit_unbind: unbinds every texture unit of bindings.h. */
 void rnd_kit_unbind(rnd_kit *k);
 
@@ -177,6 +188,7 @@ void rnd_kit_unbind(rnd_kit *k);
 typedef struct rnd_draw_out {
     uint64_t splats;           /* kawata: splats drawn (valid image-buffer pixels) */
     int buffer_w, buffer_h;    /* kawata: the image buffer's size */
+    uint32_t flags;            /* RND_FRAME_* (render.h): how the frame was degraded */
 } rnd_draw_out;
 
 /* What one frame asks of a pipeline. */

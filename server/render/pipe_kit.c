@@ -133,6 +133,26 @@ int64_t rnd_kit_set_ranges(rnd_kit *k, const rnd_view *v, uint32_t set, uint32_t
     return (int64_t)total;
 }
 
+void rnd_kit_over_rows(rnd_kit *k, GLuint vao, const rnd_target *t, int width, int height, int y0,
+                       int n)
+{
+    const gl_api *gl = k->gl;
+    gl->BindFramebuffer(GL_FRAMEBUFFER, t->fbo);
+    gl->Viewport(0, 0, width, height);
+    gl->Enable(GL_SCISSOR_TEST);
+    gl->Scissor(0, y0, width, n);
+    gl->Disable(GL_DEPTH_TEST);
+    gl->Enable(GL_BLEND);
+    gl->BlendFuncSeparate(GL_ONE, GL_ONE_MINUS_SRC_ALPHA, GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
+    gl->ColorMaski(1, GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
+    gl->BindVertexArray(vao);
+    gl->DrawArrays(GL_TRIANGLES, 0, 6);
+    gl->BindVertexArray(0);
+    gl->ColorMaski(1, GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+    gl->Disable(GL_BLEND);
+    gl->Disable(GL_SCISSOR_TEST);
+}
+
 void rnd_kit_unbind(rnd_kit *k)
 {
     const gl_api *gl = k->gl;

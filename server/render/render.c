@@ -261,13 +261,62 @@ const char *rnd_backend_name(const rnd_ctx *r)
     return r->ops->name;
 }
 
+/* The ranges that normalise a cloud's intensities and scalar property to [0, 1]. */
+typedef struct attr_norm {
+    float lo[2], scale[2];     /* [0] intensity, [1] scalar; scale 0: constant, all 1 */
+} attr_norm;
+
+/* norm_range: lo and 1 / (hi - lo) of the finite values of v[0..n). */
+static void norm_range(const float *v, uint64_t n, float *lo_out, float *scale_out)
+{
+    float lo = INFINITY, hi = -INFINITY;
+    for (uint64_t i = 0; i < n; i++) {
+        if (!isfinite(v[i])) continue;
+        lo = fminf(lo, v[i]);
+        hi = fmaxf(hi, v[i]);
+    }
+    *lo_out = lo;
+    *scale_out = hi > lo ? 1.0f / (hi - lo) : 0.0f;
+}
+
+/* upload_converted: fills the bound buffer with attribute a (intensity, scalar: normalised
+ * float bits; class: the byte as a word) of points [base, base + n), in chunks. */
+static int upload_converted(const gl_api *gl, int a, const pc_prepared *pc, uint64_t base,
+                            uint32_t n, const attr_norm *nm, sd_err *err)
+{
+    enum { CHUNK = 1 << 16 };
+    uint32_t *tmp = malloc(CHUNK * sizeof *tmp);
+    if (!tmp) return sd_errf(err, SD_ENOMEM, "out of memory uploading a cloud's %s",
+                             rnd_attrs[a].name);
+    int w = a == RND_ATTR_SCALAR;
+    const float *in = a == RND_ATTR_CLASS ? NULL : w ? pc->scalar + base : pc->intensity + base;
+    for (uint64_t i = 0; i < n; i += CHUNK) {
+        uint64_t m = n - i < CHUNK ? n - i : CHUNK;
+        for (uint64_t j = 0; j < m; j++) {
+            if (!in) {
+                tmp[j] = pc->cls[base + i + j];
+                continue;
+            }
+            float x = in[i + j];
+            float f = isfinite(x) ? (nm->scale[w] > 0 ? (x - nm->lo[w]) * nm->scale[w] : 1.0f)
+                                  : 0.0f;
+            memcpy(&tmp[j], &f, 4);
+        }
+        gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, (GLintptr)(i * 4), (GLsizeiptr)(m * 4), tmp);
+    }
+    free(tmp);
+    return 0;
+}
+
 /* upload_attr: buffer *b for attribute a of points [base, base + n) of pc. Missing colours are
- * white, missing intensities 0; intensities are normalised by the cloud's range (lo, scale). */
+ * white, missing intensities 0; intensities and the scalar are normalised by the cloud's range
+ * (nm); a cloud without classes or a scalar gets a one-word buffer for them. */
 static int upload_attr(const gl_api *gl, GLuint *b, int a, const pc_prepared *pc, uint64_t base,
-                       uint32_t n, float lo, float scale, sd_err *err)
+                       uint32_t n, const attr_norm *nm, sd_err *err)
 {
     uint64_t len = (uint64_t)n * 4 * (uint64_t)rnd_attrs[a].components;
     const void *src = NULL;
+    int convert = 0;
     switch (a) {
     case RND_ATTR_POS: src = pc->pos + 3 * base; break;
     case RND_ATTR_NORMAL: src = pc->normal ? pc->normal + 3 * base : NULL; break;
@@ -276,41 +325,41 @@ static int upload_attr(const gl_api *gl, GLuint *b, int a, const pc_prepared *pc
     case RND_ATTR_RGBA:
         src = (pc->attrs & PC_ATTR_RGB) && pc->rgba ? pc->rgba + 4 * base : NULL;
         break;
-    default: break; /* intensity: normalised below */
+    case RND_ATTR_INTENSITY: convert = (pc->attrs & PC_ATTR_INTENSITY) && pc->intensity; break;
+    case RND_ATTR_CLASS:
+        convert = (pc->attrs & PC_ATTR_CLASS) && pc->cls;
+        if (!convert) len = 4;
+        break;
+    case RND_ATTR_SCALAR:
+        convert = (pc->attrs & PC_ATTR_SCALAR) && pc->scalar;
+        if (!convert) len = 4;
+        break;
+    default: break;
     }
     gl->GenBuffers(1, b);
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, *b);
     gl->BufferData(GL_SHADER_STORAGE_BUFFER, (GLsizeiptr)len, src, GL_STATIC_DRAW);
+    if (convert) return upload_converted(gl, a, pc, base, n, nm, err);
     if (!src) {
         const GLuint fill = a == RND_ATTR_RGBA ? 0xFFFFFFFFu : 0;
         gl->ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT,
                             &fill);
     }
-    if (a == RND_ATTR_INTENSITY && (pc->attrs & PC_ATTR_INTENSITY) && pc->intensity) {
-        enum { CHUNK = 1 << 16 };
-        float *tmp = malloc(CHUNK * sizeof *tmp);
-        if (!tmp) return sd_errf(err, SD_ENOMEM, "out of memory uploading intensities");
-        const float *in = pc->intensity + base;
-        for (uint64_t i = 0; i < n; i += CHUNK) {
-            uint64_t m = n - i < CHUNK ? n - i : CHUNK;
-            for (uint64_t j = 0; j < m; j++) {
-                float x = in[i + j];
-                tmp[j] = isfinite(x) ? (scale > 0 ? (x - lo) * scale : 1.0f) : 0.0f;
-            }
-            gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, (GLintptr)(i * 4), (GLsizeiptr)(m * 4),
-                              tmp);
-        }
-        free(tmp);
-    }
     return 0;
 }
 
-/* cloud_bytes: the GPU bytes of a cloud of n points (every attribute, 4 bytes a component). */
-static uint64_t cloud_bytes(uint64_t n)
+/* cloud_bytes: the GPU bytes of cloud pc (every attribute, 4 bytes a component; class and
+ * scalar only when the cloud has them, upload_attr gives the others one word). */
+static uint64_t cloud_bytes(const pc_prepared *pc)
 {
     uint64_t per = 0;
-    for (int a = 0; a < RND_ATTR_COUNT; a++) per += 4 * (uint64_t)rnd_attrs[a].components;
-    return n * per;
+    for (int a = 0; a < RND_ATTR_COUNT; a++) {
+        if ((a == RND_ATTR_CLASS && !(pc->attrs & PC_ATTR_CLASS)) ||
+            (a == RND_ATTR_SCALAR && !(pc->attrs & PC_ATTR_SCALAR)))
+            continue;
+        per += 4 * (uint64_t)rnd_attrs[a].components;
+    }
+    return pc->n * per;
 }
 
 /* make_chunks: the slot's chunks from pc's batches (one batch covering everything when it has
@@ -408,20 +457,17 @@ static int make_resident(rnd_ctx *r, cloud_slot *slot, const pc_prepared *pc, sd
         uint32_t end = c->chunks[k].first + c->chunks[k].count;
         if (end > bs->n) bs->n = end;
     }
-    float lo = INFINITY, hi = -INFINITY;
+    attr_norm nm = {{0, 0}, {0, 0}};
     if ((pc->attrs & PC_ATTR_INTENSITY) && pc->intensity)
-        for (uint64_t i = 0; i < pc->n; i++) {
-            if (!isfinite(pc->intensity[i])) continue;
-            lo = fminf(lo, pc->intensity[i]);
-            hi = fmaxf(hi, pc->intensity[i]);
-        }
-    float scale = hi > lo ? 1.0f / (hi - lo) : 0.0f; /* constant intensity: all 1 */
+        norm_range(pc->intensity, pc->n, &nm.lo[0], &nm.scale[0]);
+    if ((pc->attrs & PC_ATTR_SCALAR) && pc->scalar)
+        norm_range(pc->scalar, pc->n, &nm.lo[1], &nm.scale[1]);
     const gl_api *gl = &r->gl;
     c->nsets = nsets;
     for (uint32_t s = 0; s < nsets && rc == 0; s++)
         for (int a = 0; a < RND_ATTR_COUNT && rc == 0; a++)
-            rc = upload_attr(gl, &c->sets[s].buf[a], a, pc, c->sets[s].base, c->sets[s].n, lo,
-                             scale, err);
+            rc = upload_attr(gl, &c->sets[s].buf[a], a, pc, c->sets[s].base, c->sets[s].n, &nm,
+                             err);
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
     if (rc == 0) rc = gl_check(gl, "uploading a cloud", err);
     r->resident_bytes += slot->bytes;
@@ -462,6 +508,8 @@ static int64_t add_cloud(rnd_ctx *r, const pc_prepared *pc, pc_prepared *src, sd
     memset(c, 0, sizeof *c);
     c->n = pc->n;
     c->attrs = pc->attrs;
+    snprintf(c->scalar_name, sizeof c->scalar_name, "%s",
+             (pc->attrs & PC_ATTR_SCALAR) ? pc->scalar_name : "");
     for (int i = 0; i < 3; i++) {
         c->offset[i] = pc->offset[i];
         c->bmin[i] = (float)(pc->bmin[i] - pc->offset[i]);
@@ -473,7 +521,7 @@ static int64_t add_cloud(rnd_ctx *r, const pc_prepared *pc, pc_prepared *src, sd
     for (uint64_t i = 0; i < pc->n; i++)
         for (int k = 0; k < 3; k++) sum[k] += pc->pos[3 * i + k];
     for (int k = 0; k < 3; k++) c->centroid[k] = (float)(sum[k] / (double)pc->n);
-    slot->bytes = cloud_bytes(pc->n);
+    slot->bytes = cloud_bytes(pc);
     slot->last_used = ++r->clock;
     int rc = make_chunks(slot, pc, r->max_set_points, err);
     if (rc >= 0) rc = make_resident(r, slot, pc, err);
@@ -764,6 +812,7 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     frame->points_drawn = v.points_visible;
     frame->splats_drawn = out.splats;
     frame->buffer_w = out.buffer_w;
+    frame->flags = out.flags;
     frame->buffer_h = out.buffer_h;
     return gl_check(gl, "rendering a frame", err);
 }

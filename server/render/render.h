@@ -61,7 +61,16 @@ typedef struct rnd_frame {
     uint64_t points_drawn;    /* after frustum culling and the point budget */
     uint64_t splats_drawn;    /* kawata: splats of its image buffer drawn; 0 for the others */
     int buffer_w, buffer_h;   /* kawata: its image buffer's size; 0 for the others */
+    uint32_t flags;           /* RND_FRAME_*: 0 for a frame drawn as asked */
 } rnd_frame;
+
+/* rnd_frame.flags (the FRAME message's flags, PROTOCOL.md). */
+enum {
+    /* soft, model=base|concentric: past the fragment memory cap (soft_frag_mib) some soft
+     * samples were dropped, or a pixel had more overlapping spheres than the Base-Model's
+     * blend holds (soft_lists.h says which and how) */
+    RND_FRAME_SOFT_TRUNCATED = 1u << 0,
+};
 
 typedef struct rnd_ctx rnd_ctx;
 

@@ -209,34 +209,7 @@ awk -v k="$k1" -v s="$s1" -v e="${e1:-0}" 'BEGIN {
     printf "targets (synthetic 1M): kawata %.2fx faster than splat (target >= 2: %s); EDL %.1f ms a frame on points (target <= 3: %s)\n",
         s / k, (s >= 2 * k) ? "met" : "MISSED", e, (e <= 3) ? "met" : "MISSED" }'
 
-# Soft Transparency (pipeline=soft, Express-Model, order=axis) against splat: the paper's
-# ST/SP (splat ms / soft ms, Table 1's frame-rate ratio; target >= 0.85, soft at most 1.18x
-# splat) at the default t = 0.5 and at t = 0.9 (fewer soft points), lambda 0.5.
-echo
-echo "#### soft vs splat (ST/SP), ${size}"
-echo
-echo "| cloud | t | points ms | splat ms | soft ms | ST/SP | CPU ms splat / soft | target ST/SP >= 0.85 |"
-echo "|---|---:|---:|---:|---:|---:|---|---|"
-for c in Guanyin synthetic-1M; do
-    f="$data/Guanyin.ply"
-    [ "$c" = synthetic-1M ] && f="$tmp/synthetic-1M.ply"
-    for t in 0.5 0.9; do
-        o="$tmp/$c-soft-$t"
-        if "$bench/render_bench" "$f" --frames "$frames" --size "$size" --backend "$backend" \
-               --pipelines points,splat,soft --set "t=$t" --label "$c" > "$o.out" 2> "$o.err"; then
-            sm=$(awk -F'|' '$4 ~ "^ *splat *$" { print $5 + 0 }' "$o.out")
-            tm=$(awk -F'|' '$4 ~ "^ *soft *$" { print $5 + 0 }' "$o.out")
-            pm=$(awk -F'|' '$4 ~ "^ *points *$" { print $5 + 0 }' "$o.out")
-            cs=$(sed -n "s/^cpu: $c splat \([0-9.]*\) ms.*/\1/p" "$o.err")
-            ct=$(sed -n "s/^cpu: $c soft \([0-9.]*\) ms.*/\1/p" "$o.err")
-            awk -v c="$c" -v t="$t" -v p="$pm" -v s="$sm" -v m="$tm" -v cs="$cs" -v ct="$ct" 'BEGIN {
-                printf "| %s | %s | %.1f | %.1f | %.1f | %.2f | %.1f / %.1f = %.2f | %s |\n", c, t, p, s,
-                    m, s / m, cs, ct, cs / ct, (s >= 0.85 * m) ? "met" : "MISSED" }'
-        else
-            echo "| $c | $t | render_bench failed: $(tail -1 "$o.err") | | | | | |"
-        fi
-    done
-done
+# Soft Transparency (soft, olt and their ratios to splat) is tests/bench/bench_soft.sh.
 
 echo
 echo "#### ParaView, same synthetic 1M cloud, ${size}"

@@ -3,6 +3,8 @@
  *
  *   render_bench FILE [--frames N] [--size WxH] [--backend auto|egl|osmesa]
  *                [--pipelines points,splat] [--label NAME] [--threads T] [--save DIR]
+ *                (a pipeline may carry its own parameters: soft:model=base:lambda=0.3; it is
+ *                 then reported under that whole name)
  *                [--set key=value ...]   (parameters for every pipeline, e.g. ewa=exact)
  *                [--shader-dir DIR]      (read the .glsl files from DIR: try a shader edit unbuilt)
  *                [--zoom Z]              (eye Z times closer to the target: a close-up, culled)
@@ -61,6 +63,7 @@ typedef struct bench_opts {
     int frames, width, height, threads;
     rnd_backend_kind backend;
     int pipes[MAX_PIPES];
+    char pipe_names[MAX_PIPES][96]; /* as given: "soft:order=tile" */
     int npipes;
     const char *sets[MAX_PIPES]; /* --set key=value, applied to every pipeline's parameters */
     int nsets;
@@ -73,6 +76,7 @@ typedef struct pipe_result {
     uint64_t drawn;
     uint64_t splats;  /* kawata: splats drawn (last frame) */
     int buffer_w, buffer_h; /* kawata: its image buffer (last frame) */
+    uint32_t flags;   /* rnd_frame.flags of any counted frame */
 } pipe_result;
 
 static double now_s(void)
@@ -114,6 +118,16 @@ static void usage(void)
             MAX_FRAMES);
 }
 
+/* pipe_params: applies "key=value:key=value" to p. Returns 0, or -1 with emsg. */
+static int pipe_params(sp_params *p, const char *kvs, char *emsg, size_t len)
+{
+    char buf[96];
+    snprintf(buf, sizeof buf, "%s", kvs);
+    for (char *save = NULL, *kv = strtok_r(buf, ":", &save); kv; kv = strtok_r(NULL, ":", &save))
+        if (sp_param_set_kv(p, kv, emsg, len) != 0) return -1;
+    return 0;
+}
+
 /* parse_pipelines: fills o->pipes from a comma-separated list of pipeline names (the values of
  * the `pipeline` parameter). Returns 0, or -1 after printing which name is unknown. */
 static int parse_pipelines(bench_opts *o, const char *list)
@@ -125,12 +139,17 @@ static int parse_pipelines(bench_opts *o, const char *list)
          tok = strtok_r(NULL, ",", &save)) {
         sp_params p;
         sp_params_defaults(&p);
-        if (sp_param_set_text(&p, "pipeline", tok, emsg, sizeof emsg) != 0) {
-            fprintf(stderr, "render_bench: --pipelines: %s\n", emsg);
+        if (o->npipes == MAX_PIPES || strlen(tok) >= sizeof o->pipe_names[0]) {
+            fprintf(stderr, "render_bench: --pipelines: more than %d names or '%s' too long\n",
+                    MAX_PIPES, tok);
             return -1;
         }
-        if (o->npipes == MAX_PIPES) {
-            fprintf(stderr, "render_bench: --pipelines: more than %d names\n", MAX_PIPES);
+        snprintf(o->pipe_names[o->npipes], sizeof o->pipe_names[0], "%s", tok);
+        char *colon = strchr(tok, ':');
+        if (colon) *colon = 0;
+        if (sp_param_set_text(&p, "pipeline", tok, emsg, sizeof emsg) != 0 ||
+            (colon && pipe_params(&p, colon + 1, emsg, sizeof emsg) != 0)) {
+            fprintf(stderr, "render_bench: --pipelines: %s\n", emsg);
             return -1;
         }
         o->pipes[o->npipes++] = p.pipeline;
@@ -273,14 +292,16 @@ static void orbit(const rnd_camera *cam0, double angle_rad, rnd_camera *cam)
 
 /* bench_pipeline: renders 1 + o->frames frames of cloud id through pipeline pipe and fills res
  * with the medians. Returns 0, or a negative SD_E* code with err filled. */
-static int bench_pipeline(rnd_ctx *r, uint32_t id, const rnd_camera *cam0, int pipe,
+static int bench_pipeline(rnd_ctx *r, uint32_t id, const rnd_camera *cam0, int k,
                           const bench_opts *o, enc_ctx *enc, pipe_result *res, sd_err *err)
 {
     sp_params p, jp;
     char emsg[200];
     sp_params_defaults(&p);
     for (int i = 0; i < o->nsets; i++) sp_param_set_kv(&p, o->sets[i], emsg, sizeof emsg);
-    p.pipeline = pipe;
+    p.pipeline = o->pipes[k];
+    const char *colon = strchr(o->pipe_names[k], ':');
+    if (colon) pipe_params(&p, colon + 1, emsg, sizeof emsg); /* checked by parse_pipelines */
     jp = p;
     jp.format = SP_FMT_JPEG;
     jp.quality = 85;
@@ -311,6 +332,7 @@ static int bench_pipeline(rnd_ctx *r, uint32_t id, const rnd_camera *cam0, int p
         res->drawn = f.points_drawn;
         res->splats = f.splats_drawn;
         res->buffer_w = f.buffer_w, res->buffer_h = f.buffer_h;
+        res->flags |= f.flags;
     }
     if (rc == 0) {
         res->frame_ms = median(t_frame, o->frames);
@@ -318,9 +340,8 @@ static int bench_pipeline(rnd_ctx *r, uint32_t id, const rnd_camera *cam0, int p
         res->jpeg_ms = median(t_jpeg, o->frames);
         res->cpu_ms = median(t_cpu, o->frames);
         if (o->save_dir) {
-            char path[4096], name[32];
-            snprintf(path, sizeof path, "%s/%s-%s.png", o->save_dir, o->label,
-                     sp_enum_name(SP_PIPELINE, pipe, name, sizeof name));
+            char path[4096];
+            snprintf(path, sizeof path, "%s/%s-%s.png", o->save_dir, o->label, o->pipe_names[k]);
             rc = enc_write_file(path, &f, &jp, err);
         }
     }
@@ -435,18 +456,21 @@ int main(int argc, char **argv)
     memset(res, 0, sizeof res);
     double points_ms = 0;
     for (int k = 0; k < o.npipes; k++) {
-        if (bench_pipeline(r, (uint32_t)id, &cam0, o.pipes[k], &o, enc, &res[k], &err) < 0)
+        if (bench_pipeline(r, (uint32_t)id, &cam0, k, &o, enc, &res[k], &err) < 0)
             goto fail;
         if (o.pipes[k] == SP_PIPE_POINTS) points_ms = res[k].frame_ms;
     }
     for (int k = 0; k < o.npipes; k++) {
-        char name[32], ratio[32] = "-";
-        sp_enum_name(SP_PIPELINE, o.pipes[k], name, sizeof name);
+        char ratio[32] = "-";
+        const char *name = o.pipe_names[k];
         if (points_ms > 0) snprintf(ratio, sizeof ratio, "%.2f", res[k].frame_ms / points_ms);
         printf("| %s | %llu | %s | %.1f | %s | %.2f | %.2f |\n", o.label,
                (unsigned long long)npts, name, res[k].frame_ms, ratio, res[k].readback_ms,
                res[k].jpeg_ms);
         fprintf(stderr, "cpu: %s %s %.1f ms/frame\n", o.label, name, res[k].cpu_ms);
+        if (res[k].flags)
+            fprintf(stderr, "flags: %s %s 0x%x (soft samples dropped)\n", o.label, name,
+                    res[k].flags);
     }
     for (int k = 0; k < o.npipes && o.edl_cost; k++)
         if (bench_edl(r, (uint32_t)id, &cam0, o.pipes[k], &o, &err) < 0) goto fail;

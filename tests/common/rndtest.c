@@ -8,7 +8,29 @@
 #include "rndtest.h"
 
 #include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
+
+rnd_ctx *tu_ctx;
+
+int tu_egl_group_setup(void **state)
+{
+    (void)state;
+    rnd_desc d = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS")};
+    sd_err err = {0};
+    tu_ctx = rnd_create(&d, &err);
+    if (!tu_ctx) fprintf(stderr, "rnd_create: %s\n", err.msg);
+    return tu_ctx ? 0 : -1;
+}
+
+int tu_egl_group_teardown(void **state)
+{
+    (void)state;
+    rnd_destroy(tu_ctx);
+    tu_ctx = NULL;
+    return 0;
+}
 
 uint32_t tu_upload(rnd_ctx *r, const pc_prepared *pc)
 {

@@ -5,6 +5,13 @@
 
 #include "render.h"
 
+/* tu_ctx: the EGL renderer (shaders from $SPLATD_SHADERS) of a test binary's group, made by
+ * tu_egl_group_setup (which prints the error and returns -1 when it cannot) and destroyed by
+ * tu_egl_group_teardown: pass both to cmocka_run_group_tests. */
+extern rnd_ctx *tu_ctx;
+int tu_egl_group_setup(void **state);
+int tu_egl_group_teardown(void **state);
+
 /* tu_upload: rnd_upload of pc; fails the test when it returns no id. */
 uint32_t tu_upload(rnd_ctx *r, const pc_prepared *pc);
 

@@ -1,6 +1,6 @@
 /* gen_cloud — a deterministic synthetic scan-like point cloud, as binary little-endian PLY.
  *
- *   gen_cloud N out.ply [--seed S]
+ *   gen_cloud N out.ply [--seed S] [--vegetation F]
  *
  * Writes N points (x y z float, red green blue uchar) of a 100 m outdoor scene in metres:
  *   50 %  ground: a disc of radius 50 m with gentle undulation, sampled like a terrestrial
@@ -9,7 +9,9 @@
  *    5 %  a sphere of radius 4 m, 17 % a 'vegetation' blob: points scattered through a ball
  *         (a tree crown);
  *    1 %  noise: points scattered uniformly through the scene's box (mixed pixels, birds);
- * every surface point moved by Gaussian noise of 1 cm per axis. Same N and seed, same bytes:
+ * every surface point moved by Gaussian noise of 1 cm per axis. --vegetation F (0 to 1) makes
+ * the vegetation share F instead, the other shares scaled down in proportion (the soft
+ * transparency bench's "half noisy vegetation" cloud is F = 0.5). Same N and seed, same bytes:
  * the generator is splitmix64 with a fixed default seed. Only standard C; 1M points take well
  * under a second. */
 #include <math.h>
@@ -105,8 +107,21 @@ static void noise(pt *p, rng *r)
 
 /* Which generator makes point i of n: fixed shares of the scene, interleaved so any prefix of
  * the file is a thinned version of the whole scene. */
-static void make_point(pt *p, rng *r)
+static void make_point(pt *p, rng *r, double veg)
 {
+    if (veg >= 0) {
+        if (uni(r) < veg) {
+            vegetation(p, r);
+            return;
+        }
+        uint64_t v = next64(r) % 830; /* the other shares, without the vegetation's 170 */
+        if (v < 500) ground(p, r);
+        else if (v < 700) building(p, r);
+        else if (v < 770) cylinder(p, r);
+        else if (v < 820) sphere(p, r);
+        else noise(p, r);
+        return;
+    }
     uint64_t u = next64(r) % 1000;
     if (u < 500) ground(p, r);
     else if (u < 700) building(p, r);
@@ -128,9 +143,17 @@ int main(int argc, char **argv)
     const char *out = NULL;
     long long n = -1;
     uint64_t seed = 0x5eed5eedull;
+    double veg = -1.0; /* the fixed shares */
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--seed") && i + 1 < argc) {
             seed = strtoull(argv[++i], NULL, 0);
+        } else if (!strcmp(argv[i], "--vegetation") && i + 1 < argc) {
+            char *e;
+            veg = strtod(argv[++i], &e);
+            if (*e || !(veg >= 0 && veg <= 1)) {
+                fprintf(stderr, "gen_cloud: --vegetation must be in [0, 1], got '%s'\n", argv[i]);
+                return 2;
+            }
         } else if (n < 0) {
             char *e;
             n = strtoll(argv[i], &e, 10);
@@ -141,12 +164,12 @@ int main(int argc, char **argv)
         } else if (!out) {
             out = argv[i];
         } else {
-            fprintf(stderr, "usage: gen_cloud N out.ply [--seed S]\n");
+            fprintf(stderr, "usage: gen_cloud N out.ply [--seed S] [--vegetation F]\n");
             return 2;
         }
     }
     if (n < 0 || !out) {
-        fprintf(stderr, "usage: gen_cloud N out.ply [--seed S]\n");
+        fprintf(stderr, "usage: gen_cloud N out.ply [--seed S] [--vegetation F]\n");
         return 2;
     }
     FILE *f = fopen(out, "wb");
@@ -170,7 +193,7 @@ int main(int argc, char **argv)
         long long m = n - done < BLOCK ? n - done : BLOCK;
         for (long long i = 0; i < m; i++) {
             pt p;
-            make_point(&p, &r);
+            make_point(&p, &r, veg);
             uint8_t *b = buf + i * REC;
             put_f32(b, p.x);
             put_f32(b + 4, p.y);

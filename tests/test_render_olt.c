@@ -1,0 +1,160 @@
+/* test_render_olt.c — the `olt` pipeline (One-Layer Transparency, the Soft Transparency paper's
+ * comparison) on llvmpipe through the public renderer, against frames of `splat` of the layers
+ * alone:
+ *   - two soft planes one behind the other: olt shows lambda * front + (1 - lambda) * back with
+ *     the back plane opaque, where `soft` (Express) blends the back plane too, so less of it
+ *     shows through;
+ *   - lambda = 0 shows only what lies behind the first soft layer (the back plane), and t = 1
+ *     (nothing soft) gives exactly the `splat` image;
+ *   - a solid plane in front of the soft layer hides it. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "camera.h"
+#include "cloud.h"
+#include "render.h"
+#include "rndtest.h"
+#include "testutil.h"
+
+enum { W = 160, H = 160, NX = 70 };
+static const double OFF[3] = {500000.0, 4100000.0, 120.0};
+
+/* A plane's worth of layers: layer j is an NX x NX grid at z[j], spacing 0.02, colour rgb[j],
+ * field value F[j]; only the layers whose bit is in mask are put in the cloud. */
+typedef struct layer {
+    float z, F;
+    uint8_t rgb[3];
+} layer;
+
+static uint32_t upload_layers(const layer *ls, int n, unsigned mask)
+{
+    int m = 0;
+    for (int j = 0; j < n; j++) m += (mask >> j) & 1;
+    pc_prepared pc;
+    tu_new_cloud(&pc, (uint64_t)m * NX * NX, 0);
+    const float h = 0.02f;
+    uint64_t k = 0;
+    for (int j = 0; j < n; j++) {
+        if (!((mask >> j) & 1)) continue;
+        for (int y = 0; y < NX; y++)
+            for (int x = 0; x < NX; x++, k++) {
+                pc.pos[3 * k] = (x - 0.5f * (NX - 1)) * h;
+                pc.pos[3 * k + 1] = (y - 0.5f * (NX - 1)) * h;
+                pc.pos[3 * k + 2] = ls[j].z;
+                pc.radius[k] = 1.5f * h;
+                memcpy(&pc.rgba[4 * k], ls[j].rgb, 3);
+                pc.F[k] = ls[j].F;
+            }
+    }
+    tu_finish_cloud(&pc, OFF);
+    uint32_t id = tu_upload(tu_ctx, &pc);
+    pc_prepared_free(&pc);
+    return id;
+}
+
+static rnd_camera cam_z(double ez)
+{
+    rnd_camera c = {{OFF[0], OFF[1], ez + OFF[2]}, {OFF[0], OFF[1], OFF[2]}, {0, 1, 0},
+                    40, 0.05f, 20.0f, W, H};
+    return c;
+}
+
+/* The mean of channel c over the central 40 x 40 pixels (inside both planes). */
+static double centre_mean(const rnd_frame *f, int c)
+{
+    double s = 0;
+    for (int y = H / 2 - 20; y < H / 2 + 20; y++)
+        for (int x = W / 2 - 20; x < W / 2 + 20; x++) s += f->rgba8[4 * ((size_t)y * W + x) + c];
+    return s / 1600.0;
+}
+
+/* Two soft planes (F = 1, t = 0.5), red in front at z = 0.3, green behind at z = -0.3, seen
+ * from z = 3. References: `splat` of the red plane alone (R) and of the green alone (G).
+ * olt must give lambda R + (1 - lambda) G per channel, the back plane opaque; tolerance 3
+ * levels on the centre means (the layer is rounded to 8 bits once before the blend, the blend
+ * once more). Express composites every disc of both planes with eq. 19 opacities, so the
+ * green that shows is (1 - a_red) a_green G with both a < 1: at lambda = 0.1 it must be at
+ * least 20 levels below olt's (1 - lambda) G. lambda = 0 shows the green plane alone (olt's
+ * "everything behind the first layer", tolerance 1 level) and t = 1 is `splat` of both
+ * (tolerance 0). */
+static void test_two_soft_layers(void **state)
+{
+    (void)state;
+    const layer ls[2] = {{0.3f, 1.0f, {255, 0, 0}}, {-0.3f, 1.0f, {0, 255, 0}}};
+    uint32_t both = upload_layers(ls, 2, 3), red = upload_layers(ls, 2, 1),
+             green = upload_layers(ls, 2, 2);
+    rnd_camera cam = cam_z(3.0);
+    sp_params p;
+    sp_params_defaults(&p);
+    rnd_frame fr = {0}, fg = {0}, fb = {0};
+    tu_render(tu_ctx, red, &cam, &p, 0, &fr);
+    tu_render(tu_ctx, green, &cam, &p, 0, &fg);
+    tu_render(tu_ctx, both, &cam, &p, 0, &fb);
+    double R = centre_mean(&fr, 0), G = centre_mean(&fg, 1);
+    assert_true(R > 100 && G > 100);
+    const float lambdas[3] = {0.1f, 0.5f, 0.0f};
+    for (int i = 0; i < 3; i++) {
+        p.t = 0.5f, p.lambda = lambdas[i];
+        rnd_frame fo = {0}, fe = {0};
+        p.pipeline = SP_PIPE_OLT;
+        tu_render(tu_ctx, both, &cam, &p, 0, &fo);
+        p.pipeline = SP_PIPE_SOFT;
+        tu_render(tu_ctx, both, &cam, &p, 0, &fe);
+        double or_ = centre_mean(&fo, 0), og = centre_mean(&fo, 1);
+        double er = centre_mean(&fe, 0), eg = centre_mean(&fe, 1);
+        double wr = p.lambda * R, wg = (1 - p.lambda) * G;
+        printf("lambda %.1f: olt (%.1f, %.1f), want (%.1f, %.1f); express (%.1f, %.1f)\n",
+               p.lambda, or_, og, wr, wg, er, eg);
+        assert_true(fabs(or_ - wr) <= 3.0 && fabs(og - wg) <= 3.0);
+        if (i == 0) assert_true(eg <= og - 20.0);
+        rnd_frame_free(&fo), rnd_frame_free(&fe);
+    }
+    p.pipeline = SP_PIPE_OLT, p.t = 1.0f, p.lambda = 0.5f;
+    rnd_frame f1 = {0};
+    tu_render(tu_ctx, both, &cam, &p, 0, &f1);
+    assert_memory_equal(f1.rgba8, fb.rgba8, (size_t)W * H * 4);
+    rnd_frame_free(&f1);
+    rnd_frame_free(&fr), rnd_frame_free(&fg), rnd_frame_free(&fb);
+    rnd_release(tu_ctx, both), rnd_release(tu_ctx, red), rnd_release(tu_ctx, green);
+}
+
+/* A solid blue plane (F = 0) at z = 0.6 in front of the soft red plane at z = 0.3 and the green
+ * at z = -0.3: the frame equals `splat` of the blue plane where the blue plane covers (its
+ * centre; tolerance 1 level: only the soft layer's pass is added, and it is discarded there). */
+static void test_solid_in_front(void **state)
+{
+    (void)state;
+    const layer ls[3] = {{0.6f, 0.0f, {0, 0, 255}}, {0.3f, 1.0f, {255, 0, 0}},
+                         {-0.3f, 1.0f, {0, 255, 0}}};
+    uint32_t all = upload_layers(ls, 3, 7), blue = upload_layers(ls, 3, 1);
+    rnd_camera cam = cam_z(3.0);
+    sp_params p;
+    sp_params_defaults(&p);
+    rnd_frame fb = {0}, fo = {0};
+    tu_render(tu_ctx, blue, &cam, &p, 0, &fb);
+    p.pipeline = SP_PIPE_OLT, p.t = 0.5f, p.lambda = 0.5f;
+    tu_render(tu_ctx, all, &cam, &p, 0, &fo);
+    for (int c = 0; c < 3; c++) {
+        double a = centre_mean(&fb, c), b = centre_mean(&fo, c);
+        printf("solid in front, channel %d: splat of the plane %.2f, olt %.2f\n", c, a, b);
+        assert_true(fabs(a - b) <= 1.0);
+    }
+    rnd_frame_free(&fb), rnd_frame_free(&fo);
+    rnd_release(tu_ctx, all), rnd_release(tu_ctx, blue);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_two_soft_layers),
+        cmocka_unit_test(test_solid_in_front),
+    };
+    return cmocka_run_group_tests(tests, tu_egl_group_setup, tu_egl_group_teardown);
+}
