@@ -77,7 +77,7 @@ static int mkdir_p(const char *dir)
  * *at() calls that write in it. Refuses a directory that another user owns or that group or
  * others may write: there, anyone could swap names under the writer. Returns the fd, or -1
  * with err filled. */
-static int open_cache_dir(const char *dir, sd_err *err)
+int cache__open_dir(const char *dir, sd_err *err)
 {
     if (mkdir_p(dir) < 0) {
         sd_errf(err, SD_EIO, "cannot create cache directory %s: %s", dir, strerror(errno));
@@ -159,7 +159,7 @@ int cache_dir_for(const char *dir, char *buf, size_t len)
 }
 
 /* Picks the default cache directory (see cache_desc.dir) for src. */
-static void default_dir(const char *src, char *buf, size_t len)
+void cache__default_dir(const char *src, char *buf, size_t len)
 {
     if (cache_dir_for(NULL, buf, len) == 0) return;
     char tmp[PATH_MAX];
@@ -173,7 +173,7 @@ int cache_path_for(const char *src, const char *dir, int k, char *buf, size_t le
     if (!realpath(src, real))
         return sd_errf(err, SD_EIO, "%s: %s", src, strerror(errno));
     if (dir && *dir) snprintf(d, sizeof d, "%s", dir);
-    else default_dir(real, d, sizeof d);
+    else cache__default_dir(real, d, sizeof d);
     char tmp[PATH_MAX];
     snprintf(tmp, sizeof tmp, "%s", real);
     const char *base = basename(tmp);
@@ -436,7 +436,7 @@ static int write_all(int fd, const void *p, size_t len)
  * the process dies while writing), else a random name created with O_EXCL | O_NOFOLLOW (a
  * symlink planted there makes the create fail, never followed). *named is set to 1 and name
  * filled in the second case. Returns the fd or -1 with errno. */
-static int create_tmp(int dfd, const char *base, char *name, size_t len, int *named)
+int cache__create_tmp(int dfd, const char *base, char *name, size_t len, int *named)
 {
     *named = 0;
     int fd = openat(dfd, ".", O_TMPFILE | O_WRONLY | O_CLOEXEC, 0600);
@@ -453,7 +453,7 @@ static int create_tmp(int dfd, const char *base, char *name, size_t len, int *na
 
 /* link_tmp: gives the unnamed file fd the new random name name in dfd (linkat fails, never
  * follows, when the name exists). Returns 0 or -1 with errno. */
-static int link_tmp(int fd, int dfd, const char *base, char *name, size_t len)
+int cache__link_tmp(int fd, int dfd, const char *base, char *name, size_t len)
 {
     char proc[64];
     snprintf(proc, sizeof proc, "/proc/self/fd/%d", fd);
@@ -511,10 +511,10 @@ static int write_cache(const char *cpath, const src_key *key, const pc_prepared 
     h.stats = p->stats;
     h.header_hash = sd_hash64(&h, offsetof(cache_header, header_hash), 0);
 
-    int dfd = open_cache_dir(dir, err);
+    int dfd = cache__open_dir(dir, err);
     if (dfd < 0) return SD_EIO;
     int named = 0;
-    int fd = create_tmp(dfd, base, tmp, sizeof tmp, &named);
+    int fd = cache__create_tmp(dfd, base, tmp, sizeof tmp, &named);
     if (fd < 0) {
         int e = errno;
         close(dfd);
@@ -524,7 +524,7 @@ static int write_cache(const char *cpath, const src_key *key, const pc_prepared 
               write_all(fd, p->block, p->block_len) || fsync(fd);
     int saved = errno;
     if (!bad && !named) {
-        bad = link_tmp(fd, dfd, base, tmp, sizeof tmp) != 0;
+        bad = cache__link_tmp(fd, dfd, base, tmp, sizeof tmp) != 0;
         saved = errno;
         named = !bad;
     }

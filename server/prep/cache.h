@@ -68,3 +68,15 @@ int cache_path_for(const char *src, const char *dir, int k, char *buf, size_t le
 /* cache__set_version: rewrites the version field of a cache file (with a valid checksum), so
  * tests can check that a cache of another version is rebuilt. Internal; returns 0 or -1. */
 int cache__set_version(const char *cache_path, uint32_t version);
+
+/* ---- shared with lod_file.c (the LOD cache writes its files the same way) ---- */
+/* cache__open_dir: creates dir (0700) when missing and opens it without following a symlink;
+ * refuses one another user owns or others may write. Returns the fd or -1 with err. */
+int cache__open_dir(const char *dir, sd_err *err);
+/* cache__create_tmp: an unnamed O_TMPFILE file in dfd (else a random O_EXCL|O_NOFOLLOW name
+ * in name, *named = 1). Returns the fd or -1 with errno. */
+int cache__create_tmp(int dfd, const char *base, char *name, size_t len, int *named);
+/* cache__link_tmp: gives an unnamed file a random name in dfd. Returns 0 or -1 with errno. */
+int cache__link_tmp(int fd, int dfd, const char *base, char *name, size_t len);
+/* cache__default_dir: the default cache directory for the source file src (a real path). */
+void cache__default_dir(const char *src, char *buf, size_t len);

@@ -1,0 +1,286 @@
+/* test_lod.c — the level-of-detail octree (prep/lod*.c) and its rendering under a point budget.
+ *
+ * Clouds are gen_cloud's synthetic scene, small (tens of thousands of points), built with a
+ * small sampling grid (grid_bits 4: 16^3 cells per node), small leaves and chunks forced small,
+ * so that a test cloud has several levels, several chunks, halos that must grow, and nodes
+ * above the chunks: every path of the out-of-core build runs in a few seconds. */
+#include <errno.h>
+#include <math.h>
+#include <setjmp.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <dirent.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <cmocka.h>
+
+#include "cache.h"
+#include "cloud.h"
+#include "imgtest.h"
+#include "lod.h"
+#include "morton.h"
+#include "prep.h"
+#include "render.h"
+#include "testutil.h"
+
+static void gen(const char *dir, int n, char *out, size_t len)
+{
+    char tool[512], cmd[2048];
+    snprintf(tool, sizeof tool, "%s/gen_cloud", tu_env("SPLATD_TOOLS", "build/tools"));
+    snprintf(out, len, "%s/g%d.ply", dir, n);
+    snprintf(cmd, sizeof cmd, "'%s' %d '%s' > /dev/null", tool, n, out);
+    if (system(cmd) != 0) fail_msg("gen_cloud failed (%s); set SPLATD_TOOLS", tool);
+}
+
+static lod_desc small_desc(const char *cache)
+{
+    lod_desc d = {.dir = cache, .grid_bits = 4, .leaf_max = 1500, .chunk_max = 6000,
+                  .threads = 2};
+    return d;
+}
+
+typedef struct key6 {
+    float p[3];
+    float v[8];               /* normal, radius, F, and the point's node level + spacing */
+} key6;
+
+static int cmp_key(const void *a, const void *b)
+{
+    return memcmp(a, b, 12);
+}
+
+/* Octree invariants: every point exactly once (the multiset of positions equals the file's);
+ * own bounds inside subtree bounds inside the parent's; a child one level below its parent
+ * with its code extending the parent's; spacing = side / 2^(level + grid_bits); in an inner
+ * node at most one point per sampling cell, and every point inside its node's cube. */
+static void test_octree_invariants(void **state)
+{
+    (void)state;
+    char dir[512], cache[600], ply[700];
+    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    snprintf(cache, sizeof cache, "%s/cache", dir);
+    gen(dir, 40000, ply, sizeof ply);
+    lod_desc d = small_desc(cache);
+    lod_cloud c;
+    lod_result res;
+    sd_err err = {0};
+    if (lod_open_cloud(ply, &d, &c, &res, &err) != 0) fail_msg("%s", err.msg);
+    assert_int_equal(res.hit, 0);
+    assert_true(res.chunks > 4);       /* the chunking really ran */
+    assert_int_equal(c.n, 40000);
+    assert_true(c.depth >= 3);
+    pc_cloud ref;
+    if (pc_load(ply, &ref, &err) != 0) fail_msg("%s", err.msg);
+    key6 *a = calloc(c.n, sizeof *a), *b = calloc(c.n, sizeof *b);
+    assert_non_null(a);
+    assert_non_null(b);
+    uint64_t k = 0, upper = 0;
+    for (uint64_t i = 0; i < c.nnodes; i++) {
+        const lod_node *nd = &c.nodes[i];
+        assert_true(lod_node_verify(&c, i));
+        double sp = c.side / (double)(1u << (nd->level + c.grid_bits));
+        assert_float_equal(nd->spacing, (float)sp, 1e-6 * sp);
+        if (i > 0) {
+            const lod_node *par = &c.nodes[nd->parent];
+            assert_int_equal(par->level + 1, nd->level);
+            assert_true(nd->code >> 3 == par->code);
+            for (int ax = 0; ax < 3; ax++) {
+                assert_true(nd->sbmin[ax] >= par->sbmin[ax] && nd->sbmax[ax] <= par->sbmax[ax]);
+            }
+        }
+        lod_node_data nd_;
+        lod_node_get(&c, i, &nd_);
+        prep_morton_frame f = {{c.origin[0], c.origin[1], c.origin[2]}, c.side,
+                               (double)(1u << PREP_MORTON_BITS) / c.side};
+        int shift = 3 * (PREP_MORTON_BITS - (nd->level + (int)c.grid_bits));
+        uint64_t *cells = malloc(nd->count * sizeof *cells);
+        for (uint32_t j = 0; j < nd->count; j++) {
+            const float *p = nd_.pos + 3 * j;
+            for (int ax = 0; ax < 3; ax++) {
+                assert_true(p[ax] >= nd->bmin[ax] && p[ax] <= nd->bmax[ax]);
+                assert_true(nd->bmin[ax] >= nd->sbmin[ax] && nd->bmax[ax] <= nd->sbmax[ax]);
+            }
+            uint64_t code = prep_morton_code(&f, p);
+            assert_true(code >> (3 * (PREP_MORTON_BITS - nd->level)) == nd->code);
+            cells[j] = code >> shift;
+            memcpy(a[k].p, p, 12);
+            a[k].v[0] = nd_.radius[j];
+            k++;
+            if (nd->nchildren) assert_true(nd_.radius_lod[j] >= nd->spacing);
+            else assert_true(nd_.radius_lod[j] == nd_.radius[j]);
+        }
+        if (nd->nchildren) { /* one point per sampling cell */
+            for (uint32_t j = 1; j < nd->count; j++) assert_true(cells[j] != cells[j - 1]);
+            upper++;
+        }
+        free(cells);
+    }
+    assert_true(upper > 1);
+    assert_int_equal(k, c.n);
+    for (uint64_t i = 0; i < ref.n; i++) memcpy(b[i].p, ref.pos + 3 * i, 12);
+    qsort(a, c.n, sizeof *a, cmp_key);
+    qsort(b, c.n, sizeof *b, cmp_key);
+    for (uint64_t i = 0; i < c.n; i++) assert_memory_equal(a[i].p, b[i].p, 12);
+    free(a);
+    free(b);
+    pc_cloud_free(&ref);
+    /* a second open loads the cache */
+    lod_cloud c2;
+    if (lod_open_cloud(ply, &d, &c2, &res, &err) != 0) fail_msg("%s", err.msg);
+    assert_int_equal(res.hit, 1);
+    assert_int_equal(c2.nnodes, c.nnodes);
+    lod_cloud_free(&c2);
+    lod_cloud_free(&c);
+    tu_rm_rf(dir);
+}
+
+/* Normals, radii and F of the out-of-core build equal the in-memory prep's, point by point
+ * (matched by position), with chunks of 6000 points whose halos had to be grown. */
+static void test_equals_in_memory_prep(void **state)
+{
+    (void)state;
+    char dir[512], cache[600], ply[700];
+    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    snprintf(cache, sizeof cache, "%s/cache", dir);
+    gen(dir, 30000, ply, sizeof ply);
+    lod_desc d = small_desc(cache);
+    lod_cloud c;
+    lod_result res;
+    sd_err err = {0};
+    if (lod_open_cloud(ply, &d, &c, &res, &err) != 0) fail_msg("%s", err.msg);
+    pc_cloud in;
+    pc_prepared p;
+    if (pc_load(ply, &in, &err) != 0) fail_msg("%s", err.msg);
+    prep_desc pd = {.threads = 2};
+    if (prep_run(&in, &pd, &p, &err) != 0) fail_msg("%s", err.msg);
+    key6 *a = calloc(c.n, sizeof *a), *b = calloc(c.n, sizeof *b);
+    uint64_t k = 0;
+    for (uint64_t i = 0; i < c.nnodes; i++) {
+        lod_node_data nd;
+        lod_node_get(&c, i, &nd);
+        for (uint32_t j = 0; j < c.nodes[i].count; j++, k++) {
+            memcpy(a[k].p, nd.pos + 3 * j, 12);
+            memcpy(a[k].v, nd.normal + 3 * j, 12);
+            a[k].v[3] = nd.radius[j];
+            a[k].v[4] = nd.F[j];
+        }
+    }
+    for (uint64_t i = 0; i < p.n; i++) {
+        memcpy(b[i].p, p.pos + 3 * i, 12);
+        memcpy(b[i].v, p.normal + 3 * i, 12);
+        b[i].v[3] = p.radius[i];
+        b[i].v[4] = p.F[i];
+    }
+    qsort(a, c.n, sizeof *a, cmp_key);
+    qsort(b, c.n, sizeof *b, cmp_key);
+    uint64_t diff = 0;
+    for (uint64_t i = 0; i < c.n; i++) {
+        assert_memory_equal(a[i].p, b[i].p, 12);
+        if (memcmp(a[i].v, b[i].v, 5 * sizeof(float)) != 0) {
+            if (diff < 5)
+                print_message("point %llu: n %g %g %g r %g F %g vs n %g %g %g r %g F %g\n",
+                              (unsigned long long)i, a[i].v[0], a[i].v[1], a[i].v[2], a[i].v[3],
+                              a[i].v[4], b[i].v[0], b[i].v[1], b[i].v[2], b[i].v[3], b[i].v[4]);
+            diff++;
+        }
+    }
+    assert_int_equal(diff, 0);
+    assert_true(c.sigma == p.sigma);
+    assert_true(c.radius_median == p.radius_median);
+    assert_true(c.F_raw_p99 == p.F_raw_p99);
+    for (int i = 0; i < 5; i++) assert_true(c.F_pct[i] == p.F_pct[i]);
+    free(a);
+    free(b);
+    pc_prepared_free(&p);
+    pc_cloud_free(&in);
+    lod_cloud_free(&c);
+    tu_rm_rf(dir);
+}
+
+static int count_files(const char *dir)
+{
+    DIR *d = opendir(dir);
+    if (!d) return 0;
+    int n = 0;
+    struct dirent *e;
+    while ((e = readdir(d)))
+        if (e->d_name[0] != '.') n++;
+    closedir(d);
+    return n;
+}
+
+/* kill -9 at moments spread over the build: afterwards either no cache loads (and nothing is
+ * left in the cache directory) or the cache that loads is whole: every node checks out. */
+static void test_kill9_never_leaves_a_loadable_cache(void **state)
+{
+    (void)state;
+    char dir[512], cache[600], ply[700];
+    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    snprintf(cache, sizeof cache, "%s/cache", dir);
+    gen(dir, 60000, ply, sizeof ply);
+    lod_desc d = small_desc(cache);
+    d.threads = 1;
+    /* how long a build takes, to spread the kills over it */
+    struct timespec t0, t1;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    lod_cloud c;
+    sd_err err = {0};
+    d.force = 1;
+    if (lod_open_cloud(ply, &d, &c, NULL, &err) != 0) fail_msg("%s", err.msg);
+    lod_cloud_free(&c);
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    double total = (t1.tv_sec - t0.tv_sec) + (t1.tv_nsec - t0.tv_nsec) * 1e-9;
+    char path[4096];
+    assert_int_equal(lod_cache_path(ply, cache, PREP_DEFAULT_K, path, sizeof path, &err), 0);
+    int loaded = 0, killed = 0;
+    for (int i = 0; i < 8; i++) {
+        unlink(path);
+        pid_t pid = fork();
+        assert_true(pid >= 0);
+        if (pid == 0) {
+            lod_cloud cc;
+            sd_err e2 = {0};
+            _exit(lod_open_cloud(ply, &d, &cc, NULL, &e2) == 0 ? 0 : 1);
+        }
+        usleep((useconds_t)(total * 1e6 * (i + 0.5) / 8.0));
+        kill(pid, SIGKILL);
+        int st;
+        waitpid(pid, &st, 0);
+        killed += WIFSIGNALED(st);
+        char why[256];
+        lod_cloud cc;
+        int got = lod_load_file(path, ply, PREP_DEFAULT_K, &cc, why, sizeof why);
+        if (got == 1) {
+            loaded++;
+            for (uint64_t j = 0; j < cc.nnodes; j++) assert_true(lod_node_verify(&cc, j));
+            lod_cloud_free(&cc);
+            assert_int_equal(count_files(cache), 1);
+        } else {
+            assert_int_equal(got, 0); /* absent, never a damaged file */
+            assert_int_equal(count_files(cache), 0);
+        }
+    }
+    print_message("kill -9: %d of 8 killed during the build, %d caches complete\n", killed,
+                  loaded);
+    assert_true(killed >= 4);
+    tu_rm_rf(dir);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_octree_invariants),
+        cmocka_unit_test(test_equals_in_memory_prep),
+        cmocka_unit_test(test_kill9_never_leaves_a_loadable_cache),
+    };
+    const char *only = getenv("SPLATD_TEST_FILTER");
+    if (only && *only) cmocka_set_test_filter(only);
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
