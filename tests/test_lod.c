@@ -273,12 +273,193 @@ static void test_kill9_never_leaves_a_loadable_cache(void **state)
     tu_rm_rf(dir);
 }
 
+/* ---- rendering ---- */
+
+typedef struct rfix {
+    char dir[512], cache[600], ply[700];
+    rnd_ctx *r;
+    uint32_t lod_id, flat_id;
+    uint64_t n;
+    pc_prepared flat;
+} rfix;
+
+static rfix *rfix_new(int n, uint32_t pool)
+{
+    rfix *f = calloc(1, sizeof *f);
+    assert_non_null(tu_tmpdir(f->dir, sizeof f->dir));
+    snprintf(f->cache, sizeof f->cache, "%s/cache", f->dir);
+    gen(f->dir, n, f->ply, sizeof f->ply);
+    sd_err err = {0};
+    rnd_desc rd = {.backend = RND_BACKEND_AUTO, .lod_pool_points = pool,
+                   .pipe = {.points_raster = RND_RASTER_EXACT},
+                   .shader_dir = tu_env("SPLATD_SHADERS", NULL)};
+    f->r = rnd_create(&rd, &err);
+    if (!f->r) fail_msg("renderer: %s", err.msg);
+    lod_desc d = small_desc(f->cache);
+    lod_cloud *c = calloc(1, sizeof *c);
+    if (lod_open_cloud(f->ply, &d, c, NULL, &err) != 0) fail_msg("%s", err.msg);
+    f->n = c->n;
+    int64_t id = rnd_adopt_lod(f->r, c, &err);
+    if (id <= 0) fail_msg("adopt: %s", err.msg);
+    f->lod_id = (uint32_t)id;
+    pc_cloud in;
+    if (pc_load(f->ply, &in, &err) != 0) fail_msg("%s", err.msg);
+    prep_desc pd = {.threads = 2};
+    if (prep_run(&in, &pd, &f->flat, &err) != 0) fail_msg("%s", err.msg);
+    pc_cloud_free(&in);
+    id = rnd_upload(f->r, &f->flat, &err);
+    if (id <= 0) fail_msg("upload: %s", err.msg);
+    f->flat_id = (uint32_t)id;
+    return f;
+}
+
+static void rfix_free(rfix *f)
+{
+    rnd_destroy(f->r);
+    pc_prepared_free(&f->flat);
+    tu_rm_rf(f->dir);
+    free(f);
+}
+
+static void camera(const rfix *f, rnd_camera *cam)
+{
+    double lo[3], hi[3];
+    for (int a = 0; a < 3; a++) lo[a] = f->flat.bmin[a], hi[a] = f->flat.bmax[a];
+    rnd_camera_frame(lo, hi, 320, 200, cam);
+}
+
+/* Renders the LOD cloud until a frame says complete; returns how many frames that took. */
+static int render_complete(rfix *f, const rnd_camera *cam, const sp_params *p, rnd_frame *fr)
+{
+    for (int i = 1; i <= 200; i++) {
+        sd_err err = {0};
+        if (rnd_render(f->r, f->lod_id, cam, p, 0, fr, &err) != 0) fail_msg("%s", err.msg);
+        if (fr->complete) return i;
+    }
+    fail_msg("no complete frame in 200");
+    return 0;
+}
+
+static double psnr(const uint8_t *a, const uint8_t *b, size_t npx)
+{
+    double se = 0;
+    for (size_t i = 0; i < npx; i++)
+        for (int c = 0; c < 3; c++) {
+            double d = (double)a[4 * i + c] - b[4 * i + c];
+            se += d * d;
+        }
+    double mse = se / (3.0 * npx);
+    return mse > 0 ? 10 * log10(255.0 * 255.0 / mse) : INFINITY;
+}
+
+/* The budget holds (points drawn <= budget) in every frame, refinement ends in a complete
+ * frame, and a budget above the cloud's size draws every point: the image then equals the flat
+ * render of the in-memory prep exactly, for the points and splat pipelines. */
+static void test_budget_and_full_equals_flat(void **state)
+{
+    (void)state;
+    rfix *f = rfix_new(40000, 0);
+    rnd_camera cam;
+    camera(f, &cam);
+    sp_params p;
+    sp_params_defaults(&p);
+    rnd_frame a = {0}, b = {0};
+    for (int pipe = 0; pipe < 2; pipe++) {
+        p.pipeline = pipe == 0 ? SP_PIPE_POINTS : SP_PIPE_SPLAT;
+        p.point_budget = 5000;
+        sd_err err = {0};
+        int frames = 0;
+        do {
+            if (rnd_render(f->r, f->lod_id, &cam, &p, 0, &a, &err) != 0) fail_msg("%s", err.msg);
+            assert_true(a.points_drawn <= 5000);
+            assert_true(a.points_drawn > 0);
+            frames++;
+        } while (!a.complete && frames < 100);
+        assert_true(a.complete);
+        p.point_budget = (int64_t)f->n + 1;
+        int nf = render_complete(f, &cam, &p, &a);
+        assert_int_equal(a.points_drawn, f->n);
+        if (rnd_render(f->r, f->flat_id, &cam, &p, 0, &b, &err) != 0) fail_msg("%s", err.msg);
+        size_t npx = (size_t)a.width * a.height, differ = 0;
+        for (size_t i = 0; i < npx; i++) differ += memcmp(a.rgba8 + 4 * i, b.rgba8 + 4 * i, 3) != 0;
+        print_message("%s: full budget complete after %d frames, %zu of %zu pixels differ from "
+                      "the flat render\n", pipe ? "splat" : "points", nf, differ, npx);
+        assert_int_equal(differ, 0);
+    }
+    rnd_frame_free(&a);
+    rnd_frame_free(&b);
+    rfix_free(f);
+}
+
+/* At a tenth of the points (inner nodes drawn with radius_lod) the splat image stays within
+ * 20 dB PSNR of the full one; drawing the same nodes without radius_lod would leave holes. */
+static void test_tenth_budget_psnr(void **state)
+{
+    (void)state;
+    rfix *f = rfix_new(40000, 0);
+    rnd_camera cam;
+    camera(f, &cam);
+    sp_params p;
+    sp_params_defaults(&p);
+    p.pipeline = SP_PIPE_SPLAT;
+    rnd_frame a = {0}, b = {0};
+    p.point_budget = (int64_t)f->n;
+    render_complete(f, &cam, &p, &a);
+    p.point_budget = (int64_t)f->n / 10;
+    render_complete(f, &cam, &p, &b);
+    assert_true(b.points_drawn <= f->n / 10);
+    double db = psnr(a.rgba8, b.rgba8, (size_t)a.width * a.height);
+    print_message("10 %% budget (%llu points): PSNR %.2f dB against the full image\n",
+                  (unsigned long long)b.points_drawn, db);
+    assert_true(db >= 20.0);
+    rnd_frame_free(&a);
+    rnd_frame_free(&b);
+    rfix_free(f);
+}
+
+/* Progressive refinement: with a cold pool the first frame is incomplete, each next frame of
+ * the same camera draws more, and the complete frame equals the one a fresh renderer ends in. */
+static void test_progressive_ends_complete(void **state)
+{
+    (void)state;
+    rfix *f = rfix_new(40000, 0);
+    rnd_camera cam;
+    camera(f, &cam);
+    sp_params p;
+    sp_params_defaults(&p);
+    p.point_budget = 30000;
+    rnd_frame a = {0}, b = {0};
+    sd_err err = {0};
+    if (rnd_render(f->r, f->lod_id, &cam, &p, 0, &a, &err) != 0) fail_msg("%s", err.msg);
+    assert_int_equal(a.complete, 0);
+    uint64_t prev = a.points_drawn;
+    int frames = 1;
+    while (!a.complete) {
+        if (rnd_render(f->r, f->lod_id, &cam, &p, 0, &a, &err) != 0) fail_msg("%s", err.msg);
+        assert_true(a.points_drawn >= prev);
+        prev = a.points_drawn;
+        assert_true(++frames < 100);
+    }
+    /* again, warm: complete at once and the same image */
+    if (rnd_render(f->r, f->lod_id, &cam, &p, 0, &b, &err) != 0) fail_msg("%s", err.msg);
+    assert_int_equal(b.complete, 1);
+    assert_memory_equal(a.rgba8, b.rgba8, (size_t)a.width * a.height * 4);
+    print_message("progressive: complete after %d frames, %llu points\n", frames,
+                  (unsigned long long)a.points_drawn);
+    rnd_frame_free(&a);
+    rnd_frame_free(&b);
+    rfix_free(f);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_octree_invariants),
         cmocka_unit_test(test_equals_in_memory_prep),
         cmocka_unit_test(test_kill9_never_leaves_a_loadable_cache),
+        cmocka_unit_test(test_budget_and_full_equals_flat),
+        cmocka_unit_test(test_tenth_budget_psnr),
+        cmocka_unit_test(test_progressive_ends_complete),
     };
     const char *only = getenv("SPLATD_TEST_FILTER");
     if (only && *only) cmocka_set_test_filter(only);

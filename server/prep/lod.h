@@ -68,6 +68,7 @@ typedef struct lod_cloud {
     uint32_t grid_bits, leaf_max, depth; /* depth: deepest level + 1 */
     double offset[3], bmin[3], bmax[3];  /* file coordinates */
     double origin[3], side;   /* the Morton cube (local) */
+    double centroid[3];       /* mean of the local positions */
     float sigma, F_raw_p99, F_pct[5], radius_median;
     uint64_t n_dropped;
     char format[64];

@@ -1056,6 +1056,7 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     memcpy(c.bmax, b->info.bmax, sizeof c.bmax);
     memcpy(c.origin, b->f.origin, sizeof c.origin);
     c.side = b->f.side;
+    memcpy(c.centroid, b->info.centroid, sizeof c.centroid);
     c.sigma = b->qs[1].value;
     c.F_raw_p99 = b->p99;
     for (int i = 0; i < 5; i++) {

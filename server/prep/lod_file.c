@@ -26,7 +26,7 @@ typedef struct lod_header {
     int64_t src_mtime_ns;
     uint32_t k, attrs, grid_bits, leaf_max, depth, pad;
     uint64_t n, nnodes, table_off, table_hash, file_len;
-    double offset[3], bmin[3], bmax[3], origin[3], side;
+    double offset[3], bmin[3], bmax[3], origin[3], side, centroid[3];
     float sigma, F_raw_p99, F_pct[5], radius_median;
     uint64_t n_dropped;
     char format[64];
@@ -211,6 +211,7 @@ int lod_load_file(const char *path, const char *src, int k, lod_cloud *out, char
     memcpy(out->bmax, h.bmax, sizeof h.bmax);
     memcpy(out->origin, h.origin, sizeof h.origin);
     out->side = h.side;
+    memcpy(out->centroid, h.centroid, sizeof h.centroid);
     out->sigma = h.sigma;
     out->F_raw_p99 = h.F_raw_p99;
     memcpy(out->F_pct, h.F_pct, sizeof h.F_pct);
@@ -311,6 +312,7 @@ int lod__writer_commit(lod_writer *w, const lod_cloud *c, const lod_src_key *key
     memcpy(h.bmax, c->bmax, sizeof h.bmax);
     memcpy(h.origin, c->origin, sizeof h.origin);
     h.side = c->side;
+    memcpy(h.centroid, c->centroid, sizeof h.centroid);
     h.sigma = c->sigma;
     h.F_raw_p99 = c->F_raw_p99;
     memcpy(h.F_pct, c->F_pct, sizeof h.F_pct);

@@ -8,6 +8,7 @@
 
 #include "framing.h"
 #include "params.h"
+#include "lod.h"
 #include "prepared.h"
 #include "sd_err.h"
 
@@ -35,6 +36,10 @@ typedef struct rnd_desc {
     uint32_t max_set_points;  /* default 0: points per buffer set as the driver allows
                                  (GL_MAX_TEXTURE_BUFFER_SIZE / 3); tests set less */
     rnd_pipe_opts pipe;
+    int lod_uploads;          /* default 4: LOD nodes uploaded per frame at most (the others
+                                 of the frame are read ahead and drawn by their ancestors) */
+    uint32_t lod_pool_points; /* default 0: points of a LOD cloud's GPU node pool: 6M, less
+                                 when the driver's buffer limit or the GPU budget says so */
 } rnd_desc;
 
 /* A camera in the cloud file's coordinates (doubles, so georeferenced eyes keep precision).
@@ -61,6 +66,9 @@ typedef struct rnd_frame {
     uint64_t points_drawn;    /* after frustum culling and the point budget */
     uint64_t splats_drawn;    /* kawata: splats of its image buffer drawn; 0 for the others */
     int buffer_w, buffer_h;   /* kawata: its image buffer's size; 0 for the others */
+    int complete;             /* 1: every node the view wants was drawn (always 1 for a flat
+                                 cloud); 0: a later frame of the same view draws more */
+    uint32_t lod_wanted, lod_drawn, lod_uploaded; /* LOD clouds: nodes this frame */
 } rnd_frame;
 
 typedef struct rnd_ctx rnd_ctx;
@@ -90,6 +98,13 @@ int64_t rnd_upload(rnd_ctx *r, const pc_prepared *pc, sd_err *err);
  * pc_prepared_free and free, on release or on failure) and uploads it, making room by evicting
  * the least recently rendered evictable clouds. Returns a cloud id > 0 or a negative SD_E*. */
 int64_t rnd_adopt(rnd_ctx *r, pc_prepared *pc, sd_err *err);
+
+/* rnd_adopt_lod: takes a heap-allocated LOD cloud (lod.h; freed by the renderer with
+ * lod_cloud_free and free, on release or failure). Its nodes reach the GPU as frames want them,
+ * into a node pool of rnd_desc.lod_pool_points points counted against the GPU budget (the pool
+ * leaves the GPU like an adopted cloud when another cloud needs the room). Frames draw at most
+ * params->point_budget points of it (0: as many as the pool holds). */
+int64_t rnd_adopt_lod(rnd_ctx *r, lod_cloud *lc, sd_err *err);
 
 /* rnd_release: removes a cloud (its GPU buffers, its pipelines' data, adopted data). */
 void rnd_release(rnd_ctx *r, uint32_t cloud_id);
