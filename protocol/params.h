@@ -35,7 +35,8 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(T,            "t",            SP_T_FLOAT, t,            0,    1,        "0.5",    NULL)     \
     X(L_M,          "l_m",          SP_T_FLOAT, l_m,          0,    1,        "0",      NULL)     \
     X(FIELD,        "field",        SP_T_ENUM,  field,        0,    0,        "uncertainty", "uncertainty|height|intensity") \
-    X(ORDER,        "order",        SP_T_ENUM,  order,        0,    0,        "axis",   "axis|tile")
+    X(ORDER,        "order",        SP_T_ENUM,  order,        0,    0,        "axis",   "axis|tile") \
+    X(LOD_FIRST,    "lod_first",    SP_T_INT,   lod_first,    0,    1,        "0",      NULL)
 
 enum {
 #define SP_ID_(id, name, type, field, lo, hi, def, vals) SP_##id,
@@ -95,6 +96,8 @@ typedef struct sp_params {
     float l_m;              /* soft: transparency modulation range (eq. 22); <= t: off */
     int32_t field;          /* soft, olt: SP_FIELD_*, the source of F */
     int32_t order;          /* soft: SP_ORDER_*, how the soft discs are composited */
+    int64_t lod_first;      /* 1: a RENDER of a LOD cloud answers its first frame, even when
+                               nodes were still missing; 0: the complete frame */
 } sp_params;
 
 typedef struct sp_param_info {

@@ -113,7 +113,8 @@ static void test_octree_invariants(void **state)
             memcpy(a[k].p, p, 12);
             a[k].v[0] = nd_.radius[j];
             k++;
-            if (nd->nchildren) assert_true(nd_.radius_lod[j] >= nd->spacing);
+            if (nd->nchildren)
+                assert_true(nd_.radius_lod[j] >= nd->spacing || nd_.radius_lod[j] == nd_.radius[j]);
             else assert_true(nd_.radius_lod[j] == nd_.radius[j]);
         }
         if (nd->nchildren) { /* one point per sampling cell */

@@ -21,6 +21,7 @@
 #include "cache.h"
 #include "commands.h"
 #include "datadir.h"
+#include "lod.h"
 #include "srv.h"
 
 static void usage(FILE *f)
@@ -66,6 +67,9 @@ static void usage(FILE *f)
             "                       3/4 of the device's memory, a quarter of RAM on a software\n"
             "                       renderer). Clouds no client has rendered for longest leave first\n"
             "                       and come back when rendered again.\n"
+            "  --lod auto|always|never  which clouds get the level-of-detail form (an out-of-core\n"
+            "                       octree drawn under point_budget): auto = files of 64 MiB or more\n"
+            "  --prep-memory SIZE   memory cap of the LOD build (default 2G)\n"
             "  --help               this text\n"
             "\n"
             "SIGTERM or SIGINT stops accepting, finishes the frames in flight (at most 5 s) and exits 0.\n");
@@ -94,7 +98,7 @@ static int parse_size(const char *s, uint64_t *out)
 static int parse_opts(int argc, char **argv, srv_opts *o)
 {
     enum { O_LISTEN = 1000, O_DATA, O_CACHE, O_BACKEND, O_TOKEN, O_PRELOAD, O_SHADERS, O_MAXC,
-           O_PORTFILE, O_HS, O_GPUMEM, O_FRAMEMEM, O_IDLE, O_RDTO, O_WRTO, O_UNAUTH, O_PERADDR, O_AUTHDELAY,
+           O_PORTFILE, O_HS, O_GPUMEM, O_LOD, O_PREPMEM, O_FRAMEMEM, O_IDLE, O_RDTO, O_WRTO, O_UNAUTH, O_PERADDR, O_AUTHDELAY,
            O_HELP };
     static const struct option lo[] = {
         {"listen", required_argument, 0, O_LISTEN},   {"data", required_argument, 0, O_DATA},
@@ -103,6 +107,7 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
         {"shader-dir", required_argument, 0, O_SHADERS}, {"max-clients", required_argument, 0, O_MAXC},
         {"port-file", required_argument, 0, O_PORTFILE}, {"handshake-timeout", required_argument, 0, O_HS},
         {"gpu-memory", required_argument, 0, O_GPUMEM},
+        {"lod", required_argument, 0, O_LOD}, {"prep-memory", required_argument, 0, O_PREPMEM},
         {"max-frame-bytes", required_argument, 0, O_FRAMEMEM},
         {"idle-timeout", required_argument, 0, O_IDLE}, {"read-timeout", required_argument, 0, O_RDTO},
         {"write-timeout", required_argument, 0, O_WRTO}, {"max-unauth", required_argument, 0, O_UNAUTH},
@@ -163,6 +168,21 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
             else if (!strcmp(optarg, "osmesa")) o->backend = RND_BACKEND_OSMESA;
             else {
                 fprintf(stderr, "splatd: --backend '%s': expected auto, egl or osmesa\n", optarg);
+                return -1;
+            }
+            break;
+        case O_LOD:
+            if (!strcmp(optarg, "auto")) o->lod_mode = LOD_AUTO;
+            else if (!strcmp(optarg, "always")) o->lod_mode = LOD_ALWAYS;
+            else if (!strcmp(optarg, "never")) o->lod_mode = LOD_NEVER;
+            else {
+                fprintf(stderr, "splatd: --lod '%s': expected auto, always or never\n", optarg);
+                return -1;
+            }
+            break;
+        case O_PREPMEM:
+            if (parse_size(optarg, &o->prep_memory) != 0) {
+                fprintf(stderr, "splatd: --prep-memory '%s': expected a size such as 2G\n", optarg);
                 return -1;
             }
             break;
@@ -646,6 +666,7 @@ static int start(srv *sv)
         .rnd = {.backend = sv->o.backend, .shader_dir = sv->o.shader_dir,
                 .max_width = sv->max_w, .max_height = sv->max_h, .gpu_memory = sv->o.gpu_memory},
         .max_clients = sv->nslots, .cache_dir = sv->o.cache_dir,
+        .lod_mode = sv->o.lod_mode, .prep_memory = sv->o.prep_memory,
         .frame_budget = sv->o.max_frame_bytes,
         .pack = srv_pack_frame, .pack_user = sv,
     };

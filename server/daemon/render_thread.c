@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -44,6 +45,7 @@ typedef struct rt_prepjob {
     uint32_t job;
     char *path;
     pc_prepared *prep;          /* set once prepared, waiting for upload */
+    lod_cloud *lod;             /* or this, for a cloud in the LOD form */
     rt_cloud_info info;
     struct rt_prepjob *next;
 } rt_prepjob;
@@ -210,8 +212,10 @@ static void do_upload(rt_ctx *rt, rnd_ctx *rnd, rt_prepjob *j)
 {
     rt_event *ev = calloc(1, sizeof *ev);
     sd_err err = {0};
-    int64_t id = rnd_adopt(rnd, j->prep, &err); /* the renderer owns it now, even on failure */
+    /* the renderer owns it now, even on failure */
+    int64_t id = j->lod ? rnd_adopt_lod(rnd, j->lod, &err) : rnd_adopt(rnd, j->prep, &err);
     j->prep = NULL;
+    j->lod = NULL;
     if (id > 0) {
         prep_prog pp = {.rt = rt, .job = j->job, .phase = -1};
         on_progress(&pp, PROTO_PHASE_UPLOAD, 1.0);
@@ -290,6 +294,17 @@ static void *render_main(void *arg)
         rnd_frame *f = &rt->frames[fi];
         int rc = rnd_render(rnd, rq.cloud_id, &rq.cam, &rq.params, rq.params.format == SP_FMT_EXR,
                             f, &err);
+        /* A RENDER of a LOD cloud answers the complete frame (unless lod_first): the frames
+         * before it load the missing nodes, a few each. The bound only guards against a view
+         * whose nodes cannot all be made resident. */
+        uint64_t spent = f->render_us;
+        for (int again = 0; rc == 0 && !stream && !f->complete && !rq.params.lod_first &&
+                            again < 100000; again++) {
+            rc = rnd_render(rnd, rq.cloud_id, &rq.cam, &rq.params,
+                            rq.params.format == SP_FMT_EXR, f, &err);
+            spent += f->render_us;
+        }
+        if (rc == 0) f->render_us = spent;
         pthread_mutex_lock(&rt->mu);
         rt->rendering = 0;
         if (rc != 0) {
@@ -310,6 +325,13 @@ static void *render_main(void *arg)
         job.meta.render_us = f->render_us;
         job.meta.readback_us = f->readback_us;
         job.meta.points_drawn = f->points_drawn;
+        job.meta.complete = f->complete;
+        /* Progressive refinement: a streamed frame that missed nodes is followed by another of
+         * the same request, unless a newer one is pending already. */
+        if (stream && !f->complete && !s->has_latest) {
+            s->latest = rq;
+            s->has_latest = 1;
+        }
         rt->encq[rt->enc_n++] = job;
         pthread_cond_signal(&rt->cv_enc);
     }
@@ -428,10 +450,39 @@ static void *prep_main(void *arg)
                          .progress = on_progress, .warn = on_cache_warn, .user = &pp};
         cache_result res;
         sd_err err = {0};
-        pc_prepared *p = calloc(1, sizeof *p);
-        int rc = p ? cache_open_cloud(j->path, &cd, p, &res, &err)
+        struct stat st;
+        int use_lod = stat(j->path, &st) == 0 && lod_want(rt->d.lod_mode, (uint64_t)st.st_size);
+        pc_prepared *p = use_lod ? NULL : calloc(1, sizeof *p);
+        lod_cloud *lc = use_lod ? calloc(1, sizeof *lc) : NULL;
+        int rc;
+        if (use_lod) {
+            lod_desc ld = {.dir = rt->d.cache_dir, .threads = rt->d.prep_threads,
+                           .memory = rt->d.prep_memory, .progress = on_progress,
+                           .warn = on_cache_warn, .user = &pp};
+            lod_result lr;
+            rc = lc ? lod_open_cloud(j->path, &ld, lc, &lr, &err)
+                    : sd_errf(&err, SD_ENOMEM, "out of memory");
+            if (rc == 0) {
+                proto_info *in = &j->info.summary;
+                in->points = lc->n;
+                in->dropped = lc->n_dropped;
+                memcpy(in->bmin, lc->bmin, sizeof in->bmin);
+                memcpy(in->bmax, lc->bmax, sizeof in->bmax);
+                memcpy(in->offset, lc->offset, sizeof in->offset);
+                in->attrs = lc->attrs;
+                in->k = lc->k;
+                in->sigma = lc->sigma;
+                snprintf(in->format, sizeof in->format, "%s", lc->format);
+                j->info.cache_hit = lr.hit;
+                j->lod = lc;
+                on_progress(&pp, PROTO_PHASE_UPLOAD, 0.0);
+            } else {
+                free(lc);
+            }
+        } else
+            rc = p ? cache_open_cloud(j->path, &cd, p, &res, &err)
                    : sd_errf(&err, SD_ENOMEM, "out of memory");
-        if (rc == 0) {
+        if (rc == 0 && !use_lod) {
             proto_info *in = &j->info.summary;
             in->points = p->n;
             in->dropped = p->n_dropped;
@@ -526,6 +577,7 @@ static void free_jobs(rt_prepjob *j)
     while (j) {
         rt_prepjob *n = j->next;
         if (j->prep) { pc_prepared_free(j->prep); free(j->prep); }
+        if (j->lod) { lod_cloud_free(j->lod); free(j->lod); }
         free(j->path);
         free(j);
         j = n;

@@ -38,6 +38,8 @@ typedef struct srv_opts {
     int shutdown_ms;             /* default 5000: how long SIGTERM waits for frames in flight */
     uint64_t gpu_memory;         /* --gpu-memory; default 0: the renderer sizes it */
     uint64_t max_frame_bytes;    /* --max-frame-bytes; default 0: a quarter of RAM */
+    int lod_mode;                /* --lod auto|always|never (LOD_*); default auto */
+    uint64_t prep_memory;        /* --prep-memory: the LOD build's memory cap; default 2 GiB */
 } srv_opts;
 
 typedef struct srv_waiter {

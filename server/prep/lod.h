@@ -17,8 +17,10 @@
  * Per point: position (local, as prepared.h), normal, radius, F and colour computed exactly as
  * prep.h's in-memory prep does from the k nearest neighbours among ALL points of the cloud (the
  * build works on chunks with a halo of neighbours grown until every kNN is exact), and a second
- * radius, radius_lod = max(radius, spacing of the node's level), used when the node is drawn
- * without its children so that coarse levels cover the surface without holes.
+ * radius, radius_lod = max(radius, spacing of the node's level) for the points of inner nodes
+ * whose neighbourhood is a surface (PCA surface variation at most PREP_SURFACE_VAR_MAX; other
+ * points, noise and vegetation, keep their radius), used when the node is drawn without its
+ * children so that coarse levels cover the surfaces without holes.
  *
  * The file (host byte order):
  *   [0, 4096)               lod_header (lod_file.c), checksummed

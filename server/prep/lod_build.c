@@ -65,7 +65,7 @@ typedef struct urec {         /* a point of a node above the chunks */
     uint64_t code, node;      /* node: its prefix */
     uint32_t gidx, level;
     float pos[3], normal[3], radius, F;
-    uint32_t rgba, pad;
+    uint32_t rgba, surface;
 } urec;
 
 typedef struct chunk {
@@ -676,6 +676,7 @@ typedef struct pt {           /* a point with its final values */
     uint64_t code;
     uint32_t gidx, rgba;
     float pos[3], normal[3], radius, F;
+    int surface;              /* its neighbourhood is a surface (prep.h step 4) */
 } pt;
 
 static float spacing_of(const build *b, int level)
@@ -719,7 +720,9 @@ static int emit(build *b, const pt *p, const uint32_t *idx, size_t cnt, int leve
         memcpy(pos + 3 * i, q->pos, 12);
         memcpy(nrm + 3 * i, q->normal, 12);
         rad[i] = q->radius;
-        rl[i] = inner && q->radius < sp ? sp : q->radius;
+        /* scattered points (noise, vegetation) stay points: a disc of the spacing of a
+         * coarse level would cover the scene with their random orientations */
+        rl[i] = inner && q->surface && q->radius < sp ? sp : q->radius;
         F[i] = q->F;
         rgba[i] = q->rgba;
         for (int a = 0; a < 3; a++) {
@@ -769,6 +772,7 @@ static int keep_upper(octx *o, const uint32_t *idx, size_t cnt, int level, uint6
         u->radius = q->radius;
         u->F = q->F;
         u->rgba = q->rgba;
+        u->surface = (uint32_t)q->surface;
     }
     return 0;
 }
@@ -844,6 +848,7 @@ static int chunk_octree(void *ctx, size_t ci, int tid, sd_err *err)
         memcpy(p[i].normal, a[i].normal, 12);
         p[i].radius = final_radius(b, &a[i]);
         p[i].F = final_F(b, a[i].Fraw);
+        p[i].surface = !(a[i].svar > PREP_SURFACE_VAR_MAX);
         idx[i] = (uint32_t)i;
         uint32_t u = fbits(p[i].radius);
         if (u >> 16 == b->qs[NQ].hi) lo[u & 0xffff]++;
@@ -903,6 +908,7 @@ static int emit_upper(build *b, sd_err *err)
         memcpy(p[i].normal, u->normal, 12);
         p[i].radius = u->radius;
         p[i].F = u->F;
+        p[i].surface = (int)u->surface;
         idx[i] = (uint32_t)i;
     }
     for (size_t i = 0; i < b->nup && rc == 0;) {
