@@ -15,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <dirent.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
@@ -23,11 +24,13 @@
 
 #include "cache.h"
 #include "cloud.h"
+#include "daemonproc.h"
 #include "imgtest.h"
 #include "lod.h"
 #include "morton.h"
 #include "prep.h"
 #include "render.h"
+#include "splat_client.h"
 #include "testutil.h"
 
 static void gen(const char *dir, int n, char *out, size_t len)
@@ -452,6 +455,77 @@ static void test_progressive_ends_complete(void **state)
     rfix_free(f);
 }
 
+/* Through the daemon (--lod always): a streaming client receives refined frames of a still
+ * camera, the last one flagged complete; a single RENDER answers the complete frame, equal to
+ * that last streamed one (lossless); with lod_first=1 a RENDER of a new view answers at once,
+ * incomplete. */
+static void test_daemon_progressive(void **state)
+{
+    (void)state;
+    char dir[512], data[600], cache[600], ply[700];
+    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    snprintf(data, sizeof data, "%s/data", dir);
+    snprintf(cache, sizeof cache, "%s/cache", dir);
+    assert_int_equal(mkdir(data, 0700), 0);
+    gen(data, 60000, ply, sizeof ply);
+    tu_daemon d;
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", data, "--cache", cache, "--lod", "always", "--lod-uploads", "1",
+                          "--shader-dir", tu_env("SPLATD_SHADERS", "shaders"), NULL};
+    if (tu_daemon_start(&d, dir, NULL, args) != 0) fail_msg("splatd did not start (log %s)", d.log);
+    spc_options o = {.host = "127.0.0.1", .port = d.port, .client_name = "test_lod"};
+    spc_client *c;
+    char err[256];
+    assert_int_equal(spc_connect(&o, &c, err, sizeof err), 0);
+    spc_info info;
+    assert_int_equal(spc_open(c, "g60000", &info, NULL, NULL), 0);
+    assert_int_equal(info.points, 60000);
+    spc_camera cam;
+    spc_camera_frame(&info, 240, 160, &cam);
+    assert_int_equal(spc_set_param(c, "format=lz4"), 0);
+    assert_int_equal(spc_set_param(c, "point_budget=50000"), 0);
+    /* lod_first on a cold pool: the first frame, incomplete */
+    spc_camera first = cam;
+    for (int a = 0; a < 3; a++) {
+        first.target[a] = 0.3 * info.bmin[a] + 0.7 * info.bmax[a];
+        first.eye[a] = first.target[a] + 0.3 * (cam.eye[a] - cam.target[a]);
+    }
+    assert_int_equal(spc_set_param(c, "lod_first=1"), 0);
+    assert_int_equal(spc_set_camera(c, &first, NULL), 0);
+    spc_frame f;
+    assert_int_equal(spc_render(c, &f, 1), 0);
+    assert_int_equal(f.complete, 0);
+    assert_int_equal(spc_set_param(c, "lod_first=0"), 0);
+    assert_int_equal(spc_stream(c, 1, 0), 0);
+    /* a view of the cloud's other corner, from close: nodes not loaded yet */
+    for (int a = 0; a < 3; a++) {
+        cam.target[a] = 0.7 * info.bmin[a] + 0.3 * info.bmax[a];
+        cam.eye[a] = cam.target[a] + 0.4 * (cam.eye[a] - cam.target[a]);
+    }
+    uint32_t seq = 0;
+    assert_int_equal(spc_set_camera(c, &cam, &seq), 0); /* does not wait: no frame skipped */
+    int frames = 0, complete = 0;
+    uint8_t *last = malloc((size_t)240 * 160 * 4);
+    while (!complete && frames < 200) {
+        assert_int_equal(spc_recv_frame(c, &f, 1), 0);
+        if (f.camera_seq != seq) continue;
+        frames++;
+        complete = f.complete;
+        assert_true(f.points_drawn <= 50000);
+        memcpy(last, f.rgba, (size_t)240 * 160 * 4);
+    }
+    assert_true(complete);
+    print_message("daemon: %d streamed frames until complete\n", frames);
+    assert_true(frames >= 2);
+    assert_int_equal(spc_stream(c, 0, 0), 0);
+    assert_int_equal(spc_render(c, &f, 1), 0);
+    assert_int_equal(f.complete, 1);
+    assert_memory_equal(f.rgba, last, (size_t)240 * 160 * 4);
+    free(last);
+    spc_close(c);
+    assert_int_equal(tu_daemon_stop(&d), 0);
+    tu_rm_rf(dir);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -461,6 +535,7 @@ int main(void)
         cmocka_unit_test(test_budget_and_full_equals_flat),
         cmocka_unit_test(test_tenth_budget_psnr),
         cmocka_unit_test(test_progressive_ends_complete),
+        cmocka_unit_test(test_daemon_progressive),
     };
     const char *only = getenv("SPLATD_TEST_FILTER");
     if (only && *only) cmocka_set_test_filter(only);

@@ -70,6 +70,9 @@ static void usage(FILE *f)
             "  --lod auto|always|never  which clouds get the level-of-detail form (an out-of-core\n"
             "                       octree drawn under point_budget): auto = files of 64 MiB or more\n"
             "  --prep-memory SIZE   memory cap of the LOD build (default 2G)\n"
+            "  --lod-uploads N      LOD nodes uploaded per frame at most (default 4); the frame\n"
+            "                       draws a missing node's ancestor instead, and the next frames\n"
+            "                       of the same view refine it\n"
             "  --help               this text\n"
             "\n"
             "SIGTERM or SIGINT stops accepting, finishes the frames in flight (at most 5 s) and exits 0.\n");
@@ -98,7 +101,7 @@ static int parse_size(const char *s, uint64_t *out)
 static int parse_opts(int argc, char **argv, srv_opts *o)
 {
     enum { O_LISTEN = 1000, O_DATA, O_CACHE, O_BACKEND, O_TOKEN, O_PRELOAD, O_SHADERS, O_MAXC,
-           O_PORTFILE, O_HS, O_GPUMEM, O_LOD, O_PREPMEM, O_FRAMEMEM, O_IDLE, O_RDTO, O_WRTO, O_UNAUTH, O_PERADDR, O_AUTHDELAY,
+           O_PORTFILE, O_HS, O_GPUMEM, O_LOD, O_PREPMEM, O_LODUP, O_FRAMEMEM, O_IDLE, O_RDTO, O_WRTO, O_UNAUTH, O_PERADDR, O_AUTHDELAY,
            O_HELP };
     static const struct option lo[] = {
         {"listen", required_argument, 0, O_LISTEN},   {"data", required_argument, 0, O_DATA},
@@ -107,7 +110,7 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
         {"shader-dir", required_argument, 0, O_SHADERS}, {"max-clients", required_argument, 0, O_MAXC},
         {"port-file", required_argument, 0, O_PORTFILE}, {"handshake-timeout", required_argument, 0, O_HS},
         {"gpu-memory", required_argument, 0, O_GPUMEM},
-        {"lod", required_argument, 0, O_LOD}, {"prep-memory", required_argument, 0, O_PREPMEM},
+        {"lod", required_argument, 0, O_LOD}, {"lod-uploads", required_argument, 0, O_LODUP}, {"prep-memory", required_argument, 0, O_PREPMEM},
         {"max-frame-bytes", required_argument, 0, O_FRAMEMEM},
         {"idle-timeout", required_argument, 0, O_IDLE}, {"read-timeout", required_argument, 0, O_RDTO},
         {"write-timeout", required_argument, 0, O_WRTO}, {"max-unauth", required_argument, 0, O_UNAUTH},
@@ -180,6 +183,16 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
                 return -1;
             }
             break;
+        case O_LODUP: {
+            char *e = NULL;
+            long nup = strtol(optarg, &e, 10);
+            if (!e || *e || nup < 1 || nup > 1024) {
+                fprintf(stderr, "splatd: --lod-uploads '%s': expected 1 to 1024\n", optarg);
+                return -1;
+            }
+            o->lod_uploads = (int)nup;
+            break;
+        }
         case O_PREPMEM:
             if (parse_size(optarg, &o->prep_memory) != 0) {
                 fprintf(stderr, "splatd: --prep-memory '%s': expected a size such as 2G\n", optarg);
@@ -664,7 +677,8 @@ static int start(srv *sv)
     sv->max_w = sv->max_h = 8192;
     rt_desc rd = {
         .rnd = {.backend = sv->o.backend, .shader_dir = sv->o.shader_dir,
-                .max_width = sv->max_w, .max_height = sv->max_h, .gpu_memory = sv->o.gpu_memory},
+                .max_width = sv->max_w, .max_height = sv->max_h, .gpu_memory = sv->o.gpu_memory,
+                .lod_uploads = sv->o.lod_uploads},
         .max_clients = sv->nslots, .cache_dir = sv->o.cache_dir,
         .lod_mode = sv->o.lod_mode, .prep_memory = sv->o.prep_memory,
         .frame_budget = sv->o.max_frame_bytes,
