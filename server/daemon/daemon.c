@@ -79,7 +79,7 @@ static void usage(FILE *f)
 }
 
 /* parse_size: "N", "NK", "NM", "NG" (powers of 1024) into bytes, at least 1 MiB. 0 or -1. */
-static int parse_size(const char *s, uint64_t *out)
+int srv_parse_size(const char *s, uint64_t *out)
 {
     char *end;
     errno = 0;
@@ -194,20 +194,20 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
             break;
         }
         case O_PREPMEM:
-            if (parse_size(optarg, &o->prep_memory) != 0) {
+            if (srv_parse_size(optarg, &o->prep_memory) != 0) {
                 fprintf(stderr, "splatd: --prep-memory '%s': expected a size such as 2G\n", optarg);
                 return -1;
             }
             break;
         case O_GPUMEM:
-            if (parse_size(optarg, &o->gpu_memory) != 0) {
+            if (srv_parse_size(optarg, &o->gpu_memory) != 0) {
                 fprintf(stderr, "splatd: --gpu-memory '%s': expected a size such as 512M or 4G "
                         "(at least 1M)\n", optarg);
                 return -1;
             }
             break;
         case O_FRAMEMEM:
-            if (parse_size(optarg, &o->max_frame_bytes) != 0) {
+            if (srv_parse_size(optarg, &o->max_frame_bytes) != 0) {
                 fprintf(stderr, "splatd: --max-frame-bytes '%s': expected a size such as 512M or "
                         "4G (at least 1M)\n", optarg);
                 return -1;

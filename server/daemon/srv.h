@@ -43,6 +43,10 @@ typedef struct srv_opts {
     uint64_t prep_memory;        /* --prep-memory: the LOD build's memory cap; default 2 GiB */
 } srv_opts;
 
+/* srv_parse_size: "512M", "4G", "1048576" (suffix K, M or G) into *out; at least 1 MiB.
+ * Returns 0 or -1. */
+int srv_parse_size(const char *s, uint64_t *out);
+
 typedef struct srv_waiter {
     uint32_t sess, seq;
 } srv_waiter;

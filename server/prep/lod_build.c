@@ -3,11 +3,12 @@
  * Passes over the input (lod_src: bounds and centroid come from its opening passes):
  *   count     points per Morton cell of depth D = min(grid_bits, 7) (8 MiB of counters); the
  *             chunks are the shallowest cells holding at most chunk_max points (down to
- *             depth D), chunk_max from the memory cap: memory / (threads * 400 bytes), the
- *             bytes a point of a chunk costs in the normals pass with its halo.
+ *             depth D), chunk_max from the memory cap: memory / 400 bytes, the bytes a point
+ *             of a chunk costs in the normals pass with its halo (chunks are processed one at a
+ *             time, each on every thread, so the cap does not grow with the thread count).
  *   distribute every point (position, colour, index in the file) into its chunk's scratch file
  *             (unnamed files in the cache directory: nothing is left behind by kill -9).
- *   normals   per chunk, in parallel: the chunk and a halo (every point within H of its cube,
+ *   normals   chunk by chunk, each in parallel over blocks of points: the chunk and a halo (every point within H of its cube,
  *             read from the neighbouring chunks' files) in (Morton code, file index) order, the
  *             order prep.c gives the whole cloud; kNN of the chunk's points and of their
  *             neighbours; a result is exact when its k-th neighbour is closer than the halo's
@@ -47,7 +48,7 @@
 #include "sd_hash.h"
 
 enum { COUNT_DEPTH_MAX = 7, BLOCK = 1 << 16, NQ = 7 };
-#define BYTES_PER_CHUNK_POINT 400u
+#define BYTES_PER_CHUNK_POINT 400u /* the normals pass of one chunk (with its halo) */
 
 typedef struct rec {          /* a point in a chunk file */
     float pos[3];
@@ -447,134 +448,192 @@ typedef struct tls {
     uint64_t hist[3][65536];
 } tls;
 
-static int chunk_normals(void *ctx, size_t ci, int tid, sd_err *err)
+enum { QBLOCK = 16384 };
+
+/* One chunk's normals pass, its steps run in parallel over blocks of QBLOCK points. */
+typedef struct njob {
+    build *b;
+    region *r;
+    const prep_knn *kn;
+    prep_knn_scratch **ks;    /* per thread */
+    tls **t;                  /* per thread */
+    int K;
+    uint32_t *list, *nbr;     /* S = own points then their neighbours; K neighbours each */
+    int32_t *slot;
+    float *d2, *r20, *nrm, *svar;
+    size_t first, count;      /* the step's range of S */
+    arec *out;
+    double vp[3];
+} njob;
+
+static int nj_query(void *ctx, size_t blk, int tid, sd_err *err)
+{
+    njob *j = ctx;
+    size_t a = j->first + blk * QBLOCK, m = j->first + j->count - a < QBLOCK ? j->first + j->count - a : QBLOCK;
+    return prep_knn_query(j->kn, j->list + a, 0, m, j->K, j->nbr + a * j->K, j->d2 + a * j->K,
+                          j->ks[tid], err);
+}
+
+static int nj_pca(void *ctx, size_t blk, int tid, sd_err *err)
+{
+    njob *j = ctx;
+    (void)tid;
+    (void)err;
+    size_t a = blk * QBLOCK, e = a + QBLOCK < j->count ? a + QBLOCK : j->count;
+    float inv_sqrt_k = (float)(1.0 / sqrt((double)j->K));
+    for (size_t i = a; i < e; i++) {
+        j->r20[i] = 2.0f * sqrtf(j->d2[i * j->K + j->K - 1]) * inv_sqrt_k;
+        prep_pca_normal(j->r->pos, j->list[i], j->nbr + i * j->K, j->K, j->nrm + 3 * i, j->svar + i);
+        orient(j->nrm + 3 * i, j->r->pos + 3 * (size_t)j->list[i], j->b->info.centroid,
+               j->b->info.has_viewpoint, j->vp);
+    }
+    return 0;
+}
+
+static int nj_own(void *ctx, size_t blk, int tid, sd_err *err)
+{
+    njob *j = ctx;
+    (void)err;
+    int K = j->K;
+    tls *t = j->t[tid];
+    size_t a = blk * QBLOCK, e = a + QBLOCK < j->count ? a + QBLOCK : j->count;
+    for (size_t i = a; i < e; i++) {
+        const uint32_t *nb = j->nbr + i * K;
+        const float *ni = j->nrm + 3 * i;
+        float s = 0, rn[PREP_MAX_K];
+        for (int q = 0; q < K; q++) {
+            int32_t sq = j->slot[nb[q]];
+            const float *nq = j->nrm + 3 * (size_t)sq;
+            float dd = fabsf(ni[0] * nq[0] + ni[1] * nq[1] + ni[2] * nq[2]);
+            if (dd > 1) dd = 1;
+            float tt = 2 - dd;
+            s += tt * tt;
+            rn[q] = j->r20[sq];
+        }
+        arec *o = &j->out[i];
+        uint32_t pi = j->list[i];
+        o->code = j->r->code[pi];
+        o->gidx = j->r->gidx[pi];
+        o->rgba = j->r->rgba[pi];
+        memcpy(o->pos, j->r->pos + 3 * (size_t)pi, 12);
+        memcpy(o->normal, ni, 12);
+        o->r20 = j->r20[i];
+        o->capn = PREP_RADIUS_CAP * prep_percentile(rn, (size_t)K, 0.5);
+        o->svar = j->svar[i];
+        float f = j->r20[i] * s / (float)K;
+        o->Fraw = f >= 0 && f <= FLT_MAX ? f : 0.0f;
+        o->nnd = sqrtf(j->d2[i * K]);
+        t->hist[0][fbits(o->r20) >> 16]++;
+        t->hist[1][fbits(o->Fraw) >> 16]++;
+        t->hist[2][fbits(o->nnd) >> 16]++;
+    }
+    return 0;
+}
+
+static size_t nblocks(size_t n)
+{
+    return (n + QBLOCK - 1) / QBLOCK;
+}
+
+/* The normals pass of chunk ci (the chunks run one after the other, each on every thread). */
+static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
 {
     build *b = ctx;
+    (void)tid_unused;
     chunk *c = &b->chunks[ci];
     if (!c->count) return 0;
-    int K = b->K;
-    float cs = c->hi[0] - c->lo[0];
-    float h = cs / 16;
-    for (;;) {
+    int K = b->K, T = b->threads;
+    float h = (c->hi[0] - c->lo[0]) / 16;
+    prep_knn_scratch *ks[64] = {0};
+    tls *tl[64] = {0};
+    if (T > 64) T = 64;
+    int rc = 0;
+    for (int t = 0; t < T && rc == 0; t++) {
+        ks[t] = prep_knn_scratch_new();
+        tl[t] = calloc(1, sizeof *tl[t]);
+        if (!ks[t] || !tl[t]) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory");
+    }
+    while (rc == 0) {
         region r;
-        int rc = load_region(b, ci, h, &r, err);
-        if (rc < 0) return rc;
+        rc = load_region(b, ci, h, &r, err);
+        if (rc < 0) break;
         size_t m = r.m;
         int full = r.edge[0] && r.edge[1] && r.edge[2] && r.edge[3] && r.edge[4] && r.edge[5];
-        uint32_t *nbr = NULL, *list = NULL;
-        float *d2 = NULL, *r20 = NULL, *nrm = NULL, *svar = NULL;
-        int32_t *slot = NULL;
+        njob j;
+        memset(&j, 0, sizeof j);
+        j.b = b, j.r = &r, j.K = K, j.ks = ks, j.t = tl;
+        for (int a = 0; a < 3; a++) j.vp[a] = b->info.viewpoint[a] - b->info.offset[a];
         prep_knn *kn = NULL;
-        prep_knn_scratch *ks = NULL;
-        arec *out = NULL;
         int exact = 1;
-        slot = malloc(m * sizeof *slot);
-        list = malloc(m * sizeof *list);
-        if (!slot || !list) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
-        /* S = own points, then their neighbours: slot[i] = position in S or -1 */
-        size_t ns = 0, nown = 0;
+        j.slot = malloc(m * sizeof *j.slot);
+        j.list = malloc(m * sizeof *j.list);
+        if (!j.slot || !j.list) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
+        size_t ns = 0, nown;
         for (size_t i = 0; i < m; i++) {
-            slot[i] = -1;
-            if (r.own[i]) slot[i] = (int32_t)ns, list[ns++] = (uint32_t)i;
+            j.slot[i] = -1;
+            if (r.own[i]) j.slot[i] = (int32_t)ns, j.list[ns++] = (uint32_t)i;
         }
         nown = ns;
         if ((size_t)K >= m) { exact = full; if (!full) goto done; }
         rc = prep_knn_build(r.pos, m, NULL, &kn, err);
         if (rc < 0) goto done;
-        ks = prep_knn_scratch_new();
-        nbr = malloc(m * (size_t)K * 4);
-        d2 = malloc(m * (size_t)K * 4);
-        if (!ks || !nbr || !d2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
-        rc = prep_knn_query(kn, list, 0, nown, K, nbr, d2, ks, err);
+        j.kn = kn;
+        j.nbr = malloc(m * (size_t)K * 4);
+        j.d2 = malloc(m * (size_t)K * 4);
+        if (!j.nbr || !j.d2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
+        j.first = 0, j.count = nown;
+        rc = prep_par_for(T, nblocks(nown), nj_query, &j, NULL, err);
         if (rc < 0) goto done;
         for (size_t i = 0; i < nown && exact; i++) {
-            if (!full && !inside(&r, r.pos + 3 * (size_t)list[i], d2[i * K + K - 1])) exact = 0;
-            for (int j = 0; j < K; j++) {
-                uint32_t q = nbr[i * K + j];
-                if (slot[q] < 0) slot[q] = (int32_t)ns, list[ns++] = q;
+            if (!full && !inside(&r, r.pos + 3 * (size_t)j.list[i], j.d2[i * K + K - 1])) exact = 0;
+            for (int q = 0; q < K; q++) {
+                uint32_t pq = j.nbr[i * K + q];
+                if (j.slot[pq] < 0) j.slot[pq] = (int32_t)ns, j.list[ns++] = pq;
             }
         }
         if (!exact) goto done;
-        if (ns > nown) {
-            rc = prep_knn_query(kn, list + nown, 0, ns - nown, K, nbr + nown * K, d2 + nown * K,
-                                ks, err);
-            if (rc < 0) goto done;
-            for (size_t i = nown; i < ns && exact; i++)
-                if (!full && !inside(&r, r.pos + 3 * (size_t)list[i], d2[i * K + K - 1]))
-                    exact = 0;
-        }
+        j.first = nown, j.count = ns - nown;
+        if (ns > nown) rc = prep_par_for(T, nblocks(ns - nown), nj_query, &j, NULL, err);
+        if (rc < 0) goto done;
+        for (size_t i = nown; i < ns && exact; i++)
+            if (!full && !inside(&r, r.pos + 3 * (size_t)j.list[i], j.d2[i * K + K - 1])) exact = 0;
         if (!exact) goto done;
-        r20 = malloc(ns * 4);
-        nrm = malloc(ns * 12);
-        svar = malloc(ns * 4);
-        out = malloc(nown * sizeof *out);
-        if (!r20 || !nrm || !svar || !out) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
-        float inv_sqrt_k = (float)(1.0 / sqrt((double)K));
-        double vp[3];
-        for (int a = 0; a < 3; a++) vp[a] = b->info.viewpoint[a] - b->info.offset[a];
-        for (size_t i = 0; i < ns; i++) {
-            r20[i] = 2.0f * sqrtf(d2[i * K + K - 1]) * inv_sqrt_k;
-            prep_pca_normal(r.pos, list[i], nbr + i * K, K, nrm + 3 * i, svar + i);
-            orient(nrm + 3 * i, r.pos + 3 * (size_t)list[i], b->info.centroid,
-                   b->info.has_viewpoint, vp);
-        }
-        tls *t = calloc(1, sizeof *t);
-        if (!t) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
-        for (size_t i = 0; i < nown; i++) {
-            const uint32_t *nb = nbr + i * K;
-            const float *ni = nrm + 3 * i;
-            float s = 0, rn[PREP_MAX_K];
-            for (int j = 0; j < K; j++) {
-                int32_t q = slot[nb[j]];
-                const float *nj = nrm + 3 * (size_t)q;
-                float dd = fabsf(ni[0] * nj[0] + ni[1] * nj[1] + ni[2] * nj[2]);
-                if (dd > 1) dd = 1;
-                float tt = 2 - dd;
-                s += tt * tt;
-                rn[j] = r20[q];
-            }
-            arec *o = &out[i];
-            uint32_t pi = list[i];
-            o->code = r.code[pi];
-            o->gidx = r.gidx[pi];
-            o->rgba = r.rgba[pi];
-            memcpy(o->pos, r.pos + 3 * (size_t)pi, 12);
-            memcpy(o->normal, ni, 12);
-            o->r20 = r20[i];
-            o->capn = PREP_RADIUS_CAP * prep_percentile(rn, (size_t)K, 0.5);
-            o->svar = svar[i];
-            float f = r20[i] * s / (float)K;
-            o->Fraw = f >= 0 && f <= FLT_MAX ? f : 0.0f;
-            o->nnd = sqrtf(d2[i * K]);
-            t->hist[0][fbits(o->r20) >> 16]++;
-            t->hist[1][fbits(o->Fraw) >> 16]++;
-            t->hist[2][fbits(o->nnd) >> 16]++;
-        }
-        if (write_at(c->fd_a, out, nown * sizeof *out, 0))
+        j.r20 = malloc(ns * 4);
+        j.nrm = malloc(ns * 12);
+        j.svar = malloc(ns * 4);
+        j.out = malloc(nown * sizeof *j.out);
+        if (!j.r20 || !j.nrm || !j.svar || !j.out) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
+        j.count = ns;
+        rc = prep_par_for(T, nblocks(ns), nj_pca, &j, NULL, err);
+        if (rc < 0) goto done;
+        j.count = nown;
+        rc = prep_par_for(T, nblocks(nown), nj_own, &j, NULL, err);
+        if (rc < 0) goto done;
+        if (write_at(c->fd_a, j.out, nown * sizeof *j.out, 0))
             rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
-        pthread_mutex_lock(&b->mu);
-        for (int q = 0; q < 3; q++)
-            for (int i = 0; i < 65536; i++) b->hist_hi[q][i] += t->hist[q][i];
-        pthread_mutex_unlock(&b->mu);
-        free(t);
     done:
-        (void)tid;
-        free(slot);
-        free(list);
-        free(nbr);
-        free(d2);
-        free(r20);
-        free(nrm);
-        free(svar);
-        free(out);
-        prep_knn_scratch_free(ks);
+        free(j.slot);
+        free(j.list);
+        free(j.nbr);
+        free(j.d2);
+        free(j.r20);
+        free(j.nrm);
+        free(j.svar);
+        free(j.out);
         prep_knn_free(kn);
         region_free(&r);
-        if (rc < 0) return rc;
-        if (exact) return 0;
+        if (rc < 0 || exact) break;
         c->retried = 1;
         h *= 2;
     }
+    for (int t = 0; t < T; t++) {
+        if (rc == 0 && tl[t])
+            for (int q = 0; q < 3; q++)
+                for (int i = 0; i < 65536; i++) b->hist_hi[q][i] += tl[t]->hist[q][i];
+        prep_knn_scratch_free(ks[t]);
+        free(tl[t]);
+    }
+    return rc;
 }
 
 /* ---- quantiles ---- */
@@ -1007,7 +1066,7 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     prep_progress pr;
     double t = now_s();
     prep_progress_begin(&pr, d->progress, d->user, PROTO_PHASE_NORMALS);
-    rc = prep_par_for(b->threads, b->nchunks, chunk_normals, b, &pr, err);
+    rc = prep_par_for(1, b->nchunks, chunk_normals, b, &pr, err); /* each chunk on every thread */
     if (rc < 0) return rc;
     prep_progress_end(&pr);
     size_t retried = 0;
@@ -1091,7 +1150,7 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     if (d.grid_bits > 7) d.grid_bits = 7;
     if (!d.leaf_max) d.leaf_max = LOD_DEFAULT_LEAF_MAX;
     if (!d.chunk_max) {
-        uint64_t cm = d.memory / ((uint64_t)d.threads * BYTES_PER_CHUNK_POINT);
+        uint64_t cm = d.memory / BYTES_PER_CHUNK_POINT; /* one chunk at a time */
         d.chunk_max = cm > UINT32_MAX ? UINT32_MAX : (cm < 100000 ? 100000 : (uint32_t)cm);
     }
     lod_result rr;
