@@ -337,6 +337,7 @@ static int render_complete(rfix *f, const rnd_camera *cam, const sp_params *p, r
 {
     for (int i = 1; i <= 200; i++) {
         sd_err err = {0};
+        if (i > 1) rnd_lod_wait(f->r, f->lod_id, 2000); /* the loader thread's next node */
         if (rnd_render(f->r, f->lod_id, cam, p, 0, fr, &err) != 0) fail_msg("%s", err.msg);
         if (fr->complete) return i;
     }
@@ -374,6 +375,7 @@ static void test_budget_and_full_equals_flat(void **state)
         sd_err err = {0};
         int frames = 0;
         do {
+            if (frames) rnd_lod_wait(f->r, f->lod_id, 2000);
             if (rnd_render(f->r, f->lod_id, &cam, &p, 0, &a, &err) != 0) fail_msg("%s", err.msg);
             assert_true(a.points_drawn <= 5000);
             assert_true(a.points_drawn > 0);
@@ -439,6 +441,7 @@ static void test_progressive_ends_complete(void **state)
     uint64_t prev = a.points_drawn;
     int frames = 1;
     while (!a.complete) {
+        rnd_lod_wait(f->r, f->lod_id, 2000);
         if (rnd_render(f->r, f->lod_id, &cam, &p, 0, &a, &err) != 0) fail_msg("%s", err.msg);
         assert_true(a.points_drawn >= prev);
         prev = a.points_drawn;
@@ -469,7 +472,7 @@ static void test_daemon_progressive(void **state)
     assert_int_equal(mkdir(data, 0700), 0);
     gen(data, 60000, ply, sizeof ply);
     tu_daemon d;
-    const char *args[] = {"--listen", "127.0.0.1:0", "--data", data, "--cache", cache, "--lod", "always", "--lod-uploads", "1",
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", data, "--cache", cache, "--lod", "always", "--lod-inflight", "1",
                           "--shader-dir", tu_env("SPLATD_SHADERS", "shaders"), NULL};
     if (tu_daemon_start(&d, dir, NULL, args) != 0) fail_msg("splatd did not start (log %s)", d.log);
     spc_options o = {.host = "127.0.0.1", .port = d.port, .client_name = "test_lod"};

@@ -70,7 +70,7 @@ static void usage(FILE *f)
             "  --lod auto|always|never  which clouds get the level-of-detail form (an out-of-core\n"
             "                       octree drawn under point_budget): auto = files of 64 MiB or more\n"
             "  --prep-memory SIZE   memory cap of the LOD build (default 2G)\n"
-            "  --lod-uploads N      LOD nodes uploaded per frame at most (default 4); the frame\n"
+            "  --lod-inflight N     LOD nodes the loader thread reads at once (default 4); a frame\n"
             "                       draws a missing node's ancestor instead, and the next frames\n"
             "                       of the same view refine it\n"
             "  --help               this text\n"
@@ -110,7 +110,7 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
         {"shader-dir", required_argument, 0, O_SHADERS}, {"max-clients", required_argument, 0, O_MAXC},
         {"port-file", required_argument, 0, O_PORTFILE}, {"handshake-timeout", required_argument, 0, O_HS},
         {"gpu-memory", required_argument, 0, O_GPUMEM},
-        {"lod", required_argument, 0, O_LOD}, {"lod-uploads", required_argument, 0, O_LODUP}, {"prep-memory", required_argument, 0, O_PREPMEM},
+        {"lod", required_argument, 0, O_LOD}, {"lod-inflight", required_argument, 0, O_LODUP}, {"prep-memory", required_argument, 0, O_PREPMEM},
         {"max-frame-bytes", required_argument, 0, O_FRAMEMEM},
         {"idle-timeout", required_argument, 0, O_IDLE}, {"read-timeout", required_argument, 0, O_RDTO},
         {"write-timeout", required_argument, 0, O_WRTO}, {"max-unauth", required_argument, 0, O_UNAUTH},
@@ -187,7 +187,7 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
             char *e = NULL;
             long nup = strtol(optarg, &e, 10);
             if (!e || *e || nup < 1 || nup > 1024) {
-                fprintf(stderr, "splatd: --lod-uploads '%s': expected 1 to 1024\n", optarg);
+                fprintf(stderr, "splatd: --lod-inflight '%s': expected 1 to 1024\n", optarg);
                 return -1;
             }
             o->lod_uploads = (int)nup;

@@ -292,6 +292,7 @@ static void *render_main(void *arg)
         pthread_mutex_unlock(&rt->mu);
 
         rnd_frame *f = &rt->frames[fi];
+        if (rq.refine) rnd_lod_wait(rnd, rq.cloud_id, 1000); /* until a node more is ready */
         int rc = rnd_render(rnd, rq.cloud_id, &rq.cam, &rq.params, rq.params.format == SP_FMT_EXR,
                             f, &err);
         /* A RENDER of a LOD cloud answers the complete frame (unless lod_first): the frames
@@ -300,6 +301,7 @@ static void *render_main(void *arg)
         uint64_t spent = f->render_us;
         for (int again = 0; rc == 0 && !stream && !f->complete && !rq.params.lod_first &&
                             again < 100000; again++) {
+            rnd_lod_wait(rnd, rq.cloud_id, 1000);
             rc = rnd_render(rnd, rq.cloud_id, &rq.cam, &rq.params,
                             rq.params.format == SP_FMT_EXR, f, &err);
             spent += f->render_us;
@@ -330,6 +332,7 @@ static void *render_main(void *arg)
          * the same request, unless a newer one is pending already. */
         if (stream && !f->complete && !s->has_latest) {
             s->latest = rq;
+            s->latest.refine = 1;
             s->has_latest = 1;
         }
         rt->encq[rt->enc_n++] = job;

@@ -44,6 +44,8 @@ typedef struct rt_request {
     rnd_camera cam;
     sp_params params;
     uint32_t req_seq, camera_seq;
+    int refine;             /* the render thread's own: a refinement of the previous frame of
+                             * a LOD cloud; it waits for the loader first. The loop sets 0. */
 } rt_request;
 
 /* Packs an encoded frame into the bytes the loop will write (header + payload), on the encoder

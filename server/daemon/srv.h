@@ -39,7 +39,7 @@ typedef struct srv_opts {
     uint64_t gpu_memory;         /* --gpu-memory; default 0: the renderer sizes it */
     uint64_t max_frame_bytes;    /* --max-frame-bytes; default 0: a quarter of RAM */
     int lod_mode;                /* --lod auto|always|never (LOD_*); default auto */
-    int lod_uploads;             /* --lod-uploads: LOD nodes uploaded a frame; default 0: 4 */
+    int lod_uploads;             /* --lod-inflight: LOD nodes loading at once; default 0: 4 */
     uint64_t prep_memory;        /* --prep-memory: the LOD build's memory cap; default 2 GiB */
 } srv_opts;
 

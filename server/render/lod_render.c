@@ -2,13 +2,16 @@
 #include "lod_render.h"
 
 #include <math.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "camera.h"
 #include "cloud.h"
+#include "sd_hash.h"
 
 enum { NBUF = RND_ATTR_COUNT + 1, B_RLOD = RND_ATTR_COUNT };
 #define NOT_RESIDENT UINT32_MAX
@@ -17,8 +20,24 @@ typedef struct alloc {
     uint32_t first, count, node;
 } alloc;
 
+/* A loader slot: one node being read (page faults on the mapping, the checksum) into memory of
+ * its own, off the render thread. */
+enum { SLOT_FREE = 0, SLOT_ASKED, SLOT_READY, SLOT_BROKEN };
+typedef struct lslot {
+    uint32_t node;
+    int state;
+    void *data;
+} lslot;
+
 struct rnd_lod {
     lod_cloud *c;
+    /* the loader thread and its K slots */
+    pthread_t th;
+    int th_started, stop, k;
+    pthread_mutex_t mu;
+    pthread_cond_t cv_work, cv_done;
+    lslot *slots;
+    uint32_t *inflight;       /* per node: its slot + 1, 0 when not loading */
     uint32_t cap;
     GLuint buf[NBUF];
     int have_pool;
@@ -35,16 +54,56 @@ struct rnd_lod {
     rnd_chunk *chunks;
 };
 
+static void *loader_main(void *arg)
+{
+    rnd_lod *l = arg;
+    pthread_mutex_lock(&l->mu);
+    for (;;) {
+        int k = -1;
+        while (!l->stop) {
+            for (int i = 0; i < l->k && k < 0; i++)
+                if (l->slots[i].state == SLOT_ASKED && !l->slots[i].data) k = i;
+            if (k >= 0) break;
+            pthread_cond_wait(&l->cv_work, &l->mu);
+        }
+        if (l->stop) break;
+        uint32_t node = l->slots[k].node;
+        l->slots[k].data = (void *)1; /* taken */
+        pthread_mutex_unlock(&l->mu);
+        const lod_node *nd = &l->c->nodes[node];
+        size_t len = (size_t)lod_node_bytes(nd->count);
+        void *d = malloc(len ? len : 1);
+        int ok = d != NULL;
+        if (ok) {
+            memcpy(d, l->c->map + nd->offset, len); /* the reads from disk happen here */
+            ok = sd_hash64(d, len, 0) == nd->hash;
+        }
+        pthread_mutex_lock(&l->mu);
+        if (!ok) {
+            free(d);
+            d = NULL;
+        }
+        l->slots[k].data = d;
+        l->slots[k].state = ok ? SLOT_READY : SLOT_BROKEN;
+        pthread_cond_broadcast(&l->cv_done);
+    }
+    pthread_mutex_unlock(&l->mu);
+    return NULL;
+}
+
 uint64_t rnd__lod_pool_bytes(uint32_t cap)
 {
     return (uint64_t)cap * 44u;
 }
 
-rnd_lod *rnd__lod_new(lod_cloud *c, uint32_t cap, rnd_gpu_cloud *g, sd_err *err)
+rnd_lod *rnd__lod_new(lod_cloud *c, uint32_t cap, int k, rnd_gpu_cloud *g, sd_err *err)
 {
     rnd_lod *l = calloc(1, sizeof *l);
     uint64_t nn = c->nnodes;
     if (l) {
+        l->k = k > 0 ? k : 1;
+        l->slots = calloc((size_t)l->k, sizeof *l->slots);
+        l->inflight = calloc(nn, sizeof *l->inflight);
         l->first = malloc(nn * sizeof *l->first);
         l->last = calloc(nn, sizeof *l->last);
         l->broken = calloc(nn, 1);
@@ -55,10 +114,17 @@ rnd_lod *rnd__lod_new(lod_cloud *c, uint32_t cap, rnd_gpu_cloud *g, sd_err *err)
         l->drawn = calloc(nn, 1);
         l->chunks = malloc(nn * sizeof *l->chunks);
     }
+    if (l && l->slots && l->inflight) {
+        pthread_mutex_init(&l->mu, NULL);
+        pthread_cond_init(&l->cv_work, NULL);
+        pthread_cond_init(&l->cv_done, NULL);
+        l->c = c;
+        l->th_started = pthread_create(&l->th, NULL, loader_main, l) == 0;
+    }
     if (!l || !l->first || !l->last || !l->broken || !l->al || !l->want || !l->heap ||
-        !l->prio || !l->drawn || !l->chunks) {
+        !l->prio || !l->drawn || !l->chunks || !l->th_started) {
         if (l) {
-            l->c = NULL;
+            l->c = NULL; /* the caller still owns c */
             rnd__lod_free(l, NULL, g);
         }
         sd_errf(err, SD_ENOMEM, "out of memory for a LOD cloud of %llu nodes",
@@ -98,6 +164,22 @@ void rnd__lod_drop_pool(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g)
 void rnd__lod_free(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g)
 {
     if (!l) return;
+    if (l->th_started) {
+        pthread_mutex_lock(&l->mu);
+        l->stop = 1;
+        pthread_cond_broadcast(&l->cv_work);
+        pthread_mutex_unlock(&l->mu);
+        pthread_join(l->th, NULL);
+    }
+    if (l->slots && l->c) {
+        pthread_mutex_destroy(&l->mu);
+        pthread_cond_destroy(&l->cv_work);
+        pthread_cond_destroy(&l->cv_done);
+        for (int i = 0; i < l->k; i++)
+            if (l->slots[i].state == SLOT_READY) free(l->slots[i].data);
+    }
+    free(l->slots);
+    free(l->inflight);
     rnd__lod_drop_pool(l, gl, g);
     if (l->c) {
         lod_cloud_free(l->c);
@@ -198,11 +280,16 @@ static uint32_t place(rnd_lod *l, uint32_t i, uint32_t *evicted)
     }
 }
 
-static int upload(rnd_lod *l, const gl_api *gl, uint32_t i, uint32_t pos)
+static int upload(rnd_lod *l, const gl_api *gl, uint32_t i, uint32_t pos, const void *data)
 {
-    lod_node_data d;
-    lod_node_get(l->c, i, &d);
     uint32_t n = l->c->nodes[i].count;
+    lod_node_data d; /* the layout of lod.h, over the loader's copy */
+    d.pos = data;
+    d.normal = d.pos + 3 * (size_t)n;
+    d.radius = d.normal + 3 * (size_t)n;
+    d.radius_lod = d.radius + n;
+    d.F = d.radius_lod + n;
+    d.rgba = (const uint32_t *)(d.F + n);
     const void *src[NBUF] = {0};
     src[RND_ATTR_POS] = d.pos;
     src[RND_ATTR_NORMAL] = d.normal;
@@ -275,8 +362,30 @@ static int cmp_chunk(const void *x, const void *y)
     return a->first < b->first ? -1 : a->first > b->first;
 }
 
+int rnd__lod_wait(rnd_lod *l, int timeout_ms)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    ts.tv_sec += timeout_ms / 1000;
+    ts.tv_nsec += (long)(timeout_ms % 1000) * 1000000L;
+    if (ts.tv_nsec >= 1000000000L) ts.tv_sec++, ts.tv_nsec -= 1000000000L;
+    pthread_mutex_lock(&l->mu);
+    int ready = 0, busy = 0;
+    for (;;) {
+        ready = busy = 0;
+        for (int k = 0; k < l->k; k++) {
+            ready += l->slots[k].state == SLOT_READY || l->slots[k].state == SLOT_BROKEN;
+            busy += l->slots[k].state == SLOT_ASKED;
+        }
+        if (ready || !busy) break;
+        if (pthread_cond_timedwait(&l->cv_done, &l->mu, &ts) != 0) break;
+    }
+    pthread_mutex_unlock(&l->mu);
+    return ready;
+}
+
 int rnd__lod_frame(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_view *v,
-                   uint64_t budget, int uploads, rnd_lod_frame *out, sd_err *err)
+                   uint64_t budget, rnd_lod_frame *out, sd_err *err)
 {
     memset(out, 0, sizeof *out);
     int rc = rnd__lod_make_pool(l, gl, g, err);
@@ -307,30 +416,56 @@ int rnd__lod_frame(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_vie
             heap_push(l, &nh, nd->first_child + k, priority(&c->nodes[nd->first_child + k], v));
     }
     out->wanted = nw;
-    /* upload the first missing ones, read ahead the others */
-    int up = 0;
-    for (uint32_t k = 0; k < nw; k++) {
-        uint32_t i = l->want[k];
-        if (l->first[i] != NOT_RESIDENT || l->broken[i]) continue;
-        const lod_node *nd = &c->nodes[i];
-        if (up >= uploads) {
-            long pg = sysconf(_SC_PAGESIZE);
-            uintptr_t a = (uintptr_t)(c->map + nd->offset) & ~(uintptr_t)(pg - 1);
-            madvise((void *)a, (size_t)((uintptr_t)(c->map + nd->offset) - a) +
-                                   (size_t)lod_node_bytes(nd->count), MADV_WILLNEED);
-            continue;
-        }
-        if (!lod_node_verify(c, i)) {
+    /* the loader's finished nodes: uploaded when still wanted, else dropped; then the missing
+     * wanted nodes, in priority order, are handed to free loader slots */
+    pthread_mutex_lock(&l->mu);
+    for (int k = 0; k < l->k; k++) {
+        lslot *sl = &l->slots[k];
+        if (sl->state != SLOT_READY && sl->state != SLOT_BROKEN) continue;
+        uint32_t i = sl->node;
+        if (sl->state == SLOT_BROKEN) {
             l->broken[i] = 1;
             out->broken++;
-            continue;
+        } else if (l->last[i] == l->stamp && l->first[i] == NOT_RESIDENT) {
+            uint32_t pos = place(l, i, &out->evicted);
+            if (pos != NOT_RESIDENT) {
+                upload(l, gl, i, pos, sl->data);
+                out->uploaded++;
+            }
         }
-        uint32_t pos = place(l, i, &out->evicted);
-        if (pos == NOT_RESIDENT) break; /* the pool was emptied: start again next frame */
-        upload(l, gl, i, pos);
-        up++;
-        out->uploaded++;
+        free(sl->data);
+        sl->data = NULL;
+        sl->state = SLOT_FREE;
+        l->inflight[i] = 0;
     }
+    /* the root has no ancestor to stand in for it: read here when missing (once per cloud) */
+    if (nw && l->want[0] == 0 && l->first[0] == NOT_RESIDENT && !l->broken[0] && !l->inflight[0]) {
+        if (!lod_node_verify(c, 0)) {
+            l->broken[0] = 1;
+            out->broken++;
+        } else {
+            uint32_t pos = place(l, 0, &out->evicted);
+            if (pos != NOT_RESIDENT) {
+                upload(l, gl, 0, pos, c->map + c->nodes[0].offset);
+                out->uploaded++;
+            }
+        }
+    }
+    int asked = 0;
+    for (uint32_t k = 0, s = 0; k < nw; k++) {
+        uint32_t i = l->want[k];
+        if (l->first[i] != NOT_RESIDENT || l->broken[i] || l->inflight[i]) continue;
+        while (s < (uint32_t)l->k && l->slots[s].state != SLOT_FREE) s++;
+        if (s == (uint32_t)l->k) break;
+        l->slots[s].node = i;
+        l->slots[s].state = SLOT_ASKED;
+        l->slots[s].data = NULL;
+        l->inflight[i] = s + 1;
+        asked++;
+    }
+    if (asked) pthread_cond_broadcast(&l->cv_work);
+    for (int k = 0; k < l->k; k++) out->loading += l->slots[k].state != SLOT_FREE;
+    pthread_mutex_unlock(&l->mu);
     if ((rc = gl_check(gl, "uploading LOD nodes", err)) < 0) return rc;
     out->changed = out->uploaded || out->evicted;
     /* draw: wanted, resident, ancestors drawn (want is in an order where parents come first) */

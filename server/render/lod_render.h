@@ -10,10 +10,11 @@
  *
  * A frame: nodes by priority (projected size of their subtree's bounding sphere: radius over
  * distance) from the root, those outside the frustum skipped, until the next would exceed the
- * point budget (or the pool); missing ones are verified (checksum) and uploaded, at most
- * `uploads` per frame in priority order, and the kernel is asked to read ahead the rest
- * (madvise WILLNEED); a node is drawn when it and all its ancestors are resident, so a missing
- * node is drawn by its ancestor. complete = every wanted node was drawn. */
+ * point budget (or the pool). Missing ones are read by the cloud's loader thread, at most k
+ * at a time in priority order, into memory of their own (the disk reads and the checksum
+ * happen there, never on the render thread); a frame uploads the nodes the loader finished
+ * and that it still wants. A node is drawn when it and all its ancestors are resident, so a
+ * missing node is drawn by its ancestor. complete = every wanted node was drawn. */
 #pragma once
 #include <stdint.h>
 
@@ -24,7 +25,7 @@ typedef struct rnd_lod rnd_lod;
 
 /* rnd__lod_new: the pool state for c (owned from now on; freed with the state). Fills g (n =
  * cap, bounds, sigma, radius median, centroid, sets: none yet). */
-rnd_lod *rnd__lod_new(lod_cloud *c, uint32_t cap, rnd_gpu_cloud *g, sd_err *err);
+rnd_lod *rnd__lod_new(lod_cloud *c, uint32_t cap, int k, rnd_gpu_cloud *g, sd_err *err);
 void rnd__lod_free(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g);
 
 /* rnd__lod_pool_bytes: the GPU bytes of a pool of cap points. */
@@ -39,12 +40,16 @@ typedef struct rnd_lod_frame {
     const rnd_chunk *chunks;  /* the nodes to draw, by set then first */
     uint32_t nchunks;
     uint64_t points;          /* points in them */
-    uint32_t wanted, drawn, uploaded, evicted, broken;
+    uint32_t wanted, drawn, uploaded, evicted, broken, loading;
     int complete;
     int changed;              /* residency changed: pipelines' per-cloud data must be remade */
 } rnd_lod_frame;
 
+/* rnd__lod_wait: waits up to timeout_ms until the loader has a node ready; returns how many
+ * are (0 when none was loading or the time ran out). */
+int rnd__lod_wait(rnd_lod *l, int timeout_ms);
+
 /* rnd__lod_frame: chooses, uploads and lists the frame's nodes. budget 0: no limit but the
  * pool. Returns 0 or a negative SD_E*. */
 int rnd__lod_frame(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_view *v,
-                   uint64_t budget, int uploads, rnd_lod_frame *out, sd_err *err);
+                   uint64_t budget, rnd_lod_frame *out, sd_err *err);

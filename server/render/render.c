@@ -548,7 +548,7 @@ int64_t rnd_adopt_lod(rnd_ctx *r, lod_cloud *lc, sd_err *err)
     }
     if (rc >= 0) {
         slot = &r->slots[idx];
-        slot->lod = rnd__lod_new(lc, r->lod_pool_points, &slot->c, err);
+        slot->lod = rnd__lod_new(lc, r->lod_pool_points, r->lod_uploads, &slot->c, err);
         if (!slot->lod) rc = err->code ? err->code : SD_ENOMEM;
     }
     if (rc >= 0 && r->lod_pool_points > r->visible_cap) {
@@ -579,6 +579,12 @@ static cloud_slot *lookup(rnd_ctx *r, uint32_t id)
     if (idx == 0 || idx > r->nslots) return NULL;
     cloud_slot *s = &r->slots[idx - 1];
     return s->used && s->gen == gen ? s : NULL;
+}
+
+int rnd_lod_wait(rnd_ctx *r, uint32_t cloud_id, int timeout_ms)
+{
+    cloud_slot *s = lookup(r, cloud_id);
+    return s && s->lod ? rnd__lod_wait(s->lod, timeout_ms) : 0;
 }
 
 void rnd_release(rnd_ctx *r, uint32_t cloud_id)
@@ -730,7 +736,7 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
             r->resident_bytes += slot->bytes;
             r->uploads++;
         }
-        rc = rnd__lod_frame(slot->lod, gl, &slot->c, &v, budget, r->lod_uploads, &lf, err);
+        rc = rnd__lod_frame(slot->lod, gl, &slot->c, &v, budget, &lf, err);
         if (rc < 0) return rc;
         if (lf.changed) detach_all(r, slot); /* per-cloud data follows the pool's contents */
         v.nchunks = lf.nchunks;

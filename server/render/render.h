@@ -36,8 +36,8 @@ typedef struct rnd_desc {
     uint32_t max_set_points;  /* default 0: points per buffer set as the driver allows
                                  (GL_MAX_TEXTURE_BUFFER_SIZE / 3); tests set less */
     rnd_pipe_opts pipe;
-    int lod_uploads;          /* default 4: LOD nodes uploaded per frame at most (the others
-                                 of the frame are read ahead and drawn by their ancestors) */
+    int lod_uploads;          /* default 4: LOD nodes loading at once (the loader thread's
+                                 slots); a frame draws a missing node's ancestor instead */
     uint32_t lod_pool_points; /* default 0: points of a LOD cloud's GPU node pool: 6M, less
                                  when the driver's buffer limit or the GPU budget says so */
 } rnd_desc;
@@ -105,6 +105,10 @@ int64_t rnd_adopt(rnd_ctx *r, pc_prepared *pc, sd_err *err);
  * leaves the GPU like an adopted cloud when another cloud needs the room). Frames draw at most
  * params->point_budget points of it (0: as many as the pool holds). */
 int64_t rnd_adopt_lod(rnd_ctx *r, lod_cloud *lc, sd_err *err);
+
+/* rnd_lod_wait: waits up to timeout_ms until the loader of LOD cloud cloud_id has a node
+ * ready for the next frame; returns how many are (0: none loading, a flat cloud, timeout). */
+int rnd_lod_wait(rnd_ctx *r, uint32_t cloud_id, int timeout_ms);
 
 /* rnd_release: removes a cloud (its GPU buffers, its pipelines' data, adopted data). */
 void rnd_release(rnd_ctx *r, uint32_t cloud_id);
