@@ -949,7 +949,7 @@ static int cmp_urec(const void *x, const void *y)
 
 static int emit_upper(build *b, sd_err *err)
 {
-    qsort(b->up, b->nup, sizeof *b->up, cmp_urec);
+    if (b->nup) qsort(b->up, b->nup, sizeof *b->up, cmp_urec);
     pt *p = malloc((b->nup ? b->nup : 1) * sizeof *p);
     uint32_t *idx = malloc((b->nup ? b->nup : 1) * 4);
     if (!p || !idx) {
@@ -1011,8 +1011,9 @@ static int link_table(build *b, lod_cloud *c, sd_err *err)
         lod_node key = {.level = (uint8_t)(t[i].level - 1), .code = t[i].code >> 3};
         lod_node *par = bsearch(&key, t, i, sizeof *t, cmp_node);
         if (!par) {
+            int lv = t[i].level;
             free(t);
-            return sd_errf(err, SD_EFORMAT, "lod: node at level %d has no parent", t[i].level);
+            return sd_errf(err, SD_EFORMAT, "lod: node at level %d has no parent", lv);
         }
         uint32_t pi = (uint32_t)(par - t);
         t[i].parent = pi;
