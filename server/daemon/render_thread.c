@@ -434,6 +434,22 @@ static void on_progress(void *user, int phase, double fraction)
     pthread_mutex_unlock(&p->rt->mu);
 }
 
+/* info_fill: the INFO summary of a prepared cloud (flat or LOD). */
+static void info_fill(proto_info *in, uint64_t n, uint64_t dropped, const double bmin[3],
+                      const double bmax[3], const double offset[3], uint32_t attrs, uint32_t k,
+                      float sigma, const char *format)
+{
+    in->points = n;
+    in->dropped = dropped;
+    memcpy(in->bmin, bmin, sizeof in->bmin);
+    memcpy(in->bmax, bmax, sizeof in->bmax);
+    memcpy(in->offset, offset, sizeof in->offset);
+    in->attrs = attrs;
+    in->k = k;
+    in->sigma = sigma;
+    snprintf(in->format, sizeof in->format, "%s", format);
+}
+
 static void *prep_main(void *arg)
 {
     rt_ctx *rt = arg;
@@ -466,16 +482,8 @@ static void *prep_main(void *arg)
             rc = lc ? lod_open_cloud(j->path, &ld, lc, &lr, &err)
                     : sd_errf(&err, SD_ENOMEM, "out of memory");
             if (rc == 0) {
-                proto_info *in = &j->info.summary;
-                in->points = lc->n;
-                in->dropped = lc->n_dropped;
-                memcpy(in->bmin, lc->bmin, sizeof in->bmin);
-                memcpy(in->bmax, lc->bmax, sizeof in->bmax);
-                memcpy(in->offset, lc->offset, sizeof in->offset);
-                in->attrs = lc->attrs;
-                in->k = lc->k;
-                in->sigma = lc->sigma;
-                snprintf(in->format, sizeof in->format, "%s", lc->format);
+                info_fill(&j->info.summary, lc->n, lc->n_dropped, lc->bmin, lc->bmax, lc->offset,
+                          lc->attrs, lc->k, lc->sigma, lc->format);
                 j->info.cache_hit = lr.hit;
                 j->lod = lc;
                 on_progress(&pp, PROTO_PHASE_UPLOAD, 0.0);
@@ -486,16 +494,8 @@ static void *prep_main(void *arg)
             rc = p ? cache_open_cloud(j->path, &cd, p, &res, &err)
                    : sd_errf(&err, SD_ENOMEM, "out of memory");
         if (rc == 0 && !use_lod) {
-            proto_info *in = &j->info.summary;
-            in->points = p->n;
-            in->dropped = p->n_dropped;
-            memcpy(in->bmin, p->bmin, sizeof in->bmin);
-            memcpy(in->bmax, p->bmax, sizeof in->bmax);
-            memcpy(in->offset, p->offset, sizeof in->offset);
-            in->attrs = p->attrs;
-            in->k = p->k;
-            in->sigma = p->sigma;
-            snprintf(in->format, sizeof in->format, "%s", p->format);
+            info_fill(&j->info.summary, p->n, p->n_dropped, p->bmin, p->bmax, p->offset, p->attrs,
+                      p->k, p->sigma, p->format);
             j->info.cache_hit = res.hit;
             j->prep = p;
             on_progress(&pp, PROTO_PHASE_UPLOAD, 0.0);

@@ -467,6 +467,33 @@ int cache__link_tmp(int fd, int dfd, const char *base, char *name, size_t len)
     return -1;
 }
 
+int cache__publish(int fd, int dfd, const char *base, char *tmp, size_t tmplen, int named,
+                   int failed)
+{
+    int bad = failed || fsync(fd);
+    int saved = errno;
+    if (!bad && !named) {
+        bad = cache__link_tmp(fd, dfd, base, tmp, tmplen) != 0;
+        saved = errno;
+        named = !bad;
+    }
+    if (close(fd) < 0 && !bad) {
+        bad = 1;
+        saved = errno;
+    }
+    if (!bad && renameat(dfd, tmp, dfd, base) < 0) {
+        bad = 1;
+        saved = errno;
+    }
+    if (bad) {
+        if (named) unlinkat(dfd, tmp, 0);
+        errno = saved;
+        return -1;
+    }
+    fsync(dfd); /* make the rename durable */
+    return 0;
+}
+
 /* Writes p to cpath: into a new temporary file in the cache directory (create_tmp), fsynced,
  * then renamed over cpath (rename replaces a symlink at cpath rather than following it) and
  * the directory fsynced. Returns 0 or SD_EIO with err. */
@@ -521,28 +548,11 @@ static int write_cache(const char *cpath, const src_key *key, const pc_prepared 
         return sd_errf(err, SD_EIO, "cannot write cache %s: %s", cpath, strerror(e));
     }
     int bad = write_all(fd, &h, sizeof h) || write_all(fd, zero, CACHE_BLOCK_OFFSET - sizeof h) ||
-              write_all(fd, p->block, p->block_len) || fsync(fd);
+              write_all(fd, p->block, p->block_len);
+    bad = cache__publish(fd, dfd, base, tmp, sizeof tmp, named, bad) < 0;
     int saved = errno;
-    if (!bad && !named) {
-        bad = cache__link_tmp(fd, dfd, base, tmp, sizeof tmp) != 0;
-        saved = errno;
-        named = !bad;
-    }
-    if (close(fd) < 0 && !bad) {
-        bad = 1;
-        saved = errno;
-    }
-    if (!bad && renameat(dfd, tmp, dfd, base) < 0) {
-        bad = 1;
-        saved = errno;
-    }
-    if (bad) {
-        if (named) unlinkat(dfd, tmp, 0);
-        close(dfd);
-        return sd_errf(err, SD_EIO, "cannot write cache %s: %s", cpath, strerror(saved));
-    }
-    fsync(dfd); /* make the rename durable */
     close(dfd);
+    if (bad) return sd_errf(err, SD_EIO, "cannot write cache %s: %s", cpath, strerror(saved));
     return 0;
 }
 

@@ -121,34 +121,6 @@ static void status(build *b, const char *pass, double frac_done, uint64_t points
     b->d->status(b->d->user, line);
 }
 
-static int read_all(int fd, void *p, size_t len, uint64_t off)
-{
-    uint8_t *q = p;
-    while (len) {
-        ssize_t g = pread(fd, q, len, (off_t)off);
-        if (g < 0 && errno == EINTR) continue;
-        if (g <= 0) return -1;
-        q += g;
-        len -= (size_t)g;
-        off += (uint64_t)g;
-    }
-    return 0;
-}
-
-static int write_at(int fd, const void *p, size_t len, uint64_t off)
-{
-    const uint8_t *q = p;
-    while (len) {
-        ssize_t g = pwrite(fd, q, len, (off_t)off);
-        if (g < 0 && errno == EINTR) continue;
-        if (g <= 0) return -1;
-        q += g;
-        len -= (size_t)g;
-        off += (uint64_t)g;
-    }
-    return 0;
-}
-
 static uint32_t fbits(float v)
 {
     uint32_t u;
@@ -271,7 +243,7 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
             r->rgba = rgba[i];
             r->gidx = gidx++;
             if (fill[c] == PER) {
-                if (write_at(b->chunks[c].fd_in, buf + (size_t)c * PER, PER * sizeof *buf, off[c]))
+                if (lod__pwrite_all(b->chunks[c].fd_in, buf + (size_t)c * PER, PER * sizeof *buf, off[c]))
                     rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
                 off[c] += PER * sizeof *buf;
                 fill[c] = 0;
@@ -280,7 +252,7 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
     }
     if (rc == 0 && m < 0) rc = (int)m;
     for (size_t c = 0; rc == 0 && c < b->nchunks; c++)
-        if (fill[c] && write_at(b->chunks[c].fd_in, buf + c * PER, fill[c] * sizeof *buf, off[c]))
+        if (fill[c] && lod__pwrite_all(b->chunks[c].fd_in, buf + c * PER, fill[c] * sizeof *buf, off[c]))
             rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
     if (rc == 0) status(b, "distribute", 0.12, b->info.n, now_s() - t);
     free(buf);
@@ -292,21 +264,6 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
 }
 
 /* ---- normals pass ---- */
-
-/* Orientation: prep.c's rule (prep.h step 3). */
-static void orient(float n[3], const float p[3], const double c[3], int has_vp, const double vp[3])
-{
-    double u[3];
-    for (int a = 0; a < 3; a++) u[a] = has_vp ? vp[a] - p[a] : p[a] - c[a];
-    double d = n[0] * u[0] + n[1] * u[1] + n[2] * u[2];
-    double ul = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
-    int flip;
-    if (fabs(d) >= 0.17364817766693 * ul && ul > 0) flip = d < 0;
-    else if (fabs(n[2]) >= 0.1f) flip = n[2] < 0;
-    else if (fabs(n[1]) >= 0.1f) flip = n[1] < 0;
-    else flip = n[0] < 0;
-    if (flip) n[0] = -n[0], n[1] = -n[1], n[2] = -n[2];
-}
 
 typedef struct region {
     size_t m;
@@ -367,7 +324,7 @@ static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
         rec *t2 = realloc(tmp, o->count * sizeof *tmp);
         if (!t2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk"); break; }
         tmp = t2;
-        if (read_all(o->fd_in, tmp, o->count * sizeof *tmp, 0)) {
+        if (lod__pread_all(o->fd_in, tmp, o->count * sizeof *tmp, 0)) {
             rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
             break;
         }
@@ -484,7 +441,7 @@ static int nj_pca(void *ctx, size_t blk, int tid, sd_err *err)
     for (size_t i = a; i < e; i++) {
         j->r20[i] = 2.0f * sqrtf(j->d2[i * j->K + j->K - 1]) * inv_sqrt_k;
         prep_pca_normal(j->r->pos, j->list[i], j->nbr + i * j->K, j->K, j->nrm + 3 * i, j->svar + i);
-        orient(j->nrm + 3 * i, j->r->pos + 3 * (size_t)j->list[i], j->b->info.centroid,
+        prep_orient_normal(j->nrm + 3 * i, j->r->pos + 3 * (size_t)j->list[i], j->b->info.centroid,
                j->b->info.has_viewpoint, j->vp);
     }
     return 0;
@@ -609,7 +566,7 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         j.count = nown;
         rc = prep_par_for(T, nblocks(nown), nj_own, &j, NULL, err);
         if (rc < 0) goto done;
-        if (write_at(c->fd_a, j.out, nown * sizeof *j.out, 0))
+        if (lod__pwrite_all(c->fd_a, j.out, nown * sizeof *j.out, 0))
             rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
     done:
         free(j.slot);
@@ -674,7 +631,7 @@ static int read_arecs(build *b, size_t ci, arec **out, sd_err *err)
     chunk *c = &b->chunks[ci];
     *out = malloc((c->count ? c->count : 1) * sizeof **out);
     if (!*out) return sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
-    if (read_all(c->fd_a, *out, c->count * sizeof **out, 0)) {
+    if (lod__pread_all(c->fd_a, *out, c->count * sizeof **out, 0)) {
         free(*out);
         return sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
     }

@@ -261,7 +261,7 @@ int lod__writer_open(lod_writer *w, const char *cpath, sd_err *err)
     return 0;
 }
 
-static int pwrite_all(int fd, const void *p, size_t len, uint64_t off)
+int lod__pwrite_all(int fd, const void *p, size_t len, uint64_t off)
 {
     const uint8_t *b = p;
     while (len) {
@@ -275,6 +275,20 @@ static int pwrite_all(int fd, const void *p, size_t len, uint64_t off)
     return 0;
 }
 
+int lod__pread_all(int fd, void *p, size_t len, uint64_t off)
+{
+    uint8_t *q = p;
+    while (len) {
+        ssize_t g = pread(fd, q, len, (off_t)off);
+        if (g < 0 && errno == EINTR) continue;
+        if (g <= 0) return -1;
+        q += g;
+        len -= (size_t)g;
+        off += (uint64_t)g;
+    }
+    return 0;
+}
+
 int lod__writer_append(lod_writer *w, const void *data, size_t len, uint64_t *off, sd_err *err)
 {
     pthread_mutex_lock(&w->mu);
@@ -282,7 +296,7 @@ int lod__writer_append(lod_writer *w, const void *data, size_t len, uint64_t *of
     w->off = at + len;
     pthread_mutex_unlock(&w->mu);
     *off = at;
-    if (pwrite_all(w->fd, data, len, at) < 0)
+    if (lod__pwrite_all(w->fd, data, len, at) < 0)
         return sd_errf(err, SD_EIO, "cannot write LOD cache %s: %s", w->path, strerror(errno));
     return 0;
 }
@@ -321,23 +335,13 @@ int lod__writer_commit(lod_writer *w, const lod_cloud *c, const lod_src_key *key
     memcpy(h.format, c->format, sizeof h.format);
     h.header_hash = sd_hash64(&h, offsetof(lod_header, header_hash), 0);
     static const uint8_t zero[HEADER_LEN];
-    int bad = pwrite_all(w->fd, c->nodes, c->nnodes * sizeof(lod_node), h.table_off) ||
-              pwrite_all(w->fd, zero, HEADER_LEN, 0) || pwrite_all(w->fd, &h, sizeof h, 0) ||
-              fsync(w->fd);
+    int bad = lod__pwrite_all(w->fd, c->nodes, c->nnodes * sizeof(lod_node), h.table_off) ||
+              lod__pwrite_all(w->fd, zero, HEADER_LEN, 0) ||
+              lod__pwrite_all(w->fd, &h, sizeof h, 0);
+    bad = cache__publish(w->fd, w->dfd, w->base, w->tmp, sizeof w->tmp, w->named, bad) < 0;
     int saved = errno;
-    if (!bad && !w->named) {
-        bad = cache__link_tmp(w->fd, w->dfd, w->base, w->tmp, sizeof w->tmp) != 0;
-        saved = errno;
-        w->named = !bad;
-    }
-    if (!bad && renameat(w->dfd, w->tmp, w->dfd, w->base) < 0) {
-        bad = 1;
-        saved = errno;
-    }
-    if (!bad) {
-        w->named = 0; /* renamed: nothing to remove */
-        fsync(w->dfd);
-    }
+    w->fd = -1;     /* closed by cache__publish */
+    w->named = 0;   /* renamed, or removed */
     lod__writer_abort(w);
     if (bad) return sd_errf(err, SD_EIO, "cannot write LOD cache %s: %s", w->path,
                             strerror(saved));

@@ -36,6 +36,9 @@ int lod__writer_append(lod_writer *w, const void *data, size_t len, uint64_t *of
 int lod__writer_commit(lod_writer *w, const lod_cloud *c, const lod_src_key *key, sd_err *err);
 /* lod__writer_abort: closes and forgets the file (nothing is left behind). */
 void lod__writer_abort(lod_writer *w);
+/* lod__pwrite_all, lod__pread_all: all len bytes at off (EINTR retried). 0 or -1 (errno). */
+int lod__pwrite_all(int fd, const void *p, size_t len, uint64_t off);
+int lod__pread_all(int fd, void *p, size_t len, uint64_t off);
 /* lod__scratch: an unnamed scratch file in the writer's directory (gone when closed or when the
  * process dies). Returns the fd or SD_EIO. */
 int lod__scratch(lod_writer *w, sd_err *err);
