@@ -94,6 +94,7 @@ typedef struct build {
     uint64_t *hist_hi[4];     /* r20, Fraw, nnd, final radius: 65536 each */
     struct { int which; double q; uint32_t hi; uint64_t rank; uint64_t *lo; float value; } qs[NQ + 1];
     float scatter_cap, p99;
+    float halo;               /* the halo the last chunk of the normals pass needed */
     pthread_mutex_t mu;
     nodeent *nodes;
     size_t nnodes, capnodes;
@@ -285,18 +286,6 @@ static void region_free(region *r)
     memset(r, 0, sizeof *r);
 }
 
-typedef struct srt {
-    uint64_t code;
-    uint32_t gidx, i;
-} srt;
-
-static int cmp_srt(const void *a, const void *b)
-{
-    const srt *x = a, *y = b;
-    if (x->code != y->code) return x->code < y->code ? -1 : 1;
-    return x->gidx < y->gidx ? -1 : x->gidx > y->gidx;
-}
-
 /* Loads chunk ci with every point within h of its cube, in (code, file index) order. */
 static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
 {
@@ -309,7 +298,6 @@ static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
         r->edge[3 + a] = r->hi[a] >= (float)(b->f.origin[a] + b->f.side);
     }
     size_t cap = 0, m = 0;
-    srt *s = NULL;
     rec *tmp = NULL;
     int rc = 0;
     float *pos = NULL;
@@ -354,40 +342,65 @@ static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
         }
     }
     free(tmp);
+    uint64_t *codes = NULL;
+    uint32_t *perm = NULL;
     if (rc == 0) {
-        s = malloc((m ? m : 1) * sizeof *s);
+        codes = malloc((m ? m : 1) * sizeof *codes);
+        perm = malloc((m ? m : 1) * sizeof *perm);
         r->pos = malloc((m ? m : 1) * 12);
         r->rgba = malloc((m ? m : 1) * 4);
         r->gidx = malloc((m ? m : 1) * 4);
         r->code = malloc((m ? m : 1) * 8);
         r->own = malloc(m ? m : 1);
-        if (!s || !r->pos || !r->rgba || !r->gidx || !r->code || !r->own)
+        if (!codes || !perm || !r->pos || !r->rgba || !r->gidx || !r->code || !r->own)
             rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
     }
+    /* (code, file index) order: the stable radix sort by code, then the (rare) runs of equal
+     * codes, which come from several chunk files, by file index */
+    if (rc == 0) rc = prep_morton_sort(pos, m, &b->f, codes, perm, err);
     if (rc == 0) {
-        for (size_t i = 0; i < m; i++) {
-            s[i].code = prep_morton_code(&b->f, pos + 3 * i);
-            s[i].gidx = gi[i];
-            s[i].i = (uint32_t)i;
+        for (size_t i = 0; i < m;) {
+            size_t e = i + 1;
+            while (e < m && codes[e] == codes[i]) e++;
+            for (size_t x = i + 1; x < e; x++) /* insertion sort of the run by gidx */
+                for (size_t y = x; y > i && gi[perm[y]] < gi[perm[y - 1]]; y--) {
+                    uint32_t t = perm[y];
+                    perm[y] = perm[y - 1];
+                    perm[y - 1] = t;
+                }
+            i = e;
         }
-        qsort(s, m, sizeof *s, cmp_srt);
         for (size_t i = 0; i < m; i++) {
-            uint32_t k = s[i].i;
+            uint32_t k = perm[i];
             memcpy(r->pos + 3 * i, pos + 3 * k, 12);
             r->rgba[i] = rgba[k];
             r->gidx[i] = gi[k];
-            r->code[i] = s[i].code;
+            r->code[i] = codes[i];
             r->own[i] = own[k];
         }
         r->m = m;
     }
-    free(s);
+    free(codes);
+    free(perm);
     free(pos);
     free(rgba);
     free(gi);
     free(own);
     if (rc < 0) region_free(r);
     return rc;
+}
+
+/* The halo a chunk with cube [lo, hi] needs for the ball (p, sqrt(d2)): the farthest the ball
+ * reaches beyond the cube along an axis. */
+static float halo_need(const chunk *c, const float *p, float d2)
+{
+    float d = sqrtf(d2), need = 0;
+    for (int a = 0; a < 3; a++) {
+        float lo = c->lo[a] - (p[a] - d), hi = p[a] + d - c->hi[a];
+        if (lo > need) need = lo;
+        if (hi > need) need = hi;
+    }
+    return need;
 }
 
 /* 1 when the ball (p, sqrt(d2)) lies inside the region (faces at the cube's edge excepted). */
@@ -406,6 +419,12 @@ typedef struct tls {
 } tls;
 
 enum { QBLOCK = 16384 };
+
+static int cmp_u32(const void *a, const void *b)
+{
+    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+    return x < y ? -1 : x > y;
+}
 
 /* One chunk's normals pass, its steps run in parallel over blocks of QBLOCK points. */
 typedef struct njob {
@@ -500,7 +519,8 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
     chunk *c = &b->chunks[ci];
     if (!c->count) return 0;
     int K = b->K, T = b->threads;
-    float h = (c->hi[0] - c->lo[0]) / 16;
+    /* the halo the previous chunk ended with, a good first guess for this one */
+    float h = b->halo > 0 ? b->halo : (c->hi[0] - c->lo[0]) / 16;
     prep_knn_scratch *ks[64] = {0};
     tls *tl[64] = {0};
     if (T > 64) T = 64;
@@ -522,6 +542,7 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         for (int a = 0; a < 3; a++) j.vp[a] = b->info.viewpoint[a] - b->info.offset[a];
         prep_knn *kn = NULL;
         int exact = 1;
+        float need = 0;
         j.slot = malloc(m * sizeof *j.slot);
         j.list = malloc(m * sizeof *j.list);
         if (!j.slot || !j.list) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
@@ -541,19 +562,37 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         j.first = 0, j.count = nown;
         rc = prep_par_for(T, nblocks(nown), nj_query, &j, NULL, err);
         if (rc < 0) goto done;
-        for (size_t i = 0; i < nown && exact; i++) {
-            if (!full && !inside(&r, r.pos + 3 * (size_t)j.list[i], j.d2[i * K + K - 1])) exact = 0;
+        /* A result is exact when its ball lies in the region; else the region grows to the
+         * farthest ball (the computed k-th distance bounds the true one from above). */
+        for (size_t i = 0; i < nown; i++) {
+            const float *pp = r.pos + 3 * (size_t)j.list[i];
+            if (!full && !inside(&r, pp, j.d2[i * K + K - 1])) {
+                exact = 0;
+                float nd = halo_need(c, pp, j.d2[i * K + K - 1]);
+                if (nd > need) need = nd;
+            }
+            if (!exact) continue;
             for (int q = 0; q < K; q++) {
                 uint32_t pq = j.nbr[i * K + q];
                 if (j.slot[pq] < 0) j.slot[pq] = (int32_t)ns, j.list[ns++] = pq;
             }
         }
         if (!exact) goto done;
+        /* the neighbours in region (Morton) order: the grid search is fast for queries in
+         * that order only (knn.h) */
+        qsort(j.list + nown, ns - nown, sizeof *j.list, cmp_u32);
+        for (size_t i = nown; i < ns; i++) j.slot[j.list[i]] = (int32_t)i;
         j.first = nown, j.count = ns - nown;
         if (ns > nown) rc = prep_par_for(T, nblocks(ns - nown), nj_query, &j, NULL, err);
         if (rc < 0) goto done;
-        for (size_t i = nown; i < ns && exact; i++)
-            if (!full && !inside(&r, r.pos + 3 * (size_t)j.list[i], j.d2[i * K + K - 1])) exact = 0;
+        for (size_t i = nown; i < ns; i++) {
+            const float *pp = r.pos + 3 * (size_t)j.list[i];
+            if (!full && !inside(&r, pp, j.d2[i * K + K - 1])) {
+                exact = 0;
+                float nd = halo_need(c, pp, j.d2[i * K + K - 1]);
+                if (nd > need) need = nd;
+            }
+        }
         if (!exact) goto done;
         j.r20 = malloc(ns * 4);
         j.nrm = malloc(ns * 12);
@@ -581,8 +620,10 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         region_free(&r);
         if (rc < 0 || exact) break;
         c->retried = 1;
-        h *= 2;
+        b->halo = 0;
+        h = need * 1.05f > h * 1.5f ? need * 1.05f : h * 1.5f;
     }
+    if (rc == 0 && !b->halo) b->halo = h;
     for (int t = 0; t < T; t++) {
         if (rc == 0 && tl[t])
             for (int q = 0; q < 3; q++)
