@@ -95,6 +95,8 @@ typedef struct build {
     struct { int which; double q; uint32_t hi; uint64_t rank; uint64_t *lo; float value; } qs[NQ + 1];
     float scatter_cap, p99;
     float halo;               /* the halo the last chunk of the normals pass needed */
+    uint64_t normals_done;    /* points through the normals pass so far */
+    double t_pass;            /* when the normals pass began */
     pthread_mutex_t mu;
     nodeent *nodes;
     size_t nnodes, capnodes;
@@ -624,6 +626,11 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         h = need * 1.05f > h * 1.5f ? need * 1.05f : h * 1.5f;
     }
     if (rc == 0 && !b->halo) b->halo = h;
+    if (rc == 0) { /* a status line per chunk: the normals pass is most of the build */
+        b->normals_done += c->count;
+        status(b, "normals", 0.12 + 0.63 * (double)b->normals_done / (double)b->info.n,
+               b->normals_done, now_s() - b->t_pass);
+    }
     for (int t = 0; t < T; t++) {
         if (rc == 0 && tl[t])
             for (int q = 0; q < 3; q++)
@@ -1065,6 +1072,7 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     prep_progress pr;
     double t = now_s();
     prep_progress_begin(&pr, d->progress, d->user, PROTO_PHASE_NORMALS);
+    b->t_pass = t;
     rc = prep_par_for(1, b->nchunks, chunk_normals, b, &pr, err); /* each chunk on every thread */
     if (rc < 0) return rc;
     prep_progress_end(&pr);
@@ -1075,7 +1083,6 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
         b->chunks[i].fd_in = -1;
     }
     res->halo_retries = b->nchunks ? (double)retried / (double)b->nchunks : 0;
-    status(b, "normals", 0.75, n, now_s() - t);
     /* quantiles: r20 median, sigma, F p99 and the reported F percentiles */
     static const struct { int which; double q; } want[NQ] = {
         {0, 0.5}, {2, 0.5}, {1, 0.99}, {1, 0.01}, {1, 0.25}, {1, 0.5}, {1, 0.75}};

@@ -61,6 +61,7 @@ struct rnd_ctx {
     uint32_t max_set_points;
     int lod_uploads;
     uint32_t lod_pool_points;
+    uint64_t lod_budget;
     uint64_t budget, resident_bytes, clock, uploads, evictions;
     /* The two targets (pipe.h), each made on first use and remade when the size changes:
      * [TARGET_8] RGBA8 for 8-bit frames, read back as it is; [TARGET_F] RGBA16F + R32F depth
@@ -168,6 +169,8 @@ rnd_ctx *rnd_create(const rnd_desc *desc, sd_err *err)
     r->max_set_points = d.max_set_points && d.max_set_points < limit ? d.max_set_points
                                                                        : (uint32_t)limit;
     r->lod_uploads = d.lod_uploads > 0 ? d.lod_uploads : 4;
+    r->lod_budget = d.lod_budget ? d.lod_budget
+                                 : r->kit.software ? RND_LOD_BUDGET_SOFTWARE : RND_LOD_BUDGET_GPU;
     uint64_t pool = d.lod_pool_points ? d.lod_pool_points : 6000000u;
     if (pool > limit) pool = limit;
     if (!d.lod_pool_points && rnd__lod_pool_bytes((uint32_t)pool) > r->budget / 2)
@@ -736,7 +739,8 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
             r->resident_bytes += slot->bytes;
             r->uploads++;
         }
-        rc = rnd__lod_frame(slot->lod, gl, &slot->c, &v, budget, &lf, err);
+        rc = rnd__lod_frame(slot->lod, gl, &slot->c, &v, budget ? budget : r->lod_budget, &lf,
+                            err);
         if (rc < 0) return rc;
         if (lf.changed) detach_all(r, slot); /* per-cloud data follows the pool's contents */
         v.nchunks = lf.nchunks;

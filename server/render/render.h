@@ -25,6 +25,14 @@ enum { RND_RASTER_AUTO = 0, RND_RASTER_PACKED, RND_RASTER_EXACT, RND_RASTER_GL }
 
 enum { RND_DEFAULT_WIDTH = SP_DEFAULT_WIDTH, RND_DEFAULT_HEIGHT = SP_DEFAULT_HEIGHT };
 
+/* Default LOD point budgets (README "Huge scans"): llvmpipe on the 2-core machine drew 250k
+ * points of the 10M synthetic scan at 1280x720 in 83 ms with splat and 43 ms with points
+ * (under load; 500k: 217 and 100 ms), so 300k keeps the default pipeline near 10 frames/s.
+ * The GPU value is not measured here (no GPU was available): Potree's 1M default scaled by
+ * the compute rasteriser's throughput, to be checked on a GPU. */
+#define RND_LOD_BUDGET_SOFTWARE 300000u
+#define RND_LOD_BUDGET_GPU 3000000u
+
 typedef struct rnd_desc {
     rnd_backend_kind backend; /* default AUTO: EGL, then OSMesa */
     const char *shader_dir;   /* default NULL: the shaders compiled into the binary */
@@ -40,6 +48,9 @@ typedef struct rnd_desc {
                                  slots); a frame draws a missing node's ancestor instead */
     uint32_t lod_pool_points; /* default 0: points of a LOD cloud's GPU node pool: 6M, less
                                  when the driver's buffer limit or the GPU budget says so */
+    uint64_t lod_budget;      /* default 0: the point budget of LOD frames whose point_budget
+                                 is 0, per back end: RND_LOD_BUDGET_SOFTWARE on a software
+                                 renderer, RND_LOD_BUDGET_GPU on a GPU */
 } rnd_desc;
 
 /* A camera in the cloud file's coordinates (doubles, so georeferenced eyes keep precision).
