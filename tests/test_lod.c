@@ -317,12 +317,40 @@ static rfix *rfix_new(int n, uint32_t pool)
     return f;
 }
 
+/* rfix_cold: the LOD cloud adopted afresh (mapped from the cache again): an empty pool. */
+static void rfix_cold(rfix *f)
+{
+    sd_err err = {0};
+    rnd_release(f->r, f->lod_id);
+    lod_desc d = small_desc(f->cache);
+    lod_cloud *c = calloc(1, sizeof *c);
+    lod_result res;
+    if (lod_open_cloud(f->ply, &d, c, &res, &err) != 0) fail_msg("%s", err.msg);
+    assert_int_equal(res.hit, 1);
+    int64_t id = rnd_adopt_lod(f->r, c, &err);
+    if (id <= 0) fail_msg("adopt: %s", err.msg);
+    f->lod_id = (uint32_t)id;
+}
+
 static void rfix_free(rfix *f)
 {
     rnd_destroy(f->r);
     pc_prepared_free(&f->flat);
     tu_rm_rf(f->dir);
     free(f);
+}
+
+/* One renderer, cloud and flat reference for the rendering tests (built once: a few seconds). */
+static int rfix_setup(void **state)
+{
+    *state = rfix_new(40000, 0);
+    return 0;
+}
+
+static int rfix_teardown(void **state)
+{
+    rfix_free(*state);
+    return 0;
 }
 
 static void camera(const rfix *f, rnd_camera *cam)
@@ -362,8 +390,8 @@ static double psnr(const uint8_t *a, const uint8_t *b, size_t npx)
  * render of the in-memory prep exactly, for the points and splat pipelines. */
 static void test_budget_and_full_equals_flat(void **state)
 {
-    (void)state;
-    rfix *f = rfix_new(40000, 0);
+    rfix *f = *state;
+    rfix_cold(f);
     rnd_camera cam;
     camera(f, &cam);
     sp_params p;
@@ -394,15 +422,15 @@ static void test_budget_and_full_equals_flat(void **state)
     }
     rnd_frame_free(&a);
     rnd_frame_free(&b);
-    rfix_free(f);
+
 }
 
 /* At a tenth of the points (inner nodes drawn with radius_lod) the splat image stays within
  * 20 dB PSNR of the full one; drawing the same nodes without radius_lod would leave holes. */
 static void test_tenth_budget_psnr(void **state)
 {
-    (void)state;
-    rfix *f = rfix_new(40000, 0);
+    rfix *f = *state;
+    rfix_cold(f);
     rnd_camera cam;
     camera(f, &cam);
     sp_params p;
@@ -420,15 +448,15 @@ static void test_tenth_budget_psnr(void **state)
     assert_true(db >= 20.0);
     rnd_frame_free(&a);
     rnd_frame_free(&b);
-    rfix_free(f);
+
 }
 
 /* Progressive refinement: with a cold pool the first frame is incomplete, each next frame of
  * the same camera draws more, and the complete frame equals the one a fresh renderer ends in. */
 static void test_progressive_ends_complete(void **state)
 {
-    (void)state;
-    rfix *f = rfix_new(40000, 0);
+    rfix *f = *state;
+    rfix_cold(f);
     rnd_camera cam;
     camera(f, &cam);
     sp_params p;
@@ -455,7 +483,7 @@ static void test_progressive_ends_complete(void **state)
                   (unsigned long long)a.points_drawn);
     rnd_frame_free(&a);
     rnd_frame_free(&b);
-    rfix_free(f);
+
 }
 
 /* Through the daemon (--lod always): a streaming client receives refined frames of a still
@@ -531,16 +559,20 @@ static void test_daemon_progressive(void **state)
 
 int main(void)
 {
-    const struct CMUnitTest tests[] = {
+    const struct CMUnitTest prep_tests[] = {
         cmocka_unit_test(test_octree_invariants),
         cmocka_unit_test(test_equals_in_memory_prep),
         cmocka_unit_test(test_kill9_never_leaves_a_loadable_cache),
+        cmocka_unit_test(test_daemon_progressive),
+    };
+    const struct CMUnitTest render_tests[] = {
         cmocka_unit_test(test_budget_and_full_equals_flat),
         cmocka_unit_test(test_tenth_budget_psnr),
         cmocka_unit_test(test_progressive_ends_complete),
-        cmocka_unit_test(test_daemon_progressive),
     };
     const char *only = getenv("SPLATD_TEST_FILTER");
     if (only && *only) cmocka_set_test_filter(only);
-    return cmocka_run_group_tests(tests, NULL, NULL);
+    int failed = cmocka_run_group_tests_name("lod_build", prep_tests, NULL, NULL);
+    failed += cmocka_run_group_tests_name("lod_render", render_tests, rfix_setup, rfix_teardown);
+    return failed;
 }
