@@ -96,6 +96,7 @@ typedef struct build {
     float scatter_cap, p99;
     float halo;               /* the halo the last chunk of the normals pass needed */
     uint64_t normals_done;    /* points through the normals pass so far */
+    int radius_pass;          /* chunk_hist: which histograms */
     double t_pass;            /* when the normals pass began */
     pthread_mutex_t mu;
     nodeent *nodes;
@@ -699,8 +700,9 @@ static float final_F(const build *b, float raw)
     return v < 0 ? 0 : (v > 1 ? 1 : v);
 }
 
-/* pass over the arecs: mode 0 lo hists of the first NQ quantiles, mode 1 hi hist of radius */
-static int chunk_quant(void *ctx, size_t ci, int tid, sd_err *err)
+/* A counting pass over the normals pass's records: with b->radius_pass 0 the bottom-16-bit
+ * histograms of the NQ quantiles' buckets, with 1 the top-16-bit histogram of the final radii. */
+static int chunk_hist(void *ctx, size_t ci, int tid, sd_err *err)
 {
     build *b = ctx;
     (void)tid;
@@ -709,26 +711,16 @@ static int chunk_quant(void *ctx, size_t ci, int tid, sd_err *err)
     if (rc < 0) return rc;
     uint64_t n = b->chunks[ci].count;
     pthread_mutex_lock(&b->mu);
-    for (uint64_t i = 0; i < n; i++)
+    for (uint64_t i = 0; i < n; i++) {
+        if (b->radius_pass) {
+            b->hist_hi[3][fbits(final_radius(b, &a[i])) >> 16]++;
+            continue;
+        }
         for (int q = 0; q < NQ; q++) {
             uint32_t u = fbits(qvalue(b, q, &a[i], 0));
             if (u >> 16 == b->qs[q].hi) b->qs[q].lo[u & 0xffff]++;
         }
-    pthread_mutex_unlock(&b->mu);
-    free(a);
-    return 0;
-}
-
-static int chunk_radius_hist(void *ctx, size_t ci, int tid, sd_err *err)
-{
-    build *b = ctx;
-    (void)tid;
-    arec *a;
-    int rc = read_arecs(b, ci, &a, err);
-    if (rc < 0) return rc;
-    uint64_t n = b->chunks[ci].count;
-    pthread_mutex_lock(&b->mu);
-    for (uint64_t i = 0; i < n; i++) b->hist_hi[3][fbits(final_radius(b, &a[i])) >> 16]++;
+    }
     pthread_mutex_unlock(&b->mu);
     free(a);
     return 0;
@@ -1095,12 +1087,13 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     }
     t = now_s();
     prep_progress_begin(&pr, d->progress, d->user, PROTO_PHASE_FIELD);
-    rc = prep_par_for(b->threads, b->nchunks, chunk_quant, b, NULL, err);
+    rc = prep_par_for(b->threads, b->nchunks, chunk_hist, b, NULL, err);
     if (rc < 0) return rc;
     for (int q = 0; q < NQ; q++) b->qs[q].value = pick_value(b, q);
     b->scatter_cap = PREP_SCATTER_CAP * b->qs[0].value;
     b->p99 = b->qs[2].value;
-    rc = prep_par_for(b->threads, b->nchunks, chunk_radius_hist, b, NULL, err);
+    b->radius_pass = 1;
+    rc = prep_par_for(b->threads, b->nchunks, chunk_hist, b, NULL, err);
     if (rc < 0) return rc;
     pick_bucket(b, NQ, b->hist_hi[3], n);
     prep_progress_end(&pr);
