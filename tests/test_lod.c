@@ -557,6 +557,33 @@ static void test_daemon_progressive(void **state)
     tu_rm_rf(dir);
 }
 
+/* A node larger than the whole pool is given up, not waited for: the frame is complete with
+ * what could be drawn (here nothing: the root does not fit a pool of 100 points). */
+static void test_pool_smaller_than_root(void **state)
+{
+    rfix *f = *state;
+    sd_err err = {0};
+    rnd_desc rd = {.lod_pool_points = 100, .shader_dir = tu_env("SPLATD_SHADERS", NULL)};
+    rnd_ctx *r = rnd_create(&rd, &err);
+    if (!r) fail_msg("renderer: %s", err.msg);
+    lod_desc d = small_desc(f->cache);
+    lod_cloud *c = calloc(1, sizeof *c);
+    if (lod_open_cloud(f->ply, &d, c, NULL, &err) != 0) fail_msg("%s", err.msg);
+    assert_true(c->nodes[0].count > 100);
+    int64_t id = rnd_adopt_lod(r, c, &err);
+    assert_true(id > 0);
+    rnd_camera cam;
+    camera(f, &cam);
+    sp_params p;
+    sp_params_defaults(&p);
+    rnd_frame a = {0};
+    if (rnd_render(r, (uint32_t)id, &cam, &p, 0, &a, &err) != 0) fail_msg("%s", err.msg);
+    assert_int_equal(a.complete, 1);
+    assert_int_equal(a.points_drawn, 0);
+    rnd_frame_free(&a);
+    rnd_destroy(r);
+}
+
 int main(void)
 {
     const struct CMUnitTest prep_tests[] = {
@@ -569,6 +596,7 @@ int main(void)
         cmocka_unit_test(test_budget_and_full_equals_flat),
         cmocka_unit_test(test_tenth_budget_psnr),
         cmocka_unit_test(test_progressive_ends_complete),
+        cmocka_unit_test(test_pool_smaller_than_root),
     };
     const char *only = getenv("SPLATD_TEST_FILTER");
     if (only && *only) cmocka_set_test_filter(only);

@@ -43,7 +43,8 @@ struct rnd_lod {
     int have_pool;
     uint32_t *first;          /* per node: pool position or NOT_RESIDENT */
     uint64_t *last;           /* per node: frame stamp when last wanted */
-    uint8_t *broken;          /* per node: failed its checksum */
+    uint8_t *broken;          /* per node: failed its checksum, or larger than the pool: never
+                                 drawn (a frame without it can still be complete) */
     alloc *al;                /* resident ranges, by first */
     uint32_t nal;
     uint64_t stamp;
@@ -257,6 +258,7 @@ static uint32_t find_hole(const rnd_lod *l, uint32_t count, uint32_t *at)
 static uint32_t place(rnd_lod *l, uint32_t i, uint32_t *evicted)
 {
     uint32_t count = l->c->nodes[i].count, at;
+    if (count > l->cap) return NOT_RESIDENT; /* never fits: the caller gives it up */
     for (;;) {
         uint32_t pos = find_hole(l, count, &at);
         if (pos != NOT_RESIDENT) {
@@ -427,6 +429,7 @@ int rnd__lod_frame(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_vie
             l->broken[i] = 1;
             out->broken++;
         } else if (l->last[i] == l->stamp && l->first[i] == NOT_RESIDENT) {
+            if (c->nodes[i].count > l->cap) l->broken[i] = 1; /* larger than the pool */
             uint32_t pos = place(l, i, &out->evicted);
             if (pos != NOT_RESIDENT) {
                 upload(l, gl, i, pos, sl->data);
@@ -440,7 +443,7 @@ int rnd__lod_frame(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_vie
     }
     /* the root has no ancestor to stand in for it: read here when missing (once per cloud) */
     if (nw && l->want[0] == 0 && l->first[0] == NOT_RESIDENT && !l->broken[0] && !l->inflight[0]) {
-        if (!lod_node_verify(c, 0)) {
+        if (!lod_node_verify(c, 0) || c->nodes[0].count > l->cap) {
             l->broken[0] = 1;
             out->broken++;
         } else {
