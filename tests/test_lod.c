@@ -29,6 +29,7 @@
 #include "lod.h"
 #include "morton.h"
 #include "prep.h"
+#include "pipelines.h"
 #include "render.h"
 #include "splat_client.h"
 #include "testutil.h"
@@ -584,6 +585,34 @@ static void test_pool_smaller_than_root(void **state)
     rnd_destroy(r);
 }
 
+/* Every pipeline draws a LOD cloud through the chunk interface: each renders the budgeted,
+ * complete frame without an error and covers part of the frame. The 20,000 points cover 7.6 %
+ * (points, one pixel each), 12.3 % (splat), 9.4 % (kawata), 16.0 % (soft) of 320x200 here; a
+ * third of the lowest, 1/30, is the bound: no pipeline leaves the frame empty or nearly so. */
+static void test_every_pipeline(void **state)
+{
+    rfix *f = *state;
+    rfix_cold(f);
+    rnd_camera cam;
+    camera(f, &cam);
+    sp_params p;
+    sp_params_defaults(&p);
+    p.point_budget = 20000;
+    rnd_frame a = {0};
+    for (int pi = 0; pi < SP_PIPE_COUNT; pi++) {
+        p.pipeline = pi;
+        render_complete(f, &cam, &p, &a);
+        size_t npx = (size_t)a.width * a.height, lit = 0;
+        for (size_t i = 0; i < npx; i++)
+            lit += a.rgba8[4 * i] || a.rgba8[4 * i + 1] || a.rgba8[4 * i + 2];
+        print_message("%s: %llu points, %.1f %% of the pixels covered\n", rnd_pipeline_name(pi),
+                      (unsigned long long)a.points_drawn, 100.0 * lit / npx);
+        assert_true(a.points_drawn <= 20000 && a.points_drawn > 10000);
+        assert_true(lit > npx / 30);
+    }
+    rnd_frame_free(&a);
+}
+
 int main(void)
 {
     const struct CMUnitTest prep_tests[] = {
@@ -597,6 +626,7 @@ int main(void)
         cmocka_unit_test(test_tenth_budget_psnr),
         cmocka_unit_test(test_progressive_ends_complete),
         cmocka_unit_test(test_pool_smaller_than_root),
+        cmocka_unit_test(test_every_pipeline),
     };
     const char *only = getenv("SPLATD_TEST_FILTER");
     if (only && *only) cmocka_set_test_filter(only);
