@@ -554,10 +554,6 @@ int64_t rnd_adopt_lod(rnd_ctx *r, lod_cloud *lc, sd_err *err)
         slot->lod = rnd__lod_new(lc, r->lod_pool_points, r->lod_uploads, &slot->c, err);
         if (!slot->lod) rc = err->code ? err->code : SD_ENOMEM;
     }
-    if (rc >= 0 && r->lod_pool_points > r->visible_cap) {
-        rnd_chunk *v = realloc(r->visible, r->lod_pool_points * sizeof *v);
-        if (v) r->visible = v, r->visible_cap = r->lod_pool_points;
-    }
     if (rc < 0) {
         if (slot && slot->lod) {
             rnd__lod_free(slot->lod, &r->gl, &slot->c); /* frees lc */
