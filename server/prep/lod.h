@@ -22,6 +22,10 @@
  * points, noise and vegetation, keep their radius), used when the node is drawn without its
  * children so that coarse levels cover the surfaces without holes.
  *
+ * Within a node, points are stored surface points first (PCA surface variation at most
+ * PREP_SURFACE_VAR_MAX), then the others, each group in a fixed pseudo-random order: a frame
+ * whose budget ends inside a node draws a uniform sample of it.
+ *
  * The file (host byte order):
  *   [0, 4096)               lod_header (lod_file.c), checksummed
  *   [4096, table_off)       node data, each node 64-byte aligned, structure of arrays:
