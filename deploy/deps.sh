@@ -34,6 +34,7 @@ pc:cmocka=libcmocka-dev
 pc:sdl2=libsdl2-dev
 file:/usr/bin/Xvfb=xvfb
 file:/usr/bin/xwd=x11-apps
+file:/usr/bin/time=time
 "
 
 # present ENTRY: 0 when the thing the entry names is on this machine.
