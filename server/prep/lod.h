@@ -4,9 +4,15 @@
  * The octree. Levels 0 (the root: the cloud's Morton cube, morton.h) down to at most
  * LOD_MAX_LEVEL. A node at level l is the Morton cell of depth l with code prefix `code`; its
  * spacing is the edge of the cells of depth l + grid_bits (side / 2^(l + grid_bits)): the node
- * holds, of the points of its cell that no ancestor took, the one nearest the centre of each
- * such sub-cell (ties: the first in (Morton code, file index) order), and passes the rest on to
- * its children, so every point is stored exactly once and spacing halves per level. A node
+ * holds, of the points of its cell that no ancestor took, one per such sub-cell: the surface
+ * point nearest the sub-cell's centre (ties: the first in (Morton code, file index) order), or
+ * where the sub-cell has no surface point, the scattered point nearest it among those a hash
+ * of the file index lets through (1 in LOD_SCATTER_KEEP; "surface": PCA surface variation at
+ * most PREP_SURFACE_VAR_MAX), and passes the rest on to its children, so every point is
+ * stored exactly once and spacing halves per level. Without the hash, scattered noise fills
+ * every sampling cell of the upper levels (1 % of noise in 100M points made a root of 1.3M
+ * points, mostly noise, that hid the surfaces); with it they reach the levels where they are
+ * as dense as the cells, and the leaves. A node takes one point at least. A node
  * whose remaining points number at most leaf_max takes them all and is a leaf. Nodes above the
  * build's chunks (see lod_build.c) are always inner nodes. With grid_bits = 7 a node of a
  * surface holds one point per occupied cell of a 128^3 grid over its cube: about 128^2 x a
@@ -46,6 +52,7 @@ enum { LOD_MAX_LEVEL = 14 };          /* grid_bits + level <= 21 Morton bits */
 enum { LOD_DEFAULT_GRID_BITS = 7 };   /* 128^3 sampling grid per node */
 enum { LOD_DEFAULT_LEAF_MAX = 50000 };
 enum { LOD_NODE_ALIGN = 64 };
+enum { LOD_SCATTER_KEEP = 64 };       /* inner nodes take 1 in 64 of the scattered points' cells */
 
 typedef struct lod_node {
     uint64_t offset;          /* file offset of the node's data */

@@ -893,19 +893,29 @@ static int process(octx *o, uint32_t *idx, size_t cnt, int level, uint64_t code,
         prep_morton_decode(cc, &x, &y, &z);
         double cen[3] = {b->f.origin[0] + (x + 0.5) * cell, b->f.origin[1] + (y + 0.5) * cell,
                          b->f.origin[2] + (z + 0.5) * cell};
-        size_t best = i;
+        /* the surface point nearest the centre; where the cell has none, the scattered one
+         * nearest it among those a hash lets through (one in LOD_SCATTER_KEEP) */
+        size_t best = SIZE_MAX;
+        int best_surf = 0;
         double bd = INFINITY;
         while (j < cnt && o->p[idx[j]].code >> shift == cc) {
-            const float *q = o->p[idx[j]].pos;
-            double d = 0;
-            for (int a = 0; a < 3; a++) d += (q[a] - cen[a]) * (q[a] - cen[a]);
-            if (d < bd) bd = d, best = j;
+            const pt *q = &o->p[idx[j]];
+            if (q->surface || mix32(q->gidx) % LOD_SCATTER_KEEP == 0) {
+                double d = 0;
+                for (int a = 0; a < 3; a++) d += (q->pos[a] - cen[a]) * (q->pos[a] - cen[a]);
+                if ((q->surface && !best_surf) || (q->surface == best_surf && d < bd))
+                    bd = d, best = j, best_surf = q->surface;
+            }
             j++;
         }
         for (size_t k = i; k < j; k++)
             if (k != best) rest[nrest++] = idx[k];
-        idx[nsel++] = idx[best];
+        if (best != SIZE_MAX) idx[nsel++] = idx[best];
         i = j;
+    }
+    if (!nsel && nrest) { /* a node has a point at least: the first one */
+        idx[nsel++] = rest[0];
+        memmove(rest, rest + 1, --nrest * sizeof *rest);
     }
     /* idx = [selected | rest], both in order */
     memcpy(idx + nsel, rest, nrest * sizeof *idx);

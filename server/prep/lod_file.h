@@ -8,7 +8,7 @@
 #include "lod.h"
 
 /* Bump when the layout or the meaning of any value changes. */
-#define LOD_VERSION 2u
+#define LOD_VERSION 3u
 
 typedef struct lod_src_key {
     uint64_t size, hash;      /* hash: sd_hash64 of the first and last MiB */
