@@ -8,7 +8,7 @@
  * point nearest the sub-cell's centre (ties: the first in (Morton code, file index) order), or
  * where the sub-cell has no surface point, the scattered point nearest it among those a hash
  * of the file index lets through (1 in LOD_SCATTER_KEEP; "surface": PCA surface variation at
- * most PREP_SURFACE_VAR_MAX), and passes the rest on to its children, so every point is
+ * most PREP_SURFACE_VAR_MAX and an eq. 20 radius that prep did not limit as a stray point's), and passes the rest on to its children, so every point is
  * stored exactly once and spacing halves per level. Without the hash, scattered noise fills
  * every sampling cell of the upper levels (1 % of noise in 100M points made a root of 1.3M
  * points, mostly noise, that hid the surfaces); with it they reach the levels where they are
@@ -23,10 +23,9 @@
  * Per point: position (local, as prepared.h), normal, radius, F and colour computed exactly as
  * prep.h's in-memory prep does from the k nearest neighbours among ALL points of the cloud (the
  * build works on chunks with a halo of neighbours grown until every kNN is exact), and a second
- * radius, radius_lod = max(radius, spacing of the node's level) for the points of inner nodes
- * whose neighbourhood is a surface (PCA surface variation at most PREP_SURFACE_VAR_MAX; other
- * points, noise and vegetation, keep their radius), used when the node is drawn without its
- * children so that coarse levels cover the surfaces without holes.
+ * radius, radius_lod = max(radius, spacing of the node's level) for the surface points (as
+ * below) of inner nodes (other points, noise and vegetation, keep their radius), used when the
+ * node is drawn without its children so that coarse levels cover the surfaces without holes.
  *
  * Within a node, points are stored surface points first (PCA surface variation at most
  * PREP_SURFACE_VAR_MAX), then the others, each group in a fixed pseudo-random order: a frame

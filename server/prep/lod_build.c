@@ -955,7 +955,10 @@ static int chunk_octree(void *ctx, size_t ci, int tid, sd_err *err)
         memcpy(p[i].normal, a[i].normal, 12);
         p[i].radius = final_radius(b, &a[i]);
         p[i].F = final_F(b, a[i].Fraw);
-        p[i].surface = !(a[i].svar > PREP_SURFACE_VAR_MAX);
+        /* a surface point: a planar neighbourhood, and not a stray point whose radius the
+         * neighbours' radii had to limit (prep.h step 4): noise above a plane has planar
+         * neighbours, but its own eq. 20 radius reaches down to them */
+        p[i].surface = !(a[i].svar > PREP_SURFACE_VAR_MAX) && !(a[i].r20 > a[i].capn);
         idx[i] = (uint32_t)i;
         uint32_t u = fbits(p[i].radius);
         if (u >> 16 == b->qs[NQ].hi) lo[u & 0xffff]++;
