@@ -344,6 +344,7 @@ static int fill_frame(spc_client *c, const proto_msg *m, spc_frame *f, int decod
     f->readback_us = pf.readback_us;
     f->encode_us = pf.encode_us;
     f->points_drawn = pf.points_drawn;
+    f->complete = (pf.flags & PROTO_FRAME_COMPLETE) != 0;
     f->data = pf.data;
     f->data_len = pf.data_len;
     if (!decode) return 0;

@@ -212,6 +212,8 @@ typedef struct spc_frame {
     const uint8_t *data;         /* the encoded bytes as sent (JPEG/PNG/EXR file, SPL4, raw) */
     size_t data_len;
     const uint8_t *rgba;         /* decoded RGBA8, top-down rows, when asked for; else NULL */
+    int complete;                /* 1: the view's every wanted node was drawn (always for a flat
+                                    cloud); 0: a step of a LOD cloud's progressive refinement */
 } spc_frame;
 /* data and rgba belong to the handle and stay valid until the next call on it.
  *

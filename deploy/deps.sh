@@ -40,6 +40,7 @@ file:/usr/bin/xwd=x11-apps
 file:/usr/lib/python3/dist-packages/yaml/__init__.py=python3-yaml
 tool:mpicc=libopenmpi-dev
 tool:mpirun=openmpi-bin
+file:/usr/bin/time=time
 "
 # Tests only: the browser viewer's end-to-end test (tests/test_browser.c) drives headless
 # Chromium through chromedriver; it skips, naming the package, where they are absent.

@@ -336,11 +336,18 @@ typedef struct proto_pong {           /* PONG, server -> client */
 enum { PROTO_FRAME_FIXED = 48 };      /* FRAME payload bytes before the image data */
 enum { PROTO_FRAME_HEAD_LEN = PROTO_HEADER_LEN + PROTO_FRAME_FIXED };
 
+/* FRAME flags: COMPLETE = every node the view wants was drawn (always for a flat cloud); a
+ * frame without it is a step of progressive refinement of a LOD cloud, and a refined frame of
+ * the same camera follows while streaming. */
+/* SOFT_TRUNCATED = soft with model=base or concentric dropped samples past its memory cap
+ * (soft_frag_mib) or past 32 overlapping spheres in a pixel: the soft layer is incomplete there. */
+enum { PROTO_FRAME_COMPLETE = 1, PROTO_FRAME_SOFT_TRUNCATED = 2 };
+
 typedef struct proto_frame {          /* FRAME, server -> client */
     uint32_t camera_seq;                /* sequence of the CAMERA it renders, 0 = default camera */
     uint8_t pipeline;                   /* params.h pipeline index */
     uint8_t format;                     /* params.h format index: SP_FMT_* */
-    uint16_t flags;                     /* bit 0: soft samples dropped (PROTOCOL.md) */
+    uint16_t flags;                     /* PROTO_FRAME_COMPLETE | PROTO_FRAME_SOFT_TRUNCATED */
     uint32_t width, height;             /* pixels */
     uint64_t render_us, readback_us, encode_us; /* microseconds */
     uint64_t points_drawn;

@@ -4,9 +4,11 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #include "cache.h"
 #include "commands.h"
+#include "lod.h"
 #include "srv.h"
 #include "prep.h"
 
@@ -34,6 +36,8 @@ int cmd_prep(int argc, char **argv)
 {
     const char *file = NULL;
     cache_desc d = {.k = PREP_DEFAULT_K, .warn = warn_stderr, .progress = prep_progress_stderr};
+    int lod_mode = LOD_AUTO;
+    uint64_t memory = 0;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         if (!strcmp(a, "--k")) {
@@ -47,15 +51,34 @@ int cmd_prep(int argc, char **argv)
                 return 2;
             }
             d.dir = argv[++i];
+        } else if (!strcmp(a, "--lod")) {
+            const char *v = i + 1 < argc ? argv[++i] : "";
+            if (!strcmp(v, "auto")) lod_mode = LOD_AUTO;
+            else if (!strcmp(v, "always")) lod_mode = LOD_ALWAYS;
+            else if (!strcmp(v, "never")) lod_mode = LOD_NEVER;
+            else {
+                fprintf(stderr, "splatd prep: --lod needs auto, always or never, got '%s'\n", v);
+                return 2;
+            }
+        } else if (!strcmp(a, "--memory")) {
+            const char *v = i + 1 < argc ? argv[++i] : "";
+            if (srv_parse_size(v, &memory) != 0) {
+                fprintf(stderr, "splatd prep: --memory needs a size such as 2G (at least 1M), "
+                        "got '%s'\n", v);
+                return 2;
+            }
         } else if (!strcmp(a, "--force")) {
             d.force = 1;
         } else if (!strcmp(a, "--quiet")) {
             d.progress = NULL;
         } else if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
             printf("usage: splatd prep FILE [--k N] [--cache DIR] [--threads N] [--force] [--quiet]\n"
+                   "                  [--lod auto|always|never] [--memory SIZE]\n"
                    "  Loads FILE (ply, pcd, las, laz, xyz, pts, txt), computes normals, splat radii,\n"
                    "  the uncertainty field F and point spacing with k nearest neighbours\n"
-                   "  (default k = 24), caches the result and prints a summary.\n");
+                   "  (default k = 24), caches the result and prints a summary.\n"
+                   "  --lod: the level-of-detail form (an octree built out of core under\n"
+                   "  --memory, default 2G), for files of 64 MiB or more (auto), always or never.\n");
             return 0;
         } else if (a[0] == '-') {
             fprintf(stderr, "splatd prep: unknown option '%s' (see splatd prep --help)\n", a);
@@ -72,6 +95,13 @@ int cmd_prep(int argc, char **argv)
         return 2;
     }
 
+    struct stat st;
+    if (stat(file, &st) == 0 && lod_want(lod_mode, (uint64_t)st.st_size)) {
+        lod_desc ld = {.dir = d.dir, .k = d.k, .threads = d.threads, .memory = memory,
+                       .force = d.force, .progress = d.progress, .warn = warn_stderr,
+                       .status = d.progress ? cmd_lod_status : NULL};
+        return cmd_prep_lod(file, &ld);
+    }
     pc_prepared p;
     cache_result r;
     sd_err err = {0};

@@ -24,6 +24,7 @@
 #include "daemon.h"
 #include "datadir.h"
 #include "page_gen.h"
+#include "lod.h"
 #include "srv.h"
 #include "tls.h"
 
@@ -78,13 +79,19 @@ static void usage(FILE *f)
             "                       3/4 of the device's memory, a quarter of RAM on a software\n"
             "                       renderer). Clouds no client has rendered for longest leave first\n"
             "                       and come back when rendered again.\n"
+            "  --lod auto|always|never  which clouds get the level-of-detail form (an out-of-core\n"
+            "                       octree drawn under point_budget): auto = files of 64 MiB or more\n"
+            "  --prep-memory SIZE   memory cap of the LOD build (default 2G)\n"
+            "  --lod-inflight N     LOD nodes the loader thread reads at once (default 4); a frame\n"
+            "                       draws a missing node's ancestor instead, and the next frames\n"
+            "                       of the same view refine it\n"
             "  --help               this text\n"
             "\n"
             "SIGTERM or SIGINT stops accepting, finishes the frames in flight (at most 5 s) and exits 0.\n");
 }
 
 /* parse_size: "N", "NK", "NM", "NG" (powers of 1024) into bytes, at least 1 MiB. 0 or -1. */
-static int parse_size(const char *s, uint64_t *out)
+int srv_parse_size(const char *s, uint64_t *out)
 {
     char *end;
     errno = 0;
@@ -122,8 +129,8 @@ void srv_opts_defaults(srv_opts *o)
 static int parse_opts(int argc, char **argv, srv_opts *o)
 {
     enum { O_LISTEN = 1000, O_DATA, O_CACHE, O_BACKEND, O_TOKEN, O_PRELOAD, O_SHADERS, O_MAXC,
-           O_PORTFILE, O_HS, O_GPUMEM, O_FRAMEMEM, O_IDLE, O_RDTO, O_WRTO, O_UNAUTH, O_PERADDR, O_AUTHDELAY,
-           O_HTTP, O_TLSCERT, O_TLSKEY, O_HELP };
+           O_PORTFILE, O_HS, O_GPUMEM, O_LOD, O_PREPMEM, O_LODUP, O_FRAMEMEM, O_IDLE, O_RDTO, O_WRTO,
+           O_UNAUTH, O_PERADDR, O_AUTHDELAY, O_HTTP, O_TLSCERT, O_TLSKEY, O_HELP };
     static const struct option lo[] = {
         {"listen", required_argument, 0, O_LISTEN},   {"data", required_argument, 0, O_DATA},
         {"cache", required_argument, 0, O_CACHE},     {"backend", required_argument, 0, O_BACKEND},
@@ -131,6 +138,7 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
         {"shader-dir", required_argument, 0, O_SHADERS}, {"max-clients", required_argument, 0, O_MAXC},
         {"port-file", required_argument, 0, O_PORTFILE}, {"handshake-timeout", required_argument, 0, O_HS},
         {"gpu-memory", required_argument, 0, O_GPUMEM},
+        {"lod", required_argument, 0, O_LOD}, {"lod-inflight", required_argument, 0, O_LODUP}, {"prep-memory", required_argument, 0, O_PREPMEM},
         {"max-frame-bytes", required_argument, 0, O_FRAMEMEM},
         {"idle-timeout", required_argument, 0, O_IDLE}, {"read-timeout", required_argument, 0, O_RDTO},
         {"write-timeout", required_argument, 0, O_WRTO}, {"max-unauth", required_argument, 0, O_UNAUTH},
@@ -195,15 +203,40 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
                 return -1;
             }
             break;
+        case O_LOD:
+            if (!strcmp(optarg, "auto")) o->lod_mode = LOD_AUTO;
+            else if (!strcmp(optarg, "always")) o->lod_mode = LOD_ALWAYS;
+            else if (!strcmp(optarg, "never")) o->lod_mode = LOD_NEVER;
+            else {
+                fprintf(stderr, "splatd: --lod '%s': expected auto, always or never\n", optarg);
+                return -1;
+            }
+            break;
+        case O_LODUP: {
+            char *e = NULL;
+            long nup = strtol(optarg, &e, 10);
+            if (!e || *e || nup < 1 || nup > 1024) {
+                fprintf(stderr, "splatd: --lod-inflight '%s': expected 1 to 1024\n", optarg);
+                return -1;
+            }
+            o->lod_uploads = (int)nup;
+            break;
+        }
+        case O_PREPMEM:
+            if (srv_parse_size(optarg, &o->prep_memory) != 0) {
+                fprintf(stderr, "splatd: --prep-memory '%s': expected a size such as 2G\n", optarg);
+                return -1;
+            }
+            break;
         case O_GPUMEM:
-            if (parse_size(optarg, &o->gpu_memory) != 0) {
+            if (srv_parse_size(optarg, &o->gpu_memory) != 0) {
                 fprintf(stderr, "splatd: --gpu-memory '%s': expected a size such as 512M or 4G "
                         "(at least 1M)\n", optarg);
                 return -1;
             }
             break;
         case O_FRAMEMEM:
-            if (parse_size(optarg, &o->max_frame_bytes) != 0) {
+            if (srv_parse_size(optarg, &o->max_frame_bytes) != 0) {
                 fprintf(stderr, "splatd: --max-frame-bytes '%s': expected a size such as 512M or "
                         "4G (at least 1M)\n", optarg);
                 return -1;
@@ -761,8 +794,11 @@ int srv_core_start(srv *sv, sd_err *err)
     if (!sv->max_h) sv->max_h = 8192;
     rt_desc rd = {
         .rnd = {.backend = sv->o.backend, .shader_dir = sv->o.shader_dir,
-                .max_width = sv->max_w, .max_height = sv->max_h, .gpu_memory = sv->o.gpu_memory},
+                .max_width = sv->max_w, .max_height = sv->max_h, .gpu_memory = sv->o.gpu_memory,
+                .lod_uploads = sv->o.lod_uploads},
         .max_clients = sv->nslots, .cache_dir = sv->o.cache_dir,
+        /* splatd --mpi partitions flat clouds across the ranks; the LOD form is rank 0's own */
+        .lod_mode = sv->hooks ? LOD_NEVER : sv->o.lod_mode, .prep_memory = sv->o.prep_memory,
         .frame_budget = sv->o.max_frame_bytes,
         .pack = srv_pack_frame, .pack_user = sv, .hooks = sv->hooks,
     };

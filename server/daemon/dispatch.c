@@ -130,7 +130,9 @@ int srv_pack_frame(void *user, const rt_frame_meta *m, const uint8_t *data, size
         .camera_seq = m->camera_seq, .pipeline = (uint8_t)m->pipeline, .format = (uint8_t)m->format,
         .width = (uint32_t)m->width, .height = (uint32_t)m->height, .render_us = m->render_us,
         .readback_us = m->readback_us, .encode_us = m->encode_us, .points_drawn = m->points_drawn,
-        .flags = (uint16_t)m->flags, .data_len = (uint32_t)len,
+        .flags = (uint16_t)((m->complete ? PROTO_FRAME_COMPLETE : 0) |
+                            (m->flags & RND_FRAME_SOFT_TRUNCATED ? PROTO_FRAME_SOFT_TRUNCATED : 0)),
+        .data_len = (uint32_t)len,
     };
     proto_frame_head(p, PROTO_VERSION, m->stream ? 0 : m->req_seq, &f);
     memcpy(p + PROTO_FRAME_HEAD_LEN, data, len);

@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -47,6 +48,7 @@ typedef struct rt_prepjob {
     uint32_t job;
     char *path;
     pc_prepared *prep;          /* set once prepared, waiting for upload */
+    lod_cloud *lod;             /* or this, for a cloud in the LOD form */
     rt_cloud_info info;
     struct rt_prepjob *next;
 } rt_prepjob;
@@ -214,10 +216,13 @@ static void do_upload(rt_ctx *rt, rnd_ctx *rnd, rt_prepjob *j)
     rt_event *ev = calloc(1, sizeof *ev);
     sd_err err = {0};
     const rt_hooks *h = rt->d.hooks;
-    /* the renderer (or the hook) owns it now, even on failure */
-    int64_t id = h && h->adopt ? h->adopt(h->user, rnd, j->path, j->prep, &err)
-                               : rnd_adopt(rnd, j->prep, &err);
+    /* the renderer (or the hook) owns it now, even on failure; a LOD cloud never reaches a
+     * hook (splatd --mpi prepares every cloud flat) */
+    int64_t id = j->lod ? rnd_adopt_lod(rnd, j->lod, &err)
+                 : h && h->adopt ? h->adopt(h->user, rnd, j->path, j->prep, &err)
+                                 : rnd_adopt(rnd, j->prep, &err);
     j->prep = NULL;
+    j->lod = NULL;
     if (id > 0) {
         prep_prog pp = {.rt = rt, .job = j->job, .phase = -1};
         on_progress(&pp, PROTO_PHASE_UPLOAD, 1.0);
@@ -238,6 +243,19 @@ static void do_upload(rt_ctx *rt, rnd_ctx *rnd, rt_prepjob *j)
     pthread_mutex_unlock(&rt->mu);
     free(j->path);
     free(j);
+}
+
+/* render_once: one frame of rq into f, through the distributed renderer's hook when there is
+ * one (splatd --mpi), else rnd_render. */
+static int render_once(rt_ctx *rt, rnd_ctx *rnd, const rt_request *rq, rnd_frame *f, sd_err *err)
+{
+    const rt_hooks *h = rt->d.hooks;
+    int want_float = rq->params.format == SP_FMT_EXR;
+    f->complete = 1; /* a hook's frame is a flat cloud's: whole */
+    f->flags = 0;
+    if (h && h->render)
+        return h->render(h->user, rnd, rq->cloud_id, &rq->cam, &rq->params, want_float, f, err);
+    return rnd_render(rnd, rq->cloud_id, &rq->cam, &rq->params, want_float, f, err);
 }
 
 static void *render_main(void *arg)
@@ -294,12 +312,19 @@ static void *render_main(void *arg)
         pthread_mutex_unlock(&rt->mu);
 
         rnd_frame *f = &rt->frames[fi];
-        const rt_hooks *h = rt->d.hooks;
-        int want_float = rq.params.format == SP_FMT_EXR;
-        int rc = h && h->render ? h->render(h->user, rnd, rq.cloud_id, &rq.cam, &rq.params,
-                                            want_float, f, &err)
-                                : rnd_render(rnd, rq.cloud_id, &rq.cam, &rq.params, want_float,
-                                             f, &err);
+        if (rq.refine) rnd_lod_wait(rnd, rq.cloud_id, 1000); /* until a node more is ready */
+        int rc = render_once(rt, rnd, &rq, f, &err);
+        /* A RENDER of a LOD cloud answers the complete frame (unless lod_first): the frames
+         * before it load the missing nodes, a few each. The bound only guards against a view
+         * whose nodes cannot all be made resident. */
+        uint64_t spent = f->render_us;
+        for (int again = 0; rc == 0 && !stream && !f->complete && !rq.params.lod_first &&
+                            again < 100000; again++) {
+            rnd_lod_wait(rnd, rq.cloud_id, 1000);
+            rc = render_once(rt, rnd, &rq, f, &err);
+            spent += f->render_us;
+        }
+        if (rc == 0) f->render_us = spent;
         pthread_mutex_lock(&rt->mu);
         rt->rendering = 0;
         if (rc != 0) {
@@ -321,6 +346,14 @@ static void *render_main(void *arg)
         job.meta.readback_us = f->readback_us;
         job.meta.points_drawn = f->points_drawn;
         job.meta.flags = f->flags;
+        job.meta.complete = f->complete;
+        /* Progressive refinement: a streamed frame that missed nodes is followed by another of
+         * the same request, unless a newer one is pending already. */
+        if (stream && !f->complete && !s->has_latest) {
+            s->latest = rq;
+            s->latest.refine = 1;
+            s->has_latest = 1;
+        }
         rt->encq[rt->enc_n++] = job;
         pthread_cond_signal(&rt->cv_enc);
     }
@@ -420,6 +453,22 @@ static void on_progress(void *user, int phase, double fraction)
     pthread_mutex_unlock(&p->rt->mu);
 }
 
+/* info_fill: the INFO summary of a prepared cloud (flat or LOD). */
+static void info_fill(proto_info *in, uint64_t n, uint64_t dropped, const double bmin[3],
+                      const double bmax[3], const double offset[3], uint32_t attrs, uint32_t k,
+                      float sigma, const char *format)
+{
+    in->points = n;
+    in->dropped = dropped;
+    memcpy(in->bmin, bmin, sizeof in->bmin);
+    memcpy(in->bmax, bmax, sizeof in->bmax);
+    memcpy(in->offset, offset, sizeof in->offset);
+    in->attrs = attrs;
+    in->k = k;
+    in->sigma = sigma;
+    snprintf(in->format, sizeof in->format, "%s", format);
+}
+
 static void *prep_main(void *arg)
 {
     rt_ctx *rt = arg;
@@ -439,20 +488,33 @@ static void *prep_main(void *arg)
                          .progress = on_progress, .warn = on_cache_warn, .user = &pp};
         cache_result res;
         sd_err err = {0};
-        pc_prepared *p = calloc(1, sizeof *p);
-        int rc = p ? cache_open_cloud(j->path, &cd, p, &res, &err)
+        struct stat st;
+        int use_lod = stat(j->path, &st) == 0 && lod_want(rt->d.lod_mode, (uint64_t)st.st_size);
+        pc_prepared *p = use_lod ? NULL : calloc(1, sizeof *p);
+        lod_cloud *lc = use_lod ? calloc(1, sizeof *lc) : NULL;
+        int rc;
+        if (use_lod) {
+            lod_desc ld = {.dir = rt->d.cache_dir, .threads = rt->d.prep_threads,
+                           .memory = rt->d.prep_memory, .progress = on_progress,
+                           .warn = on_cache_warn, .user = &pp};
+            lod_result lr;
+            rc = lc ? lod_open_cloud(j->path, &ld, lc, &lr, &err)
+                    : sd_errf(&err, SD_ENOMEM, "out of memory");
+            if (rc == 0) {
+                info_fill(&j->info.summary, lc->n, lc->n_dropped, lc->bmin, lc->bmax, lc->offset,
+                          lc->attrs, lc->k, lc->sigma, lc->format);
+                j->info.cache_hit = lr.hit;
+                j->lod = lc;
+                on_progress(&pp, PROTO_PHASE_UPLOAD, 0.0);
+            } else {
+                free(lc);
+            }
+        } else
+            rc = p ? cache_open_cloud(j->path, &cd, p, &res, &err)
                    : sd_errf(&err, SD_ENOMEM, "out of memory");
-        if (rc == 0) {
-            proto_info *in = &j->info.summary;
-            in->points = p->n;
-            in->dropped = p->n_dropped;
-            memcpy(in->bmin, p->bmin, sizeof in->bmin);
-            memcpy(in->bmax, p->bmax, sizeof in->bmax);
-            memcpy(in->offset, p->offset, sizeof in->offset);
-            in->attrs = p->attrs;
-            in->k = p->k;
-            in->sigma = p->sigma;
-            snprintf(in->format, sizeof in->format, "%s", p->format);
+        if (rc == 0 && !use_lod) {
+            info_fill(&j->info.summary, p->n, p->n_dropped, p->bmin, p->bmax, p->offset, p->attrs,
+                      p->k, p->sigma, p->format);
             j->info.cache_hit = res.hit;
             j->prep = p;
             on_progress(&pp, PROTO_PHASE_UPLOAD, 0.0);
@@ -538,6 +600,7 @@ static void free_jobs(rt_prepjob *j)
     while (j) {
         rt_prepjob *n = j->next;
         if (j->prep) { pc_prepared_free(j->prep); free(j->prep); }
+        if (j->lod) { lod_cloud_free(j->lod); free(j->lod); }
         free(j->path);
         free(j);
         j = n;

@@ -35,7 +35,8 @@ typedef struct rt_frame_meta {
     int stream;             /* 1: from the latest-wins slot */
     int width, height, pipeline, format;
     uint64_t render_us, readback_us, encode_us, points_drawn;
-    uint32_t flags;                /* rnd_frame.flags: the FRAME's flags */
+    uint32_t flags;         /* rnd_frame.flags (RND_FRAME_*) */
+    int complete;           /* rnd_frame.complete */
 } rt_frame_meta;
 
 /* A render request as the loop submits it. */
@@ -44,6 +45,8 @@ typedef struct rt_request {
     rnd_camera cam;
     sp_params params;
     uint32_t req_seq, camera_seq;
+    int refine;             /* the render thread's own: a refinement of the previous frame of
+                             * a LOD cloud; it waits for the loader first. The loop sets 0. */
 } rt_request;
 
 /* Packs an encoded frame into the bytes the loop will write (header + payload), on the encoder
@@ -71,6 +74,9 @@ typedef struct rt_desc {
     int max_clients;        /* slots; client ids must be < 2^16 in their low bits (index) */
     const char *cache_dir;  /* default NULL: cache.h's default */
     int prep_threads;       /* default 0: every core (passed to cache_desc.threads) */
+    int lod_mode;           /* LOD_AUTO (default), LOD_ALWAYS, LOD_NEVER: which clouds get the
+                             * level-of-detail form (lod.h, lod_want) */
+    uint64_t prep_memory;   /* --prep-memory: the LOD build's memory cap (default 2 GiB) */
     uint64_t frame_budget;  /* --max-frame-bytes: bytes all frames outstanding (rendering,
                              * encoding, waiting at the loop) may hold, by rt_frame_cost;
                              * default 0: a quarter of RAM, at least 256 MiB */

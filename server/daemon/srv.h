@@ -45,7 +45,14 @@ typedef struct srv_opts {
     int shutdown_ms;             /* default 5000: how long SIGTERM waits for frames in flight */
     uint64_t gpu_memory;         /* --gpu-memory; default 0: the renderer sizes it */
     uint64_t max_frame_bytes;    /* --max-frame-bytes; default 0: a quarter of RAM */
+    int lod_mode;                /* --lod auto|always|never (LOD_*); default auto */
+    int lod_uploads;             /* --lod-inflight: LOD nodes loading at once; default 0: 4 */
+    uint64_t prep_memory;        /* --prep-memory: the LOD build's memory cap; default 2 GiB */
 } srv_opts;
+
+/* srv_parse_size: "512M", "4G", "1048576" (suffix K, M or G) into *out; at least 1 MiB.
+ * Returns 0 or -1. */
+int srv_parse_size(const char *s, uint64_t *out);
 
 typedef struct srv_waiter {
     uint32_t sess, seq;

@@ -78,7 +78,7 @@ static int mkdir_p(const char *dir)
  * *at() calls that write in it. Refuses a directory that another user owns or that group or
  * others may write: there, anyone could swap names under the writer. Returns the fd, or -1
  * with err filled. */
-static int open_cache_dir(const char *dir, sd_err *err)
+int cache__open_dir(const char *dir, sd_err *err)
 {
     if (mkdir_p(dir) < 0) {
         sd_errf(err, SD_EIO, "cannot create cache directory %s: %s", dir, strerror(errno));
@@ -160,7 +160,7 @@ int cache_dir_for(const char *dir, char *buf, size_t len)
 }
 
 /* Picks the default cache directory (see cache_desc.dir) for src. */
-static void default_dir(const char *src, char *buf, size_t len)
+void cache__default_dir(const char *src, char *buf, size_t len)
 {
     if (cache_dir_for(NULL, buf, len) == 0) return;
     char tmp[PATH_MAX];
@@ -174,7 +174,7 @@ int cache_path_for(const char *src, const char *dir, int k, char *buf, size_t le
     if (!realpath(src, real))
         return sd_errf(err, SD_EIO, "%s: %s", src, strerror(errno));
     if (dir && *dir) snprintf(d, sizeof d, "%s", dir);
-    else default_dir(real, d, sizeof d);
+    else cache__default_dir(real, d, sizeof d);
     char tmp[PATH_MAX];
     snprintf(tmp, sizeof tmp, "%s", real);
     const char *base = basename(tmp);
@@ -438,7 +438,7 @@ static int write_all(int fd, const void *p, size_t len)
  * the process dies while writing), else a random name created with O_EXCL | O_NOFOLLOW (a
  * symlink planted there makes the create fail, never followed). *named is set to 1 and name
  * filled in the second case. Returns the fd or -1 with errno. */
-static int create_tmp(int dfd, const char *base, char *name, size_t len, int *named)
+int cache__create_tmp(int dfd, const char *base, char *name, size_t len, int *named)
 {
     *named = 0;
     int fd = openat(dfd, ".", O_TMPFILE | O_WRONLY | O_CLOEXEC, 0600);
@@ -455,7 +455,7 @@ static int create_tmp(int dfd, const char *base, char *name, size_t len, int *na
 
 /* link_tmp: gives the unnamed file fd the new random name name in dfd (linkat fails, never
  * follows, when the name exists). Returns 0 or -1 with errno. */
-static int link_tmp(int fd, int dfd, const char *base, char *name, size_t len)
+int cache__link_tmp(int fd, int dfd, const char *base, char *name, size_t len)
 {
     char proc[64];
     snprintf(proc, sizeof proc, "/proc/self/fd/%d", fd);
@@ -467,6 +467,33 @@ static int link_tmp(int fd, int dfd, const char *base, char *name, size_t len)
         if (rc == 0 || errno != EEXIST) return rc;
     }
     return -1;
+}
+
+int cache__publish(int fd, int dfd, const char *base, char *tmp, size_t tmplen, int named,
+                   int failed)
+{
+    int bad = failed || fsync(fd);
+    int saved = errno;
+    if (!bad && !named) {
+        bad = cache__link_tmp(fd, dfd, base, tmp, tmplen) != 0;
+        saved = errno;
+        named = !bad;
+    }
+    if (close(fd) < 0 && !bad) {
+        bad = 1;
+        saved = errno;
+    }
+    if (!bad && renameat(dfd, tmp, dfd, base) < 0) {
+        bad = 1;
+        saved = errno;
+    }
+    if (bad) {
+        if (named) unlinkat(dfd, tmp, 0);
+        errno = saved;
+        return -1;
+    }
+    fsync(dfd); /* make the rename durable */
+    return 0;
 }
 
 /* Writes p to cpath: into a new temporary file in the cache directory (create_tmp), fsynced,
@@ -513,38 +540,21 @@ static int write_cache(const char *cpath, const src_key *key, const pc_prepared 
     h.stats = p->stats;
     h.header_hash = sd_hash64(&h, offsetof(cache_header, header_hash), 0);
 
-    int dfd = open_cache_dir(dir, err);
+    int dfd = cache__open_dir(dir, err);
     if (dfd < 0) return SD_EIO;
     int named = 0;
-    int fd = create_tmp(dfd, base, tmp, sizeof tmp, &named);
+    int fd = cache__create_tmp(dfd, base, tmp, sizeof tmp, &named);
     if (fd < 0) {
         int e = errno;
         close(dfd);
         return sd_errf(err, SD_EIO, "cannot write cache %s: %s", cpath, strerror(e));
     }
     int bad = write_all(fd, &h, sizeof h) || write_all(fd, zero, CACHE_BLOCK_OFFSET - sizeof h) ||
-              write_all(fd, p->block, p->block_len) || fsync(fd);
+              write_all(fd, p->block, p->block_len);
+    bad = cache__publish(fd, dfd, base, tmp, sizeof tmp, named, bad) < 0;
     int saved = errno;
-    if (!bad && !named) {
-        bad = link_tmp(fd, dfd, base, tmp, sizeof tmp) != 0;
-        saved = errno;
-        named = !bad;
-    }
-    if (close(fd) < 0 && !bad) {
-        bad = 1;
-        saved = errno;
-    }
-    if (!bad && renameat(dfd, tmp, dfd, base) < 0) {
-        bad = 1;
-        saved = errno;
-    }
-    if (bad) {
-        if (named) unlinkat(dfd, tmp, 0);
-        close(dfd);
-        return sd_errf(err, SD_EIO, "cannot write cache %s: %s", cpath, strerror(saved));
-    }
-    fsync(dfd); /* make the rename durable */
     close(dfd);
+    if (bad) return sd_errf(err, SD_EIO, "cannot write cache %s: %s", cpath, strerror(saved));
     return 0;
 }
 

@@ -79,3 +79,20 @@ int cache__seal(const char *cache_path, const char *src);
  * out of date, -1 when damaged; why says which. Internal (tests/fuzz). */
 int cache__load(const char *cache_path, const char *src, int k, pc_prepared *out, char *why,
                 size_t whylen);
+/* ---- shared with lod_file.c (the LOD cache writes its files the same way) ---- */
+/* cache__open_dir: creates dir (0700) when missing and opens it without following a symlink;
+ * refuses one another user owns or others may write. Returns the fd or -1 with err. */
+int cache__open_dir(const char *dir, sd_err *err);
+/* cache__create_tmp: an unnamed O_TMPFILE file in dfd (else a random O_EXCL|O_NOFOLLOW name
+ * in name, *named = 1). Returns the fd or -1 with errno. */
+int cache__create_tmp(int dfd, const char *base, char *name, size_t len, int *named);
+/* cache__link_tmp: gives an unnamed file a random name in dfd. Returns 0 or -1 with errno. */
+int cache__link_tmp(int fd, int dfd, const char *base, char *name, size_t len);
+/* cache__publish: finishes a file of cache__create_tmp: fsync, a name when it has none, close,
+ * rename over base in dfd, fsync of the directory. failed: the writes before failed (errno
+ * holds why): then only closes and removes. Returns 0, or -1 with errno (fd closed, nothing
+ * left behind, base untouched). */
+int cache__publish(int fd, int dfd, const char *base, char *tmp, size_t tmplen, int named,
+                   int failed);
+/* cache__default_dir: the default cache directory for the source file src (a real path). */
+void cache__default_dir(const char *src, char *buf, size_t len);

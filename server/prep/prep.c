@@ -81,7 +81,8 @@ typedef struct job {
 /* Orients the unit normal n of point p by the rule of prep.h: towards the sensor at vp when
  * has_vp, else away from the centroid c; where that direction says little (n within 10 degrees
  * of perpendicular to it), up. */
-static void orient(float n[3], const float p[3], const double c[3], int has_vp, const double vp[3])
+void prep_orient_normal(float n[3], const float p[3], const double c[3], int has_vp,
+                        const double vp[3])
 {
     double u[3];
     for (int a = 0; a < 3; a++) u[a] = has_vp ? vp[a] - p[a] : p[a] - c[a];
@@ -142,7 +143,7 @@ static int chunk_normals(void *ctx, size_t c, int tid, sd_err *err)
             float *n = jb->need_normal ? p->normal + 3 * pi : scratch;
             prep_pca_normal(p->pos, (uint32_t)pi, idx + i * (size_t)K, K, n,
                             jb->svar ? jb->svar + pi : NULL);
-            if (jb->need_normal) orient(n, p->pos + 3 * pi, jb->centroid, jb->has_vp, jb->vp);
+            if (jb->need_normal) prep_orient_normal(n, p->pos + 3 * pi, jb->centroid, jb->has_vp, jb->vp);
         }
         w->t_normal += now_s() - t1;
     }

@@ -72,6 +72,11 @@ typedef struct prep_desc {
  * filled and out empty. */
 int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err *err);
 
+/* prep_orient_normal: step 3's orientation rule for the unit normal n of the point p (local
+ * coordinates): towards the sensor vp when has_vp, else away from the centroid c, else up. */
+void prep_orient_normal(float n[3], const float p[3], const double c[3], int has_vp,
+                        const double vp[3]);
+
 /* prep_percentile: the q-quantile (0..1, nearest rank on the sorted values: index
  * round(q * (n - 1))) of the n values v, which it reorders (selection, not a full sort).
  * 0 when n is 0. */

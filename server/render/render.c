@@ -16,6 +16,7 @@
 #include "gl_api.h"
 #include "gl_backend.h"
 #include "gl_names.h"
+#include "lod_render.h"
 #include "pipe.h"
 #include "shaders.h"
 
@@ -32,6 +33,7 @@ enum { TARGET_8 = 0, TARGET_F = 1 };
 
 typedef struct cloud_slot {
     rnd_gpu_cloud c;          /* bounds and chunks always; sets while resident */
+    rnd_lod *lod;             /* a LOD cloud: its node pool; NULL for a flat cloud */
     pc_prepared *src;         /* adopted data, to upload again after an eviction; NULL for a
                                  cloud that stays (rnd_upload) */
     uint64_t bytes;           /* its buffers' size on the GPU */
@@ -57,6 +59,9 @@ struct rnd_ctx {
     cloud_slot *slots;
     uint32_t nslots;
     uint32_t max_set_points;
+    int lod_uploads;
+    uint32_t lod_pool_points;
+    uint64_t lod_budget;
     uint64_t budget, resident_bytes, clock, uploads, evictions;
     /* The two targets (pipe.h), each made on first use and remade when the size changes:
      * [TARGET_8] RGBA8 for 8-bit frames, read back as it is; [TARGET_F] RGBA16F + R32F depth
@@ -163,6 +168,14 @@ rnd_ctx *rnd_create(const rnd_desc *desc, sd_err *err)
     if (limit > INT32_MAX) limit = INT32_MAX;           /* GLint firsts and counts */
     r->max_set_points = d.max_set_points && d.max_set_points < limit ? d.max_set_points
                                                                        : (uint32_t)limit;
+    r->lod_uploads = d.lod_uploads > 0 ? d.lod_uploads : 4;
+    r->lod_budget = d.lod_budget ? d.lod_budget
+                                 : r->kit.software ? RND_LOD_BUDGET_SOFTWARE : RND_LOD_BUDGET_GPU;
+    uint64_t pool = d.lod_pool_points ? d.lod_pool_points : 6000000u;
+    if (pool > limit) pool = limit;
+    if (!d.lod_pool_points && rnd__lod_pool_bytes((uint32_t)pool) > r->budget / 2)
+        pool = r->budget / 2 / rnd__lod_pool_bytes(1);
+    r->lod_pool_points = pool ? (uint32_t)pool : 1;
     /* Every pipeline is built now, so the first frame does not pay for shader compilation.
      * The baseline must build (broken shaders or a driver without compute shaders show at
      * start-up); another that fails is retried, and its error reported, when a frame asks
@@ -190,17 +203,28 @@ static void target_free(const gl_api *gl, rnd_target *t)
     memset(t, 0, sizeof *t);
 }
 
+/* detach_all: frees every pipeline's data for the slot's cloud (made again at its next frame). */
+static void detach_all(rnd_ctx *r, cloud_slot *slot)
+{
+    for (int i = 0; i < NPIPES; i++) {
+        if (slot->attached[i] && pipelines[i]->detach)
+            pipelines[i]->detach(&r->kit, r->pstate[i], slot->pdata[i]);
+        slot->pdata[i] = NULL;
+        slot->attached[i] = 0;
+    }
+}
+
 /* evict: takes slot's cloud off the GPU (its pipelines' data first); its bounds, chunks and
  * adopted data stay, so it can come back. */
 static void evict(rnd_ctx *r, cloud_slot *slot)
 {
     rnd_gpu_cloud *c = &slot->c;
     if (!c->sets) return;
-    for (int i = 0; i < NPIPES; i++) {
-        if (slot->attached[i] && pipelines[i]->detach)
-            pipelines[i]->detach(&r->kit, r->pstate[i], slot->pdata[i]);
-        slot->pdata[i] = NULL;
-        slot->attached[i] = 0;
+    detach_all(r, slot);
+    if (slot->lod) {
+        rnd__lod_drop_pool(slot->lod, &r->gl, c);
+        r->resident_bytes -= slot->bytes;
+        return;
     }
     for (uint32_t s = 0; s < c->nsets; s++) r->gl.DeleteBuffers(RND_ATTR_COUNT, c->sets[s].buf);
     free(c->sets);
@@ -213,6 +237,7 @@ static void evict(rnd_ctx *r, cloud_slot *slot)
 static void slot_clear(rnd_ctx *r, cloud_slot *slot)
 {
     evict(r, slot);
+    if (slot->lod) rnd__lod_free(slot->lod, &r->gl, &slot->c);
     free(slot->c.chunks);
     free(slot->set_base);
     if (slot->src) {
@@ -425,7 +450,7 @@ static int make_room(rnd_ctx *r, const cloud_slot *keep, uint64_t need, sd_err *
         cloud_slot *lru = NULL;
         for (uint32_t i = 0; i < r->nslots; i++) {
             cloud_slot *s = &r->slots[i];
-            if (!s->used || s == keep || !s->c.sets || !s->src) continue;
+            if (!s->used || s == keep || !s->c.sets || (!s->src && !s->lod)) continue;
             if (!lru || s->last_used < lru->last_used) lru = s;
         }
         if (!lru)
@@ -558,6 +583,42 @@ int64_t rnd_adopt(rnd_ctx *r, pc_prepared *pc, sd_err *err)
     return id;
 }
 
+int64_t rnd_adopt_lod(rnd_ctx *r, lod_cloud *lc, sd_err *err)
+{
+    int64_t rc = r->ops->make_current(r->be, err);
+    uint32_t idx = 0;
+    cloud_slot *slot = NULL;
+    if (rc >= 0 && (!lc || !lc->nnodes)) rc = sd_errf(err, SD_EEMPTY, "a LOD cloud without nodes");
+    if (rc >= 0) {
+        while (idx < r->nslots && r->slots[idx].used) idx++;
+        if (idx == r->nslots) {
+            cloud_slot *s = idx < MAX_SLOTS ? realloc(r->slots, (r->nslots + 1) * sizeof *s) : NULL;
+            if (!s) rc = sd_errf(err, SD_ELIMIT, "no room for another cloud slot");
+            else r->slots = s, memset(&s[idx], 0, sizeof *s), r->nslots++;
+        }
+    }
+    if (rc >= 0) {
+        slot = &r->slots[idx];
+        slot->lod = rnd__lod_new(lc, r->lod_pool_points, r->lod_uploads, &slot->c, err);
+        if (!slot->lod) rc = err->code ? err->code : SD_ENOMEM;
+    }
+    if (rc < 0) {
+        if (slot && slot->lod) {
+            rnd__lod_free(slot->lod, &r->gl, &slot->c); /* frees lc */
+            slot->lod = NULL;
+        } else if (lc) {
+            lod_cloud_free(lc);
+            free(lc);
+        }
+        return rc;
+    }
+    slot->bytes = rnd__lod_pool_bytes(r->lod_pool_points);
+    slot->last_used = ++r->clock;
+    if (++slot->gen == 0) slot->gen = 1;
+    slot->used = 1;
+    return (int64_t)(((uint32_t)slot->gen << ID_INDEX_BITS) | (idx + 1));
+}
+
 /* The slot of a live id, or NULL for 0, an unknown index or a stale generation. */
 static cloud_slot *lookup(rnd_ctx *r, uint32_t id)
 {
@@ -565,6 +626,12 @@ static cloud_slot *lookup(rnd_ctx *r, uint32_t id)
     if (idx == 0 || idx > r->nslots) return NULL;
     cloud_slot *s = &r->slots[idx - 1];
     return s->used && s->gen == gen ? s : NULL;
+}
+
+int rnd_lod_wait(rnd_ctx *r, uint32_t cloud_id, int timeout_ms)
+{
+    cloud_slot *s = lookup(r, cloud_id);
+    return s && s->lod ? rnd__lod_wait(s->lod, timeout_ms) : 0;
 }
 
 void rnd_release(rnd_ctx *r, uint32_t cloud_id)
@@ -701,9 +768,6 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     int rc = rnd__view_setup(cam, c->offset, c->bmin, c->bmax, &v, err);
     if (rc < 0) return rc;
     uint64_t budget = params->point_budget > 0 ? (uint64_t)params->point_budget : 0;
-    v.nchunks = rnd__cull(&v, c->chunks, c->nchunks, budget, r->visible, &v.points_visible);
-    v.chunks = r->visible;
-
     const gl_api *gl = &r->gl;
     if ((rc = r->ops->make_current(r->be, err)) < 0) return rc;
     if (!r->pcreated[pi]) {
@@ -712,6 +776,24 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
         r->pcreated[pi] = 1;
     }
     slot->last_used = ++r->clock;
+    rnd_lod_frame lf = {.complete = 1};
+    if (slot->lod) {
+        if (!c->sets) {
+            if ((rc = make_room(r, slot, slot->bytes, err)) < 0) return rc;
+            r->resident_bytes += slot->bytes;
+            r->uploads++;
+        }
+        rc = rnd__lod_frame(slot->lod, gl, &slot->c, &v, budget ? budget : r->lod_budget, &lf,
+                            err);
+        if (rc < 0) return rc;
+        if (lf.changed) detach_all(r, slot); /* per-cloud data follows the pool's contents */
+        v.nchunks = lf.nchunks;
+        v.chunks = lf.chunks;
+        v.points_visible = lf.points;
+    } else {
+        v.nchunks = rnd__cull(&v, c->chunks, c->nchunks, budget, r->visible, &v.points_visible);
+        v.chunks = r->visible;
+    }
     if (!c->sets && (rc = make_resident(r, slot, slot->src, err)) < 0) return rc;
     if (pipelines[pi]->attach && !slot->attached[pi]) {
         rc = pipelines[pi]->attach(&r->kit, r->pstate[pi], c, &slot->pdata[pi], err);
@@ -814,6 +896,10 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     frame->buffer_w = out.buffer_w;
     frame->flags = out.flags;
     frame->buffer_h = out.buffer_h;
+    frame->complete = lf.complete;
+    frame->lod_wanted = lf.wanted;
+    frame->lod_drawn = lf.drawn;
+    frame->lod_uploaded = lf.uploaded;
     return gl_check(gl, "rendering a frame", err);
 }
 

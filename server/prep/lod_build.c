@@ -1,0 +1,1269 @@
+/* lod_build.c — the out-of-core LOD build (lod.h).
+ *
+ * Passes over the input (lod_src: bounds and centroid come from its opening passes):
+ *   count     points per Morton cell of depth D = min(grid_bits, 7) (8 MiB of counters); the
+ *             chunks are the shallowest cells holding at most chunk_max points (down to
+ *             depth D), chunk_max from the memory cap: memory / 400 bytes, the bytes a point
+ *             of a chunk costs in the normals pass with its halo (chunks are processed one at a
+ *             time, each on every thread, so the cap does not grow with the thread count).
+ *   distribute every point (position, colour, index in the file) into its chunk's scratch file
+ *             (unnamed files in the cache directory: nothing is left behind by kill -9).
+ *   normals   chunk by chunk, each in parallel over blocks of points: the chunk and a halo (every point within H of its cube,
+ *             read from the neighbouring chunks' files) in (Morton code, file index) order, the
+ *             order prep.c gives the whole cloud; kNN of the chunk's points and of their
+ *             neighbours; a result is exact when its k-th neighbour is closer than the halo's
+ *             edge, else H doubles and the chunk starts again. Then prep.c's per-point values:
+ *             eq. 20 radius, PCA normal and surface variation, oriented as prep.c does, raw F,
+ *             the neighbours' median radius, the nearest distance. Written to the chunk's
+ *             second scratch file; histograms of the values whose percentiles prep.c takes.
+ *   quantiles exact percentiles out of core: the top 16 bits of each (non-negative) float
+ *             counted in the normals pass, the bottom 16 bits of the values in the bucket that
+ *             holds the wanted rank counted here: the radius median (scatter cap), F's 99th
+ *             percentile and the percentiles prep.c reports, sigma.
+ *   radius    the final radii (prep.c's caps), histogram for their median.
+ *   octree    per chunk, in parallel: the final values, then the additive octree of lod.h top
+ *             down over the chunk's Morton-ordered points; nodes inside the chunk are written
+ *             at once, points of the levels above the chunk are kept and grouped into their
+ *             nodes at the end (they are few: one per sampling cell of those levels).
+ * Then the node table (breadth first), the header, fsync and rename. */
+#include "lod.h"
+
+#include <errno.h>
+#include <float.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "cache.h"
+#include "cloud.h"
+#include "knn.h"
+#include "lod_file.h"
+#include "lod_src.h"
+#include "morton.h"
+#include "pca.h"
+#include "prep.h"
+#include "sd_hash.h"
+
+enum { COUNT_DEPTH_MAX = 7, BLOCK = 1 << 16, NQ = 7 };
+#define BYTES_PER_CHUNK_POINT 400u /* the normals pass of one chunk (with its halo) */
+
+typedef struct rec {          /* a point in a chunk file */
+    float pos[3];
+    uint32_t rgba, gidx;
+} rec;
+
+typedef struct arec {         /* a chunk's point after the normals pass */
+    uint64_t code;
+    uint32_t gidx, rgba;
+    float pos[3], normal[3];
+    float r20, capn, svar, Fraw, nnd;
+} arec;
+
+typedef struct urec {         /* a point of a node above the chunks */
+    uint64_t code, node;      /* node: its prefix */
+    uint32_t gidx, level;
+    float pos[3], normal[3], radius, F;
+    uint32_t rgba, surface;
+} urec;
+
+typedef struct chunk {
+    uint64_t code;            /* Morton prefix of depth `depth` */
+    uint32_t depth;
+    uint64_t count;
+    int fd_in, fd_a;          /* scratch files: recs, arecs */
+    float lo[3], hi[3];       /* its cube */
+    int retried;
+} chunk;
+
+typedef struct nodeent {      /* a written node, before the table */
+    lod_node n;
+} nodeent;
+
+typedef struct build {
+    const lod_desc *d;
+    lod_writer w;
+    lod_src_info info;
+    prep_morton_frame f;
+    int K, threads, g, cdepth;
+    chunk *chunks;
+    size_t nchunks;
+    uint32_t *cell_chunk;     /* count cells -> chunk */
+    uint64_t *hist_hi[4];     /* r20, Fraw, nnd, final radius: 65536 each */
+    struct { int which; double q; uint32_t hi; uint64_t rank; uint64_t *lo; float value; } qs[NQ + 1];
+    float scatter_cap, p99;
+    float halo;               /* the halo the last chunk of the normals pass needed */
+    uint64_t normals_done;    /* points through the normals pass so far */
+    int radius_pass;          /* chunk_hist: which histograms */
+    double t_pass;            /* when the normals pass began */
+    pthread_mutex_t mu;
+    nodeent *nodes;
+    size_t nnodes, capnodes;
+    urec *up;
+    size_t nup, capup;
+    double t0;
+} build;
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static void status(build *b, const char *pass, double frac_done, uint64_t points, double dt)
+{
+    if (!b->d->status) return;
+    double el = now_s() - b->t0;
+    double eta = frac_done > 0 ? el * (1 - frac_done) / frac_done : 0;
+    char line[256];
+    snprintf(line, sizeof line, "lod %-10s %llu points in %.2f s (%.2f M points/s); %.0f %% "
+             "done, %.1f s elapsed, ETA %.1f s", pass, (unsigned long long)points, dt,
+             dt > 0 ? points / dt / 1e6 : 0.0, frac_done * 100, el, eta);
+    b->d->status(b->d->user, line);
+}
+
+static uint32_t fbits(float v)
+{
+    uint32_t u;
+    memcpy(&u, &v, 4);
+    return u;
+}
+
+/* ---- count and chunks ---- */
+
+static int make_chunks(build *b, const uint64_t *cnt, sd_err *err)
+{
+    int D = b->cdepth;
+    uint64_t ncell = (uint64_t)1 << (3 * D);
+    uint64_t *pre = malloc((ncell + 1) * sizeof *pre);
+    b->cell_chunk = malloc(ncell * sizeof *b->cell_chunk);
+    if (!pre || !b->cell_chunk) {
+        free(pre);
+        return sd_errf(err, SD_ENOMEM, "lod: out of memory for the count grid");
+    }
+    pre[0] = 0;
+    for (uint64_t i = 0; i < ncell; i++) pre[i + 1] = pre[i] + cnt[i];
+    uint64_t chunk_max = b->d->chunk_max;
+    size_t cap = 64;
+    b->chunks = calloc(cap, sizeof *b->chunks);
+    /* depth-first over the cells: a stack of (depth, code) */
+    uint64_t stack[8 * 24][2];
+    int sp = 0;
+    stack[sp][0] = 0, stack[sp][1] = 0, sp++;
+    while (sp && b->chunks) {
+        sp--;
+        uint64_t dep = stack[sp][0], code = stack[sp][1];
+        uint64_t a = code << (3 * (D - dep)), e = (code + 1) << (3 * (D - dep));
+        uint64_t c = pre[e] - pre[a];
+        if (!c) continue;
+        if (c <= chunk_max || (int)dep == D) {
+            if (b->nchunks == cap) {
+                chunk *nc = realloc(b->chunks, 2 * cap * sizeof *nc);
+                if (!nc) {
+                    free(b->chunks);
+                    b->chunks = NULL;
+                    break;
+                }
+                b->chunks = nc;
+                memset(nc + cap, 0, cap * sizeof *nc);
+                cap *= 2;
+            }
+            chunk *ch = &b->chunks[b->nchunks];
+            ch->code = code;
+            ch->depth = (uint32_t)dep;
+            ch->count = c;
+            ch->fd_in = ch->fd_a = -1;
+            uint32_t x, y, z;
+            prep_morton_decode(code, &x, &y, &z);
+            double cs = b->f.side / (double)((uint64_t)1 << dep);
+            uint32_t xyz[3] = {x, y, z};
+            for (int k = 0; k < 3; k++) {
+                ch->lo[k] = (float)(b->f.origin[k] + xyz[k] * cs);
+                ch->hi[k] = (float)(b->f.origin[k] + (xyz[k] + 1) * cs);
+            }
+            for (uint64_t i = a; i < e; i++) b->cell_chunk[i] = (uint32_t)b->nchunks;
+            b->nchunks++;
+            continue;
+        }
+        for (int ci = 7; ci >= 0; ci--) {
+            stack[sp][0] = dep + 1;
+            stack[sp][1] = code << 3 | (uint64_t)ci;
+            sp++;
+        }
+    }
+    free(pre);
+    if (!b->chunks) return sd_errf(err, SD_ENOMEM, "lod: out of memory for the chunks");
+    if (b->nchunks > 4000)
+        return sd_errf(err, SD_ELIMIT, "lod: %zu chunks is too many open files; give more "
+                       "--memory", b->nchunks);
+    for (size_t i = 0; i < b->nchunks; i++) {
+        int rc = lod__scratch(&b->w, err);
+        if (rc < 0) return rc;
+        b->chunks[i].fd_in = rc;
+        rc = lod__scratch(&b->w, err);
+        if (rc < 0) return rc;
+        b->chunks[i].fd_a = rc;
+    }
+    return 0;
+}
+
+static uint64_t count_cell(const build *b, const float *p)
+{
+    return prep_morton_code(&b->f, p) >> (3 * (PREP_MORTON_BITS - b->cdepth));
+}
+
+static int count_and_distribute(build *b, lod_src *s, sd_err *err)
+{
+    uint64_t ncell = (uint64_t)1 << (3 * b->cdepth);
+    uint64_t *cnt = calloc(ncell, sizeof *cnt);
+    float *pos = malloc((size_t)BLOCK * 12);
+    uint32_t *rgba = malloc((size_t)BLOCK * 4);
+    int rc = cnt && pos && rgba ? lod_src_rewind(s, err) : sd_errf(err, SD_ENOMEM, "lod: out of memory");
+    int64_t m = 0;
+    double t = now_s();
+    while (rc == 0 && (m = lod_src_next(s, pos, rgba, BLOCK, err)) > 0)
+        for (int64_t i = 0; i < m; i++) cnt[count_cell(b, pos + 3 * i)]++;
+    if (rc == 0 && m < 0) rc = (int)m;
+    if (rc == 0) rc = make_chunks(b, cnt, err);
+    free(cnt);
+    status(b, "count", 0.05, b->info.n, now_s() - t);
+    /* distribute, through one buffer per chunk */
+    enum { PER = 4096 };
+    rec *buf = rc == 0 ? malloc(b->nchunks * PER * sizeof *buf) : NULL;
+    uint32_t *fill = rc == 0 ? calloc(b->nchunks, sizeof *fill) : NULL;
+    uint64_t *off = rc == 0 ? calloc(b->nchunks, sizeof *off) : NULL;
+    if (rc == 0 && (!buf || !fill || !off)) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory");
+    if (rc == 0) rc = lod_src_rewind(s, err);
+    t = now_s();
+    uint32_t gidx = 0;
+    while (rc == 0 && (m = lod_src_next(s, pos, rgba, BLOCK, err)) > 0) {
+        for (int64_t i = 0; i < m && rc == 0; i++) {
+            uint32_t c = b->cell_chunk[count_cell(b, pos + 3 * i)];
+            rec *r = &buf[(size_t)c * PER + fill[c]++];
+            memcpy(r->pos, pos + 3 * i, 12);
+            r->rgba = rgba[i];
+            r->gidx = gidx++;
+            if (fill[c] == PER) {
+                if (lod__pwrite_all(b->chunks[c].fd_in, buf + (size_t)c * PER, PER * sizeof *buf, off[c]))
+                    rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
+                off[c] += PER * sizeof *buf;
+                fill[c] = 0;
+            }
+        }
+    }
+    if (rc == 0 && m < 0) rc = (int)m;
+    for (size_t c = 0; rc == 0 && c < b->nchunks; c++)
+        if (fill[c] && lod__pwrite_all(b->chunks[c].fd_in, buf + c * PER, fill[c] * sizeof *buf, off[c]))
+            rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
+    if (rc == 0) status(b, "distribute", 0.12, b->info.n, now_s() - t);
+    free(buf);
+    free(fill);
+    free(off);
+    free(pos);
+    free(rgba);
+    return rc;
+}
+
+/* ---- normals pass ---- */
+
+typedef struct region {
+    size_t m;
+    float *pos;
+    uint32_t *gidx, *rgba;
+    uint64_t *code;
+    uint8_t *own;
+    float lo[3], hi[3];       /* the loaded box */
+    int edge[6];              /* 1 where the box reaches the cube's face: nothing lies beyond */
+} region;
+
+static void region_free(region *r)
+{
+    free(r->pos);
+    free(r->gidx);
+    free(r->rgba);
+    free(r->code);
+    free(r->own);
+    memset(r, 0, sizeof *r);
+}
+
+/* Loads chunk ci with every point within h of its cube, in (code, file index) order. */
+static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
+{
+    memset(r, 0, sizeof *r);
+    const chunk *c = &b->chunks[ci];
+    for (int a = 0; a < 3; a++) {
+        r->lo[a] = c->lo[a] - h;
+        r->hi[a] = c->hi[a] + h;
+        r->edge[a] = r->lo[a] <= (float)b->f.origin[a];
+        r->edge[3 + a] = r->hi[a] >= (float)(b->f.origin[a] + b->f.side);
+    }
+    size_t cap = 0, m = 0;
+    rec *tmp = NULL;
+    int rc = 0;
+    float *pos = NULL;
+    uint32_t *rgba = NULL, *gi = NULL;
+    uint8_t *own = NULL;
+    for (size_t j = 0; j < b->nchunks && rc == 0; j++) {
+        const chunk *o = &b->chunks[j];
+        int hit = 1;
+        for (int a = 0; a < 3; a++)
+            if (o->lo[a] > r->hi[a] || o->hi[a] < r->lo[a]) hit = 0;
+        if (!hit) continue;
+        rec *t2 = realloc(tmp, o->count * sizeof *tmp);
+        if (!t2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk"); break; }
+        tmp = t2;
+        if (lod__pread_all(o->fd_in, tmp, o->count * sizeof *tmp, 0)) {
+            rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
+            break;
+        }
+        if (m + o->count > cap) {
+            size_t nc = (m + o->count) * 2;
+            float *p2 = realloc(pos, nc * 12);
+            if (p2) pos = p2;
+            uint32_t *r2 = realloc(rgba, nc * 4);
+            if (r2) rgba = r2;
+            uint32_t *g2 = realloc(gi, nc * 4);
+            if (g2) gi = g2;
+            uint8_t *o2 = realloc(own, nc);
+            if (o2) own = o2;
+            if (!p2 || !r2 || !g2 || !o2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk"); break; }
+            cap = nc;
+        }
+        for (uint64_t i = 0; i < o->count; i++) {
+            const float *p = tmp[i].pos;
+            if (j != ci && (p[0] < r->lo[0] || p[0] > r->hi[0] || p[1] < r->lo[1] ||
+                            p[1] > r->hi[1] || p[2] < r->lo[2] || p[2] > r->hi[2]))
+                continue;
+            memcpy(pos + 3 * m, p, 12);
+            rgba[m] = tmp[i].rgba;
+            gi[m] = tmp[i].gidx;
+            own[m] = j == ci;
+            m++;
+        }
+    }
+    free(tmp);
+    uint64_t *codes = NULL;
+    uint32_t *perm = NULL;
+    if (rc == 0) {
+        codes = malloc((m ? m : 1) * sizeof *codes);
+        perm = malloc((m ? m : 1) * sizeof *perm);
+        r->pos = malloc((m ? m : 1) * 12);
+        r->rgba = malloc((m ? m : 1) * 4);
+        r->gidx = malloc((m ? m : 1) * 4);
+        r->code = malloc((m ? m : 1) * 8);
+        r->own = malloc(m ? m : 1);
+        if (!codes || !perm || !r->pos || !r->rgba || !r->gidx || !r->code || !r->own)
+            rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+    }
+    /* (code, file index) order: the stable radix sort by code, then the (rare) runs of equal
+     * codes, which come from several chunk files, by file index */
+    if (rc == 0) rc = prep_morton_sort(pos, m, &b->f, codes, perm, err);
+    if (rc == 0) {
+        for (size_t i = 0; i < m;) {
+            size_t e = i + 1;
+            while (e < m && codes[e] == codes[i]) e++;
+            for (size_t x = i + 1; x < e; x++) /* insertion sort of the run by gidx */
+                for (size_t y = x; y > i && gi[perm[y]] < gi[perm[y - 1]]; y--) {
+                    uint32_t t = perm[y];
+                    perm[y] = perm[y - 1];
+                    perm[y - 1] = t;
+                }
+            i = e;
+        }
+        for (size_t i = 0; i < m; i++) {
+            uint32_t k = perm[i];
+            memcpy(r->pos + 3 * i, pos + 3 * k, 12);
+            r->rgba[i] = rgba[k];
+            r->gidx[i] = gi[k];
+            r->code[i] = codes[i];
+            r->own[i] = own[k];
+        }
+        r->m = m;
+    }
+    free(codes);
+    free(perm);
+    free(pos);
+    free(rgba);
+    free(gi);
+    free(own);
+    if (rc < 0) region_free(r);
+    return rc;
+}
+
+/* The halo a chunk with cube [lo, hi] needs for the ball (p, sqrt(d2)): the farthest the ball
+ * reaches beyond the cube along an axis. */
+static float halo_need(const chunk *c, const float *p, float d2)
+{
+    float d = sqrtf(d2), need = 0;
+    for (int a = 0; a < 3; a++) {
+        float lo = c->lo[a] - (p[a] - d), hi = p[a] + d - c->hi[a];
+        if (lo > need) need = lo;
+        if (hi > need) need = hi;
+    }
+    return need;
+}
+
+/* 1 when the ball (p, sqrt(d2)) lies inside the region (faces at the cube's edge excepted). */
+static int inside(const region *r, const float *p, float d2)
+{
+    float d = sqrtf(d2);
+    for (int a = 0; a < 3; a++) {
+        if (!r->edge[a] && !(p[a] - r->lo[a] > d)) return 0;
+        if (!r->edge[3 + a] && !(r->hi[a] - p[a] > d)) return 0;
+    }
+    return 1;
+}
+
+typedef struct tls {
+    uint64_t hist[3][65536];
+} tls;
+
+enum { QBLOCK = 16384 };
+
+static int cmp_u32(const void *a, const void *b)
+{
+    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* One chunk's normals pass, its steps run in parallel over blocks of QBLOCK points. */
+typedef struct njob {
+    build *b;
+    region *r;
+    const prep_knn *kn;
+    prep_knn_scratch **ks;    /* per thread */
+    tls **t;                  /* per thread */
+    int K;
+    uint32_t *list, *nbr;     /* S = own points then their neighbours; K neighbours each */
+    int32_t *slot;
+    float *d2, *r20, *nrm, *svar;
+    size_t first, count;      /* the step's range of S */
+    arec *out;
+    double vp[3];
+} njob;
+
+static int nj_query(void *ctx, size_t blk, int tid, sd_err *err)
+{
+    njob *j = ctx;
+    size_t a = j->first + blk * QBLOCK, m = j->first + j->count - a < QBLOCK ? j->first + j->count - a : QBLOCK;
+    return prep_knn_query(j->kn, j->list + a, 0, m, j->K, j->nbr + a * j->K, j->d2 + a * j->K,
+                          j->ks[tid], err);
+}
+
+static int nj_pca(void *ctx, size_t blk, int tid, sd_err *err)
+{
+    njob *j = ctx;
+    (void)tid;
+    (void)err;
+    size_t a = blk * QBLOCK, e = a + QBLOCK < j->count ? a + QBLOCK : j->count;
+    float inv_sqrt_k = (float)(1.0 / sqrt((double)j->K));
+    for (size_t i = a; i < e; i++) {
+        j->r20[i] = 2.0f * sqrtf(j->d2[i * j->K + j->K - 1]) * inv_sqrt_k;
+        prep_pca_normal(j->r->pos, j->list[i], j->nbr + i * j->K, j->K, j->nrm + 3 * i, j->svar + i);
+        prep_orient_normal(j->nrm + 3 * i, j->r->pos + 3 * (size_t)j->list[i], j->b->info.centroid,
+               j->b->info.has_viewpoint, j->vp);
+    }
+    return 0;
+}
+
+static int nj_own(void *ctx, size_t blk, int tid, sd_err *err)
+{
+    njob *j = ctx;
+    (void)err;
+    int K = j->K;
+    tls *t = j->t[tid];
+    size_t a = blk * QBLOCK, e = a + QBLOCK < j->count ? a + QBLOCK : j->count;
+    for (size_t i = a; i < e; i++) {
+        const uint32_t *nb = j->nbr + i * K;
+        const float *ni = j->nrm + 3 * i;
+        float s = 0, rn[PREP_MAX_K];
+        for (int q = 0; q < K; q++) {
+            int32_t sq = j->slot[nb[q]];
+            const float *nq = j->nrm + 3 * (size_t)sq;
+            float dd = fabsf(ni[0] * nq[0] + ni[1] * nq[1] + ni[2] * nq[2]);
+            if (dd > 1) dd = 1;
+            float tt = 2 - dd;
+            s += tt * tt;
+            rn[q] = j->r20[sq];
+        }
+        arec *o = &j->out[i];
+        uint32_t pi = j->list[i];
+        o->code = j->r->code[pi];
+        o->gidx = j->r->gidx[pi];
+        o->rgba = j->r->rgba[pi];
+        memcpy(o->pos, j->r->pos + 3 * (size_t)pi, 12);
+        memcpy(o->normal, ni, 12);
+        o->r20 = j->r20[i];
+        o->capn = PREP_RADIUS_CAP * prep_percentile(rn, (size_t)K, 0.5);
+        o->svar = j->svar[i];
+        float f = j->r20[i] * s / (float)K;
+        o->Fraw = f >= 0 && f <= FLT_MAX ? f : 0.0f;
+        o->nnd = sqrtf(j->d2[i * K]);
+        t->hist[0][fbits(o->r20) >> 16]++;
+        t->hist[1][fbits(o->Fraw) >> 16]++;
+        t->hist[2][fbits(o->nnd) >> 16]++;
+    }
+    return 0;
+}
+
+static size_t nblocks(size_t n)
+{
+    return (n + QBLOCK - 1) / QBLOCK;
+}
+
+/* The normals pass of chunk ci (the chunks run one after the other, each on every thread). */
+static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
+{
+    build *b = ctx;
+    (void)tid_unused;
+    chunk *c = &b->chunks[ci];
+    if (!c->count) return 0;
+    int K = b->K, T = b->threads;
+    /* the halo the previous chunk ended with, a good first guess for this one */
+    float h = b->halo > 0 ? b->halo : (c->hi[0] - c->lo[0]) / 16;
+    prep_knn_scratch *ks[64] = {0};
+    tls *tl[64] = {0};
+    if (T > 64) T = 64;
+    int rc = 0;
+    for (int t = 0; t < T && rc == 0; t++) {
+        ks[t] = prep_knn_scratch_new();
+        tl[t] = calloc(1, sizeof *tl[t]);
+        if (!ks[t] || !tl[t]) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory");
+    }
+    while (rc == 0) {
+        region r;
+        rc = load_region(b, ci, h, &r, err);
+        if (rc < 0) break;
+        size_t m = r.m;
+        int full = r.edge[0] && r.edge[1] && r.edge[2] && r.edge[3] && r.edge[4] && r.edge[5];
+        njob j;
+        memset(&j, 0, sizeof j);
+        j.b = b, j.r = &r, j.K = K, j.ks = ks, j.t = tl;
+        for (int a = 0; a < 3; a++) j.vp[a] = b->info.viewpoint[a] - b->info.offset[a];
+        prep_knn *kn = NULL;
+        int exact = 1;
+        float need = 0;
+        j.slot = malloc(m * sizeof *j.slot);
+        j.list = malloc(m * sizeof *j.list);
+        if (!j.slot || !j.list) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
+        size_t ns = 0, nown;
+        for (size_t i = 0; i < m; i++) {
+            j.slot[i] = -1;
+            if (r.own[i]) j.slot[i] = (int32_t)ns, j.list[ns++] = (uint32_t)i;
+        }
+        nown = ns;
+        if ((size_t)K >= m) { exact = full; if (!full) goto done; }
+        rc = prep_knn_build(r.pos, m, NULL, &kn, err);
+        if (rc < 0) goto done;
+        j.kn = kn;
+        j.nbr = malloc(m * (size_t)K * 4);
+        j.d2 = malloc(m * (size_t)K * 4);
+        if (!j.nbr || !j.d2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
+        j.first = 0, j.count = nown;
+        rc = prep_par_for(T, nblocks(nown), nj_query, &j, NULL, err);
+        if (rc < 0) goto done;
+        /* A result is exact when its ball lies in the region; else the region grows to the
+         * farthest ball (the computed k-th distance bounds the true one from above). */
+        for (size_t i = 0; i < nown; i++) {
+            const float *pp = r.pos + 3 * (size_t)j.list[i];
+            if (!full && !inside(&r, pp, j.d2[i * K + K - 1])) {
+                exact = 0;
+                float nd = halo_need(c, pp, j.d2[i * K + K - 1]);
+                if (nd > need) need = nd;
+            }
+            if (!exact) continue;
+            for (int q = 0; q < K; q++) {
+                uint32_t pq = j.nbr[i * K + q];
+                if (j.slot[pq] < 0) j.slot[pq] = (int32_t)ns, j.list[ns++] = pq;
+            }
+        }
+        if (!exact) goto done;
+        /* the neighbours in region (Morton) order: the grid search is fast for queries in
+         * that order only (knn.h) */
+        qsort(j.list + nown, ns - nown, sizeof *j.list, cmp_u32);
+        for (size_t i = nown; i < ns; i++) j.slot[j.list[i]] = (int32_t)i;
+        j.first = nown, j.count = ns - nown;
+        if (ns > nown) rc = prep_par_for(T, nblocks(ns - nown), nj_query, &j, NULL, err);
+        if (rc < 0) goto done;
+        for (size_t i = nown; i < ns; i++) {
+            const float *pp = r.pos + 3 * (size_t)j.list[i];
+            if (!full && !inside(&r, pp, j.d2[i * K + K - 1])) {
+                exact = 0;
+                float nd = halo_need(c, pp, j.d2[i * K + K - 1]);
+                if (nd > need) need = nd;
+            }
+        }
+        if (!exact) goto done;
+        j.r20 = malloc(ns * 4);
+        j.nrm = malloc(ns * 12);
+        j.svar = malloc(ns * 4);
+        j.out = malloc(nown * sizeof *j.out);
+        if (!j.r20 || !j.nrm || !j.svar || !j.out) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
+        j.count = ns;
+        rc = prep_par_for(T, nblocks(ns), nj_pca, &j, NULL, err);
+        if (rc < 0) goto done;
+        j.count = nown;
+        rc = prep_par_for(T, nblocks(nown), nj_own, &j, NULL, err);
+        if (rc < 0) goto done;
+        if (lod__pwrite_all(c->fd_a, j.out, nown * sizeof *j.out, 0))
+            rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
+    done:
+        free(j.slot);
+        free(j.list);
+        free(j.nbr);
+        free(j.d2);
+        free(j.r20);
+        free(j.nrm);
+        free(j.svar);
+        free(j.out);
+        prep_knn_free(kn);
+        region_free(&r);
+        if (rc < 0 || exact) break;
+        c->retried = 1;
+        b->halo = 0;
+        h = need * 1.05f > h * 1.5f ? need * 1.05f : h * 1.5f;
+    }
+    if (rc == 0 && !b->halo) b->halo = h;
+    if (rc == 0) { /* a status line per chunk: the normals pass is most of the build */
+        b->normals_done += c->count;
+        status(b, "normals", 0.12 + 0.63 * (double)b->normals_done / (double)b->info.n,
+               b->normals_done, now_s() - b->t_pass);
+    }
+    for (int t = 0; t < T; t++) {
+        if (rc == 0 && tl[t])
+            for (int q = 0; q < 3; q++)
+                for (int i = 0; i < 65536; i++) b->hist_hi[q][i] += tl[t]->hist[q][i];
+        prep_knn_scratch_free(ks[t]);
+        free(tl[t]);
+    }
+    return rc;
+}
+
+/* ---- quantiles ---- */
+
+static float qvalue(const build *b, int q, const arec *a, float radius)
+{
+    switch (b->qs[q].which) {
+    case 0: return a->r20;
+    case 1: return a->Fraw;
+    case 2: return a->nnd;
+    default: return radius;
+    }
+}
+
+/* The bucket of the wanted rank in hi hist h. */
+static void pick_bucket(build *b, int q, const uint64_t *h, uint64_t n)
+{
+    uint64_t want = (uint64_t)floor(b->qs[q].q * (double)(n - 1) + 0.5), below = 0;
+    uint32_t k = 0;
+    while (k < 65535 && below + h[k] <= want) below += h[k++];
+    b->qs[q].hi = k;
+    b->qs[q].rank = want - below;
+}
+
+static float pick_value(build *b, int q)
+{
+    uint64_t below = 0;
+    uint32_t k = 0;
+    while (k < 65535 && below + b->qs[q].lo[k] <= b->qs[q].rank) below += b->qs[q].lo[k++];
+    uint32_t u = b->qs[q].hi << 16 | k;
+    float v;
+    memcpy(&v, &u, 4);
+    return v;
+}
+
+static int read_arecs(build *b, size_t ci, arec **out, sd_err *err)
+{
+    chunk *c = &b->chunks[ci];
+    *out = malloc((c->count ? c->count : 1) * sizeof **out);
+    if (!*out) return sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+    if (lod__pread_all(c->fd_a, *out, c->count * sizeof **out, 0)) {
+        free(*out);
+        return sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
+    }
+    return 0;
+}
+
+static float final_radius(const build *b, const arec *a)
+{
+    float cap = a->capn;
+    if (a->svar > PREP_SURFACE_VAR_MAX && cap > b->scatter_cap) cap = b->scatter_cap;
+    return a->r20 > cap ? cap : a->r20;
+}
+
+static float final_F(const build *b, float raw)
+{
+    float v = b->p99 > 0 ? raw / b->p99 : (raw > 0 ? 1.0f : 0.0f);
+    return v < 0 ? 0 : (v > 1 ? 1 : v);
+}
+
+/* A counting pass over the normals pass's records: with b->radius_pass 0 the bottom-16-bit
+ * histograms of the NQ quantiles' buckets, with 1 the top-16-bit histogram of the final radii. */
+static int chunk_hist(void *ctx, size_t ci, int tid, sd_err *err)
+{
+    build *b = ctx;
+    (void)tid;
+    arec *a;
+    int rc = read_arecs(b, ci, &a, err);
+    if (rc < 0) return rc;
+    uint64_t n = b->chunks[ci].count;
+    pthread_mutex_lock(&b->mu);
+    for (uint64_t i = 0; i < n; i++) {
+        if (b->radius_pass) {
+            b->hist_hi[3][fbits(final_radius(b, &a[i])) >> 16]++;
+            continue;
+        }
+        for (int q = 0; q < NQ; q++) {
+            uint32_t u = fbits(qvalue(b, q, &a[i], 0));
+            if (u >> 16 == b->qs[q].hi) b->qs[q].lo[u & 0xffff]++;
+        }
+    }
+    pthread_mutex_unlock(&b->mu);
+    free(a);
+    return 0;
+}
+
+/* ---- octree ---- */
+
+typedef struct pt {           /* a point with its final values */
+    uint64_t code;
+    uint32_t gidx, rgba;
+    float pos[3], normal[3], radius, F;
+    int surface;              /* its neighbourhood is a surface (prep.h step 4) */
+} pt;
+
+static float spacing_of(const build *b, int level)
+{
+    return (float)(b->f.side / (double)((uint64_t)1 << (level + b->g)));
+}
+
+static int add_node(build *b, const lod_node *n, sd_err *err)
+{
+    pthread_mutex_lock(&b->mu);
+    if (b->nnodes == b->capnodes) {
+        size_t nc = b->capnodes ? 2 * b->capnodes : 256;
+        nodeent *x = realloc(b->nodes, nc * sizeof *x);
+        if (!x) {
+            pthread_mutex_unlock(&b->mu);
+            return sd_errf(err, SD_ENOMEM, "lod: out of memory for the node table");
+        }
+        b->nodes = x;
+        b->capnodes = nc;
+    }
+    b->nodes[b->nnodes++].n = *n;
+    pthread_mutex_unlock(&b->mu);
+    return 0;
+}
+
+/* Writes one node of cnt points p[idx[i]] (inner: radius_lod covers the spacing). */
+/* The order of a node's points in the file: surface points first, then scattered ones (noise,
+ * vegetation), each group in a fixed pseudo-random order (a hash of the file index). A frame
+ * whose budget ends inside a node draws a prefix of it: so that prefix is a uniform sample
+ * of the node, surfaces first, not one corner of it (the Morton order the points come in). */
+typedef struct okey {
+    uint64_t key;
+    uint32_t i;
+} okey;
+
+static int cmp_okey(const void *a, const void *b)
+{
+    const okey *x = a, *y = b;
+    return x->key < y->key ? -1 : x->key > y->key;
+}
+
+static uint32_t mix32(uint32_t v)
+{
+    v ^= v >> 16;
+    v *= 0x7feb352dU;
+    v ^= v >> 15;
+    v *= 0x846ca68bU;
+    v ^= v >> 16;
+    return v;
+}
+
+static int emit(build *b, const pt *p, const uint32_t *idx_in, size_t cnt, int level,
+                uint64_t code, int inner, sd_err *err)
+{
+    size_t len = (size_t)lod_node_bytes((uint32_t)cnt);
+    float *buf = malloc(len ? len : 1);
+    okey *ok = malloc((cnt ? cnt : 1) * sizeof *ok);
+    uint32_t *idx = malloc((cnt ? cnt : 1) * sizeof *idx);
+    if (!buf || !ok || !idx) {
+        free(buf);
+        free(ok);
+        free(idx);
+        return sd_errf(err, SD_ENOMEM, "lod: out of memory for a node");
+    }
+    for (size_t i = 0; i < cnt; i++) {
+        const pt *q = &p[idx_in[i]];
+        ok[i].key = (uint64_t)!q->surface << 63 | (uint64_t)mix32(q->gidx) << 31 | q->gidx;
+        ok[i].i = idx_in[i];
+    }
+    qsort(ok, cnt, sizeof *ok, cmp_okey);
+    for (size_t i = 0; i < cnt; i++) idx[i] = ok[i].i;
+    free(ok);
+    float *pos = buf, *nrm = pos + 3 * cnt, *rad = nrm + 3 * cnt, *rl = rad + cnt, *F = rl + cnt;
+    uint32_t *rgba = (uint32_t *)(F + cnt);
+    float sp = spacing_of(b, level);
+    lod_node n;
+    memset(&n, 0, sizeof n);
+    for (int a = 0; a < 3; a++) n.bmin[a] = INFINITY, n.bmax[a] = -INFINITY;
+    for (size_t i = 0; i < cnt; i++) {
+        const pt *q = &p[idx[i]];
+        memcpy(pos + 3 * i, q->pos, 12);
+        memcpy(nrm + 3 * i, q->normal, 12);
+        rad[i] = q->radius;
+        /* scattered points (noise, vegetation) stay points: a disc of the spacing of a
+         * coarse level would cover the scene with their random orientations */
+        rl[i] = inner && q->surface && q->radius < sp ? sp : q->radius;
+        F[i] = q->F;
+        rgba[i] = q->rgba;
+        for (int a = 0; a < 3; a++) {
+            if (q->pos[a] < n.bmin[a]) n.bmin[a] = q->pos[a];
+            if (q->pos[a] > n.bmax[a]) n.bmax[a] = q->pos[a];
+        }
+    }
+    n.count = (uint32_t)cnt;
+    n.level = (uint8_t)level;
+    n.code = code;
+    n.spacing = sp;
+    n.hash = sd_hash64(buf, len, 0);
+    int rc = lod__writer_append(&b->w, buf, len, &n.offset, err);
+    free(buf);
+    free(idx);
+    return rc < 0 ? rc : add_node(b, &n, err);
+}
+
+typedef struct octx {
+    build *b;
+    pt *p;
+    uint32_t *scratch;
+    int cdepth;
+    urec *up;
+    size_t nup, capup;
+} octx;
+
+static int keep_upper(octx *o, const uint32_t *idx, size_t cnt, int level, uint64_t code,
+                      sd_err *err)
+{
+    if (o->nup + cnt > o->capup) {
+        size_t nc = (o->nup + cnt) * 2;
+        urec *x = realloc(o->up, nc * sizeof *x);
+        if (!x) return sd_errf(err, SD_ENOMEM, "lod: out of memory for the upper levels");
+        o->up = x;
+        o->capup = nc;
+    }
+    for (size_t i = 0; i < cnt; i++) {
+        const pt *q = &o->p[idx[i]];
+        urec *u = &o->up[o->nup++];
+        memset(u, 0, sizeof *u);
+        u->code = q->code;
+        u->node = code;
+        u->gidx = q->gidx;
+        u->level = (uint32_t)level;
+        memcpy(u->pos, q->pos, 12);
+        memcpy(u->normal, q->normal, 12);
+        u->radius = q->radius;
+        u->F = q->F;
+        u->rgba = q->rgba;
+        u->surface = (uint32_t)q->surface;
+    }
+    return 0;
+}
+
+/* The node (level, code) over the points idx[0..cnt) (ascending order), top down. */
+static int process(octx *o, uint32_t *idx, size_t cnt, int level, uint64_t code, sd_err *err)
+{
+    build *b = o->b;
+    int inside = level >= o->cdepth;
+    if (inside && (cnt <= b->d->leaf_max || level == LOD_MAX_LEVEL))
+        return emit(b, o->p, idx, cnt, level, code, 0, err);
+    int depth = level + b->g;
+    int shift = 3 * (PREP_MORTON_BITS - depth);
+    double cell = b->f.side / (double)((uint64_t)1 << depth);
+    size_t nsel = 0, nrest = 0;
+    uint32_t *rest = o->scratch;
+    for (size_t i = 0; i < cnt;) {
+        uint64_t cc = o->p[idx[i]].code >> shift;
+        size_t j = i;
+        uint32_t x, y, z;
+        prep_morton_decode(cc, &x, &y, &z);
+        double cen[3] = {b->f.origin[0] + (x + 0.5) * cell, b->f.origin[1] + (y + 0.5) * cell,
+                         b->f.origin[2] + (z + 0.5) * cell};
+        /* the surface point nearest the centre; where the cell has none, the scattered one
+         * nearest it among those a hash lets through (one in LOD_SCATTER_KEEP) */
+        size_t best = SIZE_MAX;
+        int best_surf = 0;
+        double bd = INFINITY;
+        while (j < cnt && o->p[idx[j]].code >> shift == cc) {
+            const pt *q = &o->p[idx[j]];
+            if (q->surface || mix32(q->gidx) % LOD_SCATTER_KEEP == 0) {
+                double d = 0;
+                for (int a = 0; a < 3; a++) d += (q->pos[a] - cen[a]) * (q->pos[a] - cen[a]);
+                if ((q->surface && !best_surf) || (q->surface == best_surf && d < bd))
+                    bd = d, best = j, best_surf = q->surface;
+            }
+            j++;
+        }
+        for (size_t k = i; k < j; k++)
+            if (k != best) rest[nrest++] = idx[k];
+        if (best != SIZE_MAX) idx[nsel++] = idx[best];
+        i = j;
+    }
+    if (!nsel && nrest) { /* a node has a point at least: the first one */
+        idx[nsel++] = rest[0];
+        memmove(rest, rest + 1, --nrest * sizeof *rest);
+    }
+    /* idx = [selected | rest], both in order */
+    memcpy(idx + nsel, rest, nrest * sizeof *idx);
+    int rc = inside ? emit(b, o->p, idx, nsel, level, code, nrest > 0, err)
+                    : keep_upper(o, idx, nsel, level, code, err);
+    if (rc < 0) return rc;
+    uint32_t *r = idx + nsel;
+    int cshift = 3 * (PREP_MORTON_BITS - (level + 1));
+    for (size_t i = 0; i < nrest && rc == 0;) {
+        uint64_t cc = o->p[r[i]].code >> cshift;
+        size_t j = i;
+        while (j < nrest && o->p[r[j]].code >> cshift == cc) j++;
+        rc = process(o, r + i, j - i, level + 1, cc, err);
+        i = j;
+    }
+    return rc;
+}
+
+static int chunk_octree(void *ctx, size_t ci, int tid, sd_err *err)
+{
+    build *b = ctx;
+    (void)tid;
+    chunk *c = &b->chunks[ci];
+    arec *a;
+    int rc = read_arecs(b, ci, &a, err);
+    if (rc < 0) return rc;
+    uint64_t n = c->count;
+    pt *p = malloc((n ? n : 1) * sizeof *p);
+    uint32_t *idx = malloc((n ? n : 1) * 4), *scr = malloc((n ? n : 1) * 4);
+    uint32_t *lo = calloc(65536, 4);
+    if (!p || !idx || !scr || !lo) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+    for (uint64_t i = 0; rc == 0 && i < n; i++) {
+        p[i].code = a[i].code;
+        p[i].gidx = a[i].gidx;
+        p[i].rgba = a[i].rgba;
+        memcpy(p[i].pos, a[i].pos, 12);
+        memcpy(p[i].normal, a[i].normal, 12);
+        p[i].radius = final_radius(b, &a[i]);
+        p[i].F = final_F(b, a[i].Fraw);
+        /* a surface point: a planar neighbourhood, and not a stray point whose radius the
+         * neighbours' radii had to limit (prep.h step 4): noise above a plane has planar
+         * neighbours, but its own eq. 20 radius reaches down to them */
+        p[i].surface = !(a[i].svar > PREP_SURFACE_VAR_MAX) && !(a[i].r20 > a[i].capn);
+        idx[i] = (uint32_t)i;
+        uint32_t u = fbits(p[i].radius);
+        if (u >> 16 == b->qs[NQ].hi) lo[u & 0xffff]++;
+    }
+    free(a);
+    octx o = {.b = b, .p = p, .scratch = scr, .cdepth = (int)c->depth};
+    if (rc == 0 && n) rc = process(&o, idx, n, 0, 0, err);
+    pthread_mutex_lock(&b->mu);
+    for (int i = 0; i < 65536; i++) b->qs[NQ].lo[i] += lo[i];
+    if (rc == 0 && o.nup) {
+        if (b->nup + o.nup > b->capup) {
+            size_t nc = (b->nup + o.nup) * 2;
+            urec *x = realloc(b->up, nc * sizeof *x);
+            if (!x) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for the upper levels");
+            else b->up = x, b->capup = nc;
+        }
+        if (rc == 0) {
+            memcpy(b->up + b->nup, o.up, o.nup * sizeof *o.up);
+            b->nup += o.nup;
+        }
+    }
+    pthread_mutex_unlock(&b->mu);
+    free(o.up);
+    free(p);
+    free(idx);
+    free(scr);
+    free(lo);
+    return rc;
+}
+
+static int cmp_urec(const void *x, const void *y)
+{
+    const urec *a = x, *b = y;
+    if (a->level != b->level) return a->level < b->level ? -1 : 1;
+    if (a->node != b->node) return a->node < b->node ? -1 : 1;
+    if (a->code != b->code) return a->code < b->code ? -1 : 1;
+    return a->gidx < b->gidx ? -1 : a->gidx > b->gidx;
+}
+
+static int emit_upper(build *b, sd_err *err)
+{
+    if (b->nup) qsort(b->up, b->nup, sizeof *b->up, cmp_urec);
+    pt *p = malloc((b->nup ? b->nup : 1) * sizeof *p);
+    uint32_t *idx = malloc((b->nup ? b->nup : 1) * 4);
+    if (!p || !idx) {
+        free(p);
+        free(idx);
+        return sd_errf(err, SD_ENOMEM, "lod: out of memory for the upper levels");
+    }
+    int rc = 0;
+    for (size_t i = 0; i < b->nup; i++) {
+        const urec *u = &b->up[i];
+        p[i].code = u->code;
+        p[i].gidx = u->gidx;
+        p[i].rgba = u->rgba;
+        memcpy(p[i].pos, u->pos, 12);
+        memcpy(p[i].normal, u->normal, 12);
+        p[i].radius = u->radius;
+        p[i].F = u->F;
+        p[i].surface = (int)u->surface;
+        idx[i] = (uint32_t)i;
+    }
+    for (size_t i = 0; i < b->nup && rc == 0;) {
+        size_t j = i;
+        while (j < b->nup && b->up[j].level == b->up[i].level && b->up[j].node == b->up[i].node) j++;
+        rc = emit(b, p, idx + i, j - i, (int)b->up[i].level, b->up[i].node, 1, err);
+        i = j;
+    }
+    free(p);
+    free(idx);
+    return rc;
+}
+
+static int cmp_node(const void *x, const void *y)
+{
+    const lod_node *a = x, *b = y;
+    if (a->level != b->level) return a->level < b->level ? -1 : 1;
+    return a->code < b->code ? -1 : a->code > b->code;
+}
+
+/* The table: breadth-first order, links, subtree bounds and counts. */
+static int link_table(build *b, lod_cloud *c, sd_err *err)
+{
+    size_t nn = b->nnodes;
+    lod_node *t = malloc((nn ? nn : 1) * sizeof *t);
+    if (!t) return sd_errf(err, SD_ENOMEM, "lod: out of memory for the node table");
+    for (size_t i = 0; i < nn; i++) t[i] = b->nodes[i].n;
+    qsort(t, nn, sizeof *t, cmp_node);
+    if (!nn || t[0].level != 0) {
+        free(t);
+        return sd_errf(err, SD_EFORMAT, "lod: the octree has no root");
+    }
+    uint32_t depth = 0;
+    for (size_t i = 0; i < nn; i++) {
+        t[i].parent = UINT32_MAX;
+        t[i].first_child = 0;
+        t[i].nchildren = 0;
+        if (t[i].level + 1u > depth) depth = t[i].level + 1u;
+    }
+    for (size_t i = 1; i < nn; i++) {
+        lod_node key = {.level = (uint8_t)(t[i].level - 1), .code = t[i].code >> 3};
+        lod_node *par = bsearch(&key, t, i, sizeof *t, cmp_node);
+        if (!par) {
+            int lv = t[i].level;
+            free(t);
+            return sd_errf(err, SD_EFORMAT, "lod: node at level %d has no parent", lv);
+        }
+        uint32_t pi = (uint32_t)(par - t);
+        t[i].parent = pi;
+        if (!par->nchildren) par->first_child = (uint32_t)i;
+        par->nchildren++;
+    }
+    for (size_t i = 0; i < nn; i++) {
+        t[i].subtree_points = t[i].count;
+        memcpy(t[i].sbmin, t[i].bmin, 12);
+        memcpy(t[i].sbmax, t[i].bmax, 12);
+    }
+    for (size_t i = nn; i-- > 1;) {
+        lod_node *par = &t[t[i].parent];
+        par->subtree_points += t[i].subtree_points;
+        for (int a = 0; a < 3; a++) {
+            if (t[i].sbmin[a] < par->sbmin[a]) par->sbmin[a] = t[i].sbmin[a];
+            if (t[i].sbmax[a] > par->sbmax[a]) par->sbmax[a] = t[i].sbmax[a];
+        }
+    }
+    c->nodes = t;
+    c->nnodes = nn;
+    c->depth = depth;
+    return 0;
+}
+
+static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_err *err)
+{
+    const lod_desc *d = b->d;
+    lod_src_get_info(s, &b->info);
+    uint64_t n = b->info.n;
+    b->K = (uint64_t)d->k < n ? d->k : (int)(n - 1);
+    if (n < 2) return sd_errf(err, SD_EEMPTY, "%s: the LOD form needs 2 points or more", src);
+    if (n >= ((uint64_t)1 << 32) - 1)
+        return sd_errf(err, SD_ELIMIT, "%s: %llu points is over the LOD limit of 2^32 - 1", src,
+                       (unsigned long long)n);
+    float fb[6];
+    for (int a = 0; a < 3; a++) {
+        fb[a] = (float)(b->info.bmin[a] - b->info.offset[a]);
+        fb[3 + a] = (float)(b->info.bmax[a] - b->info.offset[a]);
+    }
+    prep_morton_frame_of(fb, 2, &b->f);
+    b->g = d->grid_bits;
+    b->cdepth = d->grid_bits < COUNT_DEPTH_MAX ? d->grid_bits : COUNT_DEPTH_MAX;
+    for (int q = 0; q < 4; q++) {
+        b->hist_hi[q] = calloc(65536, sizeof(uint64_t));
+        if (!b->hist_hi[q]) return sd_errf(err, SD_ENOMEM, "lod: out of memory");
+    }
+    int rc = count_and_distribute(b, s, err);
+    if (rc < 0) return rc;
+    res->chunks = b->nchunks;
+    prep_progress pr;
+    double t = now_s();
+    prep_progress_begin(&pr, d->progress, d->user, PROTO_PHASE_NORMALS);
+    b->t_pass = t;
+    rc = prep_par_for(1, b->nchunks, chunk_normals, b, &pr, err); /* each chunk on every thread */
+    if (rc < 0) return rc;
+    prep_progress_end(&pr);
+    size_t retried = 0;
+    for (size_t i = 0; i < b->nchunks; i++) {
+        retried += b->chunks[i].retried;
+        close(b->chunks[i].fd_in);
+        b->chunks[i].fd_in = -1;
+    }
+    res->halo_retries = b->nchunks ? (double)retried / (double)b->nchunks : 0;
+    /* quantiles: r20 median, sigma, F p99 and the reported F percentiles */
+    static const struct { int which; double q; } want[NQ] = {
+        {0, 0.5}, {2, 0.5}, {1, 0.99}, {1, 0.01}, {1, 0.25}, {1, 0.5}, {1, 0.75}};
+    for (int q = 0; q <= NQ; q++) {
+        b->qs[q].which = q < NQ ? want[q].which : 3;
+        b->qs[q].q = q < NQ ? want[q].q : 0.5;
+        b->qs[q].lo = calloc(65536, sizeof(uint64_t));
+        if (!b->qs[q].lo) return sd_errf(err, SD_ENOMEM, "lod: out of memory");
+        if (q < NQ) pick_bucket(b, q, b->hist_hi[b->qs[q].which], n);
+    }
+    t = now_s();
+    prep_progress_begin(&pr, d->progress, d->user, PROTO_PHASE_FIELD);
+    rc = prep_par_for(b->threads, b->nchunks, chunk_hist, b, NULL, err);
+    if (rc < 0) return rc;
+    for (int q = 0; q < NQ; q++) b->qs[q].value = pick_value(b, q);
+    b->scatter_cap = PREP_SCATTER_CAP * b->qs[0].value;
+    b->p99 = b->qs[2].value;
+    b->radius_pass = 1;
+    rc = prep_par_for(b->threads, b->nchunks, chunk_hist, b, NULL, err);
+    if (rc < 0) return rc;
+    pick_bucket(b, NQ, b->hist_hi[3], n);
+    prep_progress_end(&pr);
+    status(b, "quantiles", 0.82, n, now_s() - t);
+    t = now_s();
+    prep_progress_begin(&pr, d->progress, d->user, PROTO_PHASE_REORDER);
+    rc = prep_par_for(b->threads, b->nchunks, chunk_octree, b, &pr, err);
+    if (rc == 0) rc = emit_upper(b, err);
+    if (rc < 0) return rc;
+    prep_progress_end(&pr);
+    status(b, "octree", 0.97, n, now_s() - t);
+
+    lod_cloud c;
+    memset(&c, 0, sizeof c);
+    rc = link_table(b, &c, err);
+    if (rc < 0) return rc;
+    c.n = n;
+    c.k = (uint32_t)d->k;
+    c.attrs = (b->info.attrs & PC_ATTR_RGB) | PC_ATTR_NORMAL | PC_ATTR_RADIUS | PC_ATTR_F;
+    c.grid_bits = (uint32_t)b->g;
+    c.leaf_max = d->leaf_max;
+    memcpy(c.offset, b->info.offset, sizeof c.offset);
+    memcpy(c.bmin, b->info.bmin, sizeof c.bmin);
+    memcpy(c.bmax, b->info.bmax, sizeof c.bmax);
+    memcpy(c.origin, b->f.origin, sizeof c.origin);
+    c.side = b->f.side;
+    memcpy(c.centroid, b->info.centroid, sizeof c.centroid);
+    c.sigma = b->qs[1].value;
+    c.F_raw_p99 = b->p99;
+    for (int i = 0; i < 5; i++) {
+        static const int qi[5] = {3, 4, 5, 6, 2};
+        c.F_pct[i] = final_F(b, b->qs[qi[i]].value);
+    }
+    c.radius_median = pick_value(b, NQ);
+    c.n_dropped = b->info.n_dropped;
+    memcpy(c.format, b->info.format, sizeof c.format);
+    lod_src_key key;
+    rc = lod__src_key(src, &key, err);
+    if (rc == 0) rc = lod__writer_commit(&b->w, &c, &key, err);
+    free((void *)c.nodes);
+    return rc;
+}
+
+int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_result *res,
+                   sd_err *err)
+{
+    lod_desc d = desc ? *desc : (lod_desc){0};
+    if (d.k <= 0) d.k = PREP_DEFAULT_K;
+    if (d.k > PREP_MAX_K) return sd_errf(err, SD_EINVAL, "lod: k = %d is over %d", d.k, PREP_MAX_K);
+    if (d.threads <= 0) d.threads = prep_default_threads();
+    if (!d.memory) d.memory = (uint64_t)2 << 30;
+    if (d.grid_bits <= 0) d.grid_bits = LOD_DEFAULT_GRID_BITS;
+    if (d.grid_bits > 7) d.grid_bits = 7;
+    if (!d.leaf_max) d.leaf_max = LOD_DEFAULT_LEAF_MAX;
+    if (!d.chunk_max) {
+        uint64_t cm = d.memory / BYTES_PER_CHUNK_POINT; /* one chunk at a time */
+        d.chunk_max = cm > UINT32_MAX ? UINT32_MAX : (cm < 100000 ? 100000 : (uint32_t)cm);
+    }
+    lod_result rr;
+    memset(&rr, 0, sizeof rr);
+    rr.chunk_max = d.chunk_max;
+    memset(out, 0, sizeof *out);
+    double t0 = now_s();
+    int rc = lod_cache_path(src, d.dir, d.k, rr.path, sizeof rr.path, err);
+    if (rc < 0) return rc;
+    if (!d.force) {
+        int got = lod_load_file(rr.path, src, d.k, out, rr.why, sizeof rr.why);
+        if (got == 1) {
+            rr.hit = 1;
+            snprintf(rr.why, sizeof rr.why, "cache valid");
+            rr.t_total = now_s() - t0;
+            if (res) *res = rr;
+            return 0;
+        }
+        if (got < 0 && d.warn) {
+            char msg[4600];
+            snprintf(msg, sizeof msg, "LOD cache %s: %s; rebuilding it", rr.path, rr.why);
+            d.warn(d.user, msg);
+        }
+    } else {
+        snprintf(rr.why, sizeof rr.why, "rebuild forced");
+    }
+    build b;
+    memset(&b, 0, sizeof b);
+    b.d = &d;
+    b.threads = d.threads;
+    b.t0 = t0;
+    pthread_mutex_init(&b.mu, NULL);
+    lod_src *s = NULL;
+    prep_progress pr;
+    prep_progress_begin(&pr, d.progress, d.user, PROTO_PHASE_LOAD);
+    rc = lod__writer_open(&b.w, rr.path, err);
+    if (rc == 0) rc = lod_src_open(src, &s, err);
+    if (rc == 0) {
+        prep_progress_end(&pr);
+        rc = run_build(&b, src, s, &rr, err);
+    }
+    lod__writer_abort(&b.w);
+    lod_src_close(s);
+    for (size_t i = 0; i < b.nchunks; i++) {
+        if (b.chunks[i].fd_in >= 0) close(b.chunks[i].fd_in);
+        if (b.chunks[i].fd_a >= 0) close(b.chunks[i].fd_a);
+    }
+    free(b.chunks);
+    free(b.cell_chunk);
+    for (int q = 0; q < 4; q++) free(b.hist_hi[q]);
+    for (int q = 0; q <= NQ; q++) free(b.qs[q].lo);
+    free(b.nodes);
+    free(b.up);
+    pthread_mutex_destroy(&b.mu);
+    if (rc < 0) return rc;
+    char why[256];
+    if (lod_load_file(rr.path, src, d.k, out, why, sizeof why) != 1)
+        return sd_errf(err, SD_ESTALE, "LOD cache %s was written but does not load: %s",
+                       rr.path, why);
+    rr.t_total = now_s() - t0;
+    if (res) *res = rr;
+    return 0;
+}

@@ -1,0 +1,314 @@
+/* lod_src.c — the LOD build's point stream (lod_src.h). */
+#include "lod_src.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <float.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "cloud.h"
+
+enum { BLOCK = 1 << 16, MAX_PROPS = 64, MAX_HEADER = 64 * 1024 };
+enum { T_NONE, T_I8, T_U8, T_I16, T_U16, T_I32, T_U32, T_F32, T_F64 };
+static const uint8_t tsize[] = {0, 1, 1, 2, 2, 4, 4, 4, 8};
+
+struct lod_src {
+    char path[4096];
+    lod_src_info info;
+    /* streamed PLY */
+    int fd;
+    uint64_t data_off, nrec, rec, next;  /* next record */
+    int off[7], type[7];                 /* x y z red green blue alpha: offset, type */
+    uint8_t *buf;
+    /* in-memory fallback */
+    pc_cloud cloud;
+    int have_cloud;
+};
+
+static int type_of(const char *s)
+{
+    static const char *const names[][2] = {
+        {"char", "int8"}, {"uchar", "uint8"}, {"short", "int16"}, {"ushort", "uint16"},
+        {"int", "int32"}, {"uint", "uint32"}, {"float", "float32"}, {"double", "float64"}};
+    for (int i = 0; i < 8; i++)
+        if (!strcmp(s, names[i][0]) || !strcmp(s, names[i][1])) return i + 1;
+    return T_NONE;
+}
+
+static double load(const uint8_t *p, int t)
+{
+    switch (t) {
+    case T_I8: return (int8_t)p[0];
+    case T_U8: return p[0];
+    case T_I16: { int16_t v; memcpy(&v, p, 2); return v; }
+    case T_U16: { uint16_t v; memcpy(&v, p, 2); return v; }
+    case T_I32: { int32_t v; memcpy(&v, p, 4); return v; }
+    case T_U32: { uint32_t v; memcpy(&v, p, 4); return v; }
+    case T_F32: { float v; memcpy(&v, p, 4); return v; }
+    case T_F64: { double v; memcpy(&v, p, 8); return v; }
+    default: return 0;
+    }
+}
+
+static uint8_t colour8(double v)
+{
+    if (!(v > 0)) return 0;
+    if (v >= 255) return 255;
+    return (uint8_t)(v + 0.5);
+}
+
+/* try_ply_header: 1 when path is a binary little-endian PLY that starts with a vertex element
+ * of scalar properties with x, y, z (then s is set up for streaming), 0 when it is something
+ * else (the fallback reads it), negative on an I/O error. */
+static int try_ply_header(lod_src *s, sd_err *err)
+{
+    char *h = malloc(MAX_HEADER + 1);
+    if (!h) return sd_errf(err, SD_ENOMEM, "out of memory");
+    ssize_t got = pread(s->fd, h, MAX_HEADER, 0);
+    if (got < 0) {
+        free(h);
+        return sd_errf(err, SD_EIO, "%s: %s", s->path, strerror(errno));
+    }
+    h[got] = 0;
+    char *end = strstr(h, "end_header\n");
+    if (strncmp(h, "ply\n", 4) != 0 || !end ||
+        !strstr(h, "\nformat binary_little_endian 1.0\n")) {
+        free(h);
+        return 0;
+    }
+    s->data_off = (uint64_t)(end + 11 - h);
+    *end = 0;
+    for (int i = 0; i < 7; i++) s->off[i] = -1;
+    int in_vertex = 0, seen_elem = 0, ok = 1;
+    uint64_t rec = 0;
+    char *save = NULL;
+    for (char *line = strtok_r(h, "\n", &save); line && ok; line = strtok_r(NULL, "\n", &save)) {
+        char a[64], b[64], c[64];
+        int nt = sscanf(line, "%63s %63s %63s", a, b, c);
+        if (nt >= 3 && !strcmp(a, "element")) {
+            if (seen_elem) break; /* only the first element matters */
+            seen_elem = 1;
+            char *e = NULL;
+            unsigned long long cnt = strtoull(c, &e, 10);
+            in_vertex = !strcmp(b, "vertex") && e && !*e;
+            ok = in_vertex;
+            s->nrec = cnt;
+        } else if (nt >= 1 && !strcmp(a, "property") && in_vertex) {
+            if (nt < 3 || !strcmp(b, "list")) { ok = 0; break; }
+            int t = type_of(b);
+            if (!t) { ok = 0; break; }
+            static const char *const want[7] = {"x", "y", "z", "red", "green", "blue", "alpha"};
+            for (int i = 0; i < 7; i++)
+                if (!strcmp(c, want[i]) && s->off[i] < 0) {
+                    s->off[i] = (int)rec;
+                    s->type[i] = t;
+                }
+            rec += tsize[t];
+        }
+    }
+    free(h);
+    if (!ok || !seen_elem || s->off[0] < 0 || s->off[1] < 0 || s->off[2] < 0 || rec == 0)
+        return 0;
+    s->rec = rec;
+    struct stat st;
+    if (fstat(s->fd, &st) < 0) return sd_errf(err, SD_EIO, "%s: %s", s->path, strerror(errno));
+    if (s->nrec > ((uint64_t)st.st_size - s->data_off) / rec)
+        return sd_errf(err, SD_ETRUNC, "%s: the header claims %llu vertices of %llu bytes, the "
+                       "file holds %llu bytes after its header", s->path,
+                       (unsigned long long)s->nrec, (unsigned long long)rec,
+                       (unsigned long long)((uint64_t)st.st_size - s->data_off));
+    return 1;
+}
+
+/* Reads records [r, r + m) into s->buf. */
+static int read_records(lod_src *s, uint64_t r, size_t m, sd_err *err)
+{
+    size_t len = m * s->rec, done = 0;
+    while (done < len) {
+        ssize_t g = pread(s->fd, s->buf + done, len - done,
+                          (off_t)(s->data_off + r * s->rec + done));
+        if (g < 0 && errno == EINTR) continue;
+        if (g <= 0)
+            return sd_errf(err, SD_EIO, "%s: %s at byte %llu", s->path,
+                           g < 0 ? strerror(errno) : "the file ended (it changed)",
+                           (unsigned long long)(s->data_off + r * s->rec + done));
+        done += (size_t)g;
+    }
+    return 0;
+}
+
+static void record_xyz(const lod_src *s, const uint8_t *p, double xyz[3])
+{
+    for (int a = 0; a < 3; a++) xyz[a] = load(p + s->off[a], s->type[a]);
+}
+
+static uint32_t record_rgba(const lod_src *s, const uint8_t *p)
+{
+    if (s->off[3] < 0 || s->off[4] < 0 || s->off[5] < 0) return 0xFFFFFFFFu;
+    uint32_t v = 0;
+    for (int c = 0; c < 4; c++) {
+        uint8_t x = 255;
+        if (s->off[3 + c] >= 0) {
+            /* 16-bit colours are scaled to 8 bits, as io_ply does */
+            double scale = s->type[3 + c] == T_U16 ? 255.0 / 65535.0 : 1.0;
+            x = colour8(load(p + s->off[3 + c], s->type[3 + c]) * scale);
+        }
+        v |= (uint32_t)x << (8 * c);
+    }
+    return v;
+}
+
+static int bounds_pass(lod_src *s, sd_err *err)
+{
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    uint64_t kept = 0;
+    for (uint64_t r = 0; r < s->nrec;) {
+        size_t m = s->nrec - r < BLOCK ? (size_t)(s->nrec - r) : BLOCK;
+        int rc = read_records(s, r, m, err);
+        if (rc < 0) return rc;
+        for (size_t i = 0; i < m; i++) {
+            double p[3];
+            record_xyz(s, s->buf + i * s->rec, p);
+            if (!isfinite(p[0]) || !isfinite(p[1]) || !isfinite(p[2])) continue;
+            kept++;
+            for (int a = 0; a < 3; a++) {
+                if (p[a] < lo[a]) lo[a] = p[a];
+                if (p[a] > hi[a]) hi[a] = p[a];
+            }
+        }
+        r += m;
+    }
+    if (!kept) return sd_errf(err, SD_EEMPTY, "%s: no finite points (%llu read)", s->path,
+                              (unsigned long long)s->nrec);
+    for (int a = 0; a < 3; a++) {
+        if (!(0.5 * hi[a] - 0.5 * lo[a] <= FLT_MAX))
+            return sd_errf(err, SD_ELIMIT, "%s: the points span %g along %c, more than float32 "
+                           "holds", s->path, hi[a] - lo[a], "xyz"[a]);
+        s->info.bmin[a] = lo[a];
+        s->info.bmax[a] = hi[a];
+        s->info.offset[a] = 0.5 * lo[a] + 0.5 * hi[a];
+    }
+    s->info.n = kept;
+    s->info.n_dropped = s->nrec - kept;
+    s->info.attrs = s->off[3] >= 0 && s->off[4] >= 0 && s->off[5] >= 0 ? PC_ATTR_RGB : 0;
+    snprintf(s->info.format, sizeof s->info.format, "PLY binary_little_endian 1.0");
+    s->info.streamed = 1;
+    return 0;
+}
+
+int lod_src_open(const char *path, lod_src **out, sd_err *err)
+{
+    *out = NULL;
+    lod_src *s = calloc(1, sizeof *s);
+    if (!s) return sd_errf(err, SD_ENOMEM, "out of memory");
+    snprintf(s->path, sizeof s->path, "%s", path);
+    s->fd = open(path, O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+    if (s->fd < 0) {
+        int e = errno;
+        free(s);
+        return sd_errf(err, SD_EIO, "%s: %s", path, strerror(e));
+    }
+    struct stat st;
+    int rc = fstat(s->fd, &st) < 0 || !S_ISREG(st.st_mode)
+                 ? sd_errf(err, SD_EIO, "%s: not a regular file", path) : try_ply_header(s, err);
+    if (rc == 1) {
+        s->buf = malloc((size_t)BLOCK * s->rec);
+        rc = s->buf ? bounds_pass(s, err) : sd_errf(err, SD_ENOMEM, "out of memory");
+    } else if (rc == 0) {
+        rc = pc_load(path, &s->cloud, err);
+        if (rc == 0) {
+            s->have_cloud = 1;
+            lod_src_info *in = &s->info;
+            in->n = s->cloud.n;
+            in->n_dropped = s->cloud.n_dropped;
+            memcpy(in->offset, s->cloud.offset, sizeof in->offset);
+            memcpy(in->bmin, s->cloud.bmin, sizeof in->bmin);
+            memcpy(in->bmax, s->cloud.bmax, sizeof in->bmax);
+            in->attrs = s->cloud.attrs & PC_ATTR_RGB;
+            in->has_viewpoint = s->cloud.has_viewpoint;
+            memcpy(in->viewpoint, s->cloud.viewpoint, sizeof in->viewpoint);
+            memcpy(in->format, s->cloud.format, sizeof in->format);
+            in->format[sizeof in->format - 1] = 0;
+        }
+    }
+    if (rc < 0) {
+        lod_src_close(s);
+        return rc;
+    }
+    /* the centroid, as prep.c sums it (doubles of the float positions) */
+    double c[3] = {0, 0, 0};
+    float *pos = malloc((size_t)BLOCK * 12);
+    uint32_t *rgba = malloc((size_t)BLOCK * 4);
+    rc = pos && rgba ? lod_src_rewind(s, err) : sd_errf(err, SD_ENOMEM, "out of memory");
+    int64_t m;
+    while (rc == 0 && (m = lod_src_next(s, pos, rgba, BLOCK, err)) > 0)
+        for (int64_t i = 0; i < m; i++)
+            for (int a = 0; a < 3; a++) c[a] += pos[3 * i + a];
+    if (rc == 0 && m < 0) rc = (int)m;
+    free(pos);
+    free(rgba);
+    if (rc < 0) {
+        lod_src_close(s);
+        return rc;
+    }
+    for (int a = 0; a < 3; a++) s->info.centroid[a] = c[a] / (double)s->info.n;
+    *out = s;
+    return 0;
+}
+
+void lod_src_close(lod_src *s)
+{
+    if (!s) return;
+    if (s->fd >= 0) close(s->fd);
+    free(s->buf);
+    if (s->have_cloud) pc_cloud_free(&s->cloud);
+    free(s);
+}
+
+void lod_src_get_info(const lod_src *s, lod_src_info *info)
+{
+    *info = s->info;
+}
+
+int lod_src_rewind(lod_src *s, sd_err *err)
+{
+    (void)err;
+    s->next = 0;
+    return 0;
+}
+
+int64_t lod_src_next(lod_src *s, float *pos, uint32_t *rgba, size_t max, sd_err *err)
+{
+    size_t k = 0;
+    if (s->have_cloud) {
+        while (k < max && s->next < s->cloud.n) {
+            uint64_t i = s->next++;
+            memcpy(pos + 3 * k, s->cloud.pos + 3 * i, 12);
+            uint32_t v = 0xFFFFFFFFu;
+            if (s->cloud.attrs & PC_ATTR_RGB) memcpy(&v, s->cloud.rgba + 4 * i, 4);
+            rgba[k++] = v;
+        }
+        return (int64_t)k;
+    }
+    while (k < max && s->next < s->nrec) {
+        size_t want = max - k < BLOCK ? max - k : BLOCK;
+        size_t m = s->nrec - s->next < want ? (size_t)(s->nrec - s->next) : want;
+        int rc = read_records(s, s->next, m, err);
+        if (rc < 0) return rc;
+        for (size_t i = 0; i < m; i++) {
+            const uint8_t *p = s->buf + i * s->rec;
+            double x[3];
+            record_xyz(s, p, x);
+            if (!isfinite(x[0]) || !isfinite(x[1]) || !isfinite(x[2])) continue;
+            for (int a = 0; a < 3; a++) pos[3 * k + a] = (float)(x[a] - s->info.offset[a]);
+            rgba[k++] = record_rgba(s, p);
+        }
+        s->next += m;
+    }
+    return (int64_t)k;
+}
