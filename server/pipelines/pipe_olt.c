@@ -15,8 +15,9 @@
  *      front of the target's nearest surface (a solid point in front of it hides it).
  * So a pixel shows lambda * layer + (1 - lambda) * (the opaque surface behind the layer).
  * The membership test is per point (its centre pixel), not per fragment: a big soft splat that
- * straddles a depth edge of the layer is either all layer or all behind. Clouds in several
- * buffer sets are refused (the filter reads one field buffer a frame). Costs about two splat
+ * straddles a depth edge of the layer is either all layer or all behind. A cloud in several
+ * buffer sets (a LOD cloud's node pool, a large cloud) gets each set's field buffer bound as
+ * splat's passes make the set current (splat__set_set_hook). Costs about two splat
  * frames plus a full-frame blend; `make bench` measures it. */
 #include <stdlib.h>
 #include <string.h>
@@ -32,7 +33,21 @@ typedef struct olt_state {
     GLuint f_tex, lkeys_tex, lkeys_buf;
     uint64_t lkeys_bytes;
     rnd_target layer;          /* fbo + RGBA8 colour texture of the frame's size */
+    const gl_api *gl;          /* for bind_field, during a frame */
+    const soft_fields *fs;     /*   the frame's cloud's field buffers */
 } olt_state;
+
+/* bind_field: splat's passes made buffer set `set` current: its field buffer on RND_T_SOFT_F. */
+static void bind_field(void *user, uint32_t set)
+{
+    olt_state *s = user;
+    const gl_api *gl = s->gl;
+    if (!s->fs || set >= s->fs->nsets) return;
+    gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_F);
+    gl->BindTexture(GL_TEXTURE_BUFFER, s->f_tex);
+    gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, s->fs->sets[set].f_buf);
+    gl->ActiveTexture(GL_TEXTURE0);
+}
 
 static void olt_destroy(rnd_kit *k, void *state)
 {
@@ -152,21 +167,16 @@ static int olt_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     const gl_api *gl = k->gl;
     const sp_params *p = d->params;
     if (!fs) return sd_errf(err, SD_EINVAL, "olt: the cloud was not attached");
-    if (d->cloud->nsets != 1)
-        return sd_errf(err, SD_ELIMIT, "olt: a cloud in %u buffer sets is not supported (one "
-                       "field buffer a frame)", d->cloud->nsets);
     int rc = soft_fields_update(gl, d->cloud, fs, p, err);
     if (rc < 0) return rc;
     if ((rc = layer_ensure(gl, s, d->view->width, d->view->height, err)) < 0) return rc;
+    /* each buffer set's field buffer is bound when splat's passes make the set current */
+    s->gl = gl;
+    s->fs = fs;
+    splat__set_set_hook(s->splat, bind_field, s);
     splat_frame f;
     int nstripes = splat__frame_begin(k, s->splat, d, &f, err);
     rc = nstripes < 0 ? nstripes : 0;
-    if (nstripes > 0) {
-        gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_F);
-        gl->BindTexture(GL_TEXTURE_BUFFER, s->f_tex);
-        gl->TexBuffer(GL_TEXTURE_BUFFER, GL_R32UI, fs->sets[0].f_buf);
-        gl->ActiveTexture(GL_TEXTURE0);
-    }
     rnd_draw ld = *d;
     ld.target = &s->layer;
     for (int i = 0; i < nstripes && rc == 0; i++) {
@@ -211,6 +221,8 @@ static int olt_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
         compose(k, s, d, f.y0, f.n, yb, nb);
     }
     int end = splat__frame_end(k, s->splat, err);
+    splat__set_set_hook(s->splat, NULL, NULL);
+    s->fs = NULL;
     return rc < 0 ? rc : end;
 }
 

@@ -125,6 +125,8 @@ typedef struct splat_state {
                                   there 1024 groups of 64 (1M points: 15 each) measured 20-25 %
                                   faster than one group per 64 points; a GPU wants them all. */
     int max_rows;              /* rnd_pipe_opts.splat_stripe_rows (tests): rows per stripe */
+    void (*set_hook)(void *user, uint32_t set); /* splat__set_set_hook */
+    void *set_hook_user;
     GLuint vao;                /* empty, for the resolve's two triangles       */
     GLuint frame_buf;          /* the accumulation buffer: Px per pixel of one stripe */
     GLuint frame_tex;          /* the same buffer as a buffer texture, for the resolve */
@@ -267,6 +269,7 @@ static int64_t set_points(rnd_kit *k, splat_state *s, const rnd_draw *d, uint32_
     int64_t total = rnd_kit_set_ranges(k, d->view, set, &nranges, &first, err);
     if (total <= 0) return total;
     rnd_kit_bind_set(k, &d->cloud->sets[set], d->params->color);
+    if (s->set_hook) s->set_hook(s->set_hook_user, set);
     for (int p = 0; p < P_RESOLVE; p++) {
         k->gl->UseProgram(s->prog[p]);
         if (s->loc[p][U_TOTAL] >= 0) k->gl->Uniform1ui(s->loc[p][U_TOTAL], (GLuint)total);
@@ -604,6 +607,13 @@ void splat__set_filter(rnd_kit *k, void *state, int mode, float t)
         if (s->floc[p][0] >= 0) k->gl->Uniform1i(s->floc[p][0], mode);
         k->gl->Uniform1f(s->floc[p][1], t);
     }
+}
+
+void splat__set_set_hook(void *state, void (*fn)(void *user, uint32_t set), void *user)
+{
+    splat_state *s = state;
+    s->set_hook = fn;
+    s->set_hook_user = user;
 }
 
 void splat__destroy(rnd_kit *k, void *state)

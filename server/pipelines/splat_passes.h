@@ -44,6 +44,10 @@ enum {
 /* splat__set_filter: after splat__frame_begin, the filter mode and threshold of a
  * splat__create_filtered state. */
 void splat__set_filter(rnd_kit *k, void *state, int mode, float t);
+/* splat__set_set_hook: fn(user, set) runs whenever the passes make buffer set `set` current
+ * (before its points are drawn), so a filtered state's caller can bind that set's field
+ * buffer; NULL: none. */
+void splat__set_set_hook(void *state, void (*fn)(void *user, uint32_t set), void *user);
 /* splat__keys_buffer: the storage buffer behind splat__keys_texture, and its bytes. */
 GLuint splat__keys_buffer(const void *state, uint64_t *bytes);
 void splat__destroy(rnd_kit *k, void *state);
