@@ -80,6 +80,7 @@ void pixel(int b, bool all)
 #else
 layout(binding = T_KAWATA_PTS) uniform samplerBuffer u_pts;
 layout(std430, binding = B_KAWATA_SPLATS) writeonly restrict buffer Splats { vec4 splats[]; };
+layout(std430, binding = B_KAWATA_TILES) writeonly restrict buffer Tiles { uint tiles[]; };
 uniform mat4 u_proj;
 uniform ivec2 u_fsize;
 uniform float u_gamma;   // depth tolerance: u_gamma + u_slope * depth
@@ -238,6 +239,15 @@ void pixel(ivec2 q, ivec2 blo, ivec2 bhi, int w)
     vec4 clip = u_proj * vec4(pa, 1.0);
     splats[2 * b] = vec4((clip.xy / clip.w * 0.5 + 0.5) * vec2(u_fsize), -pa.z, 1.0);
     splats[2 * b + 1] = vec4(col, 1.0);
+    // The 8x8 tiles of buffer pixels whose frame pixels this splat may reach (pass 5 reads
+    // the 5x5 buffer pixels from floor(u) - 2, u a frame pixel's centre in buffer pixels: so
+    // those of buffer pixels q - 3 .. q + 3, at most 2x2 tiles) are marked for pass 5.
+    int tw = (u_bsize.x + 7) >> 3;
+    ivec2 t0 = max(q - 3, ivec2(0)) >> 3, t1 = min(q + 3, u_bsize - 1) >> 3;
+    tiles[t0.y * tw + t0.x] = 1u;
+    tiles[t0.y * tw + t1.x] = 1u;
+    tiles[t1.y * tw + t0.x] = 1u;
+    tiles[t1.y * tw + t1.x] = 1u;
     atomicAdd(nsplats, 1u);
 }
 #endif

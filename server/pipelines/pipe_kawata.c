@@ -57,16 +57,20 @@
  *           summed weight. A cut-off of 1.5 (a 4x4 gather) left 94 one-pixel holes in the
  *           README figure's view of the 1M scan, where buffer pixels of the far ground are
  *           empty; 2 leaves 14. On llvmpipe a fragment pass shades whole pixel quads at once,
- *           where scattering splats with float atomics runs lane by lane.
+ *           where scattering splats with float atomics runs lane by lane. It is drawn as two
+ *           triangles per 8x8 tile of buffer pixels that the fit marked as within reach of a
+ *           splat, and none elsewhere (kawata_splat.vert), so empty parts of the rectangle
+ *           are not rasterised: the same pixels are written, with the same values.
  *
  * A cloud in several buffer sets (pipe.h) is drawn set by set: passes 1 and 2 key points by
  * their cloud-wide index, and STAGE 1 runs once per set, each resolving the points of its own.
  *
  * Cost (the 1M scan at 1280x720, CPU time of both llvmpipe threads, glFinish between passes,
- * a loaded 2-core machine): clears ~2 ms, pass 1 ~28, pass 2 ~26, the list ~1, pass 3's
- * resolve ~9, the fit ~10, the gather ~18: ~95 ms against `splat`'s ~85 (with fragment passes
- * over the rectangle the resolve took ~13 and the fit ~22; the resolve's cost is its random
- * reads of the two points' positions and colours, not its pixel count). That cloud is denser
+ * a loaded 2-core machine): clears ~2 ms, pass 1 ~27, pass 2 ~25, the list ~1, pass 3's
+ * resolve ~9, the fit ~11, the gather ~11: ~88 ms against `splat`'s ~85 (with fragment passes
+ * over the whole rectangle the resolve took ~13, the fit ~22 and the gather ~18; the
+ * resolve's cost is its random reads of the two points' positions and colours, not its pixel
+ * count). That cloud is denser
  * than the frame, so rho is 1 and the buffer is the frame; passes 1 and 2 over every point are
  * each as costly as the whole raster pass of `points`, and together already more than half of
  * `splat`. Where the buffer is smaller than the frame it wins: bunnyData.pts 32 ms against 72
@@ -93,7 +97,8 @@ enum { LIST_PER = 32 };              /* passes 3-4: list entries an invocation, 
     X(PER, "u_per") X(BASE, "u_base") X(SETN, "u_count") X(PASS, "u_pass")                    \
     X(IBITS, "u_index_bits") X(GAMMA, "u_gamma") X(QSCALE, "u_qscale") X(QMAX, "u_qmax")       \
     X(SLOPE, "u_slope") X(COLOR, "u_color") X(LIGHT, "u_light") X(SUPPORT, "u_min_support")   \
-    X(ALL, "u_all") X(CUTOFF, "u_cutoff") X(BLO, "u_blo") X(BHI, "u_bhi") X(KERNEL, "u_k")
+    X(ALL, "u_all") X(CUTOFF, "u_cutoff") X(BLO, "u_blo") X(BHI, "u_bhi") X(KERNEL, "u_k")    \
+    X(T0, "u_t0") X(TCOLS, "u_tcols")
 
 enum {
 #define KW_U_ENUM_(id, name) U_##id,
@@ -103,7 +108,7 @@ enum {
 };
 
 enum { P_RASTER = 0, P_LIST, P_RESOLVE, P_FIT, P_SPLAT, P_COUNT };
-enum { B_DEPTH = 0, B_NEAR, B_FAR, B_PTS, B_SPLATS, B_LIST, B_COUNTER, NBUF };
+enum { B_DEPTH = 0, B_NEAR, B_FAR, B_PTS, B_SPLATS, B_LIST, B_TILES, B_COUNTER, NBUF };
 enum { PTS_BYTES = 64, SPLAT_BYTES = 32 }; /* per buffer pixel */
 
 typedef struct kawata_state {
@@ -247,15 +252,6 @@ static void raster_set(const gl_api *gl, const kawata_state *s, const rnd_gpu_cl
     gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
 }
 
-/* draw_rect: one triangle over the viewport, limited to rect by the scissor. */
-static void draw_rect(const gl_api *gl, const kawata_state *s, const int r[4])
-{
-    gl->Scissor(r[0], r[1], r[2] - r[0], r[3] - r[1]);
-    gl->BindVertexArray(s->vao);
-    gl->DrawArrays(GL_TRIANGLES, 0, 3);
-    gl->BindVertexArray(0);
-}
-
 static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
 {
     kawata_state *s = state;
@@ -318,6 +314,9 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     buffer(gl, s, B_SPLATS, nb * SPLAT_BYTES, RND_B_KAWATA_SPLATS, GL_RGBA32F,
            RND_T_KAWATA_SPLATS);
     buffer(gl, s, B_LIST, nb * 4, RND_B_KAWATA_LIST, GL_R32UI, RND_T_KAWATA_LIST);
+    int tw = (bw + 7) / 8, th = (bh + 7) / 8;
+    buffer(gl, s, B_TILES, (uint64_t)tw * (uint64_t)th * 4, RND_B_KAWATA_TILES, GL_R32UI,
+           RND_T_KAWATA_TILES);
     buffer(gl, s, B_COUNTER, 8, RND_B_KAWATA_COUNT, 0, 0);
     GLintptr row0 = (GLintptr)brect[1] * bw * 4;
     GLsizeiptr rows = (GLsizeiptr)(brect[3] - brect[1]) * bw * 4;
@@ -326,6 +325,13 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     fill(gl, s->buf[B_FAR], row0, rows, 0);
     fill(gl, s->buf[B_SPLATS], (GLintptr)brect[1] * bw * SPLAT_BYTES,
          (GLsizeiptr)(brect[3] - brect[1]) * bw * SPLAT_BYTES, 0);
+    /* the tiles within reach of the rectangle's splats (3 buffer pixels around it) */
+    int trect[4] = {(brect[0] - 3 > 0 ? brect[0] - 3 : 0) / 8,
+                    (brect[1] - 3 > 0 ? brect[1] - 3 : 0) / 8,
+                    (brect[2] + 3 < bw ? brect[2] + 3 : bw - 1) / 8 + 1,
+                    (brect[3] + 3 < bh ? brect[3] + 3 : bh - 1) / 8 + 1};
+    fill(gl, s->buf[B_TILES], (GLintptr)trect[1] * tw * 4,
+         (GLsizeiptr)(trect[3] - trect[1]) * tw * 4, 0);
     fill(gl, s->buf[B_COUNTER], 0, 8, 0);
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
 
@@ -412,9 +418,14 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     gl->Disable(GL_BLEND);
     gl->Enable(GL_SCISSOR_TEST);
     gl->UseProgram(s->prog[P_SPLAT]);
+    gl->Uniform2i(s->loc[P_SPLAT][U_T0], trect[0], trect[1]);
+    gl->Uniform1i(s->loc[P_SPLAT][U_TCOLS], trect[2] - trect[0]);
     gl->BindFramebuffer(GL_FRAMEBUFFER, d->target->fbo);
     gl->Viewport(0, 0, v->width, v->height);
-    draw_rect(gl, s, rect);
+    gl->Scissor(rect[0], rect[1], rect[2] - rect[0], rect[3] - rect[1]);
+    gl->BindVertexArray(s->vao);
+    gl->DrawArraysInstanced(GL_TRIANGLES, 0, 6, (trect[2] - trect[0]) * (trect[3] - trect[1]));
+    gl->BindVertexArray(0);
     gl->Disable(GL_SCISSOR_TEST);
     /* The splat count; the frame waits for the GPU at its end anyway (render.c's glFinish). */
     GLuint count = 0;
