@@ -21,9 +21,9 @@
  * gather of cut-off 2); at 3.5 (2.7 random points a buffer pixel, 12 of a grid) none. The price
  * is the paper's own: a blurrier image than `splat` on clean scans.
  *
- *   pass 1  kawata_raster.comp, u_pass 1: per point, atomicMin of its eye depth (float bits)
+ *   pass 1  kawata_raster.comp, PASS 1: per point, atomicMin of its eye depth (float bits)
  *           into its buffer pixel: Omega_1's depth.
- *   pass 2  kawata_raster.comp, u_pass 2: points with exactly that depth store their index
+ *   pass 2  kawata_raster.comp, PASS 2: points with exactly that depth store their index
  *           (atomicMin: ties go to the lowest index), points behind it by at most gamma store
  *           atomicMax of (depth step quantised to the high bits | index): the farthest point
  *           within gamma, Omega_2. gamma = kawata_gamma x the bounding box's diagonal (paper:
@@ -94,7 +94,7 @@ enum { LIST_PER = 32 };              /* passes 3-4: list entries an invocation, 
     X(VIEWPROJ, "u_viewproj") X(VIEW, "u_view") X(PROJ, "u_proj") X(BSIZE, "u_bsize")         \
     X(FSIZE, "u_fsize") X(ZNEAR, "u_znear") X(ZFAR, "u_zfar") X(TOTAL, "u_total")             \
     X(NRANGES, "u_nranges") X(FIRST, "u_first") X(STRIDE, "u_stride") X(THREADS, "u_threads")  \
-    X(PER, "u_per") X(BASE, "u_base") X(SETN, "u_count") X(PASS, "u_pass")                    \
+    X(PER, "u_per") X(BASE, "u_base") X(SETN, "u_count")                                       \
     X(IBITS, "u_index_bits") X(GAMMA, "u_gamma") X(QSCALE, "u_qscale") X(QMAX, "u_qmax")       \
     X(SLOPE, "u_slope") X(COLOR, "u_color") X(LIGHT, "u_light") X(SUPPORT, "u_min_support")   \
     X(ALL, "u_all") X(CUTOFF, "u_cutoff") X(BLO, "u_blo") X(BHI, "u_bhi") X(KERNEL, "u_k")    \
@@ -107,7 +107,7 @@ enum {
     U_COUNT
 };
 
-enum { P_RASTER = 0, P_LIST, P_RESOLVE, P_FIT, P_SPLAT, P_COUNT };
+enum { P_RASTER1 = 0, P_RASTER2, P_LIST, P_RESOLVE, P_FIT, P_SPLAT, P_COUNT };
 enum { B_DEPTH = 0, B_NEAR, B_FAR, B_PTS, B_SPLATS, B_LIST, B_TILES, B_COUNTER, NBUF };
 enum { PTS_BYTES = 64, SPLAT_BYTES = 32 }; /* per buffer pixel */
 
@@ -148,7 +148,8 @@ static int kawata_create(rnd_kit *k, void **state, sd_err *err)
         int n;
         const char *defs;
     } progs[P_COUNT] = {
-        [P_RASTER] = {{"kawata_raster.comp"}, 1, NULL},
+        [P_RASTER1] = {{"kawata_raster.comp"}, 1, "#define PASS 1\n"},
+        [P_RASTER2] = {{"kawata_raster.comp"}, 1, "#define PASS 2\n"},
         [P_LIST] = {{"kawata_fit.comp"}, 1, "#define STAGE 0\n"},
         [P_RESOLVE] = {{"kawata_fit.comp"}, 1, "#define STAGE 1\n"},
         [P_FIT] = {{"kawata_fit.comp"}, 1, "#define STAGE 2\n"},
@@ -239,7 +240,8 @@ static void raster_set(const gl_api *gl, const kawata_state *s, const rnd_gpu_cl
     if (!groups) groups = 1;
     uint32_t gx = groups < MAX_GROUPS_X ? groups : MAX_GROUPS_X, gy = (groups + gx - 1) / gx;
     uint32_t threads = gx * gy * GROUP;
-    const GLint *l = s->loc[P_RASTER];
+    gl->UseProgram(s->prog[P_RASTER1 + pass - 1]);
+    const GLint *l = s->loc[P_RASTER1 + pass - 1];
     gl->Uniform1ui(l[U_TOTAL], total);
     gl->Uniform1ui(l[U_NRANGES], nranges);
     gl->Uniform1ui(l[U_FIRST], first);
@@ -247,7 +249,6 @@ static void raster_set(const gl_api *gl, const kawata_state *s, const rnd_gpu_cl
     gl->Uniform1ui(l[U_THREADS], threads);
     gl->Uniform1ui(l[U_PER], (total + threads - 1) / threads);
     gl->Uniform1ui(l[U_BASE], (GLuint)c->sets[set].base);
-    gl->Uniform1i(l[U_PASS], pass);
     gl->DispatchCompute(gx, gy, 1);
     gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
 }
@@ -361,7 +362,6 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     }
 
     /* Passes 1 and 2, each over every buffer set (one set: its range table is made once). */
-    gl->UseProgram(s->prog[P_RASTER]);
     int rebind = c->nsets > 1;
     uint32_t nranges = 0, first = 0;
     int64_t total = 0;
