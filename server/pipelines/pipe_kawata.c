@@ -66,11 +66,11 @@
  * their cloud-wide index, and STAGE 1 runs once per set, each resolving the points of its own.
  *
  * Cost (the 1M scan at 1280x720, CPU time of both llvmpipe threads, glFinish between passes,
- * a loaded 2-core machine): clears ~2 ms, pass 1 ~27, pass 2 ~25, the list ~1, pass 3's
- * resolve ~9, the fit ~11, the gather ~11: ~88 ms against `splat`'s ~85 (with fragment passes
- * over the whole rectangle the resolve took ~13, the fit ~22 and the gather ~18; the
- * resolve's cost is its random reads of the two points' positions and colours, not its pixel
- * count). That cloud is denser
+ * a loaded 2-core machine): clears ~2.5 ms, pass 1 ~23, pass 2 ~24, the list ~1, pass 3's
+ * resolve ~10, the fit ~11, the gather ~11: ~83 ms against `splat`'s ~85 (before: one raster
+ * program for both passes, 28 + 26, and fragment passes over the whole rectangle, the resolve
+ * ~13, the fit ~22 and the gather ~18; the resolve's cost is its random reads of the two
+ * points' positions and colours, not its pixel count). That cloud is denser
  * than the frame, so rho is 1 and the buffer is the frame; passes 1 and 2 over every point are
  * each as costly as the whole raster pass of `points`, and together already more than half of
  * `splat`. Where the buffer is smaller than the frame it wins: bunnyData.pts 32 ms against 72
