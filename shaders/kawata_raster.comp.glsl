@@ -49,7 +49,11 @@ void main()
     float znear = u_znear, zfar = u_zfar, gamma = u_gamma, qscale = u_qscale;
     uint total = u_total, nranges = u_nranges, first = u_first, threads = u_threads;
     uint per = u_per, base = u_base, ibits = u_index_bits, qtop = u_qmax - 1u;
-    const int pass = PASS;
+#if PASS == 2
+    const int pass = 2;
+#else
+    const int pass = 1; // also where no PASS is defined (test_gl compiles every shader bare)
+#endif
     uint gid = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * u_stride;
     for (uint j = 0u; j < per; j++) {
         uint k = gid + j * threads;

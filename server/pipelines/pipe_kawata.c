@@ -275,6 +275,9 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     d->out->buffer_w = bw;
     d->out->buffer_h = bh;
     uint64_t nb = (uint64_t)bw * (uint64_t)bh;
+    if (bw > 65535 || bh > 65535) /* the list keeps x | y << 16 (frames: 16384 a side) */
+        return sd_errf(err, SD_ELIMIT, "a %dx%d kawata image buffer is over 65535 a side", bw,
+                       bh);
     if (nb * PTS_BYTES > (uint64_t)k->max_ssbo || nb * 4 > (uint64_t)k->max_texels)
         return sd_errf(err, SD_ELIMIT, "a %dx%d kawata image buffer needs a %llu-byte storage "
                        "block, over the driver's %lld", bw, bh,
