@@ -5,48 +5,45 @@
 // exp(-u_k * sum), which edl.c multiplies into the colour by blending. Only neighbours nearer
 // than the pixel darken it, so the far side of a depth step gets a dark rim and the near side
 // keeps its colour; a plane facing the camera (one depth) is left as it is (shade exactly 1).
-// Background pixels (depth +inf) are discarded, and background neighbours or ones outside the
-// rectangle edl.c copied (u_lo, u_hi: the cloud's screen rectangle with a margin, inside the
-// frame) add nothing.
+// Background pixels (depth +inf) get the shade 1, which leaves them as they are; background
+// neighbours add nothing.
 //
 // The sum of logs is taken as the log of one product, sum log2(z / min(z, z_n)) =
 // log2(prod z / min(z, z_n)), each ratio clamped to 2^15 so that the product stays finite: one
 // log2 a pixel instead of 4. The depth is read from a buffer texture holding a copy of the
-// frame's depth_eye (edl.c): on llvmpipe texelFetch from a buffer texture gathers all SIMD lanes
-// at once, where each 2-D texture fetch cost ~3 ms of CPU a 1280x720 frame (measured: 9 fetches
-// a pixel through the 2-D texture ~14 ms). 4 neighbours rather than 8 (the issue allows
+// frame's depth_eye over the rectangle edl.c shades, framed by u_r rows and columns of +inf
+// (edl.c): every neighbour's texel exists and one outside the rectangle reads as background, so
+// the pass has no bounds tests. On llvmpipe texelFetch from a buffer texture gathers all SIMD
+// lanes at once, where each 2-D texture fetch cost ~3 ms of CPU a 1280x720 frame (measured: 9
+// fetches a pixel through the 2-D texture ~14 ms). 4 neighbours rather than 8 (the issue allows
 // either): with 8 the pass cost ~8 ms of CPU (4.5 ms wall) on the 1M scan's frame, over the
-// 3 ms target.
+// 3 ms target. llvmpipe runs both sides of a branch and every lane of a discarded fragment
+// (masked), so neither `discard` nor per-neighbour bounds tests saved work: on Guanyin.ply's
+// rectangle (345k pixels) the pass with them cost 5.4 ms of CPU; without, see edl.c.
 
 #include "lib_bindings.glsl"
 
 layout(binding = T_EDL_DEPTH) uniform samplerBuffer u_depth; // R32F eye depth, +inf = background
 
-uniform ivec2 u_size;
-uniform ivec2 u_lo, u_hi;  // the copied rectangle [u_lo, u_hi); the copy holds stale data outside
+uniform ivec2 u_org;       // the frame pixel of the copy's texel 0 (the rectangle's corner - u_r)
+uniform int u_pw;          // texels a row of the copy: the rectangle's width + 2 u_r
 uniform int u_r;           // the radius in whole pixels
 uniform float u_k;         // RND_EDL_SCALE * edl_strength / 4
 
 layout(location = 0) out vec4 o_shade;
 
-// z / min(z, z_n) for the neighbour at p + o, clamped to [1, 2^15]; 1 outside the rectangle.
-float ratio(ivec2 p, ivec2 o, float z, ivec2 size)
-{
-    ivec2 q = p + o;
-    if (q.x < u_lo.x || q.y < u_lo.y || q.x >= u_hi.x || q.y >= u_hi.y) return 1.0;
-    float zn = texelFetch(u_depth, q.y * size.x + q.x).r;
-    return z / clamp(zn, z * (1.0 / 32768.0), z);
-}
-
 void main()
 {
-    ivec2 size = u_size;
-    int r = u_r;
-    ivec2 p = ivec2(gl_FragCoord.xy);
-    float z = texelFetch(u_depth, p.y * size.x + p.x).r;
-    if (!(z < 3.0e38)) discard;
-    float prod = ratio(p, ivec2(r, 0), z, size) * ratio(p, ivec2(0, r), z, size) *
-                 ratio(p, ivec2(-r, 0), z, size) * ratio(p, ivec2(0, -r), z, size);
-    float shade = exp(-u_k * log2(prod));
+    int r = u_r, pw = u_pw;
+    ivec2 p = ivec2(gl_FragCoord.xy) - u_org;
+    int c = p.y * pw + p.x;
+    float z = texelFetch(u_depth, c).r;
+    // z / min(z, z_n) per neighbour, clamped to [1, 2^15] (1 for a background neighbour)
+    float lo = z * (1.0 / 32768.0);
+    float prod = (z / clamp(texelFetch(u_depth, c + r).r, lo, z)) *
+                 (z / clamp(texelFetch(u_depth, c + r * pw).r, lo, z)) *
+                 (z / clamp(texelFetch(u_depth, c - r).r, lo, z)) *
+                 (z / clamp(texelFetch(u_depth, c - r * pw).r, lo, z));
+    float shade = z < 3.0e38 ? exp(-u_k * log2(prod)) : 1.0;
     o_shade = vec4(shade, shade, shade, 1.0);
 }

@@ -1,7 +1,7 @@
 #version 430
 // kawata_splat.frag — pass 5 of the `kawata` pipeline (pipe_kawata.c): Gaussian splats of the
 // image buffer magnified to the frame with normalised blending, as a gather. A splat (from
-// kawata_fit.frag: its centre in frame pixels, eye depth, colour) has the weight
+// kawata_fit.comp: its centre in frame pixels, eye depth, colour) has the weight
 // exp(-r^2 / (2 s^2)) at distance r < R = u_cutoff frame pixels from its centre (s: 0.75 buffer
 // pixels, R: 2, so that a frame pixel inside an empty buffer pixel still reaches the splats of
 // its neighbours), so the splats that reach a frame pixel lie in the 5x5 buffer pixels around
@@ -19,7 +19,7 @@
 layout(binding = T_KAWATA_SPLATS) uniform samplerBuffer u_splats;
 
 uniform ivec2 u_bsize, u_fsize;
-uniform ivec2 u_blo, u_bhi; // the buffer pixels this frame wrote (kawata_fit.frag)
+uniform ivec2 u_blo, u_bhi; // the buffer pixels this frame wrote (kawata_fit.comp)
 uniform float u_cutoff;   // R, frame pixels
 uniform float u_k;        // 1 / (2 s^2), s the kernel's standard deviation in frame pixels
 uniform float u_gamma, u_slope;

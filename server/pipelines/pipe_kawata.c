@@ -2,9 +2,9 @@
  * five passes over clouds that need nothing but positions (colours are used when present;
  * file normals, radii and F are never read). Passes 1-2 rasterise points into the small image
  * buffer with compute shaders where the paper used point sprites and the depth test (DESIGN.md
- * "Rasterisation strategy"); passes 3-5 are fragment passes (llvmpipe shades pixel quads at
- * once) that read everything through buffer textures (gathers on llvmpipe; a 2-D texelFetch
- * cost several times as much) and, for 3-4, write storage buffers.
+ * "Rasterisation strategy"); passes 3-4 are compute passes over the list of covered buffer
+ * pixels, pass 5 a fragment pass (llvmpipe shades pixel quads at once); all read through
+ * buffer textures (gathers on llvmpipe; a 2-D texelFetch cost several times as much).
  *
  * Image buffer (eq. 1-3). The paper's eq. 2-3 are garbled in the text; DESIGN.md reads them as:
  * rho = the frame-buffer pixels that the point spacing sigma covers at the distance of the
@@ -21,16 +21,21 @@
  * gather of cut-off 2); at 3.5 (2.7 random points a buffer pixel, 12 of a grid) none. The price
  * is the paper's own: a blurrier image than `splat` on clean scans.
  *
- *   pass 1  kawata_raster.comp, u_pass 1: per point, atomicMin of its eye depth (float bits)
+ *   pass 1  kawata_raster.comp, PASS 1: per point, atomicMin of its eye depth (float bits)
  *           into its buffer pixel: Omega_1's depth.
- *   pass 2  kawata_raster.comp, u_pass 2: points with exactly that depth store their index
+ *   pass 2  kawata_raster.comp, PASS 2: points with exactly that depth store their index
  *           (atomicMin: ties go to the lowest index), points behind it by at most gamma store
  *           atomicMax of (depth step quantised to the high bits | index): the farthest point
  *           within gamma, Omega_2. gamma = kawata_gamma x the bounding box's diagonal (paper:
  *           0.5-1 %; default 0.75 %). llvmpipe has no 64-bit atomics; quantising the step
  *           relative to gamma leaves 32 - index bits levels for it (4096 for 1M points).
- *   pass 3  kawata_fit.frag STAGE 1: per buffer pixel, both points to eye space with their
- *           colours; STAGE 2 averages them (Omega_a, the splat's position),
+ *   list    kawata_fit.comp STAGE 0: the buffer pixels of the rectangle with a nearest point,
+ *           in row order (so that neighbours are read together), for passes 3-4: llvmpipe
+ *           runs every instruction for every SIMD lane, masked, so fragment passes over the
+ *           whole rectangle paid as much for its empty pixels as for covered ones (the 1M
+ *           scan's default view: 74k of 213k covered).
+ *   pass 3  kawata_fit.comp STAGE 1: per listed buffer pixel, both points to eye space with
+ *           their colours; STAGE 2 averages them (Omega_a, the splat's position),
  *   pass 4  and (STAGE 2) fits z = Ax + By + C by least squares to the up to 18 points of the
  *           3x3 neighbourhood in both buffers (eq. 4-5, Cramer's rule on coordinates centred
  *           on Omega_a), normal (A, B, -1) turned towards the eye, Lambert shading (Omega_c).
@@ -52,17 +57,24 @@
  *           summed weight. A cut-off of 1.5 (a 4x4 gather) left 94 one-pixel holes in the
  *           README figure's view of the 1M scan, where buffer pixels of the far ground are
  *           empty; 2 leaves 14. On llvmpipe a fragment pass shades whole pixel quads at once,
- *           where scattering splats with float atomics runs lane by lane.
+ *           where scattering splats with float atomics runs lane by lane. It is drawn as two
+ *           triangles per 8x8 tile of buffer pixels that the fit marked as within reach of a
+ *           splat, and none elsewhere (kawata_splat.vert), so empty parts of the rectangle
+ *           are not rasterised: the same pixels are written, with the same values.
  *
  * A cloud in several buffer sets (pipe.h) is drawn set by set: passes 1 and 2 key points by
  * their cloud-wide index, and STAGE 1 runs once per set, each resolving the points of its own.
  *
- * Cost (`make bench`, the 1M scan at 1280x720, CPU time of both llvmpipe threads, glFinish
- * between passes): pass 1 ~28 ms, pass 2 ~25, pass 3's resolve ~13, the fit ~23, the gather
- * ~18: ~107 ms against `splat`'s ~84. That cloud is denser than the frame, so rho is 1 and
- * the buffer is the frame; the two passes over every point are each as costly as the whole
- * raster pass of `points`. Where the buffer is smaller than the frame it wins: bunnyData.pts
- * 32 ms against 72 (README "Measured performance"). */
+ * Cost (the 1M scan at 1280x720, CPU time of both llvmpipe threads, glFinish between passes,
+ * a loaded 2-core machine): clears ~2.5 ms, pass 1 ~23, pass 2 ~24, the list ~1, pass 3's
+ * resolve ~10, the fit ~11, the gather ~11: ~83 ms against `splat`'s ~85 (before: one raster
+ * program for both passes, 28 + 26, and fragment passes over the whole rectangle, the resolve
+ * ~13, the fit ~22 and the gather ~18; the resolve's cost is its random reads of the two
+ * points' positions and colours, not its pixel count). That cloud is denser
+ * than the frame, so rho is 1 and the buffer is the frame; passes 1 and 2 over every point are
+ * each as costly as the whole raster pass of `points`, and together already more than half of
+ * `splat`. Where the buffer is smaller than the frame it wins: bunnyData.pts 32 ms against 72
+ * (README "kawata and Eye-Dome Lighting"). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -76,16 +88,17 @@ enum { KAWATA_MIN_SUPPORT = 3 };     /* a plane needs three points; see the file
 #define KAWATA_SLOPE_PIXELS 4.0f     /* depth tolerance: buffer pixels of depth per pixel */
 #define KAWATA_CUTOFF 2.0f           /* splat cut-off radius, buffer pixels (5x5 gather) */
 #define KAWATA_SIGMA 0.75f           /* the splats' standard deviation, buffer pixels */
-enum { TEX_ROUND = 64 };             /* the stages' framebuffer grows in steps of this */
+enum { LIST_PER = 32 };              /* passes 3-4: list entries an invocation, at most */
 
 #define KAWATA_UNIFORMS(X)                                                                   \
     X(VIEWPROJ, "u_viewproj") X(VIEW, "u_view") X(PROJ, "u_proj") X(BSIZE, "u_bsize")         \
     X(FSIZE, "u_fsize") X(ZNEAR, "u_znear") X(ZFAR, "u_zfar") X(TOTAL, "u_total")             \
     X(NRANGES, "u_nranges") X(FIRST, "u_first") X(STRIDE, "u_stride") X(THREADS, "u_threads")  \
-    X(PER, "u_per") X(BASE, "u_base") X(SETN, "u_count") X(PASS, "u_pass")                    \
+    X(PER, "u_per") X(BASE, "u_base") X(SETN, "u_count")                                       \
     X(IBITS, "u_index_bits") X(GAMMA, "u_gamma") X(QSCALE, "u_qscale") X(QMAX, "u_qmax")       \
     X(SLOPE, "u_slope") X(COLOR, "u_color") X(LIGHT, "u_light") X(SUPPORT, "u_min_support")   \
-    X(ALL, "u_all") X(CUTOFF, "u_cutoff") X(BLO, "u_blo") X(BHI, "u_bhi") X(KERNEL, "u_k")
+    X(ALL, "u_all") X(CUTOFF, "u_cutoff") X(BLO, "u_blo") X(BHI, "u_bhi") X(KERNEL, "u_k")    \
+    X(T0, "u_t0") X(TCOLS, "u_tcols")
 
 enum {
 #define KW_U_ENUM_(id, name) U_##id,
@@ -94,8 +107,8 @@ enum {
     U_COUNT
 };
 
-enum { P_RASTER = 0, P_RESOLVE, P_FIT, P_SPLAT, P_COUNT };
-enum { B_DEPTH = 0, B_NEAR, B_FAR, B_PTS, B_SPLATS, B_COUNTER, NBUF };
+enum { P_RASTER1 = 0, P_RASTER2, P_LIST, P_RESOLVE, P_FIT, P_SPLAT, P_COUNT };
+enum { B_DEPTH = 0, B_NEAR, B_FAR, B_PTS, B_SPLATS, B_LIST, B_TILES, B_COUNTER, NBUF };
 enum { PTS_BYTES = 64, SPLAT_BYTES = 32 }; /* per buffer pixel */
 
 typedef struct kawata_state {
@@ -106,19 +119,7 @@ typedef struct kawata_state {
     GLuint buf[NBUF];
     uint64_t bytes[NBUF];
     GLuint tex[NBUF];          /* buffer textures over buf[] (0 for the counter) */
-    /* Passes 3-4 are fragment passes that only write storage buffers; this R8 texture, grown
-     * as needed and never drawn to (draw buffer GL_NONE), gives their framebuffer its size. */
-    GLuint rt, fbo;
-    int rt_w, rt_h;
 } kawata_state;
-
-static void free_textures(const gl_api *gl, kawata_state *s)
-{
-    if (s->rt) gl->DeleteTextures(1, &s->rt);
-    if (s->fbo) gl->DeleteFramebuffers(1, &s->fbo);
-    s->rt = s->fbo = 0;
-    s->rt_w = s->rt_h = 0;
-}
 
 static void kawata_destroy(rnd_kit *k, void *state)
 {
@@ -130,7 +131,6 @@ static void kawata_destroy(rnd_kit *k, void *state)
     if (s->vao) gl->DeleteVertexArrays(1, &s->vao);
     gl->DeleteTextures(NBUF, s->tex);
     gl->DeleteBuffers(NBUF, s->buf);
-    free_textures(gl, s);
     memset(s, 0, sizeof *s);
     free(s);
 }
@@ -148,9 +148,11 @@ static int kawata_create(rnd_kit *k, void **state, sd_err *err)
         int n;
         const char *defs;
     } progs[P_COUNT] = {
-        [P_RASTER] = {{"kawata_raster.comp"}, 1, NULL},
-        [P_RESOLVE] = {{"kawata_splat.vert", "kawata_fit.frag"}, 2, "#define STAGE 1\n"},
-        [P_FIT] = {{"kawata_splat.vert", "kawata_fit.frag"}, 2, "#define STAGE 2\n"},
+        [P_RASTER1] = {{"kawata_raster.comp"}, 1, "#define PASS 1\n"},
+        [P_RASTER2] = {{"kawata_raster.comp"}, 1, "#define PASS 2\n"},
+        [P_LIST] = {{"kawata_fit.comp"}, 1, "#define STAGE 0\n"},
+        [P_RESOLVE] = {{"kawata_fit.comp"}, 1, "#define STAGE 1\n"},
+        [P_FIT] = {{"kawata_fit.comp"}, 1, "#define STAGE 2\n"},
         [P_SPLAT] = {{"kawata_splat.vert", "kawata_splat.frag"}, 2, NULL},
     };
     static const char *const unames[U_COUNT] = {
@@ -176,34 +178,6 @@ static int kawata_create(rnd_kit *k, void **state, sd_err *err)
     }
     *state = s;
     return 0;
-}
-
-/* ensure_target: makes the stages' framebuffer at least w x h (grown in steps of TEX_ROUND,
- * never shrunk, so a moving camera does not reallocate it every frame). Returns 0 or SD_EGL. */
-static int ensure_target(const gl_api *gl, kawata_state *s, int w, int h, sd_err *err)
-{
-    if (s->rt && s->rt_w >= w && s->rt_h >= h) return 0;
-    int tw = s->rt_w > w ? s->rt_w : (w + TEX_ROUND - 1) / TEX_ROUND * TEX_ROUND;
-    int th = s->rt_h > h ? s->rt_h : (h + TEX_ROUND - 1) / TEX_ROUND * TEX_ROUND;
-    free_textures(gl, s);
-    gl->GenTextures(1, &s->rt);
-    gl->BindTexture(GL_TEXTURE_2D, s->rt);
-    gl->TexStorage2D(GL_TEXTURE_2D, 1, GL_R8, tw, th);
-    gl->BindTexture(GL_TEXTURE_2D, 0);
-    gl->GenFramebuffers(1, &s->fbo);
-    gl->BindFramebuffer(GL_FRAMEBUFFER, s->fbo);
-    gl->FramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, s->rt, 0);
-    const GLenum none = GL_NONE;
-    gl->DrawBuffers(1, &none);
-    GLenum st = gl->CheckFramebufferStatus(GL_FRAMEBUFFER);
-    gl->BindFramebuffer(GL_FRAMEBUFFER, 0);
-    if (st != GL_FRAMEBUFFER_COMPLETE) {
-        free_textures(gl, s);
-        return sd_errf(err, SD_EGL, "kawata: a %dx%d framebuffer is incomplete (0x%x)", tw, th,
-                       (unsigned)st);
-    }
-    s->rt_w = tw, s->rt_h = th;
-    return gl_check(gl, "making the kawata passes' framebuffer", err);
 }
 
 /* Bits for a point index of a cloud of n points, leaving 0 free in pass 2's keys: the smallest
@@ -266,7 +240,8 @@ static void raster_set(const gl_api *gl, const kawata_state *s, const rnd_gpu_cl
     if (!groups) groups = 1;
     uint32_t gx = groups < MAX_GROUPS_X ? groups : MAX_GROUPS_X, gy = (groups + gx - 1) / gx;
     uint32_t threads = gx * gy * GROUP;
-    const GLint *l = s->loc[P_RASTER];
+    gl->UseProgram(s->prog[P_RASTER1 + pass - 1]);
+    const GLint *l = s->loc[P_RASTER1 + pass - 1];
     gl->Uniform1ui(l[U_TOTAL], total);
     gl->Uniform1ui(l[U_NRANGES], nranges);
     gl->Uniform1ui(l[U_FIRST], first);
@@ -274,18 +249,8 @@ static void raster_set(const gl_api *gl, const kawata_state *s, const rnd_gpu_cl
     gl->Uniform1ui(l[U_THREADS], threads);
     gl->Uniform1ui(l[U_PER], (total + threads - 1) / threads);
     gl->Uniform1ui(l[U_BASE], (GLuint)c->sets[set].base);
-    gl->Uniform1i(l[U_PASS], pass);
     gl->DispatchCompute(gx, gy, 1);
     gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
-}
-
-/* draw_rect: one triangle over the viewport, limited to rect by the scissor. */
-static void draw_rect(const gl_api *gl, const kawata_state *s, const int r[4])
-{
-    gl->Scissor(r[0], r[1], r[2] - r[0], r[3] - r[1]);
-    gl->BindVertexArray(s->vao);
-    gl->DrawArrays(GL_TRIANGLES, 0, 3);
-    gl->BindVertexArray(0);
 }
 
 static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
@@ -310,12 +275,13 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     d->out->buffer_w = bw;
     d->out->buffer_h = bh;
     uint64_t nb = (uint64_t)bw * (uint64_t)bh;
+    if (bw > 65535 || bh > 65535) /* the list keeps x | y << 16 (frames: 16384 a side) */
+        return sd_errf(err, SD_ELIMIT, "a %dx%d kawata image buffer is over 65535 a side", bw,
+                       bh);
     if (nb * PTS_BYTES > (uint64_t)k->max_ssbo || nb * 4 > (uint64_t)k->max_texels)
         return sd_errf(err, SD_ELIMIT, "a %dx%d kawata image buffer needs a %llu-byte storage "
                        "block, over the driver's %lld", bw, bh,
                        (unsigned long long)(nb * PTS_BYTES), (long long)k->max_ssbo);
-    int rc = ensure_target(gl, s, bw, bh, err);
-    if (rc < 0) return rc;
 
     /* Only the buffer pixels of the cloud's screen rectangle (grown by one for the 3x3 fit) are
      * cleared, resolved and fitted: points cannot land outside it, and the shaders treat
@@ -351,13 +317,26 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     buffer(gl, s, B_PTS, nb * PTS_BYTES, RND_B_KAWATA_PTS, GL_RGBA32F, RND_T_KAWATA_PTS);
     buffer(gl, s, B_SPLATS, nb * SPLAT_BYTES, RND_B_KAWATA_SPLATS, GL_RGBA32F,
            RND_T_KAWATA_SPLATS);
-    buffer(gl, s, B_COUNTER, 4, RND_B_KAWATA_COUNT, 0, 0);
+    buffer(gl, s, B_LIST, nb * 4, RND_B_KAWATA_LIST, GL_R32UI, RND_T_KAWATA_LIST);
+    int tw = (bw + 7) / 8, th = (bh + 7) / 8;
+    buffer(gl, s, B_TILES, (uint64_t)tw * (uint64_t)th * 4, RND_B_KAWATA_TILES, GL_R32UI,
+           RND_T_KAWATA_TILES);
+    buffer(gl, s, B_COUNTER, 8, RND_B_KAWATA_COUNT, 0, 0);
     GLintptr row0 = (GLintptr)brect[1] * bw * 4;
     GLsizeiptr rows = (GLsizeiptr)(brect[3] - brect[1]) * bw * 4;
     fill(gl, s->buf[B_DEPTH], row0, rows, 0xFFFFFFFFu);
     fill(gl, s->buf[B_NEAR], row0, rows, 0xFFFFFFFFu);
     fill(gl, s->buf[B_FAR], row0, rows, 0);
-    fill(gl, s->buf[B_COUNTER], 0, 4, 0);
+    fill(gl, s->buf[B_SPLATS], (GLintptr)brect[1] * bw * SPLAT_BYTES,
+         (GLsizeiptr)(brect[3] - brect[1]) * bw * SPLAT_BYTES, 0);
+    /* the tiles within reach of the rectangle's splats (3 buffer pixels around it) */
+    int trect[4] = {(brect[0] - 3 > 0 ? brect[0] - 3 : 0) / 8,
+                    (brect[1] - 3 > 0 ? brect[1] - 3 : 0) / 8,
+                    (brect[2] + 3 < bw ? brect[2] + 3 : bw - 1) / 8 + 1,
+                    (brect[3] + 3 < bh ? brect[3] + 3 : bh - 1) / 8 + 1};
+    fill(gl, s->buf[B_TILES], (GLintptr)trect[1] * tw * 4,
+         (GLsizeiptr)(trect[3] - trect[1]) * tw * 4, 0);
+    fill(gl, s->buf[B_COUNTER], 0, 8, 0);
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
 
     /* Every program's per-frame uniforms (those a program lacks are -1 and skipped). */
@@ -386,7 +365,6 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     }
 
     /* Passes 1 and 2, each over every buffer set (one set: its range table is made once). */
-    gl->UseProgram(s->prog[P_RASTER]);
     int rebind = c->nsets > 1;
     uint32_t nranges = 0, first = 0;
     int64_t total = 0;
@@ -400,14 +378,22 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
             if (total > 0) raster_set(gl, s, c, set, (uint32_t)total, nranges, first, pass);
         }
 
-    /* Pass 3, first half: both points of every buffer pixel to eye space, in one pass for a
-     * cloud in one buffer set; else the rows are cleared to "no point" and each set writes the
-     * points it holds. Fragment passes that write storage buffers only. */
-    gl->Disable(GL_DEPTH_TEST);
-    gl->Disable(GL_BLEND);
-    gl->Enable(GL_SCISSOR_TEST);
-    gl->BindFramebuffer(GL_FRAMEBUFFER, s->fbo);
-    gl->Viewport(0, 0, bw, bh);
+    /* Passes 3-4 run over the list of the covered buffer pixels (those with a nearest point),
+     * in the rectangle's row order: each invocation of the list pass takes LIST_PER pixels
+     * of it. The list's length stays on the GPU, so passes 3-4 start as many invocations, each
+     * taking entries `threads` apart. */
+    uint64_t area = (uint64_t)(brect[2] - brect[0]) * (uint64_t)(brect[3] - brect[1]);
+    uint64_t lgroups = (area + (uint64_t)GROUP * LIST_PER - 1) / ((uint64_t)GROUP * LIST_PER);
+    GLuint lg = lgroups < 1 ? 1 : lgroups > MAX_GROUPS_X ? MAX_GROUPS_X : (GLuint)lgroups;
+    uint32_t lper = (uint32_t)((area + (uint64_t)lg * GROUP - 1) / ((uint64_t)lg * GROUP));
+    gl->UseProgram(s->prog[P_LIST]);
+    gl->Uniform1ui(s->loc[P_LIST][U_PER], lper);
+    gl->DispatchCompute(lg, 1, 1);
+    gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
+
+    /* Pass 3, first half: both points of every listed buffer pixel to eye space, in one pass
+     * for a cloud in one buffer set; else the rows are cleared to "no point" and each set
+     * writes the points it holds. */
     if (rebind)
         fill(gl, s->buf[B_PTS], (GLintptr)brect[1] * bw * PTS_BYTES,
              (GLsizeiptr)(brect[3] - brect[1]) * bw * PTS_BYTES, 0);
@@ -418,21 +404,31 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
         if (rebind) rnd_kit_bind_set(k, &c->sets[set], p->color);
         gl->Uniform1ui(lr[U_BASE], (GLuint)c->sets[set].base);
         gl->Uniform1ui(lr[U_SETN], c->sets[set].n);
-        draw_rect(gl, s, brect);
+        gl->Uniform1ui(lr[U_THREADS], lg * GROUP);
+        gl->DispatchCompute(lg, 1, 1);
         gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
     }
     /* Passes 3 (average) and 4 (plane fit, shading): the splats. */
     gl->UseProgram(s->prog[P_FIT]);
-    draw_rect(gl, s, brect);
+    gl->Uniform1ui(s->loc[P_FIT][U_THREADS], lg * GROUP);
+    gl->DispatchCompute(lg, 1, 1);
     gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT |
                       GL_BUFFER_UPDATE_BARRIER_BIT);
 
     /* Pass 5 into the target over the cloud's screen rectangle, grown by the cut-off. */
     rnd__screen_rect(v, c->bmin, c->bmax, (int)ceilf(cutoff) + 1, rect);
+    gl->Disable(GL_DEPTH_TEST);
+    gl->Disable(GL_BLEND);
+    gl->Enable(GL_SCISSOR_TEST);
     gl->UseProgram(s->prog[P_SPLAT]);
+    gl->Uniform2i(s->loc[P_SPLAT][U_T0], trect[0], trect[1]);
+    gl->Uniform1i(s->loc[P_SPLAT][U_TCOLS], trect[2] - trect[0]);
     gl->BindFramebuffer(GL_FRAMEBUFFER, d->target->fbo);
     gl->Viewport(0, 0, v->width, v->height);
-    draw_rect(gl, s, rect);
+    gl->Scissor(rect[0], rect[1], rect[2] - rect[0], rect[3] - rect[1]);
+    gl->BindVertexArray(s->vao);
+    gl->DrawArraysInstanced(GL_TRIANGLES, 0, 6, (trect[2] - trect[0]) * (trect[3] - trect[1]));
+    gl->BindVertexArray(0);
     gl->Disable(GL_SCISSOR_TEST);
     /* The splat count; the frame waits for the GPU at its end anyway (render.c's glFinish). */
     GLuint count = 0;

@@ -24,7 +24,9 @@
     X(KAWATA_FAR)    /* kawata: uint per buffer pixel, pass 2's key (depth step, index) */    \
     X(KAWATA_PTS)    /* kawata: 4 vec4 per buffer pixel: P1, P2 (eye, valid), their colours */ \
     X(KAWATA_SPLATS) /* kawata: 2 vec4 per buffer pixel: the splat (frame x, y, depth), colour */\
-    X(KAWATA_COUNT)  /* kawata: uint, the splats drawn */                                     \
+    X(KAWATA_LIST)   /* kawata: uint per covered buffer pixel, x | y << 16 (the list pass) */ \
+    X(KAWATA_TILES)  /* kawata: uint per 8x8 buffer pixels, 1 where a splat may reach them */ \
+    X(KAWATA_COUNT)  /* kawata: 2 uint, the splats drawn and the covered buffer pixels */     \
     X(SOFT_PROJ)     /* soft: 2 vec4 per soft point in draw order: (x, y, r px, depth), (rgb, W) */\
     X(SOFT_CELLS)    /* soft: uint per (tile, block): counts, then offsets; + the total */     \
     X(SOFT_LIST)     /* soft: uint per tile entry: draw-order numbers, tile by tile */          \
@@ -45,6 +47,8 @@
     X(KAWATA_FAR)    /* kawata: KAWATA_FAR as R32UI */                                         \
     X(KAWATA_PTS)    /* kawata: KAWATA_PTS as RGBA32F, 4 texels a buffer pixel */             \
     X(KAWATA_SPLATS) /* kawata: KAWATA_SPLATS as RGBA32F, 2 texels a buffer pixel */          \
+    X(KAWATA_LIST)   /* kawata: KAWATA_LIST as R32UI */                                        \
+    X(KAWATA_TILES)  /* kawata: KAWATA_TILES as R32UI */                                       \
     X(EDL_DEPTH)     /* EDL: a copy of the target's depth_eye as R32F */                      \
     X(SOFT_F)        /* soft: R32UI float bits of the field source (FIELD or INTENSITY) */    \
     X(SOFT_IDX)      /* soft: R32UI soft point indices, then their ranks along the 3 axes */  \

@@ -10,7 +10,7 @@
 
 typedef struct rnd_edl {
     GLuint prog, vao;
-    GLint u_size, u_lo, u_hi, u_r, u_k;
+    GLint u_org, u_pw, u_r, u_k;
     GLuint copy_buf, copy_tex;   /* depth_eye copied into a buffer, read as a buffer texture */
     uint64_t copy_bytes;
 } rnd_edl;

@@ -1,24 +1,32 @@
 #version 430
-// kawata_fit.frag — passes 3 and 4 of the `kawata` pipeline (pipe_kawata.c), fragment passes
-// over the image buffer's pixels (the viewport is the buffer, the scissor the cloud's rectangle
-// in it) that write storage buffers and draw nothing. Fragment passes because llvmpipe shades
-// whole pixel quads at once where compute invocations pay per work group (the stages as compute
-// shaders took longer), and every read goes through a buffer texture because texelFetch from one
-// gathers all SIMD lanes at once on llvmpipe, where a 2-D texelFetch costs several times as
-// much and storage-buffer reads run lane by lane. pipe_kawata.c inserts "#define STAGE 1|2".
-//   STAGE 1: the nearest point of each buffer pixel (near[b]) and the farthest within gamma
-//           (far[b]'s index bits), when they belong to this buffer set, to eye space (w = 1)
-//           with their colours: pts[4b] = P1, pts[4b + 1] = P2, pts[4b + 2] = colour of P1,
-//           pts[4b + 3] = colour of P2; (0, 0, 0, 0) marks "no point". u_all 1 (a cloud in one
-//           set): every entry of every pixel written; else per set only its own points (the
+// kawata_fit.comp — passes 3 and 4 of the `kawata` pipeline (pipe_kawata.c), compute passes over
+// the list of the image buffer's covered pixels that pass 2 made (kawata_raster.comp: each
+// buffer pixel with a nearest point, once), so that empty buffer pixels cost nothing: llvmpipe
+// runs every instruction of a fragment or an invocation for all its SIMD lanes, masked, so the
+// earlier fragment passes over the cloud's whole rectangle paid as much for an empty pixel as
+// for a covered one (the 1M scan: 65k covered of 213k). Invocations take list entries u_threads
+// apart (adjacent invocations read adjacent entries, 8 SIMD lanes at once on llvmpipe), many a
+// work group, since llvmpipe pays per invocation. Every read goes through a buffer texture:
+// texelFetch from one gathers all SIMD lanes at once on llvmpipe, where a 2-D texelFetch costs
+// several times as much and storage-buffer reads run lane by lane. pipe_kawata.c inserts
+// "#define STAGE 1|2".
+//   STAGE 1: the nearest point of each listed buffer pixel (near[b]) and the farthest within
+//           gamma (far[b]'s index bits), when they belong to this buffer set, to eye space
+//           (w = 1) with their colours: pts[4b] = P1, pts[4b + 1] = P2, pts[4b + 2] = colour of
+//           P1, pts[4b + 3] = colour of P2; (0, 0, 0, 0) marks "no point". u_all 1 (a cloud in
+//           one set): every entry of the pixel written; else per set only its own points (the
 //           rows were cleared first).
 //   STAGE 2: the average of the two (Omega_a, pass 3), the least-squares plane z = Ax + By + C
 //           in eye space over the points of the 3x3 neighbourhood in both buffers that lie
 //           within the depth tolerance of the nearest point (eq. 4-5, pass 4; coordinates
 //           centred on Omega_a for conditioning, Cramer's rule), normal (A, B, -1) turned
 //           towards the eye, Lambert shading, and the splat for pass 5: splats[2b] = (frame x,
-//           frame y, eye depth, 1), splats[2b + 1] = (colour, 1); (0, 0, 0, 0) when the pixel
-//           has no point or fewer than u_min_support supporters. Counts the splats in nsplats.
+//           frame y, eye depth, 1), splats[2b + 1] = (colour, 1). The splats of the rectangle's
+//           rows were cleared to 0 ("none"), so a pixel with fewer than u_min_support supporters
+//           writes nothing. A neighbour is empty where near[] says so (its pts entries are an
+//           earlier frame's). Counts the splats in nsplats.
+
+layout(local_size_x = 64) in;
 
 #include "lib_bindings.glsl"
 
@@ -27,11 +35,17 @@ uniform ivec2 u_blo, u_bhi; // the buffer pixels [u_blo, u_bhi) this frame uses 
                             // screen rectangle); the others hold an earlier frame's data
 uniform mat4 u_view;        // local -> eye
 uniform int u_color;        // 0 rgb, 1 field, 2 normal, 3 depth, 4 intensity
+uniform uint u_threads;     // invocations in the dispatch
+uniform uint u_per;         // STAGE 0: rectangle pixels an invocation
+layout(binding = T_KAWATA_LIST) uniform usamplerBuffer u_list;   // covered pixels: x | y << 16
+layout(binding = T_KAWATA_NEAR) uniform usamplerBuffer u_near;
+layout(std430, binding = B_KAWATA_COUNT) restrict buffer Count { uint nsplats, nlist; };
 
-#if STAGE == 1
+#if STAGE == 0
+layout(std430, binding = B_KAWATA_LIST) restrict writeonly buffer List { uint list[]; };
+#elif STAGE == 1
 layout(binding = T_POS) uniform samplerBuffer u_pos;
 layout(binding = T_SRC) uniform usamplerBuffer u_src;
-layout(binding = T_KAWATA_NEAR) uniform usamplerBuffer u_near;
 layout(binding = T_KAWATA_FAR) uniform usamplerBuffer u_far;
 layout(std430, binding = B_KAWATA_PTS) writeonly restrict buffer Pts { vec4 pts[]; };
 #include "lib_fetch.glsl"
@@ -57,11 +71,8 @@ void put(uint i, int e, bool all)
     pts[e + 2] = vec4(c, 1.0);
 }
 
-void main()
+void pixel(int b, bool all)
 {
-    ivec2 q = ivec2(gl_FragCoord.xy);
-    int b = q.y * u_bsize.x + q.x;
-    bool all = u_all != 0;
     uint k = texelFetch(u_far, b).x;
     put(texelFetch(u_near, b).x, 4 * b, all);
     put(k == 0u ? 0xFFFFFFFFu : k & ((1u << u_index_bits) - 1u), 4 * b + 1, all);
@@ -69,7 +80,7 @@ void main()
 #else
 layout(binding = T_KAWATA_PTS) uniform samplerBuffer u_pts;
 layout(std430, binding = B_KAWATA_SPLATS) writeonly restrict buffer Splats { vec4 splats[]; };
-layout(std430, binding = B_KAWATA_COUNT) restrict buffer Count { uint nsplats; };
+layout(std430, binding = B_KAWATA_TILES) writeonly restrict buffer Tiles { uint tiles[]; };
 uniform mat4 u_proj;
 uniform ivec2 u_fsize;
 uniform float u_gamma;   // depth tolerance: u_gamma + u_slope * depth
@@ -98,12 +109,14 @@ void add_point(vec4 t, vec3 pa, float z0, float tol, bool self, inout Fit f)
 }
 
 // Point j (0: nearest, 1: farthest) of neighbour q + (dx, dy); "no point" outside this
-// frame's rectangle.
+// frame's rectangle or where the neighbour has none.
 vec4 point_at(ivec2 q, int dx, int dy, int j, ivec2 blo, ivec2 bhi, int w)
 {
     ivec2 r = q + ivec2(dx, dy);
     if (r.x < blo.x || r.y < blo.y || r.x >= bhi.x || r.y >= bhi.y) return vec4(0.0);
-    return texelFetch(u_pts, 4 * (r.y * w + r.x) + j);
+    int b = r.y * w + r.x;
+    if (texelFetch(u_near, b).x == 0xFFFFFFFFu) return vec4(0.0);
+    return texelFetch(u_pts, 4 * b + j);
 }
 
 // Solves the round's normal equations by Cramer's rule on [sxx sxy sx; sxy syy sy; sx sy n]
@@ -120,17 +133,11 @@ bool solve(Fit f, out vec3 abc)
     return true;
 }
 
-void main()
+void pixel(ivec2 q, ivec2 blo, ivec2 bhi, int w)
 {
-    ivec2 blo = u_blo, bhi = u_bhi;
-    int w = u_bsize.x;
-    ivec2 q = ivec2(gl_FragCoord.xy);
     int b = q.y * w + q.x;
     vec4 a1 = texelFetch(u_pts, 4 * b);
-    if (a1.w == 0.0) {
-        splats[2 * b] = vec4(0.0);
-        return;
-    }
+    if (a1.w == 0.0) return;
     vec4 a2 = texelFetch(u_pts, 4 * b + 1);
     vec3 pa = a2.w > 0.0 ? 0.5 * (a1.xyz + a2.xyz) : a1.xyz; // pass 3
     float tol = u_gamma + u_slope * (-a1.z);
@@ -177,10 +184,7 @@ void main()
     add_point(v71, pa, a1.z, tol, false, f);
     add_point(v80, pa, a1.z, tol, false, f);
     add_point(v81, pa, a1.z, tol, false, f);
-    if (f.support < u_min_support) {
-        splats[2 * b] = vec4(0.0);
-        return;
-    }
+    if (f.support < u_min_support) return;
     vec3 nrm = vec3(0.0, 0.0, 1.0);
     vec3 abc;
     if (solve(f, abc)) {
@@ -197,10 +201,7 @@ void main()
                     2.0 * abc.y * abc.z * f.sy + abc.z * abc.z * f.n;
         float bound = max(2.5 * sqrt(max(rss, 0.0) / f.n), 0.0625 * u_slope * (-a1.z));
         vec3 e1 = a1.xyz - pa;
-        if (abs(e1.z - (abc.x * e1.x + abc.y * e1.y + abc.z)) > bound) {
-            splats[2 * b] = vec4(0.0);
-            return;
-        }
+        if (abs(e1.z - (abc.x * e1.x + abc.y * e1.y + abc.z)) > bound) return;
         f.g = vec4(abc, bound);
         f.sxx = f.sxy = f.syy = f.sx = f.sy = f.n = f.sxz = f.syz = f.sz = f.szz = 0.0;
         f.support = 0;
@@ -222,10 +223,7 @@ void main()
         add_point(v71, pa, a1.z, tol, false, f);
         add_point(v80, pa, a1.z, tol, false, f);
         add_point(v81, pa, a1.z, tol, false, f);
-        if (f.support < u_min_support) {
-            splats[2 * b] = vec4(0.0);
-            return;
-        }
+        if (f.support < u_min_support) return;
         if (solve(f, abc)) nrm = normalize(vec3(-abc.x, -abc.y, 1.0)); // (A, B, -1) towards +z
     }
     vec3 c1 = texelFetch(u_pts, 4 * b + 2).rgb;
@@ -241,6 +239,63 @@ void main()
     vec4 clip = u_proj * vec4(pa, 1.0);
     splats[2 * b] = vec4((clip.xy / clip.w * 0.5 + 0.5) * vec2(u_fsize), -pa.z, 1.0);
     splats[2 * b + 1] = vec4(col, 1.0);
+    // The 8x8 tiles of buffer pixels whose frame pixels this splat may reach (pass 5 reads
+    // the 5x5 buffer pixels from floor(u) - 2, u a frame pixel's centre in buffer pixels: so
+    // those of buffer pixels q - 3 .. q + 3, at most 2x2 tiles) are marked for pass 5.
+    int tw = (u_bsize.x + 7) >> 3;
+    ivec2 t0 = max(q - 3, ivec2(0)) >> 3, t1 = min(q + 3, u_bsize - 1) >> 3;
+    tiles[t0.y * tw + t0.x] = 1u;
+    tiles[t0.y * tw + t1.x] = 1u;
+    tiles[t1.y * tw + t0.x] = 1u;
+    tiles[t1.y * tw + t1.x] = 1u;
     atomicAdd(nsplats, 1u);
+}
+#endif
+
+#if STAGE == 0
+// STAGE 0: invocation g lists the covered pixels among the rectangle's pixels [g u_per, (g + 1) u_per)
+// (row by row), in their order: it counts them, reserves that many entries with one atomic,
+// and writes them. Neighbouring pixels stay neighbours in the list, which the later stages
+// read in order (a list in the order pass 2 met the points cost ~2x as much a pixel).
+void main()
+{
+    ivec2 blo = u_blo, bhi = u_bhi;
+    int w = u_bsize.x, rw = bhi.x - blo.x;
+    uint per = u_per, area = uint(rw * (bhi.y - blo.y));
+    uint k0 = gl_GlobalInvocationID.x * per, k1 = min(k0 + per, area);
+    ivec2 q0 = blo + ivec2(int(k0) % rw, int(k0) / rw);
+    uint count = 0u;
+    ivec2 q = q0;
+    for (uint k = k0; k < k1; k++) {
+        if (texelFetch(u_near, q.y * w + q.x).x != 0xFFFFFFFFu) count++;
+        q = q.x + 1 < bhi.x ? ivec2(q.x + 1, q.y) : ivec2(blo.x, q.y + 1);
+    }
+    if (count == 0u) return;
+    uint at = atomicAdd(nlist, count);
+    q = q0;
+    for (uint k = k0; k < k1; k++) {
+        if (texelFetch(u_near, q.y * w + q.x).x != 0xFFFFFFFFu) list[at++] = uint(q.x) | uint(q.y) << 16;
+        q = q.x + 1 < bhi.x ? ivec2(q.x + 1, q.y) : ivec2(blo.x, q.y + 1);
+    }
+}
+#else
+void main()
+{
+    uint n = nlist, threads = u_threads;
+#if STAGE == 1
+    bool all = u_all != 0;
+#else
+    ivec2 blo = u_blo, bhi = u_bhi;
+#endif
+    int w = u_bsize.x;
+    for (uint k = gl_GlobalInvocationID.x; k < n; k += threads) {
+        uint e = texelFetch(u_list, int(k)).x; // x | y << 16
+        ivec2 q = ivec2(e & 0xFFFFu, e >> 16);
+#if STAGE == 1
+        pixel(q.y * w + q.x, all);
+#else
+        pixel(q, blo, bhi, w);
+#endif
+    }
 }
 #endif
