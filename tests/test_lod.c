@@ -27,6 +27,7 @@
 #include "daemonproc.h"
 #include "imgtest.h"
 #include "lod.h"
+#include "lod_src.h"
 #include "morton.h"
 #include "prep.h"
 #include "pipelines.h"
@@ -155,13 +156,10 @@ static void test_octree_invariants(void **state)
 
 /* Normals, radii and F of the out-of-core build equal the in-memory prep's, point by point
  * (matched by position), with chunks of 6000 points whose halos had to be grown. */
-static void test_equals_in_memory_prep(void **state)
+static void equals_in_memory_prep(const char *dir, const char *ply)
 {
-    (void)state;
-    char dir[512], cache[600], ply[700];
-    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    char cache[600];
     snprintf(cache, sizeof cache, "%s/cache", dir);
-    gen(dir, 30000, ply, sizeof ply);
     lod_desc d = small_desc(cache);
     lod_cloud c;
     lod_result res;
@@ -213,7 +211,99 @@ static void test_equals_in_memory_prep(void **state)
     pc_prepared_free(&p);
     pc_cloud_free(&in);
     lod_cloud_free(&c);
+}
+
+static void test_equals_in_memory_prep(void **state)
+{
+    (void)state;
+    char dir[512], ply[700];
+    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    gen(dir, 30000, ply, sizeof ply);
+    equals_in_memory_prep(dir, ply);
     tu_rm_rf(dir);
+}
+
+/* A LAS file is streamed too (io/las_stream.c, not read whole): the stream hands out exactly
+ * pc_load's points (positions and colours, in order), and the octree built from it equals the
+ * in-memory prep bit for bit, as for PLY. gen_cloud's LAS has 16-bit colours (v * 257), so the
+ * colours go through the scaled-down branch. */
+/* stream_equals_load: lod_src streams path (streamed == 1) and hands out exactly pc_load's
+ * points, positions and colours, in order; returns the count. */
+static uint64_t stream_equals_load(const char *path)
+{
+    sd_err err = {0};
+    lod_src *src;
+    if (lod_src_open(path, &src, &err) != 0) fail_msg("%s", err.msg);
+    lod_src_info info;
+    lod_src_get_info(src, &info);
+    assert_int_equal(info.streamed, 1);
+    pc_cloud in;
+    if (pc_load(path, &in, &err) != 0) fail_msg("%s", err.msg);
+    assert_int_equal(info.n, in.n);
+    assert_string_equal(info.format, in.format);
+    for (int a = 0; a < 3; a++) assert_true(info.offset[a] == in.offset[a]);
+    float pos[3 * 1000];
+    uint32_t rgba[1000];
+    uint64_t k = 0, bad = 0;
+    int64_t m;
+    if (lod_src_rewind(src, &err) != 0) fail_msg("%s", err.msg);
+    while ((m = lod_src_next(src, pos, rgba, 1000, &err)) > 0)
+        for (int64_t i = 0; i < m; i++, k++) {
+            uint32_t want = 0xFFFFFFFFu;
+            if (in.attrs & PC_ATTR_RGB) memcpy(&want, in.rgba + 4 * k, 4);
+            if (memcmp(pos + 3 * i, in.pos + 3 * k, 12) != 0 || rgba[i] != want) bad++;
+        }
+    assert_true(m == 0);
+    assert_int_equal(k, in.n);
+    assert_int_equal(bad, 0);
+    pc_cloud_free(&in);
+    lod_src_close(src);
+    return k;
+}
+
+static void test_las_streamed(void **state)
+{
+    (void)state;
+    char dir[512], las[700], ply[700], cmd[2048];
+    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    snprintf(las, sizeof las, "%s/g.las", dir);
+    snprintf(cmd, sizeof cmd, "'%s/gen_cloud' 30000 '%s' > /dev/null",
+             tu_env("SPLATD_TOOLS", "build/tools"), las);
+    if (system(cmd) != 0) fail_msg("gen_cloud failed; set SPLATD_TOOLS");
+    assert_int_equal(stream_equals_load(las), 30000);
+    /* the same scene as PLY (same seed): the colours come back as written (v * 257 -> v), the
+     * positions within half a millimetre (LAS stores millimetres) */
+    gen(dir, 30000, ply, sizeof ply);
+    sd_err err = {0};
+    pc_cloud a, b;
+    if (pc_load(las, &a, &err) != 0 || pc_load(ply, &b, &err) != 0) fail_msg("%s", err.msg);
+    assert_string_equal(a.format, "LAS 1.2 format 2");
+    assert_int_equal(a.n, b.n);
+    uint64_t other = 0;
+    double far = 0;
+    for (uint64_t k = 0; k < a.n; k++) {
+        if (memcmp(a.rgba + 4 * k, b.rgba + 4 * k, 3) != 0) other++;
+        for (int c = 0; c < 3; c++) {
+            double d = fabs((a.pos[3 * k + c] + a.offset[c]) - (b.pos[3 * k + c] + b.offset[c]));
+            if (d > far) far = d;
+        }
+    }
+    assert_int_equal(other, 0);
+    print_message("LAS vs PLY of the same scene: colours equal, positions within %.2e m\n", far);
+    assert_true(far <= 0.0005 + 1e-5); /* half a millimetre + float rounding at 50 m */
+    pc_cloud_free(&a);
+    pc_cloud_free(&b);
+    equals_in_memory_prep(dir, las);
+    tu_rm_rf(dir);
+    /* real files: 8-bit values in the 16-bit fields (autzen_trim), no colours (point10: format
+     * 0), format 3 records with 27 extra bytes */
+    static const char *const files[] = {"autzen_trim.las", "point10.las", "extrabytes.las"};
+    for (size_t i = 0; i < sizeof files / sizeof *files; i++) {
+        char path[1024];
+        tu_data(files[i], path, sizeof path);
+        print_message("%s: %llu points streamed = pc_load\n", files[i],
+                      (unsigned long long)stream_equals_load(path));
+    }
 }
 
 static int count_files(const char *dir)
@@ -629,6 +719,7 @@ int main(void)
     const struct CMUnitTest prep_tests[] = {
         cmocka_unit_test(test_octree_invariants),
         cmocka_unit_test(test_equals_in_memory_prep),
+        cmocka_unit_test(test_las_streamed),
         cmocka_unit_test(test_kill9_never_leaves_a_loadable_cache),
         cmocka_unit_test(test_daemon_progressive),
     };

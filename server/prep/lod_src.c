@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include "cloud.h"
+#include "las_stream.h"
 
 enum { BLOCK = 1 << 16, MAX_PROPS = 64, MAX_HEADER = 64 * 1024 };
 enum { T_NONE, T_I8, T_U8, T_I16, T_U16, T_I32, T_U32, T_F32, T_F64 };
@@ -25,6 +26,11 @@ struct lod_src {
     uint64_t data_off, nrec, rec, next;  /* next record */
     int off[7], type[7];                 /* x y z red green blue alpha: offset, type */
     uint8_t *buf;
+    /* streamed LAS (uncompressed) */
+    pc_las_stream *las;
+    int las_wide;                        /* colours scaled down from 16 bits (pc_read_las's rule) */
+    double *las_xyz;
+    uint16_t *las_rgb;
     /* in-memory fallback */
     pc_cloud cloud;
     int have_cloud;
@@ -163,6 +169,21 @@ static uint32_t record_rgba(const lod_src *s, const uint8_t *p)
     return v;
 }
 
+/* set_bounds: the bounds of the finite points and the offset (pc_finalize's rule: the centre
+ * of the box) into s->info; refuses a span float32 cannot hold. */
+static int set_bounds(lod_src *s, const double lo[3], const double hi[3], sd_err *err)
+{
+    for (int a = 0; a < 3; a++) {
+        if (!(0.5 * hi[a] - 0.5 * lo[a] <= FLT_MAX))
+            return sd_errf(err, SD_ELIMIT, "%s: the points span %g along %c, more than float32 "
+                           "holds", s->path, hi[a] - lo[a], "xyz"[a]);
+        s->info.bmin[a] = lo[a];
+        s->info.bmax[a] = hi[a];
+        s->info.offset[a] = 0.5 * lo[a] + 0.5 * hi[a];
+    }
+    return 0;
+}
+
 static int bounds_pass(lod_src *s, sd_err *err)
 {
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
@@ -185,20 +206,75 @@ static int bounds_pass(lod_src *s, sd_err *err)
     }
     if (!kept) return sd_errf(err, SD_EEMPTY, "%s: no finite points (%llu read)", s->path,
                               (unsigned long long)s->nrec);
-    for (int a = 0; a < 3; a++) {
-        if (!(0.5 * hi[a] - 0.5 * lo[a] <= FLT_MAX))
-            return sd_errf(err, SD_ELIMIT, "%s: the points span %g along %c, more than float32 "
-                           "holds", s->path, hi[a] - lo[a], "xyz"[a]);
-        s->info.bmin[a] = lo[a];
-        s->info.bmax[a] = hi[a];
-        s->info.offset[a] = 0.5 * lo[a] + 0.5 * hi[a];
-    }
+    int rc = set_bounds(s, lo, hi, err);
+    if (rc < 0) return rc;
     s->info.n = kept;
     s->info.n_dropped = s->nrec - kept;
     s->info.attrs = s->off[3] >= 0 && s->off[4] >= 0 && s->off[5] >= 0 ? PC_ATTR_RGB : 0;
     snprintf(s->info.format, sizeof s->info.format, "PLY binary_little_endian 1.0");
     s->info.streamed = 1;
     return 0;
+}
+
+/* las_bounds_pass: bounds, count and the colours' largest value of a streamed LAS file. */
+static int las_bounds_pass(lod_src *s, sd_err *err)
+{
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    uint64_t n = pc_las_stream_count(s->las);
+    int rgb = pc_las_stream_has_rgb(s->las);
+    unsigned cmax = 0;
+    for (uint64_t r = 0; r < n;) {
+        size_t m = n - r < BLOCK ? (size_t)(n - r) : BLOCK;
+        int rc = pc_las_stream_read(s->las, r, m, s->las_xyz, rgb ? s->las_rgb : NULL, err);
+        if (rc < 0) return rc;
+        for (size_t i = 0; i < m; i++)
+            for (int a = 0; a < 3; a++) {
+                double v = s->las_xyz[3 * i + a];
+                if (v < lo[a]) lo[a] = v;
+                if (v > hi[a]) hi[a] = v;
+            }
+        if (rgb)
+            for (size_t i = 0; i < 3 * m; i++)
+                if (s->las_rgb[i] > cmax) cmax = s->las_rgb[i];
+        r += m;
+    }
+    int rc = set_bounds(s, lo, hi, err);
+    if (rc < 0) return rc;
+    s->las_wide = cmax > 255;
+    s->nrec = n;
+    s->info.n = n; /* LAS coordinates are always finite */
+    s->info.n_dropped = 0;
+    s->info.attrs = rgb ? PC_ATTR_RGB : 0;
+    snprintf(s->info.format, sizeof s->info.format, "%s", pc_las_stream_format(s->las));
+    s->info.streamed = 1;
+    return 0;
+}
+
+static int64_t las_next(lod_src *s, float *pos, uint32_t *rgba, size_t max, sd_err *err)
+{
+    size_t k = 0;
+    int rgb = pc_las_stream_has_rgb(s->las);
+    while (k < max && s->next < s->nrec) {
+        size_t want = max - k < BLOCK ? max - k : BLOCK;
+        size_t m = s->nrec - s->next < want ? (size_t)(s->nrec - s->next) : want;
+        int rc = pc_las_stream_read(s->las, s->next, m, s->las_xyz, rgb ? s->las_rgb : NULL, err);
+        if (rc < 0) return rc;
+        for (size_t i = 0; i < m; i++, k++) {
+            for (int a = 0; a < 3; a++)
+                pos[3 * k + a] = (float)(s->las_xyz[3 * i + a] - s->info.offset[a]);
+            uint32_t v = 0xFFFFFFFFu;
+            if (rgb) {
+                v = 0xFF000000u;
+                for (int c = 0; c < 3; c++) {
+                    unsigned x = s->las_rgb[3 * i + c];
+                    v |= (uint32_t)(uint8_t)(s->las_wide ? (x + 128) / 257 : x) << (8 * c);
+                }
+            }
+            rgba[k] = v;
+        }
+        s->next += m;
+    }
+    return (int64_t)k;
 }
 
 int lod_src_open(const char *path, lod_src **out, sd_err *err)
@@ -219,6 +295,11 @@ int lod_src_open(const char *path, lod_src **out, sd_err *err)
     if (rc == 1) {
         s->buf = malloc((size_t)BLOCK * s->rec);
         rc = s->buf ? bounds_pass(s, err) : sd_errf(err, SD_ENOMEM, "out of memory");
+    } else if (rc == 0 && (rc = pc_las_stream_open(path, &s->las, err)) == 1) {
+        s->las_xyz = malloc((size_t)BLOCK * 3 * sizeof(double));
+        s->las_rgb = malloc((size_t)BLOCK * 3 * sizeof(uint16_t));
+        rc = s->las_xyz && s->las_rgb ? las_bounds_pass(s, err)
+                                      : sd_errf(err, SD_ENOMEM, "out of memory");
     } else if (rc == 0) {
         rc = pc_load(path, &s->cloud, err);
         if (rc == 0) {
@@ -266,6 +347,9 @@ void lod_src_close(lod_src *s)
     if (!s) return;
     if (s->fd >= 0) close(s->fd);
     free(s->buf);
+    pc_las_stream_close(s->las);
+    free(s->las_xyz);
+    free(s->las_rgb);
     if (s->have_cloud) pc_cloud_free(&s->cloud);
     free(s);
 }
@@ -295,6 +379,7 @@ int64_t lod_src_next(lod_src *s, float *pos, uint32_t *rgba, size_t max, sd_err 
         }
         return (int64_t)k;
     }
+    if (s->las) return las_next(s, pos, rgba, max, err);
     while (k < max && s->next < s->nrec) {
         size_t want = max - k < BLOCK ? max - k : BLOCK;
         size_t m = s->nrec - s->next < want ? (size_t)(s->nrec - s->next) : want;

@@ -1,6 +1,7 @@
-/* gen_cloud — a deterministic synthetic scan-like point cloud, as binary little-endian PLY.
+/* gen_cloud — a deterministic synthetic scan-like point cloud, as binary little-endian PLY or
+ * as LAS.
  *
- *   gen_cloud N out.ply [--seed S] [--vegetation F]
+ *   gen_cloud N out.ply|out.las [--seed S] [--vegetation F]
  *
  * Writes N points (x y z float, red green blue uchar) of a 100 m outdoor scene in metres:
  *   50 %  ground: a disc of radius 50 m with gentle undulation, sampled like a terrestrial
@@ -13,7 +14,13 @@
  * the vegetation share F instead, the other shares scaled down in proportion (the soft
  * transparency bench's "half noisy vegetation" cloud is F = 0.5). Same N and seed, same bytes:
  * the generator is splitmix64 with a fixed default seed. Only standard C; 1M points take well
- * under a second. */
+ * under a second.
+ *
+ * An output name ending in .las (any case) gives LAS 1.2, point format 2: the same points,
+ * quantised to millimetres (scale 0.001, offset 0), colours stored as 16-bit values (v * 257, so
+ * readers that scale 16-bit colours down get v back), and an ASPRS class per generator:
+ * 2 ground, 6 building, 1 poles and sphere, 5 vegetation, 7 noise. The header's bounds and
+ * counts by return are filled in after the points, so the file is written in one pass. */
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -25,6 +32,7 @@
 typedef struct pt {
     float x, y, z;
     uint8_t c[3];
+    uint8_t cls;   /* ASPRS class (LAS output only) */
 } pt;
 
 static const double NOISE = 0.01; /* metres, per axis */
@@ -54,6 +62,7 @@ static void ground(pt *p, rng *r)
     double x = d * cos(t), y = d * sin(t);
     jitter(p, r, x, y, ground_z(x, y));
     colour(p, r, 110, 120, 70);
+    p->cls = 2;
 }
 
 static void building(pt *p, rng *r)
@@ -69,6 +78,7 @@ static void building(pt *p, rng *r)
     else { x = x0 + s * B[2]; y = y0 + t * B[3]; z = B[4]; }
     jitter(p, r, x, y, z + ground_z(B[0], B[1]));
     colour(p, r, 160, 155, 150);
+    p->cls = 6;
 }
 
 static void cylinder(pt *p, rng *r)
@@ -78,6 +88,7 @@ static void cylinder(pt *p, rng *r)
     double t = 6.283185307179586 * uni(r);
     jitter(p, r, C[0] + C[2] * cos(t), C[1] + C[2] * sin(t), uni(r) * C[3]);
     colour(p, r, 60, 90, 170);
+    p->cls = 1;
 }
 
 static void sphere(pt *p, rng *r)
@@ -85,6 +96,7 @@ static void sphere(pt *p, rng *r)
     double z = 2 * uni(r) - 1, t = 6.283185307179586 * uni(r), s = sqrt(1 - z * z);
     jitter(p, r, 0 + 4 * s * cos(t), 25 + 4 * s * sin(t), 6 + 4 * z);
     colour(p, r, 190, 60, 50);
+    p->cls = 1;
 }
 
 static void vegetation(pt *p, rng *r)
@@ -95,6 +107,7 @@ static void vegetation(pt *p, rng *r)
     } while (x * x + y * y + z * z > 1);
     jitter(p, r, -30 + 5 * x, -5 + 5 * y, 7 + 4 * z);
     colour(p, r, 50, 130, 40);
+    p->cls = 5;
 }
 
 static void noise(pt *p, rng *r)
@@ -103,6 +116,7 @@ static void noise(pt *p, rng *r)
     p->y = (float)(100 * uni(r) - 50);
     p->z = (float)(16 * uni(r) - 1);
     colour(p, r, 128, 128, 128);
+    p->cls = 7;
 }
 
 /* Which generator makes point i of n: fixed shares of the scene, interleaved so any prefix of
@@ -138,6 +152,76 @@ static void put_f32(uint8_t *b, float v)
     b[0] = (uint8_t)u; b[1] = (uint8_t)(u >> 8); b[2] = (uint8_t)(u >> 16); b[3] = (uint8_t)(u >> 24);
 }
 
+static void put_u16(uint8_t *b, unsigned v)
+{
+    b[0] = (uint8_t)v; b[1] = (uint8_t)(v >> 8);
+}
+
+static void put_u32(uint8_t *b, uint32_t v)
+{
+    for (int k = 0; k < 4; k++) b[k] = (uint8_t)(v >> (8 * k));
+}
+
+static void put_f64(uint8_t *b, double v)
+{
+    uint64_t u;
+    memcpy(&u, &v, 8);
+    for (int k = 0; k < 8; k++) b[k] = (uint8_t)(u >> (8 * k));
+}
+
+static int ends_with_las(const char *s)
+{
+    size_t n = strlen(s);
+    if (n < 4) return 0;
+    const char *e = s + n - 4;
+    return e[0] == '.' && (e[1] | 32) == 'l' && (e[2] | 32) == 'a' && (e[3] | 32) == 's';
+}
+
+enum { LAS_HDR = 227, LAS_REC = 26 };
+static const double LAS_SCALE = 0.001;
+
+/* las_header: the LAS 1.2 public header of n format-2 points with the given bounds (the
+ * quantised coordinates' extremes, in metres). */
+static void las_header(uint8_t *h, long long n, const double lo[3], const double hi[3],
+                       uint64_t seed)
+{
+    memset(h, 0, LAS_HDR);
+    memcpy(h, "LASF", 4);
+    h[24] = 1;
+    h[25] = 2;
+    snprintf((char *)h + 26, 32, "gen_cloud seed %llu", (unsigned long long)seed);
+    snprintf((char *)h + 58, 32, "splatd gen_cloud");
+    put_u16(h + 94, LAS_HDR);
+    put_u32(h + 96, LAS_HDR);
+    h[104] = 2;
+    put_u16(h + 105, LAS_REC);
+    put_u32(h + 107, (uint32_t)n);
+    put_u32(h + 111, (uint32_t)n); /* every point a first (and only) return */
+    for (int k = 0; k < 3; k++) {
+        put_f64(h + 131 + 8 * k, LAS_SCALE);
+        put_f64(h + 155 + 8 * k, 0.0);
+        put_f64(h + 179 + 16 * k, hi[k]);
+        put_f64(h + 187 + 16 * k, lo[k]);
+    }
+}
+
+/* las_record: point p as a format-2 record; widens lo/hi by its quantised position. */
+static void las_record(uint8_t *b, const pt *p, double lo[3], double hi[3])
+{
+    memset(b, 0, LAS_REC);
+    const float xyz[3] = {p->x, p->y, p->z};
+    for (int k = 0; k < 3; k++) {
+        int32_t q = (int32_t)lround(xyz[k] / LAS_SCALE);
+        put_u32(b + 4 * k, (uint32_t)q);
+        double v = q * LAS_SCALE;
+        if (v < lo[k]) lo[k] = v;
+        if (v > hi[k]) hi[k] = v;
+    }
+    b[14] = 1 | 1 << 3; /* return 1 of 1 */
+    b[15] = p->cls;
+    for (int k = 0; k < 3; k++) put_u16(b + 20 + 2 * k, p->c[k] * 257u);
+}
+
 int main(int argc, char **argv)
 {
     const char *out = NULL;
@@ -164,12 +248,12 @@ int main(int argc, char **argv)
         } else if (!out) {
             out = argv[i];
         } else {
-            fprintf(stderr, "usage: gen_cloud N out.ply [--seed S] [--vegetation F]\n");
+            fprintf(stderr, "usage: gen_cloud N out.ply|out.las [--seed S] [--vegetation F]\n");
             return 2;
         }
     }
     if (n < 0 || !out) {
-        fprintf(stderr, "usage: gen_cloud N out.ply [--seed S] [--vegetation F]\n");
+        fprintf(stderr, "usage: gen_cloud N out.ply|out.las [--seed S] [--vegetation F]\n");
         return 2;
     }
     FILE *f = fopen(out, "wb");
@@ -177,11 +261,29 @@ int main(int argc, char **argv)
         perror(out);
         return 1;
     }
-    fprintf(f, "ply\nformat binary_little_endian 1.0\ncomment gen_cloud seed %llu\n"
-               "element vertex %lld\nproperty float x\nproperty float y\nproperty float z\n"
-               "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
-            (unsigned long long)seed, n);
-    enum { BLOCK = 65536, REC = 15 };
+    int las = ends_with_las(out);
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    uint8_t hdr[LAS_HDR];
+    if (las) {
+        if (n > 4294967295LL) {
+            fprintf(stderr, "gen_cloud: LAS 1.2 holds at most 4294967295 points\n");
+            fclose(f);
+            return 2;
+        }
+        las_header(hdr, n, lo, hi, seed); /* bounds written again at the end */
+        if (fwrite(hdr, LAS_HDR, 1, f) != 1) {
+            perror(out);
+            fclose(f);
+            return 1;
+        }
+    } else {
+        fprintf(f, "ply\nformat binary_little_endian 1.0\ncomment gen_cloud seed %llu\n"
+                   "element vertex %lld\nproperty float x\nproperty float y\nproperty float z\n"
+                   "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
+                (unsigned long long)seed, n);
+    }
+    enum { BLOCK = 65536 };
+    const size_t REC = las ? LAS_REC : 15;
     uint8_t *buf = malloc((size_t)BLOCK * REC);
     if (!buf) {
         fprintf(stderr, "gen_cloud: out of memory\n");
@@ -195,6 +297,10 @@ int main(int argc, char **argv)
             pt p;
             make_point(&p, &r, veg);
             uint8_t *b = buf + i * REC;
+            if (las) {
+                las_record(b, &p, lo, hi);
+                continue;
+            }
             put_f32(b, p.x);
             put_f32(b + 4, p.y);
             put_f32(b + 8, p.z);
@@ -209,6 +315,14 @@ int main(int argc, char **argv)
         done += m;
     }
     free(buf);
+    if (las) {
+        las_header(hdr, n, lo, hi, seed);
+        if (fseek(f, 0, SEEK_SET) != 0 || fwrite(hdr, LAS_HDR, 1, f) != 1) {
+            perror(out);
+            fclose(f);
+            return 1;
+        }
+    }
     if (fclose(f) != 0) {
         perror(out);
         return 1;
