@@ -81,6 +81,7 @@ int cli_parse(int argc, char **argv, cli_args *a, char *err, size_t errlen)
     a->port = 7878;
     a->timeout_s = 60;
     a->inflight = 2;
+    a->prefetch = 4;
     a->width = SP_DEFAULT_WIDTH;
     a->height = SP_DEFAULT_HEIGHT;
     const char *pos[4];
@@ -117,8 +118,8 @@ int cli_parse(int argc, char **argv, cli_args *a, char *err, size_t errlen)
         }
         static const char *with_value[] = {"--host", "--port", "--token-file", "--tls-ca", "--tls-name",
                                            "-o", "--output",
-                                           "--path", "--orbit", "--inflight", "--set", "--eye",
-                                           "--target", "--up", "--fov", "--size", "--timeout",
+                                           "--path", "--orbit", "--inflight", "--prefetch", "--set",
+                                           "--eye", "--target", "--up", "--fov", "--size", "--timeout",
                                            "--shard", "--shards", NULL};
         int known = 0;
         for (int k = 0; with_value[k]; k++) known |= !strcmp(opt, with_value[k]);
@@ -161,6 +162,9 @@ int cli_parse(int argc, char **argv, cli_args *a, char *err, size_t errlen)
         } else if (!strcmp(opt, "--inflight")) {
             if (parse_long(val, 1, 64, &l) < 0) goto bad_value;
             a->inflight = (int)l;
+        } else if (!strcmp(opt, "--prefetch")) {
+            if (parse_long(val, 0, 16, &l) < 0) goto bad_value;
+            a->prefetch = (int)l;
         } else if (!strcmp(opt, "--timeout")) {
             if (parse_long(val, 0, 86400, &l) < 0) goto bad_value;
             a->timeout_s = (int)l;
@@ -196,6 +200,7 @@ int cli_parse(int argc, char **argv, cli_args *a, char *err, size_t errlen)
                  !strcmp(opt, "--port") ? "1 to 65535"
                  : !strcmp(opt, "--orbit") ? "a frame count >= 1"
                  : !strcmp(opt, "--inflight") ? "1 to 64"
+                 : !strcmp(opt, "--prefetch") ? "0 to 16 cameras, 0 = off"
                  : !strcmp(opt, "--timeout") ? "seconds, 0 = none"
                  : !strcmp(opt, "--set") ? "key=value"
                  : !strcmp(opt, "--fov") ? "degrees in (0, 180)"

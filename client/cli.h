@@ -19,6 +19,7 @@ typedef struct cli_args {
     const char *path_file;     /* --path */
     long orbit;                /* --orbit N (0: none) */
     int inflight;              /* --inflight K, default 2 */
+    int prefetch;              /* --prefetch K, default 4: next cameras announced (PREFETCH) */
     int force;                 /* --force */
     const char *shard;         /* --shard I/N, or NULL */
     const char *shards;        /* --shards N (count for an index from the environment) */

@@ -156,6 +156,36 @@ int spc_set_camera(spc_client *c, const spc_camera *cam, uint32_t *seq)
     return spc__flush(c, spc__deadline(c));
 }
 
+int spc_prefetch(spc_client *c, const spc_camera *cams, int n)
+{
+    int rc = usable(c);
+    if (rc < 0) return rc;
+    if (!cams || n < 1) return spc__fail(c, SPC_E_INVALID_ARG, "no cameras to prefetch");
+    if (n > (int)PROTO_MAX_PREFETCH) n = (int)PROTO_MAX_PREFETCH;
+    proto_prefetch pf = {.count = (uint8_t)n};
+    for (int k = 0; k < n; k++) {
+        to_proto_cam(&cams[k], &pf.cams[k]);
+        if ((c->server.max_width && cams[k].width > c->server.max_width) ||
+            (c->server.max_height && cams[k].height > c->server.max_height))
+            return spc__fail(c, SPC_E_BAD_CAMERA, "prefetch camera %d: size %ux%u is over the "
+                             "server's maximum of %ux%u", k, cams[k].width, cams[k].height,
+                             c->server.max_width, c->server.max_height);
+    }
+    size_t start = c->out.len;
+    rc = proto_enc_prefetch(&c->out, spc__next_seq(c), &pf);
+    if (rc < 0) return enc_failed(c, rc, "PREFETCH");
+    proto_prefetch chk;
+    proto_error e = {0};
+    rc = proto_parse_prefetch(c->out.data + start + PROTO_HEADER_LEN,
+                              (uint32_t)(c->out.len - start - PROTO_HEADER_LEN), &chk, &e);
+    if (rc < 0) {
+        c->out.len = start;
+        return spc__fail(c, rc == -PROTO_E_BAD_CAMERA ? SPC_E_BAD_CAMERA : SPC_E_INVALID_ARG,
+                         "%s", e.msg);
+    }
+    return spc__flush(c, spc__deadline(c));
+}
+
 void spc_camera_frame(const spc_info *info, uint32_t width, uint32_t height, spc_camera *cam)
 {
     memset(cam, 0, sizeof *cam);

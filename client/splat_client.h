@@ -182,6 +182,12 @@ void spc_camera_orbit(const spc_info *info, const double up[3], int i, int n, fl
  * returns. *seq (may be NULL) gets the camera's sequence number (FRAME camera_seq echoes it). */
 int spc_set_camera(spc_client *c, const spc_camera *cam, uint32_t *seq);
 
+/* spc_prefetch: tells the server the next cameras of a path (at most 16 are sent; nearest
+ * first): for a level-of-detail cloud it reads and uploads the nodes they need ahead, between
+ * frames, so those frames find them resident (a later PREFETCH replaces the earlier one). A
+ * flat cloud ignores it. Checked locally like spc_set_camera; no answer unless wrong. */
+int spc_prefetch(spc_client *c, const spc_camera *cams, int n);
+
 /* ---- parameters (the table in protocol/params.h; `splat --help` lists them) ------------- */
 
 /* spc_set_param: sets one parameter from "key=value" text ("splat_scale=1.5", "light=0,1,1",

@@ -115,6 +115,8 @@ static void usage(FILE *f, const char *cmd)
             "  --orbit N         N cameras around the bounding-box centre, about --up (default:\n"
             "                    the up axis the default camera guesses from the bounds)\n"
             "  --inflight K      frames in flight (default 2, 1..64)\n"
+            "  --prefetch K      announce the next K cameras to the server (default 4, 0..16;\n"
+            "                    0 = off): a level-of-detail cloud's nodes load ahead\n"
             "  --force           re-render frames that already exist\n"
             "  --shard I/N       render only frames i with i %% N == I (a farm's worker I of N);\n"
             "                    without it: $JOB_COMPLETION_INDEX (Kubernetes Indexed Job) of\n"
@@ -280,6 +282,24 @@ typedef struct inflight {
     long index;
 } inflight;
 
+/* path_cam: the camera of frame idx of n: from the path file's cameras, else the orbit. */
+static void path_cam(const cli_args *a, const cp_cam *cams, const spc_info *in, long n, long idx,
+                     spc_camera *cam)
+{
+    if (cams) {
+        memset(cam, 0, sizeof *cam);
+        memcpy(cam->eye, cams[idx].eye, sizeof cam->eye);
+        memcpy(cam->target, cams[idx].target, sizeof cam->target);
+        memcpy(cam->up, cams[idx].up, sizeof cam->up);
+        cam->fov_deg = cams[idx].fov;
+        cam->width = a->width;
+        cam->height = a->height;
+    } else {
+        spc_camera_orbit(in, a->have_up ? a->up : NULL, (int)idx, (int)n,
+                         a->have_fov ? a->fov : 45.0f, a->width, a->height, cam);
+    }
+}
+
 static int cmd_path(spc_client *c, const cli_args *a)
 {
     char err[600];
@@ -351,22 +371,20 @@ static int cmd_path(spc_client *c, const cli_args *a)
         while (sent < ntodo && nfl < a->inflight) {
             long idx = todo[sent];
             spc_camera cam;
-            if (cams) {
-                memset(&cam, 0, sizeof cam);
-                memcpy(cam.eye, cams[idx].eye, sizeof cam.eye);
-                memcpy(cam.target, cams[idx].target, sizeof cam.target);
-                memcpy(cam.up, cams[idx].up, sizeof cam.up);
-                cam.fov_deg = cams[idx].fov;
-                cam.width = a->width;
-                cam.height = a->height;
-            } else {
-                spc_camera_orbit(&in, a->have_up ? a->up : NULL, (int)idx, (int)n,
-                                 a->have_fov ? a->fov : 45.0f, a->width, a->height, &cam);
-            }
+            path_cam(a, cams, &in, n, idx, &cam);
             uint32_t seq;
             if (spc_send_render(c, &cam, &seq) < 0) {
                 snprintf(err, sizeof err, "frame %ld", idx);
                 rc = fail(c, err);
+                goto out;
+            }
+            /* the cameras after the ones in flight: the server loads their nodes meanwhile */
+            spc_camera next[16];
+            int np = 0;
+            for (long j = sent + 1; j < ntodo && np < a->prefetch; j++)
+                path_cam(a, cams, &in, n, todo[j], &next[np++]);
+            if (np && spc_prefetch(c, next, np) < 0) {
+                rc = fail(c, "prefetch");
                 goto out;
             }
             fl[nfl].seq = seq;
@@ -465,7 +483,7 @@ static int view_command(int argc, char **argv)
 {
     static const char *const with_value[] = {
         "--host", "--port", "--token-file", "--tls-ca", "--tls-name", "--timeout", "--set", "-o", "--path", "--orbit",
-        "--inflight", "--eye", "--target", "--up", "--fov", "--size", "--script",
+        "--inflight", "--prefetch", "--eye", "--target", "--up", "--fov", "--size", "--script",
         "--drag-budget", "--shard", "--shards"};
     for (int i = 1; i < argc; i++) {
         const char *s = argv[i];

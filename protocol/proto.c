@@ -620,19 +620,34 @@ int proto_parse_open(const uint8_t *pl, uint32_t len, char name[PROTO_MAX_NAME +
 
 /* ---- CAMERA ------------------------------------------------------------------------------- */
 
+static void w_camera(wr *w, const proto_camera *m)
+{
+    for (int i = 0; i < 3; i++) w_f64(w, m->eye[i]);
+    for (int i = 0; i < 3; i++) w_f64(w, m->target[i]);
+    for (int i = 0; i < 3; i++) w_f64(w, m->up[i]);
+    w_f32(w, m->fov_deg);
+    w_f32(w, m->znear);
+    w_f32(w, m->zfar);
+    w_u32(w, m->width);
+    w_u32(w, m->height);
+}
+
 int proto_enc_camera(proto_buf *b, uint32_t seq, const proto_camera *m)
 {
     wr w;
     w_begin(&w, b);
-    for (int i = 0; i < 3; i++) w_f64(&w, m->eye[i]);
-    for (int i = 0; i < 3; i++) w_f64(&w, m->target[i]);
-    for (int i = 0; i < 3; i++) w_f64(&w, m->up[i]);
-    w_f32(&w, m->fov_deg);
-    w_f32(&w, m->znear);
-    w_f32(&w, m->zfar);
-    w_u32(&w, m->width);
-    w_u32(&w, m->height);
+    w_camera(&w, m);
     return w_end(&w, PROTO_MSG_CAMERA, seq);
+}
+
+int proto_enc_prefetch(proto_buf *b, uint32_t seq, const proto_prefetch *m)
+{
+    if (m->count < 1 || m->count > PROTO_MAX_PREFETCH) return -PROTO_E_INVALID_ARG;
+    wr w;
+    w_begin(&w, b);
+    w_u8(&w, m->count);
+    for (unsigned k = 0; k < m->count; k++) w_camera(&w, &m->cams[k]);
+    return w_end(&w, PROTO_MSG_PREFETCH, seq);
 }
 
 /* camera_check: the geometric checks of a CAMERA; 0 or -BAD_CAMERA with e filled. */
@@ -679,25 +694,49 @@ static int camera_check(const proto_camera *m, proto_error *e)
     return 0;
 }
 
-int proto_parse_camera(const uint8_t *pl, uint32_t len, proto_camera *m, proto_error *e)
+static void r_camera(rd *r, proto_camera *m)
 {
-    rd r;
-    r_init(&r, pl, len, "CAMERA", e);
     memset(m, 0, sizeof *m);
     static const char *fe[3] = {"eye.x", "eye.y", "eye.z"};
     static const char *ft[3] = {"target.x", "target.y", "target.z"};
     static const char *fu[3] = {"up.x", "up.y", "up.z"};
-    for (int i = 0; i < 3; i++) m->eye[i] = r_f64(&r, fe[i]);
-    for (int i = 0; i < 3; i++) m->target[i] = r_f64(&r, ft[i]);
-    for (int i = 0; i < 3; i++) m->up[i] = r_f64(&r, fu[i]);
-    m->fov_deg = r_f32(&r, "fov");
-    m->znear = r_f32(&r, "near");
-    m->zfar = r_f32(&r, "far");
-    m->width = r_u32(&r, "width");
-    m->height = r_u32(&r, "height");
+    for (int i = 0; i < 3; i++) m->eye[i] = r_f64(r, fe[i]);
+    for (int i = 0; i < 3; i++) m->target[i] = r_f64(r, ft[i]);
+    for (int i = 0; i < 3; i++) m->up[i] = r_f64(r, fu[i]);
+    m->fov_deg = r_f32(r, "fov");
+    m->znear = r_f32(r, "near");
+    m->zfar = r_f32(r, "far");
+    m->width = r_u32(r, "width");
+    m->height = r_u32(r, "height");
+}
+
+int proto_parse_camera(const uint8_t *pl, uint32_t len, proto_camera *m, proto_error *e)
+{
+    rd r;
+    r_init(&r, pl, len, "CAMERA", e);
+    r_camera(&r, m);
     int rc = r_end(&r);
     if (rc) return rc;
     return camera_check(m, e);
+}
+
+int proto_parse_prefetch(const uint8_t *pl, uint32_t len, proto_prefetch *m, proto_error *e)
+{
+    rd r;
+    r_init(&r, pl, len, "PREFETCH", e);
+    m->count = r_u8(&r, "count");
+    if (!r.rc && (m->count < 1 || m->count > PROTO_MAX_PREFETCH))
+        return proto_errorf(e, PROTO_E_MALFORMED, "PREFETCH count %u is outside 1..%u",
+                            m->count, PROTO_MAX_PREFETCH);
+    for (unsigned k = 0; k < m->count && !r.rc; k++) r_camera(&r, &m->cams[k]);
+    int rc = r_end(&r);
+    if (rc) return rc;
+    for (unsigned k = 0; k < m->count; k++) {
+        proto_error ce = {0};
+        if ((rc = camera_check(&m->cams[k], &ce)) < 0)
+            return proto_errorf(e, -rc, "PREFETCH camera %u: %s", k, ce.msg);
+    }
+    return 0;
 }
 
 /* ---- PARAMS ------------------------------------------------------------------------------- */

@@ -44,6 +44,7 @@
 #define PROTO_MAX_ERRTEXT    1024u /* ERROR message text */
 #define PROTO_MAX_PARAMS     64u   /* records in one PARAMS message */
 #define PROTO_MAX_DIM        16384u /* largest width or height a CAMERA may ask for */
+#define PROTO_MAX_PREFETCH   16u   /* cameras in one PREFETCH message */
 #define PROTO_MAX_COORD      1e12   /* largest |coordinate| of a CAMERA's eye, target and up:
                                      * far beyond any georeferenced scan (ECEF is ~6.4e6 m),
                                      * and small enough that differences, squares and lengths
@@ -64,6 +65,7 @@ enum { PROTO_C2S = 1, PROTO_S2C = 2 };
     X(STREAM,   7,   PROTO_C2S)      \
     X(PING,     8,   PROTO_C2S)      \
     X(BYE,      9,   PROTO_C2S)      \
+    X(PREFETCH, 10,  PROTO_C2S)      \
     X(WELCOME,  129, PROTO_S2C)      \
     X(CLOUDS,   130, PROTO_S2C)      \
     X(INFO,     131, PROTO_S2C)      \
@@ -308,6 +310,11 @@ typedef struct proto_camera {         /* CAMERA, client -> server */
     uint32_t width, height;             /* pixels, 1 .. PROTO_MAX_DIM */
 } proto_camera;
 
+typedef struct proto_prefetch {       /* PREFETCH, client -> server */
+    uint8_t count;                      /* 1 .. PROTO_MAX_PREFETCH */
+    proto_camera cams[PROTO_MAX_PREFETCH]; /* the next cameras of a path, nearest first */
+} proto_prefetch;
+
 typedef struct proto_param_rec {      /* one PARAMS record */
     char name[64];                      /* parameter name (params.h) */
     uint8_t type;                       /* sp_type */
@@ -369,6 +376,7 @@ int proto_enc_open(proto_buf *b, uint32_t seq, const char *name);
 int proto_enc_camera(proto_buf *b, uint32_t seq, const proto_camera *m);
 int proto_enc_params(proto_buf *b, uint32_t seq, const proto_param_rec *recs, unsigned n);
 int proto_enc_stream(proto_buf *b, uint32_t seq, const proto_stream *m);
+int proto_enc_prefetch(proto_buf *b, uint32_t seq, const proto_prefetch *m);
 int proto_enc_ping(proto_buf *b, uint32_t seq, const proto_ping *m);
 int proto_enc_welcome(proto_buf *b, uint32_t seq, const proto_welcome *m);
 int proto_enc_clouds(proto_buf *b, uint32_t seq, const proto_cloud_entry *items, uint32_t n);
@@ -411,6 +419,9 @@ int proto_parse_camera(const uint8_t *pl, uint32_t len, proto_camera *m, proto_e
 int proto_parse_params(const uint8_t *pl, uint32_t len, sp_params *p, uint64_t *changed,
                        proto_error *e);
 int proto_parse_stream(const uint8_t *pl, uint32_t len, proto_stream *m, proto_error *e);
+/* proto_parse_prefetch: count in 1..PROTO_MAX_PREFETCH, then count cameras as CAMERA's payload,
+ * each checked as CAMERA is (the error names the camera's index). */
+int proto_parse_prefetch(const uint8_t *pl, uint32_t len, proto_prefetch *m, proto_error *e);
 int proto_parse_ping(const uint8_t *pl, uint32_t len, proto_ping *m, proto_error *e);
 /* proto_parse_empty: LIST, RENDER, BYE, OK: MALFORMED unless len == 0. */
 int proto_parse_empty(unsigned type, uint32_t len, proto_error *e);

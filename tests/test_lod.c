@@ -588,6 +588,28 @@ static void test_progressive_ends_complete(void **state)
     rnd_frame_free(&b);
 }
 
+/* lod_daemon: a daemon (--lod always, one loader slot) over gen_cloud's 60000-point scene in a
+ * new directory dir, and a client with that cloud open. */
+static spc_client *lod_daemon(char *dir, size_t len, tu_daemon *d, spc_info *info)
+{
+    char data[600], cache[600], ply[700];
+    assert_non_null(tu_tmpdir(dir, len));
+    snprintf(data, sizeof data, "%s/data", dir);
+    snprintf(cache, sizeof cache, "%s/cache", dir);
+    assert_int_equal(mkdir(data, 0700), 0);
+    gen(data, 60000, ply, sizeof ply);
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", data, "--cache", cache, "--lod",
+                          "always", "--lod-inflight", "1", "--shader-dir",
+                          tu_env("SPLATD_SHADERS", "shaders"), NULL};
+    if (tu_daemon_start(d, dir, NULL, args) != 0) fail_msg("splatd did not start (log %s)", d->log);
+    spc_options o = {.host = "127.0.0.1", .port = d->port, .client_name = "test_lod"};
+    spc_client *c;
+    char err[256];
+    assert_int_equal(spc_connect(&o, &c, err, sizeof err), 0);
+    assert_int_equal(spc_open(c, "g60000", info, NULL, NULL), 0);
+    return c;
+}
+
 /* Through the daemon (--lod always): a streaming client receives refined frames of a still
  * camera, the last one flagged complete; a single RENDER answers the complete frame, equal to
  * that last streamed one (lossless); with lod_first=1 a RENDER of a new view answers at once,
@@ -595,22 +617,10 @@ static void test_progressive_ends_complete(void **state)
 static void test_daemon_progressive(void **state)
 {
     (void)state;
-    char dir[512], data[600], cache[600], ply[700];
-    assert_non_null(tu_tmpdir(dir, sizeof dir));
-    snprintf(data, sizeof data, "%s/data", dir);
-    snprintf(cache, sizeof cache, "%s/cache", dir);
-    assert_int_equal(mkdir(data, 0700), 0);
-    gen(data, 60000, ply, sizeof ply);
+    char dir[512];
     tu_daemon d;
-    const char *args[] = {"--listen", "127.0.0.1:0", "--data", data, "--cache", cache, "--lod", "always", "--lod-inflight", "1",
-                          "--shader-dir", tu_env("SPLATD_SHADERS", "shaders"), NULL};
-    if (tu_daemon_start(&d, dir, NULL, args) != 0) fail_msg("splatd did not start (log %s)", d.log);
-    spc_options o = {.host = "127.0.0.1", .port = d.port, .client_name = "test_lod"};
-    spc_client *c;
-    char err[256];
-    assert_int_equal(spc_connect(&o, &c, err, sizeof err), 0);
     spc_info info;
-    assert_int_equal(spc_open(c, "g60000", &info, NULL, NULL), 0);
+    spc_client *c = lod_daemon(dir, sizeof dir, &d, &info);
     assert_int_equal(info.points, 60000);
     spc_camera cam;
     spc_camera_frame(&info, 240, 160, &cam);
@@ -654,6 +664,55 @@ static void test_daemon_progressive(void **state)
     assert_int_equal(f.complete, 1);
     assert_memory_equal(f.rgba, last, (size_t)240 * 160 * 4);
     free(last);
+    spc_close(c);
+    assert_int_equal(tu_daemon_stop(&d), 0);
+    tu_rm_rf(dir);
+}
+
+/* PREFETCH: after the client announced a camera and the server had a moment between frames,
+ * the first frame of that camera with lod_first=1 (whatever is resident, no waiting) is
+ * complete; a camera of the same kind not announced is not (its nodes are read only when a
+ * frame wants them). One loader slot, so the idle steps do the work, not a lucky frame. */
+static void test_daemon_prefetch(void **state)
+{
+    (void)state;
+    char dir[512];
+    tu_daemon d;
+    spc_info info;
+    spc_client *c = lod_daemon(dir, sizeof dir, &d, &info);
+    spc_camera cam, near[2];
+    spc_camera_frame(&info, 240, 160, &cam);
+    assert_int_equal(spc_set_param(c, "format=lz4"), 0);
+    assert_int_equal(spc_set_param(c, "point_budget=50000"), 0);
+    assert_int_equal(spc_set_param(c, "lod_first=1"), 0);
+    /* two close views of opposite corners */
+    static const double wt[2] = {0.3, 0.7};
+    for (int k = 0; k < 2; k++) {
+        near[k] = cam;
+        for (int a = 0; a < 3; a++) {
+            near[k].target[a] = wt[k] * info.bmin[a] + (1 - wt[k]) * info.bmax[a];
+            near[k].eye[a] = near[k].target[a] + 0.3 * (cam.eye[a] - cam.target[a]);
+        }
+    }
+    spc_frame f;
+    /* the control: a close view not announced, cold */
+    assert_int_equal(spc_set_camera(c, &near[0], NULL), 0);
+    assert_int_equal(spc_render(c, &f, 1), 0);
+    assert_int_equal(f.complete, 0);
+    /* announced: its nodes load while the server has nothing else to do */
+    assert_int_equal(spc_prefetch(c, &near[1], 1), 0);
+    struct timespec ts = {1, 500000000L};
+    nanosleep(&ts, NULL);
+    assert_int_equal(spc_set_camera(c, &near[1], NULL), 0);
+    assert_int_equal(spc_render(c, &f, 1), 0);
+    print_message("prefetched view: complete %d, %llu points drawn\n", f.complete,
+                  (unsigned long long)f.points_drawn);
+    assert_int_equal(f.complete, 1);
+    /* a bad camera in a PREFETCH is answered with its index */
+    spc_camera bad[2] = {near[0], near[1]};
+    bad[1].fov_deg = 200;
+    assert_true(spc_prefetch(c, bad, 2) < 0);
+    assert_non_null(strstr(spc_errmsg(c), "camera 1"));
     spc_close(c);
     assert_int_equal(tu_daemon_stop(&d), 0);
     tu_rm_rf(dir);
@@ -722,6 +781,7 @@ int main(void)
         cmocka_unit_test(test_las_streamed),
         cmocka_unit_test(test_kill9_never_leaves_a_loadable_cache),
         cmocka_unit_test(test_daemon_progressive),
+        cmocka_unit_test(test_daemon_prefetch),
     };
     const struct CMUnitTest render_tests[] = {
         cmocka_unit_test(test_budget_and_full_equals_flat),

@@ -577,6 +577,8 @@ static int p_camera(const uint8_t *pl, uint32_t len, proto_error *e)
 { proto_camera m; return proto_parse_camera(pl, len, &m, e); }
 static int p_params(const uint8_t *pl, uint32_t len, proto_error *e)
 { sp_params p; sp_params_defaults(&p); return proto_parse_params(pl, len, &p, NULL, e); }
+static int p_prefetch(const uint8_t *pl, uint32_t len, proto_error *e)
+{ proto_prefetch m; return proto_parse_prefetch(pl, len, &m, e); }
 static int p_stream(const uint8_t *pl, uint32_t len, proto_error *e)
 { proto_stream m; return proto_parse_stream(pl, len, &m, e); }
 static int p_ping(const uint8_t *pl, uint32_t len, proto_error *e)
@@ -760,6 +762,54 @@ static void test_malformed_payloads(void **state)
     proto_hello hb = {.min_version = 1, .max_version = 1, .proof_len = 7};
     assert_int_equal(proto_enc_hello(&b, 1, &hb), -PROTO_E_INVALID_ARG);
     assert_int_equal(b.len, 0);
+    proto_buf_free(&b);
+}
+
+/* PREFETCH: count, then CAMERA payloads: round trip; count 0, 17 and a count the payload does
+ * not hold are refused; a bad camera is named by its index. */
+static void test_prefetch(void **state)
+{
+    (void)state;
+    proto_buf b = {0};
+    proto_error e = {0};
+    proto_camera good = {{0, 0, 5}, {0, 0, 0}, {0, 1, 0}, 60, 0.5f, 90, 64, 48};
+    proto_prefetch in = {.count = 3}, out;
+    for (int k = 0; k < 3; k++) {
+        in.cams[k] = good;
+        in.cams[k].eye[0] = k + 0.25;
+        in.cams[k].width = 64 + (uint32_t)k;
+    }
+    assert_int_equal(proto_enc_prefetch(&b, 7, &in), 0);
+    assert_int_equal(b.len, 16 + 1 + 3 * 92);
+    assert_int_equal(b.data[16], 3);
+    assert_int_equal(proto_parse_prefetch(b.data + 16, (uint32_t)b.len - 16, &out, &e), 0);
+    assert_int_equal(out.count, 3);
+    for (int k = 0; k < 3; k++) {
+        assert_true(out.cams[k].eye[0] == k + 0.25);
+        assert_int_equal(out.cams[k].width, 64 + k);
+        assert_true(out.cams[k].zfar == 90);
+    }
+    /* the count claims 3 cameras, the payload holds 2 */
+    assert_int_equal(proto_parse_prefetch(b.data + 16, 1 + 2 * 92, &out, &e), -PROTO_E_TRUNCATED);
+    /* count 0 and 17 */
+    uint8_t zero = 0;
+    assert_int_equal(proto_parse_prefetch(&zero, 1, &out, &e), -PROTO_E_MALFORMED);
+    assert_non_null(strstr(e.msg, "count 0"));
+    uint8_t big[1 + 17 * 92] = {17};
+    assert_int_equal(proto_parse_prefetch(big, sizeof big, &out, &e), -PROTO_E_MALFORMED);
+    in.count = 17;
+    assert_int_equal(proto_enc_prefetch(&b, 7, &in), -PROTO_E_INVALID_ARG);
+    in.count = 0;
+    assert_int_equal(proto_enc_prefetch(&b, 7, &in), -PROTO_E_INVALID_ARG);
+    /* a bad camera is named by its index */
+    in.count = 3;
+    in.cams[2].fov_deg = 0;
+    b.len = 0;
+    assert_int_equal(proto_enc_prefetch(&b, 7, &in), 0);
+    assert_int_equal(proto_parse_prefetch(b.data + 16, (uint32_t)b.len - 16, &out, &e),
+                     -PROTO_E_BAD_CAMERA);
+    assert_non_null(strstr(e.msg, "PREFETCH camera 2"));
+    assert_non_null(strstr(e.msg, "fov"));
     proto_buf_free(&b);
 }
 
@@ -1117,6 +1167,7 @@ static int parse_any(const proto_msg *m, proto_error *e)
     case PROTO_MSG_CAMERA: return p_camera(m->payload, m->len, e);
     case PROTO_MSG_PARAMS: return p_params(m->payload, m->len, e);
     case PROTO_MSG_STREAM: return p_stream(m->payload, m->len, e);
+    case PROTO_MSG_PREFETCH: return p_prefetch(m->payload, m->len, e);
     case PROTO_MSG_PING: return p_ping(m->payload, m->len, e);
     case PROTO_MSG_WELCOME: return p_welcome(m->payload, m->len, e);
     case PROTO_MSG_CLOUDS: return p_clouds(m->payload, m->len, e);
@@ -1148,6 +1199,9 @@ static void test_fuzz(void **state)
     proto_enc_params(&seeds, 4, recs, SP_PARAM_COUNT);
     proto_stream s = {1, 30};
     proto_enc_stream(&seeds, 5, &s);
+    proto_prefetch pf = {.count = 2, .cams = {c, c}};
+    pf.cams[1].eye[0] = 3;
+    proto_enc_prefetch(&seeds, 13, &pf);
     proto_welcome w = {.version = 1, .server = "s", .backend = "egl", .renderer = "r"};
     proto_enc_welcome(&seeds, 6, &w);
     proto_cloud_entry items[2] = {{"a.ply", 1, 2, 0}, {"bb.las", 3, 4, 1}};
@@ -1244,6 +1298,7 @@ int main(void)
         cmocka_unit_test(test_truncated_payloads),
         cmocka_unit_test(test_malformed_payloads),
         cmocka_unit_test(test_camera_validation),
+        cmocka_unit_test(test_prefetch),
         cmocka_unit_test(test_limits_at_the_boundary),
         cmocka_unit_test(test_params_validation),
         cmocka_unit_test(test_cloud_names),

@@ -432,6 +432,47 @@ static int need_cloud(srv *sv, sess *s, uint32_t seq, const char *what)
     return 0;
 }
 
+/* camera_in: c as the renderer's camera into k; 0, or answers BAD_CAMERA to seq (what names the
+ * message) when its size is over the server's maximum and returns -1. */
+static int camera_in(srv *sv, sess *s, uint32_t seq, const char *what, const proto_camera *c,
+                     rnd_camera *k)
+{
+    if ((int)c->width > sv->max_w || (int)c->height > sv->max_h) {
+        char t[160];
+        snprintf(t, sizeof t, "%s size %ux%u is over this server's maximum of %dx%d", what,
+                 c->width, c->height, sv->max_w, sv->max_h);
+        send_error(sv, s, seq, PROTO_E_BAD_CAMERA, t);
+        return -1;
+    }
+    memcpy(k->eye, c->eye, sizeof k->eye);
+    memcpy(k->target, c->target, sizeof k->target);
+    memcpy(k->up, c->up, sizeof k->up);
+    k->fov_deg = c->fov_deg;
+    k->znear = c->znear;
+    k->zfar = c->zfar;
+    k->width = (int)c->width;
+    k->height = (int)c->height;
+    return 0;
+}
+
+/* PREFETCH: the next cameras of a path; the render thread reads their LOD nodes ahead. No
+ * answer unless it is wrong (a flat cloud has nothing to prefetch: accepted, nothing done). */
+static void on_prefetch(srv *sv, sess *s, const proto_msg *m)
+{
+    proto_prefetch pf;
+    proto_error pe = {0};
+    int rc = proto_parse_prefetch(m->payload, m->len, &pf, &pe);
+    if (rc < 0) { send_error(sv, s, m->h.seq, -rc, pe.msg); return; }
+    if (!need_cloud(sv, s, m->h.seq, "PREFETCH")) return;
+    rnd_camera cams[PROTO_MAX_PREFETCH];
+    for (unsigned k = 0; k < pf.count; k++) {
+        char what[32];
+        snprintf(what, sizeof what, "PREFETCH camera %u", k);
+        if (camera_in(sv, s, m->h.seq, what, &pf.cams[k], &cams[k]) < 0) return;
+    }
+    rt_submit_prefetch(sv->rt, s->id, s->cloud_id, cams, pf.count, &s->params);
+}
+
 static void on_camera(srv *sv, sess *s, const proto_msg *m)
 {
     proto_camera c;
@@ -439,22 +480,7 @@ static void on_camera(srv *sv, sess *s, const proto_msg *m)
     int rc = proto_parse_camera(m->payload, m->len, &c, &pe);
     if (rc < 0) { send_error(sv, s, m->h.seq, -rc, pe.msg); return; }
     if (!need_cloud(sv, s, m->h.seq, "CAMERA")) return;
-    if ((int)c.width > sv->max_w || (int)c.height > sv->max_h) {
-        char t[160];
-        snprintf(t, sizeof t, "CAMERA size %ux%u is over this server's maximum of %dx%d",
-                 c.width, c.height, sv->max_w, sv->max_h);
-        send_error(sv, s, m->h.seq, PROTO_E_BAD_CAMERA, t);
-        return;
-    }
-    rnd_camera *k = &s->cam;
-    memcpy(k->eye, c.eye, sizeof k->eye);
-    memcpy(k->target, c.target, sizeof k->target);
-    memcpy(k->up, c.up, sizeof k->up);
-    k->fov_deg = c.fov_deg;
-    k->znear = c.znear;
-    k->zfar = c.zfar;
-    k->width = (int)c.width;
-    k->height = (int)c.height;
+    if (camera_in(sv, s, m->h.seq, "CAMERA", &c, &s->cam) < 0) return;
     s->have_camera = 1;
     s->camera_seq = m->h.seq;
     stream_update(sv, s, 0);
@@ -539,6 +565,7 @@ void srv_handle(void *owner, sess *s, const proto_msg *m)
     case PROTO_MSG_PARAMS: on_params(sv, s, m); break;
     case PROTO_MSG_RENDER: on_render(sv, s, m); break;
     case PROTO_MSG_STREAM: on_stream(sv, s, m); break;
+    case PROTO_MSG_PREFETCH: on_prefetch(sv, s, m); break;
     case PROTO_MSG_PING: on_ping(sv, s, m); break;
     case PROTO_MSG_BYE:
         s->close_after = 1;

@@ -36,6 +36,11 @@ typedef struct rt_slot {
     uint64_t sending;           /* the cost of its frame being written to the socket: it left
                                  * the outstanding count (the next one may render) but its bytes
                                  * stay held until written (rt_frame_sent) */
+    int has_prefetch;           /* a PREFETCH waits for the render thread (latest wins) */
+    int npcams;
+    uint32_t pcloud;
+    sp_params pparams;
+    rnd_camera pcams[PROTO_MAX_PREFETCH];
 } rt_slot;
 
 typedef struct rt_encjob {
@@ -190,6 +195,8 @@ static int free_frame(rt_ctx *rt)
 static int has_work(rt_ctx *rt)
 {
     if (rt->up_head) return 1;
+    for (int k = 0; k < rt->nslots; k++)
+        if (rt->slots[k].has_prefetch) return 1;
     if (free_frame(rt) < 0) return 0;
     /* The same order as pick: the first slot with work decides. */
     for (int k = 0; k < rt->nslots; k++) {
@@ -280,9 +287,48 @@ static void *render_main(void *arg)
     rt->gpu_budget = st.budget;
     rt->init_state = 1;
     pthread_cond_broadcast(&rt->cv_init);
+    int prefetching = 0; /* a LOD cloud's prefetch has nodes left to load and upload */
     for (;;) {
-        while (!rt->stop && !has_work(rt)) pthread_cond_wait(&rt->cv_render, &rt->mu);
+        while (!rt->stop && !has_work(rt)) {
+            if (!prefetching) {
+                pthread_cond_wait(&rt->cv_render, &rt->mu);
+                continue;
+            }
+            /* idle: upload what the loaders read ahead, hand them the next nodes, and look
+             * again in 5 ms (or at once when work arrives) */
+            rt->rendering = 1;
+            pthread_mutex_unlock(&rt->mu);
+            int more = rnd_lod_idle(rnd, &err);
+            pthread_mutex_lock(&rt->mu);
+            rt->rendering = 0;
+            prefetching = more > 0;
+            if (prefetching && !rt->stop && !has_work(rt)) {
+                struct timespec ts;
+                clock_gettime(CLOCK_REALTIME, &ts);
+                ts.tv_nsec += 5000000L;
+                if (ts.tv_nsec >= 1000000000L) ts.tv_sec++, ts.tv_nsec -= 1000000000L;
+                pthread_cond_timedwait(&rt->cv_render, &rt->mu, &ts);
+            }
+        }
         if (rt->stop) break;
+        rt_slot *ps = NULL;
+        for (int k = 0; k < rt->nslots && !ps; k++)
+            if (rt->slots[k].has_prefetch) ps = &rt->slots[k];
+        if (ps) {
+            /* a PREFETCH: the nodes of its cameras become the cloud's prefetch queue */
+            rnd_camera cams[PROTO_MAX_PREFETCH];
+            int n = ps->npcams;
+            uint32_t cloud = ps->pcloud;
+            sp_params params = ps->pparams;
+            memcpy(cams, ps->pcams, (size_t)n * sizeof *cams);
+            ps->has_prefetch = 0;
+            pthread_mutex_unlock(&rt->mu);
+            sd_err perr = {0};
+            int q = rnd_lod_prefetch(rnd, cloud, cams, n, &params, &perr);
+            pthread_mutex_lock(&rt->mu);
+            if (q > 0) prefetching = 1;
+            continue;
+        }
         if (rt->up_head) {
             rt_prepjob *j = rt->up_head;
             rt->up_head = j->next;
@@ -313,10 +359,15 @@ static void *render_main(void *arg)
 
         rnd_frame *f = &rt->frames[fi];
         if (rq.refine) rnd_lod_wait(rnd, rq.cloud_id, 1000); /* until a node more is ready */
-        int rc = render_once(rt, rnd, &rq, f, &err);
-        /* A RENDER of a LOD cloud answers the complete frame (unless lod_first): the frames
-         * before it load the missing nodes, a few each. The bound only guards against a view
-         * whose nodes cannot all be made resident. */
+        /* A RENDER of a LOD cloud answers the complete frame (unless lod_first): its nodes are
+         * loaded first, without drawing the frame again after each of them */
+        int rc = 0;
+        if (!stream && !rq.params.lod_first && !(rt->d.hooks && rt->d.hooks->render))
+            rc = rnd_lod_settle(rnd, rq.cloud_id, &rq.cam, &rq.params, 60000, &err);
+        if (rc >= 0) rc = render_once(rt, rnd, &rq, f, &err);
+        /* Should the settling above have stopped short (time, a view the pool cannot hold),
+         * frames load the rest, a few nodes each. The bound only guards against a view whose
+         * nodes cannot all be made resident. */
         uint64_t spent = f->render_us;
         for (int again = 0; rc == 0 && !stream && !f->complete && !rq.params.lod_first &&
                             again < 100000; again++) {
@@ -687,6 +738,25 @@ void rt_client_close(rt_ctx *rt, uint32_t id)
         pthread_cond_signal(&rt->cv_render);
     }
     pthread_mutex_unlock(&rt->mu);
+}
+
+int rt_submit_prefetch(rt_ctx *rt, uint32_t id, uint32_t cloud_id, const rnd_camera *cams,
+                       int n, const sp_params *params)
+{
+    if (n < 1) return 0;
+    if (n > (int)PROTO_MAX_PREFETCH) n = (int)PROTO_MAX_PREFETCH;
+    pthread_mutex_lock(&rt->mu);
+    rt_slot *s = slot_of(rt, id);
+    if (s) {
+        s->has_prefetch = 1;
+        s->npcams = n;
+        s->pcloud = cloud_id;
+        s->pparams = *params;
+        memcpy(s->pcams, cams, (size_t)n * sizeof *cams);
+        pthread_cond_signal(&rt->cv_render);
+    }
+    pthread_mutex_unlock(&rt->mu);
+    return 0;
 }
 
 int rt_submit_latest(rt_ctx *rt, uint32_t id, const rt_request *rq)

@@ -156,6 +156,11 @@ int rt_submit_latest(rt_ctx *rt, uint32_t id, const rt_request *rq);
 /* rt_submit_queue: appends a one-shot request. Returns 0, or SD_ELIMIT when RT_QUEUE_MAX are
  * already queued (the caller answers BUSY). */
 int rt_submit_queue(rt_ctx *rt, uint32_t id, const rt_request *rq);
+/* rt_submit_prefetch: the client's PREFETCH (the next cameras of its path, at most
+ * PROTO_MAX_PREFETCH): the render thread makes the nodes they need resident ahead, between
+ * frames; a later one replaces it. Only LOD clouds have anything to prefetch. Returns 0. */
+int rt_submit_prefetch(rt_ctx *rt, uint32_t id, uint32_t cloud_id, const rnd_camera *cams,
+                       int n, const sp_params *params);
 /* rt_frame_released: one frame of client id is gone before being written (a streamed frame
  * replaced by a newer one, a failed frame): no longer outstanding, its bytes given back. */
 void rt_frame_released(rt_ctx *rt, uint32_t id);

@@ -48,6 +48,11 @@ struct rnd_lod {
     alloc *al;                /* resident ranges, by first */
     uint32_t nal;
     uint64_t stamp;
+    /* prefetch: the missing nodes of the views a client announced (rnd__lod_prefetch), in
+     * their order; handed to loader slots the frame leaves free, and uploaded when they arrive
+     * (a frame's or an idle step's), while pmark[i] == pgen */
+    uint32_t *pq, npq, pqhead;
+    uint32_t *pmark, pgen;
     /* per frame */
     uint32_t *want, *heap;
     float *prio;
@@ -114,6 +119,8 @@ rnd_lod *rnd__lod_new(lod_cloud *c, uint32_t cap, int k, rnd_gpu_cloud *g, sd_er
         l->prio = malloc(nn * sizeof *l->prio);
         l->drawn = calloc(nn, 1);
         l->chunks = malloc(nn * sizeof *l->chunks);
+        l->pq = malloc(nn * sizeof *l->pq);
+        l->pmark = calloc(nn, sizeof *l->pmark);
     }
     if (l && l->slots && l->inflight) {
         pthread_mutex_init(&l->mu, NULL);
@@ -123,7 +130,7 @@ rnd_lod *rnd__lod_new(lod_cloud *c, uint32_t cap, int k, rnd_gpu_cloud *g, sd_er
         l->th_started = pthread_create(&l->th, NULL, loader_main, l) == 0;
     }
     if (!l || !l->first || !l->last || !l->broken || !l->al || !l->want || !l->heap ||
-        !l->prio || !l->drawn || !l->chunks || !l->th_started) {
+        !l->prio || !l->drawn || !l->chunks || !l->pq || !l->pmark || !l->th_started) {
         if (l) {
             l->c = NULL; /* the caller still owns c */
             rnd__lod_free(l, NULL, g);
@@ -195,6 +202,8 @@ void rnd__lod_free(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g)
     free(l->prio);
     free(l->drawn);
     free(l->chunks);
+    free(l->pq);
+    free(l->pmark);
     free(l);
 }
 
@@ -386,16 +395,11 @@ int rnd__lod_wait(rnd_lod *l, int timeout_ms)
     return ready;
 }
 
-int rnd__lod_frame(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_view *v,
-                   uint64_t budget, rnd_lod_frame *out, sd_err *err)
+/* choose: the nodes of view v within limit points, by priority, into l->want (parents before
+ * children); marks them wanted at the current stamp. Returns their count. */
+static uint32_t choose(rnd_lod *l, const rnd_view *v, uint64_t limit)
 {
-    memset(out, 0, sizeof *out);
-    int rc = rnd__lod_make_pool(l, gl, g, err);
-    if (rc < 0) return rc;
     const lod_cloud *c = l->c;
-    uint64_t limit = budget && budget < l->cap ? budget : l->cap;
-    l->stamp++;
-    /* choose */
     uint32_t nh = 0, nw = 0;
     uint64_t total = 0;
     heap_push(l, &nh, 0, INFINITY);
@@ -417,19 +421,23 @@ int rnd__lod_frame(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_vie
         for (uint32_t k = 0; k < nd->nchildren; k++)
             heap_push(l, &nh, nd->first_child + k, priority(&c->nodes[nd->first_child + k], v));
     }
-    out->wanted = nw;
-    /* the loader's finished nodes: uploaded when still wanted, else dropped; then the missing
-     * wanted nodes, in priority order, are handed to free loader slots */
-    pthread_mutex_lock(&l->mu);
+    return nw;
+}
+
+/* take_ready: the loader's finished nodes (l->mu held): uploaded when wanted this frame or
+ * prefetched, else dropped; their slots freed. */
+static void take_ready(rnd_lod *l, const gl_api *gl, rnd_lod_frame *out)
+{
     for (int k = 0; k < l->k; k++) {
         lslot *sl = &l->slots[k];
         if (sl->state != SLOT_READY && sl->state != SLOT_BROKEN) continue;
         uint32_t i = sl->node;
+        int keep = l->last[i] == l->stamp || (l->pgen && l->pmark[i] == l->pgen);
         if (sl->state == SLOT_BROKEN) {
             l->broken[i] = 1;
             out->broken++;
-        } else if (l->last[i] == l->stamp && l->first[i] == NOT_RESIDENT) {
-            if (c->nodes[i].count > l->cap) l->broken[i] = 1; /* larger than the pool */
+        } else if (keep && l->first[i] == NOT_RESIDENT) {
+            if (l->c->nodes[i].count > l->cap) l->broken[i] = 1; /* larger than the pool */
             uint32_t pos = place(l, i, &out->evicted);
             if (pos != NOT_RESIDENT) {
                 upload(l, gl, i, pos, sl->data);
@@ -441,22 +449,17 @@ int rnd__lod_frame(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_vie
         sl->state = SLOT_FREE;
         l->inflight[i] = 0;
     }
-    /* the root has no ancestor to stand in for it: read here when missing (once per cloud) */
-    if (nw && l->want[0] == 0 && l->first[0] == NOT_RESIDENT && !l->broken[0] && !l->inflight[0]) {
-        if (!lod_node_verify(c, 0) || c->nodes[0].count > l->cap) {
-            l->broken[0] = 1;
-            out->broken++;
-        } else {
-            uint32_t pos = place(l, 0, &out->evicted);
-            if (pos != NOT_RESIDENT) {
-                upload(l, gl, 0, pos, c->map + c->nodes[0].offset);
-                out->uploaded++;
-            }
-        }
-    }
+}
+
+/* ask: hands the missing nodes of list[0..n) to free loader slots, in order (l->mu held);
+ * *from (when not NULL) advances past the nodes handed out or not needing it. Returns how
+ * many were asked for. */
+static int ask(rnd_lod *l, const uint32_t *list, uint32_t n, uint32_t *from)
+{
     int asked = 0;
-    for (uint32_t k = 0, s = 0; k < nw; k++) {
-        uint32_t i = l->want[k];
+    uint32_t k = from ? *from : 0;
+    for (uint32_t s = 0; k < n; k++) {
+        uint32_t i = list[k];
         if (l->first[i] != NOT_RESIDENT || l->broken[i] || l->inflight[i]) continue;
         while (s < (uint32_t)l->k && l->slots[s].state != SLOT_FREE) s++;
         if (s == (uint32_t)l->k) break;
@@ -466,6 +469,116 @@ int rnd__lod_frame(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_vie
         l->inflight[i] = s + 1;
         asked++;
     }
+    if (from) *from = k;
+    return asked;
+}
+
+/* load_root: the root has no ancestor to stand in for it: read here, on the render thread,
+ * when the view wants it and it is missing (once per cloud). l->mu held. */
+static void load_root(rnd_lod *l, const gl_api *gl, uint32_t nw, rnd_lod_frame *out)
+{
+    const lod_cloud *c = l->c;
+    if (!nw || l->want[0] != 0 || l->first[0] != NOT_RESIDENT || l->broken[0] || l->inflight[0])
+        return;
+    if (!lod_node_verify(c, 0) || c->nodes[0].count > l->cap) {
+        l->broken[0] = 1;
+        out->broken++;
+        return;
+    }
+    uint32_t pos = place(l, 0, &out->evicted);
+    if (pos != NOT_RESIDENT) {
+        upload(l, gl, 0, pos, c->map + c->nodes[0].offset);
+        out->uploaded++;
+    }
+}
+
+int rnd__lod_settle(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_view *v,
+                    uint64_t budget, int timeout_ms, rnd_lod_frame *out, sd_err *err)
+{
+    memset(out, 0, sizeof *out);
+    int rc = rnd__lod_make_pool(l, gl, g, err);
+    if (rc < 0) return rc;
+    uint64_t limit = budget && budget < l->cap ? budget : l->cap;
+    struct timespec t0, t;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    for (;;) {
+        l->stamp++;
+        uint32_t nw = choose(l, v, limit);
+        pthread_mutex_lock(&l->mu);
+        take_ready(l, gl, out);
+        load_root(l, gl, nw, out);
+        uint32_t missing = 0;
+        for (uint32_t k = 0; k < nw; k++)
+            missing += l->first[l->want[k]] == NOT_RESIDENT && !l->broken[l->want[k]];
+        int asked = ask(l, l->want, nw, NULL);
+        asked += ask(l, l->pq, l->npq, &l->pqhead);
+        if (asked) pthread_cond_broadcast(&l->cv_work);
+        int loading = 0;
+        for (int k = 0; k < l->k; k++) loading += l->slots[k].state != SLOT_FREE;
+        pthread_mutex_unlock(&l->mu);
+        out->wanted = nw;
+        out->complete = missing == 0;
+        clock_gettime(CLOCK_MONOTONIC, &t);
+        double ms = (t.tv_sec - t0.tv_sec) * 1e3 + (t.tv_nsec - t0.tv_nsec) / 1e6;
+        /* done, out of time, or nothing can come (the pool cannot hold the view) */
+        if (!missing || ms >= timeout_ms || !loading) break;
+        rnd__lod_wait(l, 1000);
+    }
+    out->changed = out->uploaded || out->evicted;
+    return gl_check(gl, "uploading LOD nodes", err);
+}
+
+int rnd__lod_prefetch(rnd_lod *l, const rnd_view *views, int n, uint64_t budget)
+{
+    uint64_t limit = budget && budget < l->cap ? budget : l->cap;
+    l->pgen++;
+    l->npq = l->pqhead = 0;
+    for (int j = 0; j < n; j++) {
+        uint32_t nw = choose(l, &views[j], limit);
+        for (uint32_t k = 0; k < nw; k++) {
+            uint32_t i = l->want[k];
+            if (l->pmark[i] == l->pgen || l->broken[i]) continue;
+            l->pmark[i] = l->pgen;
+            if (l->first[i] == NOT_RESIDENT) l->pq[l->npq++] = i;
+        }
+    }
+    return (int)l->npq;
+}
+
+int rnd__lod_idle(rnd_lod *l, const gl_api *gl, rnd_lod_frame *out, int *pending)
+{
+    memset(out, 0, sizeof *out);
+    *pending = 0;
+    if (!l->have_pool) return 0; /* no frame yet: nothing to upload into */
+    pthread_mutex_lock(&l->mu);
+    take_ready(l, gl, out);
+    if (ask(l, l->pq, l->npq, &l->pqhead)) pthread_cond_broadcast(&l->cv_work);
+    for (int k = 0; k < l->k; k++) out->loading += l->slots[k].state != SLOT_FREE;
+    pthread_mutex_unlock(&l->mu);
+    *pending = out->loading > 0 || l->pqhead < l->npq;
+    out->changed = out->uploaded || out->evicted;
+    return 0;
+}
+
+int rnd__lod_frame(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_view *v,
+                   uint64_t budget, rnd_lod_frame *out, sd_err *err)
+{
+    memset(out, 0, sizeof *out);
+    int rc = rnd__lod_make_pool(l, gl, g, err);
+    if (rc < 0) return rc;
+    const lod_cloud *c = l->c;
+    uint64_t limit = budget && budget < l->cap ? budget : l->cap;
+    l->stamp++;
+    uint32_t nw = choose(l, v, limit);
+    out->wanted = nw;
+    /* the loader's finished nodes: uploaded when still wanted (or prefetched), else dropped;
+     * then the missing wanted nodes, in priority order, are handed to free loader slots, and
+     * the slots left free to the prefetched ones */
+    pthread_mutex_lock(&l->mu);
+    take_ready(l, gl, out);
+    load_root(l, gl, nw, out);
+    int asked = ask(l, l->want, nw, NULL);
+    asked += ask(l, l->pq, l->npq, &l->pqhead);
     if (asked) pthread_cond_broadcast(&l->cv_work);
     for (int k = 0; k < l->k; k++) out->loading += l->slots[k].state != SLOT_FREE;
     pthread_mutex_unlock(&l->mu);

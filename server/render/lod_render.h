@@ -49,6 +49,24 @@ typedef struct rnd_lod_frame {
  * are (0 when none was loading or the time ran out). */
 int rnd__lod_wait(rnd_lod *l, int timeout_ms);
 
+/* rnd__lod_prefetch: the nodes views[0..n) would draw within budget (0: the pool) that are not
+ * resident become the prefetch queue (replacing the previous one): the loader reads them in
+ * their order whenever a frame leaves slots free, and frames or idle steps upload them.
+ * Returns the queue's length. No GL. */
+int rnd__lod_prefetch(rnd_lod *l, const rnd_view *views, int n, uint64_t budget);
+
+/* rnd__lod_idle: between frames, uploads the prefetched nodes the loader finished and hands it
+ * the next ones; *pending = 1 while the queue or the loader has work left. Nothing happens
+ * before the first frame made the pool. out's counters as a frame's. Returns 0. */
+int rnd__lod_idle(rnd_lod *l, const gl_api *gl, rnd_lod_frame *out, int *pending);
+
+/* rnd__lod_settle: makes the nodes view v wants (within budget) resident before a frame that
+ * must be complete: uploads them as the loader reads them, without drawing, until none is
+ * missing, timeout_ms passed, or nothing is loading (a view the pool cannot hold). out->complete
+ * says whether all arrived; out->changed whether the pool changed. Returns 0 or SD_EGL. */
+int rnd__lod_settle(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_view *v,
+                    uint64_t budget, int timeout_ms, rnd_lod_frame *out, sd_err *err);
+
 /* rnd__lod_frame: chooses, uploads and lists the frame's nodes. budget 0: no limit but the
  * pool. Returns 0 or a negative SD_E*. */
 int rnd__lod_frame(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_view *v,

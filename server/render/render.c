@@ -60,6 +60,7 @@ struct rnd_ctx {
     uint32_t nslots;
     uint32_t max_set_points;
     int lod_uploads;
+    uint64_t lod_prefetched;
     uint32_t lod_pool_points;
     uint64_t lod_budget;
     uint64_t budget, resident_bytes, clock, uploads, evictions;
@@ -634,6 +635,78 @@ int rnd_lod_wait(rnd_ctx *r, uint32_t cloud_id, int timeout_ms)
     return s && s->lod ? rnd__lod_wait(s->lod, timeout_ms) : 0;
 }
 
+int rnd_lod_prefetch(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cams, int n,
+                     const sp_params *params, sd_err *err)
+{
+    cloud_slot *s = lookup(r, cloud_id);
+    if (!s) return sd_errf(err, SD_EINVAL, "cloud id %u is not (or no longer) loaded", cloud_id);
+    if (!s->lod || n <= 0) return 0;
+    enum { MAXV = 64 };
+    rnd_view v[MAXV];
+    if (n > MAXV) n = MAXV;
+    for (int j = 0; j < n; j++) {
+        const rnd_camera *cam = &cams[j];
+        if (cam->width < 1 || cam->height < 1 || cam->width > r->max_width ||
+            cam->height > r->max_height)
+            return sd_errf(err, SD_ELIMIT, "prefetch camera %d: frame size %dx%d is outside 1x1 "
+                           "to %dx%d", j, cam->width, cam->height, r->max_width, r->max_height);
+        int rc = rnd__view_setup(cam, s->c.offset, s->c.bmin, s->c.bmax, &v[j], err);
+        if (rc < 0) return rc;
+    }
+    uint64_t budget = params->point_budget > 0 ? (uint64_t)params->point_budget : r->lod_budget;
+    return rnd__lod_prefetch(s->lod, v, n, budget);
+}
+
+int rnd_lod_settle(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam,
+                   const sp_params *params, int timeout_ms, sd_err *err)
+{
+    cloud_slot *s = lookup(r, cloud_id);
+    if (!s) return sd_errf(err, SD_EINVAL, "cloud id %u is not (or no longer) loaded", cloud_id);
+    if (!s->lod) return 1;
+    if (cam->width < 1 || cam->height < 1 || cam->width > r->max_width ||
+        cam->height > r->max_height)
+        return 0; /* rnd_render refuses it with the reason */
+    rnd_view v;
+    int rc = rnd__view_setup(cam, s->c.offset, s->c.bmin, s->c.bmax, &v, err);
+    if (rc < 0) return rc;
+    if ((rc = r->ops->make_current(r->be, err)) < 0) return rc;
+    if (!s->c.sets) {
+        if ((rc = make_room(r, s, s->bytes, err)) < 0) return rc;
+        r->resident_bytes += s->bytes;
+        r->uploads++;
+    }
+    uint64_t budget = params->point_budget > 0 ? (uint64_t)params->point_budget : r->lod_budget;
+    rnd_lod_frame lf;
+    rc = rnd__lod_settle(s->lod, &r->gl, &s->c, &v, budget, timeout_ms, &lf, err);
+    if (lf.changed) detach_all(r, s);
+    return rc < 0 ? rc : lf.complete;
+}
+
+int rnd_lod_idle(rnd_ctx *r, sd_err *err)
+{
+    int any = 0, current = 0;
+    for (uint32_t i = 0; i < r->nslots; i++) {
+        cloud_slot *s = &r->slots[i];
+        if (!s->used || !s->lod || !s->c.sets) continue;
+        if (!current) {
+            int rc = r->ops->make_current(r->be, err);
+            if (rc < 0) return rc;
+            current = 1;
+        }
+        rnd_lod_frame lf;
+        int pending = 0;
+        rnd__lod_idle(s->lod, &r->gl, &lf, &pending);
+        if (lf.changed) detach_all(r, s); /* per-cloud data follows the pool's contents */
+        r->lod_prefetched += lf.uploaded;
+        any |= pending;
+    }
+    if (current) {
+        int rc = gl_check(&r->gl, "uploading prefetched LOD nodes", err);
+        if (rc < 0) return rc;
+    }
+    return any;
+}
+
 void rnd_release(rnd_ctx *r, uint32_t cloud_id)
 {
     cloud_slot *s = lookup(r, cloud_id);
@@ -649,6 +722,7 @@ void rnd_get_stats(const rnd_ctx *r, rnd_stats *st)
     st->resident_bytes = r->resident_bytes;
     st->uploads = r->uploads;
     st->evictions = r->evictions;
+    st->lod_prefetched = r->lod_prefetched;
     for (uint32_t i = 0; i < r->nslots; i++) {
         if (!r->slots[i].used) continue;
         st->clouds++;

@@ -130,6 +130,25 @@ int64_t rnd_adopt_lod(rnd_ctx *r, lod_cloud *lc, sd_err *err);
  * ready for the next frame; returns how many are (0: none loading, a flat cloud, timeout). */
 int rnd_lod_wait(rnd_ctx *r, uint32_t cloud_id, int timeout_ms);
 
+/* rnd_lod_prefetch: the server side of PREFETCH: the nodes LOD cloud cloud_id would draw for
+ * the n cameras under params' point budget are read and uploaded ahead, between frames
+ * (rnd_lod_idle) and in the slots frames leave free, replacing an earlier prefetch of that
+ * cloud. A flat cloud: nothing to do (0). Returns the nodes queued or a negative SD_E*. */
+int rnd_lod_prefetch(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cams, int n,
+                     const sp_params *params, sd_err *err);
+
+/* rnd_lod_settle: before a frame that must be complete (a RENDER without lod_first), loads
+ * and uploads every node the camera wants, without drawing in between, for at most timeout_ms.
+ * Returns 1 when all are resident (always for a flat cloud), 0 when not (time, or a view the
+ * pool cannot hold: the caller's frames refine as before), or a negative SD_E*. */
+int rnd_lod_settle(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam,
+                   const sp_params *params, int timeout_ms, sd_err *err);
+
+/* rnd_lod_idle: one step of every LOD cloud's prefetch (uploads what the loaders finished,
+ * hands them the next nodes); returns 1 while any has work left (the caller waits a little,
+ * rnd_lod_wait, and steps again), 0 when none has, or a negative SD_E*. */
+int rnd_lod_idle(rnd_ctx *r, sd_err *err);
+
 /* rnd_release: removes a cloud (its GPU buffers, its pipelines' data, adopted data). */
 void rnd_release(rnd_ctx *r, uint32_t cloud_id);
 
@@ -138,6 +157,7 @@ typedef struct rnd_stats {
     uint64_t resident_bytes;  /* cloud buffers on the GPU now */
     uint32_t clouds, resident;/* clouds known, and on the GPU */
     uint64_t uploads, evictions; /* since rnd_create */
+    uint64_t lod_prefetched;  /* LOD nodes uploaded between frames (rnd_lod_idle) */
 } rnd_stats;
 
 /* rnd_get_stats: the residency counters. rnd_cloud_resident: 1 when cloud_id's buffers are on

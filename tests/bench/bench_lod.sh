@@ -8,7 +8,9 @@
 #      degrees apart, each timed once complete) for the 1M and 10M clouds, points and splat;
 #   3. a daemon with the prepared 10M cloud: time from OPEN to the first frame (splat render
 #      with lod_first=1, connection included) and to the complete frame, and the daemon's RSS
-#      with the cloud open and drawn.
+#      with the cloud open and drawn;
+#   4. a fly-through (`splat path`, 32 cameras low over the scene, 640x360, points, budget 1M) against
+#      a fresh daemon each run, with --prefetch 0 and 4 alternating: wall time of the job.
 # Environment: SPLATD_BIN, SPLAT_BIN, SPLATD_BENCH, SPLATD_TOOLS; LOD_BENCH_100M=1 adds the
 # 100M cloud (1.5 GB of PLY, ~12 GB of scratch and cache, ~20 minutes here);
 # LOD_BENCH_DIR=DIR keeps the clouds and caches there (default: a temporary directory).
@@ -92,4 +94,39 @@ for n in $sizes; do
     wait "$pid" || true
     awk -v l="$l" -v a="$t0" -v b="$t1" -v c="$t2" -v r="$rss" \
         'BEGIN{printf "| %s | %.0f | %.0f | %.0f |\n", l, (b - a) * 1e3, (c - b) * 1e3, r / 1024}'
+done
+
+echo
+echo "## Level of detail: a fly-through with and without PREFETCH (fresh daemon each run)"
+echo
+awk 'BEGIN{ for (i = 0; i < 32; i++) { t = i / 31; x = -35 + 70 * t; y = -30 + 60 * t;
+    printf "%g %g 3  %g %g 2.5  0 0 1  60\n", x, y, x + 10, y + 8.6 } }' > "$tmp/fly.txt"
+echo "| cloud | --prefetch 0 s (runs) | --prefetch 4 s (runs) | ratio of medians |"
+echo "|---|---|---|---:|"
+for n in $sizes; do
+    l=$(label "$n")
+    r0=""; r4=""
+    for run in 1 2 3; do
+        for k in 0 4; do
+            rm -f "$tmp/port" "$tmp"/fly_*.jpg
+            "$splatd" --data "$tmp/data" --cache "$tmp/cache" --listen 127.0.0.1:0 \
+                --port-file "$tmp/port" --lod always 2> "$tmp/splatd.log" &
+            pid=$!
+            i=0
+            while [ ! -s "$tmp/port" ] && [ $i -lt 600 ]; do sleep 0.1; i=$((i + 1)); done
+            port=$(cat "$tmp/port")
+            t0=$(date +%s.%N)
+            "$splat" --port "$port" -q path "g$l" --path "$tmp/fly.txt" -o "$tmp/fly_%03d.jpg" \
+                --size 640x360 --set point_budget=1000000 --set pipeline=points --prefetch $k
+            t1=$(date +%s.%N)
+            kill "$pid"
+            wait "$pid" || true
+            s=$(awk -v a="$t0" -v b="$t1" 'BEGIN{printf "%.2f", b - a}')
+            if [ $k = 0 ]; then r0="$r0 $s"; else r4="$r4 $s"; fi
+        done
+    done
+    med() { echo "$1" | tr ' ' '\n' | grep . | sort -n | sed -n 2p; }
+    m0=$(med "$r0"); m4=$(med "$r4")
+    awk -v l="$l" -v a="$r0" -v b="$r4" -v x="$m0" -v y="$m4" \
+        'BEGIN{printf "| %s |%s |%s | %.2f |\n", l, a, b, x / y}'
 done

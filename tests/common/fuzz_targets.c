@@ -174,6 +174,12 @@ int fuzz_parse_msg(const proto_msg *m)
     case PROTO_MSG_PARAMS:
         rc = check_params_msg(m, &e);
         break;
+    case PROTO_MSG_PREFETCH: {
+        proto_prefetch x;
+        rc = proto_parse_prefetch(pl, n, &x, &e);
+        if (rc == 0) check_reenc(m, &b, proto_enc_prefetch(&b, seq, &x));
+        break;
+    }
     case PROTO_MSG_STREAM: {
         proto_stream x;
         rc = proto_parse_stream(pl, n, &x, &e);
