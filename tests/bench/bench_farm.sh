@@ -6,7 +6,13 @@
 #   sort-last  `splatd --mpi` under mpirun -np 1..4 (skipped without mpirun/splatd-mpi):
 #              frames/s of a camera path (one frame in flight), the compositing time per
 #              frame (rank 0's median), the bytes each rank sends per frame, and each rank's
-#              resident memory after loading.
+#              resident memory after loading;
+#   partition  the ranks' parts of Guanyin.ply and bun000.ply for N = 2, 3, 4, 7 (part_bench):
+#              each part's share of the points and of the footprint proxy (sum of pi r^2 over
+#              its splats), and the imbalance max/mean of both, for the earlier median cuts and
+#              the octree-cell kd tree splatd --mpi uses (partition.h); for Guanyin at N = 2..4
+#              also each part's render time alone (points, splat; 1280x720, 4 views) and the
+#              spread max/mean that a frame of the ranks waits on.
 # All processes share this machine's cores: the numbers measure overheads, not speed-ups.
 set -eu
 bin=${SPLATD_BIN:-build/bin/splatd}
@@ -22,7 +28,7 @@ cleanup() {
 }
 trap cleanup EXIT INT TERM
 mkdir -p "$tmp/data"
-cp "$data/Guanyin.ply" "$tmp/data/"
+cp "$data/Guanyin.ply" "$data/bun000.ply" "$tmp/data/"
 "$bin" prep "$tmp/data/Guanyin.ply" --cache "$tmp/cache" --quiet
 
 # wait_port FILE PID: waits for the port file of a starting daemon.
@@ -80,6 +86,22 @@ echo "Cost model: a frame costs t = render + read-back + encode on its daemon pl
 echo "decode on the client; N daemons on N machines give N / t frames/s until the clients' network"
 echo "or the shared file system limits, after each daemon's one-time load (prep from the shared"
 echo "cache: mmap). Here both daemons share $(nproc) cores, so 2 shards cannot beat one daemon."
+
+# ---- the ranks' parts (no MPI needed) ----
+part_bench=${SPLATD_BENCH:-$(dirname "$bin")/../bench}/part_bench
+if [ -x "$part_bench" ]; then
+    for cloud in Guanyin bun000; do
+        echo
+        echo "## partition: $cloud.ply into N parts, median cuts (before) vs octree cells (splatd --mpi); footprint = sum of pi r^2"
+        echo
+        render=""
+        [ "$cloud" = Guanyin ] && render="--render 2,3,4"
+        "$part_bench" "$tmp/data/$cloud.ply" --cache "$tmp/cache" --parts 2,3,4,7 $render
+    done
+else
+    echo
+    echo "(partition: skipped, $part_bench not built)"
+fi
 
 # ---- sort-last over MPI ----
 mpi_bin=$(dirname "$bin")/splatd-mpi
