@@ -14,15 +14,18 @@
  * ms the partition's wall-clock time (one run; single thread).
  *
  * With --render, for each listed N and both partitions, every part is uploaded alone into one
- * renderer (the default back end, llvmpipe here) and drawn at 1280x720 from 4 views (the
- * default framing of the whole cloud, turned 0, 90, 180, 270 degrees about its up axis) with
- * the points and splat pipelines: the GPU time (render_us, up to glFinish) of each part is the
+ * renderer (the default back end, llvmpipe here) and drawn at 1280x720 with the points and
+ * splat pipelines, timed from 4 views (the default framing of the whole cloud, turned 0, 90,
+ * 180, 270 degrees about its up axis): the GPU time (render_us, up to glFinish) of each part is the
  * median of 5 frames, the parts drawn in turn. Under splatd --mpi a frame waits for its
  * slowest rank, so the row reports
- *   | N | partition | pipeline | slowest part ms | mean part ms | max/mean |
- * the medians (tu_median) over the views of the slowest part's time, of the parts' mean time
- * and of their ratio (1 = every rank as fast as the others). Parts are drawn one after
- * another in one process (no contention between them, unlike ranks sharing this machine's
+ *   | N | partition | pipeline | covered pixels max/mean | slowest part ms | mean part ms |
+ *   ms max/mean |
+ * with the parts' actual screen footprint, max/mean of the pixels each covers alone (finite
+ * depth; deterministic), median over 14 views from the 6 axis and 8 diagonal directions at
+ * the framing distance; and medians over the 4 timed views of the slowest part's time, the
+ * parts' mean time and their ratio (1 = every rank as fast as the others). Parts are drawn
+ * one after another in one process (no contention between them, unlike ranks sharing this machine's
  * cores; llvmpipe's threads still share them with whatever else runs). */
 #include <math.h>
 #include <stdio.h>
@@ -83,7 +86,31 @@ static void quarter_turn(rnd_camera *cam)
     for (int i = 0; i < 3; i++) cam->eye[i] = cam->target[i] + u[i] * ud + x[i];
 }
 
-enum { VIEWS = 4, REPS = 5, RENDER_MAX = 16 };
+enum { VIEWS = 4, REPS = 5, RENDER_MAX = 16, COVER_VIEWS = 14 };
+
+/* view_from: c0 (a camera framing the cloud) moved to direction v of the 14 (the 6 axes, the 8
+ * diagonals) at the same distance from its target; up kept unless nearly along the view. */
+static void view_from(const rnd_camera *c0, int v, rnd_camera *c)
+{
+    static const signed char dir[COVER_VIEWS][3] = {
+        {1, 0, 0},  {-1, 0, 0}, {0, 1, 0},   {0, -1, 0},  {0, 0, 1},   {0, 0, -1},  {1, 1, 1},
+        {1, 1, -1}, {1, -1, 1}, {1, -1, -1}, {-1, 1, 1},  {-1, 1, -1}, {-1, -1, 1}, {-1, -1, -1}};
+    *c = *c0;
+    double l = 0, dist = 0, ul = 0, dot = 0;
+    for (int a = 0; a < 3; a++) {
+        l += dir[v][a] * dir[v][a];
+        dist += (c0->eye[a] - c0->target[a]) * (c0->eye[a] - c0->target[a]);
+        ul += c0->up[a] * c0->up[a];
+    }
+    l = sqrt(l);
+    dist = sqrt(dist);
+    for (int a = 0; a < 3; a++) {
+        c->eye[a] = c0->target[a] + dist * dir[v][a] / l;
+        dot += c0->up[a] * dir[v][a] / l / sqrt(ul);
+    }
+    if (fabs(dot) > 0.9) /* looking along up: the first camera's view direction is up */
+        for (int a = 0; a < 3; a++) c->up[a] = c0->target[a] - c0->eye[a];
+}
 
 /* render_parts: the rows of --render for np parts of pc as part gives them. */
 static int render_parts(rnd_ctx *r, const pc_prepared *pc, const uint16_t *part, int np,
@@ -132,10 +159,27 @@ static int render_parts(rnd_ctx *r, const pc_prepared *pc, const uint16_t *part,
             mean[v] = sum / np;
             ratio[v] = mean[v] > 0 ? mx / mean[v] : 1;
         }
+        /* the parts' screen footprint from the 14 directions: pixels with a finite depth */
+        double cratio[COVER_VIEWS];
+        for (int v = 0; v < COVER_VIEWS && rc == 0; v++) {
+            rnd_camera cv;
+            view_from(&cam, v, &cv);
+            double cmx = 0, csum = 0;
+            for (int p = 0; p < np && rc == 0; p++) {
+                double cov = 0;
+                if (ids[p]) rc = rnd_render(r, ids[p], &cv, &prm, 1, &f, err);
+                for (size_t i = 0; ids[p] && rc == 0 && i < (size_t)f.width * f.height; i++)
+                    cov += isfinite(f.depth[i]);
+                cmx = cov > cmx ? cov : cmx;
+                csum += cov;
+            }
+            cratio[v] = csum > 0 ? cmx * np / csum : 1;
+        }
         rnd_frame_free(&f);
         if (rc == 0)
-            printf("| %d | %s | %s | %.1f | %.1f | %.3f |\n", np, kind, pipes[q],
-                   tu_median(slow, VIEWS), tu_median(mean, VIEWS), tu_median(ratio, VIEWS));
+            printf("| %d | %s | %s | %.3f | %.1f | %.1f | %.3f |\n", np, kind, pipes[q],
+                   tu_median(cratio, COVER_VIEWS), tu_median(slow, VIEWS), tu_median(mean, VIEWS),
+                   tu_median(ratio, VIEWS));
     }
     for (int p = 0; p < np; p++)
         if (ids[p]) rnd_release(r, ids[p]);
@@ -215,10 +259,11 @@ int main(int argc, char **argv)
         }
     }
     if (r && rc == 0) {
-        printf("\nrender time per part (%s; GPU time, median of %d frames, medians over %d "
-               "views, 1280x720):\n\n| N | partition | pipeline | slowest part ms | mean part "
-               "ms | max/mean |\n|---:|---|---|---:|---:|---:|\n", rnd_renderer_string(r),
-               REPS, VIEWS);
+        printf("\nparts rendered alone (%s; 1280x720; coverage: median over %d views; time: "
+               "GPU time, median of %d frames, medians over %d views):\n\n| N | partition | "
+               "pipeline | covered pixels max/mean | slowest part ms | mean part ms | ms "
+               "max/mean |\n|---:|---|---|---:|---:|---:|---:|\n", rnd_renderer_string(r),
+               COVER_VIEWS, REPS, VIEWS);
         for (const char *s = rlist; rc == 0 && (np = next_count(&s)) != 0;) {
             if (np < 0) {
                 rc = 2;
