@@ -13,17 +13,23 @@ enum { CELLS = 1u << PREP_MORTON_BITS }; /* finest-level cells per axis */
 /* One unit: a leaf cell of the octree and the points it holds. */
 typedef struct unit {
     uint32_t lo[3], size;  /* finest-level cells: [lo, lo + size) per axis */
-    uint32_t first, count; /* its points: perm[first .. first + count) (Morton order) */
+    uint32_t first, count; /* its points: the sorted positions [first, first + count) */
     double fp;             /* their footprint proxy, sum of pi r^2 */
 } unit;
 
 typedef struct kd_ctx {
-    const uint32_t *perm;
+    const uint32_t *perm;  /* sorted position -> point (NULL: the points were in order) */
     uint16_t *part;
     pc_part_box *box;
     const prep_morton_frame *f;
     int axis;              /* for by_lo */
 } kd_ctx;
+
+/* point_at: the point at sorted position j. */
+static uint32_t point_at(const uint32_t *perm, uint32_t j)
+{
+    return perm ? perm[j] : j;
+}
 
 /* point_fp: a point's weight in the footprint proxy (a bad radius weighs nothing). */
 static double point_fp(const float *radius, uint64_t i)
@@ -51,7 +57,7 @@ static void leaves(const uint64_t *codes, const uint32_t *perm, const float *rad
         x->first = a;
         x->count = b - a;
         x->fp = 0;
-        for (uint32_t j = a; j < b; j++) x->fp += point_fp(radius, perm[j]);
+        for (uint32_t j = a; j < b; j++) x->fp += point_fp(radius, point_at(perm, j));
         return;
     }
     int shift = 3 * (PREP_MORTON_BITS - level - 1);
@@ -128,7 +134,7 @@ static void kd(kd_ctx *c, unit *u, size_t nu, const uint32_t rlo[3], const uint3
     if (k == 1) {
         for (size_t j = 0; j < nu; j++)
             for (uint32_t q = 0; q < u[j].count; q++)
-                c->part[c->perm[u[j].first + q]] = (uint16_t)first;
+                c->part[point_at(c->perm, u[j].first + q)] = (uint16_t)first;
         set_box(c, first, rlo, rhi);
         return;
     }
@@ -196,6 +202,11 @@ static void kd(kd_ctx *c, unit *u, size_t nu, const uint32_t rlo[3], const uint3
     kd(c, u + best_j, nu - best_j, glo, ghi, first + kl, k - kl);
 }
 
+static int no_memory(uint64_t n, sd_err *err)
+{
+    return sd_errf(err, SD_ENOMEM, "out of memory partitioning %llu points", (unsigned long long)n);
+}
+
 int pc_partition(const float *pos, const float *radius, uint64_t n, int nparts, uint16_t *part,
                  pc_part_box *box, sd_err *err)
 {
@@ -208,11 +219,20 @@ int pc_partition(const float *pos, const float *radius, uint64_t n, int nparts, 
     prep_morton_frame_of(pos, (size_t)n, &f);
     size_t m = n ? (size_t)n : 1;
     uint64_t *codes = malloc(m * sizeof *codes);
-    uint32_t *perm = malloc(m * sizeof *perm);
+    uint32_t *perm = NULL;
     unit *u = NULL;
-    int rc = codes && perm ? prep_morton_sort(pos, (size_t)n, &f, codes, perm, err)
-                           : sd_errf(err, SD_ENOMEM, "out of memory partitioning %llu points",
-                                     (unsigned long long)n);
+    int rc = codes ? 0 : no_memory(n, err);
+    /* A prepared cloud is stored in the Morton order of this very frame (prep.c): then the
+     * codes are already sorted and the radix sort and its 16 bytes a point are skipped. */
+    int sorted = 1;
+    for (uint64_t i = 0; rc == 0 && i < n; i++) {
+        codes[i] = prep_morton_code(&f, pos + 3 * i);
+        if (i && codes[i] < codes[i - 1]) sorted = 0;
+    }
+    if (rc == 0 && !sorted) {
+        perm = malloc(m * sizeof *perm);
+        rc = perm ? prep_morton_sort(pos, (size_t)n, &f, codes, perm, err) : no_memory(n, err);
+    }
     uint64_t cap = n / ((uint64_t)PC_PART_CELL_DIV * (uint64_t)nparts);
     size_t nu = 0;
     if (rc == 0 && n) { /* count the units, then make them */

@@ -41,8 +41,9 @@ typedef struct pc_part_box {
 /* pc_partition: part[i] in [0, nparts) for each of the n points of pos (3n floats) with splat
  * radii radius (n floats, >= 0; NULL: every point weighs the same, only points are balanced);
  * box, when not NULL, receives the nparts regions. nparts in 1..PC_PART_MAX, n < 2^32.
- * A part may be empty only when the cloud has fewer units than parts. Returns 0 or
- * SD_EINVAL / SD_ENOMEM. */
+ * A part may be empty only when the cloud has fewer units than parts. Temporary memory: 8
+ * bytes a point, 16 more when pos is not in the Morton order of its own cube (a prepared
+ * cloud is: prep.c sorts it so), and 32 bytes a unit. Returns 0 or SD_EINVAL / SD_ENOMEM. */
 int pc_partition(const float *pos, const float *radius, uint64_t n, int nparts, uint16_t *part,
                  pc_part_box *box, sd_err *err);
 
