@@ -659,13 +659,19 @@ static void test_partition_cells_uneven(void **state)
         pc_partition_balance(NULL, N, part, np, pts, fp, &ip, &ifp);
         assert_true(ip <= 1.05 && ifp == ip);
     }
-    /* degenerate: one position */
+    /* degenerate: one position, one unit: every part but one is empty; at 1000 parts the
+     * regions around the unit are cut down to its cell itself, and the parts left over get
+     * empty boxes */
     for (int i = 0; i < 3 * 100; i++) pos[i] = 0.25f;
-    pc_part_box box[4];
-    assert_int_equal(pc_partition(pos, radius, 100, 4, part, box, &err), 0);
-    check_cells(pos, 100, 4, part, box);
-    for (int i = 1; i < 100; i++) assert_int_equal(part[i], part[0]);
+    for (int np = 2; np <= 1000; np += np < 16 ? 1 : 984) { /* 2..16, 1000 */
+        static pc_part_box box[1000];
+        assert_int_equal(pc_partition(pos, radius, 100, np, part, box, &err), 0);
+        check_cells(pos, 100, np, part, box);
+        for (int i = 1; i < 100; i++) assert_int_equal(part[i], part[0]);
+    }
+    pc_part_box box[3];
     assert_int_equal(pc_partition(pos, radius, 0, 3, part, box, &err), 0); /* no points */
+    for (int p = 0; p < 3; p++) assert_true(box[p].cell_lo[0] <= box[p].cell_hi[0]);
     free(part);
     free(radius);
     free(pos);
