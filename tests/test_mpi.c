@@ -29,9 +29,9 @@
 #include "common/daemonproc.h"
 #include "common/imgtest.h"
 #include "common/testutil.h"
+#include "partition.h"
 #include "cloud.h"
 #include "morton.h"
-#include "partition.h"
 #include "prep.h"
 
 enum { BUNNY_POINTS = 40256 }; /* "element vertex 40256" in tests/data/bun000.ply */
@@ -386,86 +386,6 @@ static void test_points_identical_1_to_4(void **state)
     }
 }
 
-/* pc_partition_median (the earlier partition) on a known layout: a long box split into 2, 3
- * and 4 slabs by recursive median cuts along the longest axis; pc_prepared_subset keeps the
- * whole cloud's summary. */
-static void test_partition(void **state)
-{
-    (void)state;
-    enum { N = 1200 };
-    float *pos = malloc(3 * N * sizeof *pos);
-    uint16_t part[N];
-    assert_non_null(pos);
-    /* x in [0, 12) (the longest axis), y in [0, 2), z in [0, 1): x = i / 100 */
-    for (int i = 0; i < N; i++) {
-        pos[3 * i] = i / 100.0f;
-        pos[3 * i + 1] = (i % 7) / 3.5f;
-        pos[3 * i + 2] = (i % 5) / 5.0f;
-    }
-    sd_err err = {0};
-    for (int k = 1; k <= 4; k++) {
-        assert_int_equal(pc_partition_median(pos, N, k, part, &err), 0);
-        int count[4] = {0};
-        for (int i = 0; i < N; i++) {
-            assert_true(part[i] < k);
-            count[part[i]]++;
-        }
-        for (int p = 0; p < k; p++) assert_int_equal(count[p], N / k);
-        /* cut along x (the longest axis and, for 3 and 4 parts, still the longest of each
-         * half): part p holds the p-th slab of x */
-        for (int i = 0; i < N; i++) assert_int_equal(part[i], i / (N / k));
-    }
-    assert_int_equal(pc_partition_median(pos, N, 0, part, &err), SD_EINVAL);
-    assert_int_equal(pc_partition(pos, NULL, N, 0, part, NULL, &err), SD_EINVAL);
-    assert_int_equal(pc_partition(pos, NULL, N, PC_PART_MAX + 1, part, NULL, &err), SD_EINVAL);
-
-    /* a cube of 8 points in 2 parts: the longest axis is a tie, x (the first) is cut */
-    float cube[24];
-    for (int i = 0; i < 8; i++) {
-        cube[3 * i] = (float)(i & 1);
-        cube[3 * i + 1] = (float)(i >> 1 & 1);
-        cube[3 * i + 2] = (float)(i >> 2 & 1);
-    }
-    uint16_t cp[8];
-    assert_int_equal(pc_partition_median(cube, 8, 2, cp, &err), 0);
-    for (int i = 0; i < 8; i++) assert_int_equal(cp[i], i & 1);
-
-    /* subset: the points of part 1 of 3, batches re-cut, summary kept */
-    pc_prepared src = {.n = N, .attrs = PC_ATTR_NORMAL | PC_ATTR_RADIUS | PC_ATTR_F | PC_ATTR_RGB,
-                       .k = 24, .nbatches = 1};
-    assert_int_equal(pc_prepared_alloc(&src, &err), 0);
-    memcpy(src.pos, pos, 3 * N * sizeof *pos);
-    for (int i = 0; i < N; i++) {
-        src.radius[i] = (float)i;
-        src.rgba[4 * i] = (uint8_t)i;
-        src.F[i] = i / (float)N;
-    }
-    pc_prepared_make_batches(&src, N);
-    src.bmin[0] = -5;
-    src.bmax[0] = 17;
-    src.offset[1] = 1e6;
-    src.sigma = 0.25f;
-    assert_int_equal(pc_partition_median(pos, N, 3, part, &err), 0);
-    pc_prepared sub;
-    assert_int_equal(pc_prepared_subset(&src, part, 1, &sub, &err), 0);
-    assert_int_equal(sub.n, N / 3);
-    assert_int_equal(sub.nbatches, 1);
-    assert_int_equal(sub.batches[0].count, N / 3);
-    assert_true(sub.batches[0].bmin[0] == 4.0f && sub.batches[0].bmax[0] == 7.99f);
-    for (uint64_t j = 0; j < sub.n; j++) {
-        uint64_t i = N / 3 + j;
-        assert_true(sub.pos[3 * j] == pos[3 * i]);
-        assert_true(sub.radius[j] == (float)i);
-        assert_int_equal(sub.rgba[4 * j], (uint8_t)i);
-        assert_true(sub.F[j] == i / (float)N);
-    }
-    assert_true(sub.bmin[0] == -5 && sub.bmax[0] == 17 && sub.offset[1] == 1e6);
-    assert_true(sub.sigma == 0.25f && sub.k == 24);
-    pc_prepared_free(&sub);
-    pc_prepared_free(&src);
-    free(pos);
-}
-
 /* count_prefix: how many of the sorted codes[0, n) share code's top 3 level bits. */
 static uint64_t count_prefix(const uint64_t *codes, uint64_t n, uint64_t code, int level)
 {
@@ -677,12 +597,92 @@ static void test_partition_cells_uneven(void **state)
     free(pos);
 }
 
+/* pc_partition_median (the earlier partition) on a known layout: a long box split into 2, 3
+ * and 4 slabs by recursive median cuts along the longest axis; pc_prepared_subset keeps the
+ * whole cloud's summary. */
+static void test_partition(void **state)
+{
+    (void)state;
+    enum { N = 1200 };
+    float *pos = malloc(3 * N * sizeof *pos);
+    uint16_t part[N];
+    assert_non_null(pos);
+    /* x in [0, 12) (the longest axis), y in [0, 2), z in [0, 1): x = i / 100 */
+    for (int i = 0; i < N; i++) {
+        pos[3 * i] = i / 100.0f;
+        pos[3 * i + 1] = (i % 7) / 3.5f;
+        pos[3 * i + 2] = (i % 5) / 5.0f;
+    }
+    sd_err err = {0};
+    for (int k = 1; k <= 4; k++) {
+        assert_int_equal(pc_partition_median(pos, N, k, part, &err), 0);
+        int count[4] = {0};
+        for (int i = 0; i < N; i++) {
+            assert_true(part[i] < k);
+            count[part[i]]++;
+        }
+        for (int p = 0; p < k; p++) assert_int_equal(count[p], N / k);
+        /* cut along x (the longest axis and, for 3 and 4 parts, still the longest of each
+         * half): part p holds the p-th slab of x */
+        for (int i = 0; i < N; i++) assert_int_equal(part[i], i / (N / k));
+    }
+    assert_int_equal(pc_partition_median(pos, N, 0, part, &err), SD_EINVAL);
+    assert_int_equal(pc_partition(pos, NULL, N, 0, part, NULL, &err), SD_EINVAL);
+    assert_int_equal(pc_partition(pos, NULL, N, PC_PART_MAX + 1, part, NULL, &err), SD_EINVAL);
+
+    /* a cube of 8 points in 2 parts: the longest axis is a tie, x (the first) is cut */
+    float cube[24];
+    for (int i = 0; i < 8; i++) {
+        cube[3 * i] = (float)(i & 1);
+        cube[3 * i + 1] = (float)(i >> 1 & 1);
+        cube[3 * i + 2] = (float)(i >> 2 & 1);
+    }
+    uint16_t cp[8];
+    assert_int_equal(pc_partition_median(cube, 8, 2, cp, &err), 0);
+    for (int i = 0; i < 8; i++) assert_int_equal(cp[i], i & 1);
+
+    /* subset: the points of part 1 of 3, batches re-cut, summary kept */
+    pc_prepared src = {.n = N, .attrs = PC_ATTR_NORMAL | PC_ATTR_RADIUS | PC_ATTR_F | PC_ATTR_RGB,
+                       .k = 24, .nbatches = 1};
+    assert_int_equal(pc_prepared_alloc(&src, &err), 0);
+    memcpy(src.pos, pos, 3 * N * sizeof *pos);
+    for (int i = 0; i < N; i++) {
+        src.radius[i] = (float)i;
+        src.rgba[4 * i] = (uint8_t)i;
+        src.F[i] = i / (float)N;
+    }
+    pc_prepared_make_batches(&src, N);
+    src.bmin[0] = -5;
+    src.bmax[0] = 17;
+    src.offset[1] = 1e6;
+    src.sigma = 0.25f;
+    assert_int_equal(pc_partition_median(pos, N, 3, part, &err), 0);
+    pc_prepared sub;
+    assert_int_equal(pc_prepared_subset(&src, part, 1, &sub, &err), 0);
+    assert_int_equal(sub.n, N / 3);
+    assert_int_equal(sub.nbatches, 1);
+    assert_int_equal(sub.batches[0].count, N / 3);
+    assert_true(sub.batches[0].bmin[0] == 4.0f && sub.batches[0].bmax[0] == 7.99f);
+    for (uint64_t j = 0; j < sub.n; j++) {
+        uint64_t i = N / 3 + j;
+        assert_true(sub.pos[3 * j] == pos[3 * i]);
+        assert_true(sub.radius[j] == (float)i);
+        assert_int_equal(sub.rgba[4 * j], (uint8_t)i);
+        assert_true(sub.F[j] == i / (float)N);
+    }
+    assert_true(sub.bmin[0] == -5 && sub.bmax[0] == 17 && sub.offset[1] == 1e6);
+    assert_true(sub.sigma == 0.25f && sub.k == 24);
+    pc_prepared_free(&sub);
+    pc_prepared_free(&src);
+    free(pos);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_partition),
         cmocka_unit_test(test_partition_cells_bunny),
         cmocka_unit_test(test_partition_cells_uneven),
+        cmocka_unit_test(test_partition),
         cmocka_unit_test_setup_teardown(test_points_identical_1_to_4, setup, teardown),
         cmocka_unit_test_setup_teardown(test_rank_dies, setup, teardown),
     };

@@ -6,14 +6,13 @@
 #   sort-last  `splatd --mpi` under mpirun -np 1..4 (skipped without mpirun/splatd-mpi):
 #              frames/s of a camera path (one frame in flight), the compositing time per
 #              frame (rank 0's median), the bytes each rank sends per frame, and each rank's
-#              resident memory after loading;
-#   partition  the ranks' parts of Guanyin.ply and bun000.ply for N = 2, 3, 4, 7 (part_bench):
-#              each part's share of the points and of the footprint proxy (sum of pi r^2 over
-#              its splats), and the imbalance max/mean of both, for the earlier median cuts and
-#              the octree-cell kd tree splatd --mpi uses (partition.h); for Guanyin at N = 2..4
-#              also each part's render time alone (points, splat; 1280x720, 4 views) and the
-#              spread max/mean that a frame of the ranks waits on.
+#              resident memory after loading.
 # All processes share this machine's cores: the numbers measure overheads, not speed-ups.
+# Also the ranks' parts (partition.h), no MPI needed: Guanyin.ply and bun000.ply into N = 2, 3,
+# 4, 7 parts by the earlier median cuts and by the octree-cell kd tree splatd --mpi uses, each
+# part's share of the points and of the footprint proxy (sum of pi r^2 over its splats) and
+# the imbalance max/mean of both; for Guanyin at N = 2..4 also each part rendered alone
+# (points, splat; 1280x720): its covered pixels and render time, max/mean (part_bench.c).
 set -eu
 bin=${SPLATD_BIN:-build/bin/splatd}
 splat=${SPLAT_BIN:-build/bin/splat}
