@@ -219,7 +219,7 @@ static int load(mr_ctx *m, const mr_cmd *c, pc_prepared *full, sd_err *err)
                      (unsigned long long)total, m->size);
     if (rc == 0) {
         part = malloc((size_t)(full->n ? full->n : 1) * sizeof *part);
-        rc = part ? pc_partition(full->pos, full->n, m->size, part, err)
+        rc = part ? pc_partition(full->pos, full->radius, full->n, m->size, part, NULL, err)
                   : sd_errf(err, SD_ENOMEM, "out of memory for the partition");
     }
     if (rc == 0) rc = pc_prepared_subset(full, part, m->rank, &mine, err);

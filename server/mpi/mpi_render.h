@@ -3,7 +3,8 @@
  * Rank 0 is the daemon clients talk to (daemon_run with the hooks below); every other rank runs
  * mr_worker. On rank 0's render thread the hooks broadcast each cloud load and each frame to
  * all ranks: every rank opens the cloud through the (shared) prep cache, keeps the spatial part
- * pc_partition gives it (about 1/N of the points, a compact region) and uploads only that;
+ * pc_partition gives it (about 1/N of the points and of their splat area, a box of whole
+ * octree cells) and uploads only that;
  * every rank renders its part with the frame's pipeline and camera, and the ranks composite
  * (compose.h: binary swap with folding, then a gather to rank 0), which encodes and sends.
  *

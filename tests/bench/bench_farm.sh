@@ -8,6 +8,11 @@
 #              frame (rank 0's median), the bytes each rank sends per frame, and each rank's
 #              resident memory after loading.
 # All processes share this machine's cores: the numbers measure overheads, not speed-ups.
+# Also the ranks' parts (partition.h), no MPI needed: Guanyin.ply and bun000.ply into N = 2, 3,
+# 4, 7 parts by the earlier median cuts and by the octree-cell kd tree splatd --mpi uses, each
+# part's share of the points and of the footprint proxy (sum of pi r^2 over its splats) and
+# the imbalance max/mean of both; for Guanyin at N = 2..4 also each part rendered alone
+# (points, splat; 1280x720): its covered pixels and render time, max/mean (part_bench.c).
 set -eu
 bin=${SPLATD_BIN:-build/bin/splatd}
 splat=${SPLAT_BIN:-build/bin/splat}
@@ -22,7 +27,7 @@ cleanup() {
 }
 trap cleanup EXIT INT TERM
 mkdir -p "$tmp/data"
-cp "$data/Guanyin.ply" "$tmp/data/"
+cp "$data/Guanyin.ply" "$data/bun000.ply" "$tmp/data/"
 "$bin" prep "$tmp/data/Guanyin.ply" --cache "$tmp/cache" --quiet
 
 # wait_port FILE PID: waits for the port file of a starting daemon.
@@ -80,6 +85,22 @@ echo "Cost model: a frame costs t = render + read-back + encode on its daemon pl
 echo "decode on the client; N daemons on N machines give N / t frames/s until the clients' network"
 echo "or the shared file system limits, after each daemon's one-time load (prep from the shared"
 echo "cache: mmap). Here both daemons share $(nproc) cores, so 2 shards cannot beat one daemon."
+
+# ---- the ranks' parts (no MPI needed) ----
+part_bench=${SPLATD_BENCH:-$(dirname "$bin")/../bench}/part_bench
+if [ -x "$part_bench" ]; then
+    for cloud in Guanyin bun000; do
+        echo
+        echo "## partition: $cloud.ply into N parts, median cuts (before) vs octree cells (splatd --mpi); footprint = sum of pi r^2"
+        echo
+        render=""
+        [ "$cloud" = Guanyin ] && render="--render 2,3,4"
+        "$part_bench" "$tmp/data/$cloud.ply" --cache "$tmp/cache" --parts 2,3,4,7 $render
+    done
+else
+    echo
+    echo "(partition: skipped, $part_bench not built)"
+fi
 
 # ---- sort-last over MPI ----
 mpi_bin=$(dirname "$bin")/splatd-mpi
