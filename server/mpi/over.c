@@ -49,6 +49,15 @@ void ov_op(const uint8_t *lo, const uint8_t *hi, uint8_t *dst, size_t npix, size
         for (size_t i = 0; i < npix; i++) {
             const uint8_t *f = lo + 4 * i, *b = hi + 4 * i;
             uint8_t *o = dst + 4 * i, fa = f[3];
+            /* the usual cases, with over8's result: an opaque front, an empty one */
+            if (fa == 255) {
+                if (o != f) memcpy(o, f, 4);
+                continue;
+            }
+            if ((f[0] | f[1] | f[2] | fa) == 0) {
+                if (o != b) memcpy(o, b, 4);
+                continue;
+            }
             uint8_t r = over8(f[0], fa, b[0]), g = over8(f[1], fa, b[1]);
             uint8_t bl = over8(f[2], fa, b[2]), al = over8(fa, fa, b[3]);
             o[0] = r, o[1] = g, o[2] = bl, o[3] = al;
