@@ -29,6 +29,8 @@
 #include "common/exrtest.h"
 #include "common/imgtest.h"
 #include "common/testutil.h"
+#include "boxorder.h"
+#include "over.h"
 #include "partition.h"
 
 enum { BUNNY_POINTS = 40256 }; /* "element vertex 40256" in tests/data/bun000.ply */
@@ -510,10 +512,130 @@ static void test_partition(void **state)
     free(pos);
 }
 
+/* bo_order on known layouts: parts cut like pc_partition's (a kd split) ordered by the eye's
+ * side of each cut, recursively; boxes no plane separates fall back to distances and say so. */
+static void test_box_order(void **state)
+{
+    (void)state;
+    int order[8], tmp[8];
+    /* 4 slabs along x: [0,1] [1,2] [2,3] [3,4] (touching at the cuts, as points on a cut) */
+    bo_box slab[4];
+    for (int p = 0; p < 4; p++)
+        slab[p] = (bo_box){{(float)p, 0, 0}, {(float)p + 1, 1, 1}};
+    assert_int_equal(bo_order(slab, 4, (double[3]){-5, 0.5, 0.5}, order, tmp), 1);
+    for (int i = 0; i < 4; i++) assert_int_equal(order[i], i);
+    assert_int_equal(bo_order(slab, 4, (double[3]){9, 0.5, 0.5}, order, tmp), 1);
+    for (int i = 0; i < 4; i++) assert_int_equal(order[i], 3 - i);
+    /* eye inside slab 2: 2 first, then its neighbours before the far ones */
+    assert_int_equal(bo_order(slab, 4, (double[3]){2.5, 0.5, 0.5}, order, tmp), 1);
+    assert_int_equal(order[0], 2);
+    assert_true((order[1] == 1 && order[2] == 0 && order[3] == 3) ||
+                (order[1] == 3 && order[2] == 1 && order[3] == 0) ||
+                (order[1] == 1 && order[2] == 3 && order[3] == 0));
+    /* a kd split: x at 2, then y at 1 on the left and y at 3 on the right; eye at the right
+     * top, looking across: right side first, its upper part first; on the left the lower
+     * part is behind the upper one only if the eye is above the cut (y = 1): it is */
+    bo_box kd[4] = {{{0, 0, 0}, {2, 1, 1}}, {{0, 1, 0}, {2, 4, 1}},
+                    {{2, 0, 0}, {4, 3, 1}}, {{2, 3, 0}, {4, 4, 1}}};
+    assert_int_equal(bo_order(kd, 4, (double[3]){6, 3.5, 0.5}, order, tmp), 1);
+    assert_int_equal(order[0], 3);
+    assert_int_equal(order[1], 2);
+    assert_int_equal(order[2], 1);
+    assert_int_equal(order[3], 0);
+    /* an empty part (no point) comes last */
+    bo_box e3[3] = {{{0, 0, 0}, {1, 1, 1}}, {{INFINITY, INFINITY, INFINITY},
+                    {-INFINITY, -INFINITY, -INFINITY}}, {{1, 0, 0}, {2, 1, 1}}};
+    assert_int_equal(bo_order(e3, 3, (double[3]){5, 0.5, 0.5}, order, tmp), 1);
+    assert_int_equal(order[0], 2);
+    assert_int_equal(order[1], 0);
+    assert_int_equal(order[2], 1);
+    /* a pinwheel of 4 boxes around a centre square (no axis plane separates them) and the
+     * centre: the fallback, nearest first, reported */
+    bo_box pin[5] = {{{0, 0, 0}, {2, 1, 1}}, {{2, 0, 0}, {3, 2, 1}}, {{1, 2, 0}, {3, 3, 1}},
+                     {{0, 1, 0}, {1, 3, 1}}, {{1, 1, 0}, {2, 2, 1}}};
+    assert_int_equal(bo_order(pin, 5, (double[3]){1.5, 1.5, 5}, order, tmp), 0);
+    assert_int_equal(order[0], 4);
+    /* the boxes of real parts: pc_partition of a grid into 3, seen from -x */
+    enum { G = 12 };
+    float pos[3 * G * G * G];
+    uint16_t part[G * G * G];
+    for (int i = 0; i < G * G * G; i++) {
+        pos[3 * i] = (float)(i % G) * 2.0f; /* x the longest: cut along x */
+        pos[3 * i + 1] = (float)(i / G % G);
+        pos[3 * i + 2] = (float)(i / G / G);
+    }
+    sd_err err = {0};
+    assert_int_equal(pc_partition(pos, G * G * G, 3, part, &err), 0);
+    bo_box pb[3];
+    bo_boxes(pos, G * G * G, part, 3, pb);
+    assert_int_equal(bo_order(pb, 3, (double[3]){-10, 5, 5}, order, tmp), 1);
+    for (int i = 0; i + 1 < 3; i++) assert_true(pb[order[i]].hi[0] <= pb[order[i + 1]].lo[0]);
+}
+
+/* ov_op, the backgrounds and the half conversions against values worked by hand. */
+static void test_over(void **state)
+{
+    (void)state;
+    /* 8-bit: front (128, 0, 0, 128) over (0, 255, 0, 255): G = 0 + 127 x 255 / 255 = 127, A =
+     * 128 + 127 = 255; an opaque front wins whole; an empty front gives the back */
+    uint8_t lo[12] = {128, 0, 0, 128, 10, 20, 30, 255, 0, 0, 0, 0};
+    uint8_t hi[12] = {0, 255, 0, 255, 1, 2, 3, 255, 40, 50, 60, 100};
+    uint8_t out[12];
+    ov_op(lo, hi, out, 3, OV_PX8, NULL);
+    const uint8_t want[12] = {128, 127, 0, 255, 10, 20, 30, 255, 40, 50, 60, 100};
+    assert_memory_equal(out, want, 12);
+    /* the background under a pixel with coverage 128/255: C + (1 - A) bg, alpha 1 */
+    uint8_t px[8] = {128, 0, 0, 128, 0, 0, 0, 0};
+    ov_background8(px, 2, (float[3]){0, 1, 0.2f});
+    const uint8_t wpx[8] = {128, 127, 25, 255, 0, 255, 51, 255};
+    assert_memory_equal(px, wpx, 8);
+    /* float: (0.5, 0, 0, 0.5) over (0, 1, 0, 1) = (0.5, 0.5, 0, 1); depth the nearer */
+    uint8_t fl[OV_PXF], fh[OV_PXF], fo[OV_PXF];
+    float zl = 2.0f, zh = 1.5f;
+    uint16_t cl[4] = {ov_float_to_half(0.5f), 0, 0, ov_float_to_half(0.5f)};
+    uint16_t ch[4] = {0, ov_float_to_half(1.0f), 0, ov_float_to_half(1.0f)};
+    memcpy(fl, &zl, 4), memcpy(fl + 4, cl, 8);
+    memcpy(fh, &zh, 4), memcpy(fh + 4, ch, 8);
+    ov_op(fl, fh, fo, 1, OV_PXF, NULL);
+    float z;
+    uint16_t co[4];
+    memcpy(&z, fo, 4), memcpy(co, fo + 4, 8);
+    assert_true(z == 1.5f);
+    assert_true(ov_half_to_float(co[0]) == 0.5f && ov_half_to_float(co[1]) == 0.5f);
+    assert_true(ov_half_to_float(co[2]) == 0.0f && ov_half_to_float(co[3]) == 1.0f);
+    uint16_t rgbaf[4];
+    uint8_t rgba8[4];
+    cl[1] = 0;
+    memcpy(fl + 4, cl, 8);
+    ov_backgroundf(fl, 1, (float[3]){0, 0.5f, 0}, rgbaf, rgba8, &z);
+    assert_true(ov_half_to_float(rgbaf[0]) == 0.5f && ov_half_to_float(rgbaf[1]) == 0.25f);
+    assert_true(ov_half_to_float(rgbaf[3]) == 0.5f); /* coverage kept, as the float target */
+    assert_int_equal(rgba8[0], 128);
+    assert_int_equal(rgba8[1], 64);
+    assert_int_equal(rgba8[3], 255);
+    assert_true(z == 2.0f);
+    /* halves: every non-NaN bit pattern round-trips; floats round to the nearest half, ties
+     * to even; past 65504 is infinity; below 2^-24 / 2 is zero */
+    for (uint32_t h = 0; h < 65536; h++) {
+        if (((h >> 10) & 31) == 31 && (h & 1023)) continue;
+        assert_int_equal(ov_float_to_half(ov_half_to_float((uint16_t)h)), h);
+        assert_true(ov_half_to_float((uint16_t)h) == tu_half((uint16_t)h) ||
+                    isnan(tu_half((uint16_t)h)));
+    }
+    assert_int_equal(ov_float_to_half(1.0f + 1.0f / 2048), 0x3c00);          /* tie: even */
+    assert_int_equal(ov_float_to_half(1.0f + 3.0f / 2048), 0x3c02);          /* tie: even */
+    assert_int_equal(ov_float_to_half(65520.0f), 0x7c00);
+    assert_int_equal(ov_float_to_half(65519.0f), 0x7bff);
+    assert_int_equal(ov_float_to_half(ldexpf(1.0f, -26)), 0);
+    assert_int_equal(ov_float_to_half(ldexpf(3.0f, -25)), 2);                /* 1.5 -> 2 */
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_partition),
+        cmocka_unit_test(test_box_order),
+        cmocka_unit_test(test_over),
         cmocka_unit_test_setup_teardown(test_points_identical_1_to_4, setup, teardown),
         cmocka_unit_test_setup_teardown(test_rank_dies, setup, teardown),
     };
