@@ -34,6 +34,7 @@ typedef struct mr_cloud {
     uint64_t n_local, n_total;
     double offset[3];          /* the cloud's local origin (file coordinates) */
     bo_box *boxes;             /* every rank's part's bounding box: the order of "over" */
+    int order_warned;          /* rank 0 said that no plane separates the boxes */
 } mr_cloud;
 
 struct mr_ctx {
@@ -61,7 +62,6 @@ struct mr_ctx {
     double comp_ms[MR_MAX_TIMES];
     int ncomp;
     int *order, *order_tmp;    /* soft, olt: the ranks front to back (boxorder.h) */
-    int order_exact;           /* the last order found separating planes at every step */
 };
 
 static double now_ms(void)
@@ -474,7 +474,13 @@ static int frame_over(mr_ctx *m, const mr_cmd *c, mr_cloud *cl, sp_params *p, rn
     /* the order: every rank computes it from the same boxes and camera */
     double eye[3];
     for (int a = 0; a < 3; a++) eye[a] = c->cam.eye[a] - cl->offset[a];
-    m->order_exact = bo_order(cl->boxes, m->size, eye, m->order, m->order_tmp);
+    if (!bo_order(cl->boxes, m->size, eye, m->order, m->order_tmp) && m->rank == 0 &&
+        !cl->order_warned) {
+        /* parts that are not cut by planes (boxorder.h): said once per cloud */
+        cl->order_warned = 1;
+        fprintf(stderr, "splatd-mpi: the parts' boxes overlap (no plane separates them): soft "
+                "and olt composite them nearest first, which can be wrong where they overlap\n");
+    }
     if (stride == OV_PX8) {
         memcpy(m->img, f->rgba8, npix * 4);
     } else {
