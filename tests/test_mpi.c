@@ -555,21 +555,24 @@ static void test_box_order(void **state)
                      {{0, 1, 0}, {1, 3, 1}}, {{1, 1, 0}, {2, 2, 1}}};
     assert_int_equal(bo_order(pin, 5, (double[3]){1.5, 1.5, 5}, order, tmp), 0);
     assert_int_equal(order[0], 4);
-    /* the boxes of real parts: pc_partition of a grid into 3, seen from -x */
+    /* bo_boxes: the points' boxes of a grid cut into 3 parts, the middle one in y halves
+     * numbered 2 and 0, the left slab 1; points on a cut go to either side */
     enum { G = 12 };
     float pos[3 * G * G * G];
     uint16_t part[G * G * G];
     for (int i = 0; i < G * G * G; i++) {
-        pos[3 * i] = (float)(i % G) * 2.0f; /* x the longest: cut along x */
-        pos[3 * i + 1] = (float)(i / G % G);
-        pos[3 * i + 2] = (float)(i / G / G);
+        int x = i % G, y = i / G % G;
+        pos[3 * i] = (float)x, pos[3 * i + 1] = (float)y, pos[3 * i + 2] = (float)(i / G / G);
+        part[i] = x <= 5 ? 1 : y <= 5 ? 2 : 0;
     }
-    sd_err err = {0};
-    assert_int_equal(pc_partition(pos, G * G * G, 3, part, &err), 0);
     bo_box pb[3];
     bo_boxes(pos, G * G * G, part, 3, pb);
-    assert_int_equal(bo_order(pb, 3, (double[3]){-10, 5, 5}, order, tmp), 1);
-    for (int i = 0; i + 1 < 3; i++) assert_true(pb[order[i]].hi[0] <= pb[order[i + 1]].lo[0]);
+    assert_true(pb[1].lo[0] == 0 && pb[1].hi[0] == 5 && pb[1].hi[1] == 11);
+    assert_true(pb[2].lo[0] == 6 && pb[2].hi[1] == 5 && pb[0].lo[1] == 6 && pb[0].hi[2] == 11);
+    assert_int_equal(bo_order(pb, 3, (double[3]){20, 2, 5}, order, tmp), 1);
+    assert_int_equal(order[0], 2);
+    assert_int_equal(order[1], 0);
+    assert_int_equal(order[2], 1);
 }
 
 /* ov_op, the backgrounds and the half conversions against values worked by hand. */
