@@ -77,8 +77,9 @@ INC_server/render += $(INC_render_gen)
 INC_server/daemon += $(INC_render_gen)
 INC_protocol   := -Iprotocol
 INC_client     := -Iprotocol -Iclient
-INC_ALL        := -Iprotocol $(addprefix -Iserver/,$(SERVER_DIRS)) -Iclient -Itests -Itests/common $(INC_render_gen)
-# server/mpi (splatd-mpi, `splatd --mpi`) sits on top of everything, like cmd; nothing sees it.
+INC_ALL        := -Iprotocol $(addprefix -Iserver/,$(SERVER_DIRS)) -Iclient -Itests -Itests/common $(INC_render_gen) -Iserver/mpi
+# server/mpi (splatd-mpi, `splatd --mpi`) sits on top of everything, like cmd; nothing but the
+# tests sees it.
 INC_server/mpi := -Iprotocol $(addprefix -Iserver/,$(SERVER_DIRS) mpi)
 # inc_of SRC: the include flags of the directory SRC is in (tests/, tools/: all of them).
 inc_of = $(or $(INC_$(patsubst %/,%,$(dir $(1)))),$(INC_ALL))
@@ -202,6 +203,10 @@ ifneq ($(MPICC),)
 $(eval $(call MPI_FLAVOUR,$(BUILD),))
 $(eval $(call MPI_FLAVOUR,$(BUILD)/asan,$(ASAN_FLAGS)))
 endif
+# test_mpi also tests the parts of server/mpi that need no MPI (the parts' order, "over")
+MPI_PLAIN_SRC := server/mpi/boxorder.c server/mpi/over.c
+$(BUILD)/tests/test_mpi: $(call obj,$(BUILD),$(MPI_PLAIN_SRC))
+$(BUILD)/asan/tests/test_mpi: $(call obj,$(BUILD)/asan,$(MPI_PLAIN_SRC))
 
 TESTS       := $(patsubst tests/%.c,$(BUILD)/tests/%,$(TEST_SRC))
 ASAN_TESTS  := $(patsubst tests/%.c,$(BUILD)/asan/tests/%,$(TEST_SRC))

@@ -41,6 +41,17 @@ int cmp_composite(MPI_Comm comm, uint8_t *img, uint8_t *scratch, uint8_t *out, s
                   size_t stride, cmp_op op, void *user, cmp_wait wait, void *wait_user,
                   cmp_stats *st);
 
+/* cmp_composite_ordered: cmp_composite for an operator that is associative but not
+ * commutative ("over"): order[0..size) lists the ranks front to back, and every call of op
+ * gets as lo the image of ranks that all come before those of hi in that order. The ranks
+ * take the schedule's places in that order; the first 2 (size - p2) places fold in adjacent
+ * pairs (the second into the first), so every exchange of the swap joins two runs of
+ * consecutive places. Bytes sent are those of cmp_composite. MPI_ERR_RANK when this rank is
+ * not in order. */
+int cmp_composite_ordered(MPI_Comm comm, const int *order, uint8_t *img, uint8_t *scratch,
+                          uint8_t *out, size_t npix, size_t stride, cmp_op op, void *user,
+                          cmp_wait wait, void *wait_user, cmp_stats *st);
+
 /* cmp_range: the pixel range [*lo, *hi) rank r keeps after the swap among p2 ranks. */
 void cmp_range(int r, int p2, size_t npix, size_t *lo, size_t *hi);
 

@@ -9,8 +9,10 @@
 #include <string.h>
 #include <time.h>
 
+#include "boxorder.h"
 #include "cache.h"
 #include "compose.h"
+#include "over.h"
 #include "partition.h"
 
 enum { MR_LOAD = 1, MR_RENDER, MR_QUIT };
@@ -30,6 +32,9 @@ typedef struct mr_cloud {
     uint32_t key;              /* 0: free */
     uint32_t local_id;         /* 0: this rank's part is empty */
     uint64_t n_local, n_total;
+    double offset[3];          /* the cloud's local origin (file coordinates) */
+    bo_box *boxes;             /* every rank's part's bounding box: the order of "over" */
+    int order_warned;          /* rank 0 said that no plane separates the boxes */
 } mr_cloud;
 
 struct mr_ctx {
@@ -56,6 +61,7 @@ struct mr_ctx {
     uint64_t frames, bytes_sent;
     double comp_ms[MR_MAX_TIMES];
     int ncomp;
+    int *order, *order_tmp;    /* soft, olt: the ranks front to back (boxorder.h) */
 };
 
 static double now_ms(void)
@@ -134,12 +140,20 @@ int mr_supported(const sp_params *params, sd_err *err)
         SP_PIPELINE_LIST(MR_PIPE_NAME_)
 #undef MR_PIPE_NAME_
     };
-    if (params->pipeline != SP_PIPE_POINTS && params->pipeline != SP_PIPE_SPLAT)
+    int pi = params->pipeline;
+    if (pi != SP_PIPE_POINTS && pi != SP_PIPE_SPLAT && pi != SP_PIPE_SOFT && pi != SP_PIPE_OLT)
         return sd_errf(err, SD_EUNSUP, "pipeline %s is not available with splatd --mpi: only "
-                       "points and splat composite from the ranks' parts (kawata fits planes "
-                       "to each pixel's points of the whole cloud; soft and olt order every "
-                       "transparent disc of the whole cloud back to front)",
-                       params->pipeline < SP_PIPE_COUNT ? names[params->pipeline] : "?");
+                       "points, splat, soft and olt composite from the ranks' parts (kawata "
+                       "fits planes to each pixel's points of the whole cloud)",
+                       pi >= 0 && pi < SP_PIPE_COUNT ? names[pi] : "?");
+    if (pi == SP_PIPE_SOFT && params->model != SP_MODEL_EXPRESS)
+        return sd_errf(err, SD_EUNSUP, "soft model=%s is not available with splatd --mpi: "
+                       "only model=express is composited from the ranks' parts (their images "
+                       "go \"over\" each other front to back in the order of their boxes, "
+                       "38-47 dB PSNR from the single image where splats and discs cross the "
+                       "cuts, see README); base and concentric integrate overlapping spheres' "
+                       "density together, and their composite was not measured",
+                       params->model == SP_MODEL_BASE ? "base" : "concentric");
     if (params->shading == SP_SHADING_EDL)
         return sd_errf(err, SD_EUNSUP, "shading=edl is not available with splatd --mpi (it "
                        "needs the composited depth on one GL context)");
@@ -203,6 +217,8 @@ static int load(mr_ctx *m, const mr_cmd *c, pc_prepared *full, sd_err *err)
     pc_prepared mine = {0}, *heap = NULL;
     cache_result res;
     uint16_t *part = NULL;
+    bo_box *boxes = NULL;
+    double offset[3] = {0, 0, 0};
     mr_cloud *slot = NULL;
     for (int i = 0; i < MR_MAX_CLOUDS && !slot; i++)
         if (!m->clouds[i].key) slot = &m->clouds[i];
@@ -223,6 +239,12 @@ static int load(mr_ctx *m, const mr_cmd *c, pc_prepared *full, sd_err *err)
                   : sd_errf(err, SD_ENOMEM, "out of memory for the partition");
     }
     if (rc == 0) rc = pc_prepared_subset(full, part, m->rank, &mine, err);
+    if (rc == 0) { /* every part's box, for the order of soft's and olt's "over" */
+        boxes = malloc((size_t)m->size * sizeof *boxes);
+        if (!boxes) rc = sd_errf(err, SD_ENOMEM, "out of memory for the parts' boxes");
+        else bo_boxes(full->pos, full->n, part, m->size, boxes);
+        memcpy(offset, full->offset, sizeof offset);
+    }
     free(part);
     if (full) pc_prepared_free(full);
     int64_t id = 0;
@@ -243,10 +265,12 @@ static int load(mr_ctx *m, const mr_cmd *c, pc_prepared *full, sd_err *err)
     int all = agree(m, rc, err);
     if (all < 0) {
         if (id > 0) rnd_release(m->rnd, (uint32_t)id);
+        free(boxes);
         return all;
     }
     *slot = (mr_cloud){.key = c->key, .local_id = (uint32_t)id, .n_local = n_local,
-                       .n_total = total};
+                       .n_total = total, .boxes = boxes};
+    memcpy(slot->offset, offset, sizeof offset);
     const char *name = strrchr(c->path, '/');
     fprintf(stderr, "splatd-mpi: rank %d of %d: %s: %llu of %llu points, resident %.0f MiB\n",
             m->rank, m->size, name ? name + 1 : c->path, (unsigned long long)slot->n_local,
@@ -398,6 +422,96 @@ static int xchg_sums(void *user, int rc, uint32_t *px, size_t n, int is_float, s
     return m->rank == 0;
 }
 
+/* clear_frame: f sized w x h, nothing drawn: colour and coverage 0, depth +inf (a rank with
+ * no points under soft or olt). */
+static int clear_frame(rnd_frame *f, int w, int h, sd_err *err)
+{
+    sp_params black = {0};
+    int rc = empty_frame(f, w, h, &black, err);
+    if (rc == 0)
+        for (size_t i = 0; i < (size_t)w * (size_t)h; i++) f->rgba8[4 * i + 3] = 0;
+    return rc;
+}
+
+/* frame_over: soft and olt. Every rank renders its part with a black background and coverage
+ * in alpha, and the ranks' images go "over" each other front to back by their boxes
+ * (boxorder.h) through the ordered binary swap (compose.h); rank 0 puts the background under
+ * the result (over.h). */
+static int frame_over(mr_ctx *m, const mr_cmd *c, mr_cloud *cl, sp_params *p, rnd_frame *f,
+                      double t0, sd_err *err)
+{
+    int rc = 0;
+    if (m->size == 1) {
+        /* one image: the GL puts it over the background as it draws (rounding at each blend,
+         * as the single process does); nothing to composite */
+        if (!cl) return sd_errf(err, SD_EINVAL, "cloud %u is not loaded", c->key);
+        rc = rnd_render(m->rnd, cl->local_id, &c->cam, p, c->want_float, f, err);
+        if (rc < 0) return rc;
+        m->frames++;
+        if (m->ncomp < MR_MAX_TIMES) m->comp_ms[m->ncomp++] = 0;
+        f->render_us = (uint64_t)((now_ms() - t0) * 1e3);
+        f->readback_us = 0;
+        f->points_drawn = cl->n_total;
+        return 0;
+    }
+    float bg[3];
+    memcpy(bg, p->background, sizeof bg);
+    memset(p->background, 0, sizeof p->background);
+    if (!cl) {
+        rc = sd_errf(err, SD_EINVAL, "cloud %u is not loaded on this rank", c->key);
+    } else if (cl->local_id) {
+        rnd_set_coverage(m->rnd, 1);
+        rc = rnd_render(m->rnd, cl->local_id, &c->cam, p, c->want_float, f, err);
+        rnd_set_coverage(m->rnd, 0);
+    } else {
+        rc = clear_frame(f, c->cam.width, c->cam.height, err);
+    }
+    size_t npix = (size_t)c->cam.width * (size_t)c->cam.height;
+    size_t stride = c->want_float ? OV_PXF : OV_PX8;
+    if (rc == 0) rc = ensure_img(m, npix * stride, err);
+    if ((rc = agree(m, rc, err)) < 0) return rc;
+    double t1 = now_ms();
+    /* the order: every rank computes it from the same boxes and camera */
+    double eye[3];
+    for (int a = 0; a < 3; a++) eye[a] = c->cam.eye[a] - cl->offset[a];
+    if (!bo_order(cl->boxes, m->size, eye, m->order, m->order_tmp) && m->rank == 0 &&
+        !cl->order_warned) {
+        /* parts that are not cut by planes (boxorder.h): said once per cloud */
+        cl->order_warned = 1;
+        fprintf(stderr, "splatd-mpi: the parts' boxes overlap (no plane separates them): soft "
+                "and olt composite them nearest first, which can be wrong where they overlap\n");
+    }
+    if (stride == OV_PX8) {
+        memcpy(m->img, f->rgba8, npix * 4);
+    } else {
+        for (size_t i = 0; i < npix; i++) {
+            uint8_t *px = m->img + i * stride;
+            memcpy(px, &f->depth[i], 4);
+            memcpy(px + 4, f->rgba16f + 4 * i, 8);
+        }
+    }
+    cmp_stats st;
+    int mrc = cmp_composite_ordered(m->comm, m->order, m->img, m->scratch, m->out, npix, stride,
+                                    ov_op, NULL, wait_rq, m, &st);
+    m->bytes_sent += st.bytes_sent;
+    m->frames++;
+    if (mrc != MPI_SUCCESS) return mpi_err(m, mrc, "compositing", err);
+    if (m->rank == 0) {
+        if (stride == OV_PX8) {
+            memcpy(f->rgba8, m->out, npix * 4);
+            ov_background8(f->rgba8, npix, bg);
+        } else {
+            ov_backgroundf(m->out, npix, bg, f->rgba16f, f->rgba8, f->depth);
+        }
+        double t2 = now_ms();
+        if (m->ncomp < MR_MAX_TIMES) m->comp_ms[m->ncomp++] = t2 - t1;
+        f->render_us = (uint64_t)((t1 - t0) * 1e3);
+        f->readback_us = (uint64_t)((t2 - t1) * 1e3); /* compositing: the frame's "read-back" */
+        f->points_drawn = cl->n_total;
+    }
+    return 0;
+}
+
 /* frame: every rank renders its part and the ranks composite; rank 0 gets the result in f. */
 static int frame(mr_ctx *m, const mr_cmd *c, rnd_frame *f, sd_err *err)
 {
@@ -406,6 +520,8 @@ static int frame(mr_ctx *m, const mr_cmd *c, rnd_frame *f, sd_err *err)
     mr_cloud *cl = find_cloud(m, c->key);
     sp_params p = c->params;
     if (p.point_budget > 0) p.point_budget = (p.point_budget + m->size - 1) / m->size;
+    if (p.pipeline == SP_PIPE_SOFT || p.pipeline == SP_PIPE_OLT)
+        return frame_over(m, c, cl, &p, f, t0, err);
     int splat = p.pipeline == SP_PIPE_SPLAT;
     m->xchg_ms = 0;
     m->xchg_calls = 0;
@@ -500,6 +616,14 @@ mr_ctx *mr_create(MPI_Comm comm, int argc, char **argv)
     m->comm = comm;
     MPI_Comm_rank(comm, &m->rank);
     MPI_Comm_size(comm, &m->size);
+    m->order = malloc((size_t)m->size * sizeof *m->order);
+    m->order_tmp = malloc((size_t)m->size * sizeof *m->order_tmp);
+    if (!m->order || !m->order_tmp) {
+        free(m->order);
+        free(m->order_tmp);
+        free(m);
+        return NULL;
+    }
     m->hooks = (rt_hooks){.user = m, .configure = configure, .adopt = hook_adopt,
                           .render = hook_render};
     m->xchg = (rnd_exchange){.user = m, .keys = xchg_keys, .sums = xchg_sums};
@@ -531,6 +655,9 @@ void mr_destroy(mr_ctx *m)
     free(m->img);
     free(m->scratch);
     free(m->out);
+    for (int i = 0; i < MR_MAX_CLOUDS; i++) free(m->clouds[i].boxes);
+    free(m->order);
+    free(m->order_tmp);
     rnd_frame_free(&m->frame);
     free(m);
 }

@@ -14,7 +14,13 @@
  *
  * Supported pipelines: points (per pixel the nearest depth wins: exact, because every rank
  * renders with the exact raster form and the whole cloud's near and far planes, see
- * partition.h). The others are refused with an error naming why (mr_supported). */
+ * partition.h); splat (its per-pixel state exchanged between its passes, rnd_exchange); soft
+ * (model=express) and olt: every rank renders its part with a black background and coverage
+ * in alpha, the images go premultiplied "over" each other front to back in the order of the
+ * parts' boxes as seen from the eye (boxorder.h, over.h; binary swap keeping that order,
+ * compose.h), and rank 0 puts the background under the result. That differs from the single
+ * image only where splats and discs reach across a cut (README "Farms and sort-last" gives the
+ * PSNR). The others are refused with an error naming why (mr_supported). */
 #pragma once
 #include <mpi.h>
 

@@ -54,6 +54,7 @@ struct rnd_ctx {
     char renderer[320];
     int max_width, max_height;
     rnd_kit kit;
+    int coverage;              /* rnd_set_coverage: 8-bit frames keep coverage in alpha */
     void *pstate[NPIPES];
     int pcreated[NPIPES];
     cloud_slot *slots;
@@ -886,9 +887,11 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     gl->BindFramebuffer(GL_FRAMEBUFFER, t->fbo);
     gl->Viewport(0, 0, cam->width, cam->height);
     /* 8-bit frames are opaque: alpha is cleared to 1 and masked off while the pipeline draws
-     * (pipe.h); the float target keeps coverage in alpha. */
+     * (pipe.h); the float target, and the 8-bit one under rnd_set_coverage, keep coverage in
+     * alpha. */
+    int opaque8 = !t->is_float && !r->coverage;
     const float bg[4] = {params->background[0], params->background[1], params->background[2],
-                         t->is_float ? 0.0f : 1.0f};
+                         opaque8 ? 1.0f : 0.0f};
     const float inf[4] = {INFINITY, 0, 0, 0};
     /* The depth renderbuffer is left to the pipelines that test depth (pipe.h). */
     /* EDL reads the eye depth (the 8-bit target then writes it too) over the cloud's screen
@@ -916,7 +919,7 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
         gl->ClearBufferfv(GL_COLOR, 1, inf);
         gl->Disable(GL_SCISSOR_TEST);
     }
-    if (!t->is_float) gl->ColorMaski(0, GL_TRUE, GL_TRUE, GL_TRUE, GL_FALSE);
+    if (opaque8) gl->ColorMaski(0, GL_TRUE, GL_TRUE, GL_TRUE, GL_FALSE);
     rnd_draw_out out = {0};
     const rnd_draw draw = {.cloud = c, .cloud_data = slot->pdata[pi], .view = &v,
                            .params = params, .target = t, .out = &out};
@@ -980,6 +983,11 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
 void rnd_set_exchange(rnd_ctx *r, const rnd_exchange *x)
 {
     r->kit.exchange = x;
+}
+
+void rnd_set_coverage(rnd_ctx *r, int on)
+{
+    r->coverage = on != 0;
 }
 
 void rnd_frame_free(rnd_frame *f)

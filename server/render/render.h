@@ -188,6 +188,13 @@ typedef struct rnd_exchange {
  * a single process). Pipelines without per-pixel state to exchange (points) ignore it. */
 void rnd_set_exchange(rnd_ctx *r, const rnd_exchange *x);
 
+/* rnd_set_coverage: on: the following 8-bit frames keep coverage in alpha as float frames do
+ * (the target's alpha cleared to 0 and written by the pipeline: 1 where an opaque surface was
+ * drawn, the accumulated "over" of soft discs and layers elsewhere) instead of being opaque;
+ * RGB is drawn exactly as without it. For compositing the ranks' images of soft and olt
+ * (server/mpi). off (the default): opaque 8-bit frames. */
+void rnd_set_coverage(rnd_ctx *r, int on);
+
 /* rnd_render: renders cloud_id through params->pipeline into frame (buffers allocated or
  * resized by the renderer; free with rnd_frame_free). want_float also fills rgba16f and depth.
  * Returns 0 or a negative SD_E* code. */

@@ -6,7 +6,8 @@
 #   sort-last  `splatd --mpi` under mpirun -np 1..4 (skipped without mpirun/splatd-mpi):
 #              frames/s of a camera path (one frame in flight), the compositing time per
 #              frame (rank 0's median), the bytes each rank sends per frame, and each rank's
-#              resident memory after loading.
+#              resident memory after loading (points, splat, soft; SPLATD_BENCH_MPI_PIPES
+#              picks some).
 # All processes share this machine's cores: the numbers measure overheads, not speed-ups.
 # Also the ranks' parts (partition.h), no MPI needed: Guanyin.ply and bun000.ply into N = 2, 3,
 # 4, 7 parts by the earlier median cuts and by the octree-cell kd tree splatd --mpi uses, each
@@ -117,8 +118,9 @@ echo "## sort-last: splatd --mpi, mpirun -np N (loopback, Guanyin.ply, 1280x720 
 echo
 echo "| pipeline | np | frames/s | compositing ms/frame (median) | MiB sent per frame, per rank | resident MiB per rank after load |"
 echo "|---|---:|---:|---:|---|---|"
-# the frame counts in the ranks' logs include the 2 warm-up frames
-for pipe in points splat; do
+# the frame counts in the ranks' logs include the 2 warm-up frames; soft (model=express, its
+# defaults) composites the ranks' RGBA with "over" in their boxes' order (server/mpi/over.h)
+for pipe in ${SPLATD_BENCH_MPI_PIPES:-points splat soft}; do
     for np in 1 2 3 4; do
         log="$tmp/mpi-$pipe-$np.log"
         rm -f "$tmp/port-mpi"
