@@ -32,6 +32,9 @@ struct spc_client {
     uint32_t open_pending;        /* an OPEN answered with a provisional INFO: its sequence,
                                    * until the full INFO (or an ERROR) of it arrives */
     int have_final;               /* that full INFO arrived while waiting for something else */
+    spc_progress_fn open_progress; /* spc_open's progress callback: also called for the
+                                   * PROGRESS of a provisional OPEN that later calls skip */
+    void *open_user;
     proto_info final;
 };
 

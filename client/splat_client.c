@@ -92,6 +92,12 @@ void spc__note(spc_client *c, const proto_msg *m)
 {
     if (!c->open_pending || m->h.seq != c->open_pending) return;
     proto_error e = {0};
+    proto_progress p;
+    if (m->h.type == PROTO_MSG_PROGRESS && c->open_progress &&
+        proto_parse_progress(m->payload, m->len, &p, &e) == 0) {
+        c->open_progress(c->open_user, proto_phase_name(p.phase), p.fraction, p.text);
+        return;
+    }
     if (m->h.type == PROTO_MSG_INFO && proto_parse_info(m->payload, m->len, &c->final, &e) == 0 &&
         !(c->final.attrs & PROTO_INFO_PROVISIONAL)) {
         c->have_final = 1;
@@ -150,6 +156,8 @@ int spc_open(spc_client *c, const char *name, spc_info *info, spc_progress_fn pr
         return spc__fail(c, -e.code, "bad INFO from the server: %s", e.msg);
     c->open_pending = in.attrs & PROTO_INFO_PROVISIONAL ? seq : 0;
     c->have_final = 0;
+    c->open_progress = progress;
+    c->open_user = user;
     info_from(&in, info);
     return 0;
 }

@@ -162,6 +162,8 @@ int spc_open(spc_client *c, const char *name, spc_info *info, spc_progress_fn pr
  * SPC_INFO_PROVISIONAL; today: a COPC file's top octree levels): frames render at once, drawn
  * with `points` (spc_frame.provisional = 1) whatever `pipeline` says, while the server goes on
  * preparing; then the server swaps in the full cloud and sends its INFO.
+ * Until the full INFO, progress and user of spc_open stay in use: every call on c that skips a
+ * PROGRESS of the OPEN passes it to progress.
  * spc_open_provisional: 1 while the open cloud is provisional (its full INFO not yet seen by
  * any call on c). spc_wait_ready: waits for that full INFO (calling progress for each PROGRESS,
  * skipping frames) and fills info; returns 1 then, 0 at once when nothing was pending, or a
