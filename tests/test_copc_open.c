@@ -22,6 +22,7 @@
 #include <string.h>
 #include <sys/stat.h>
 
+#include "cloud.h"
 #include "copc.h"
 #include "daemonproc.h"
 #include "io_text.h"
@@ -266,9 +267,38 @@ static void test_truncated(void **state)
     tu_rm_rf(dir);
 }
 
+/* The level rule of pc_read_copc_budget on its own: levels 0..L, L the deepest whose running
+ * total fits the budget, at least the root. */
+static void test_budget_rule(void **state)
+{
+    (void)state;
+    char src[600];
+    const char *path = tu_data("ellipsoid.copc.laz", src, sizeof src);
+    sums_ctx s;
+    level_sums(path, &s);
+    const struct { uint64_t budget; int level; uint64_t points; } cases[] = {
+        {1, 0, s.sums[0]},                       /* the root alone is over: still the root */
+        {s.sums[0] - 1, 0, s.sums[0]},
+        {s.sums[0], 0, s.sums[0]},
+        {s.sums[0] + s.sums[1] - 1, 0, s.sums[0]},
+        {s.sums[0] + s.sums[1], 1, s.sums[0] + s.sums[1]},
+        {10000000, 1, s.sums[0] + s.sums[1]},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        pc_raw r = {0};
+        sd_err e = {0};
+        int level = -1;
+        if (pc_read_copc_budget(path, cases[i].budget, &r, &level, &e) != 0) fail_msg("%s", e.msg);
+        assert_int_equal(level, cases[i].level);
+        assert_int_equal(r.n, cases[i].points);
+        pc_raw_free(&r);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_budget_rule),
         cmocka_unit_test(test_first_image),
         cmocka_unit_test(test_truncated),
     };

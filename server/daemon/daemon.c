@@ -88,7 +88,7 @@ static void usage(FILE *f)
             "  --copc-preview N     a first OPEN of an unprepared .copc.laz shows COPC's top octree\n"
             "                       levels (at most N points together; at least the root) to\n"
             "                       clients that set provisional=1, while the full prep runs\n"
-            "                       (default 1000000; 0: off)\n"
+            "                       (default 500000; 0: off)\n"
             "  --help               this text\n"
             "\n"
             "SIGTERM or SIGINT stops accepting, finishes the frames in flight (at most 5 s) and exits 0.\n");
@@ -126,7 +126,7 @@ void srv_opts_defaults(srv_opts *o)
     o->max_per_addr = 32;
     o->auth_delay_ms = 250;
     o->shutdown_ms = 5000;
-    o->preview_points = 1000000;
+    o->preview_points = 500000;
 }
 
 /* parse_opts: fills o from argv. Returns 0, 1 for --help (exit 0), or -1 after printing the

@@ -49,7 +49,7 @@ typedef struct srv_opts {
     int lod_uploads;             /* --lod-inflight: LOD nodes loading at once; default 0: 4 */
     uint64_t prep_memory;        /* --prep-memory: the LOD build's memory cap; default 2 GiB */
     uint64_t preview_points;     /* --copc-preview: a COPC file's provisional cloud holds at
-                                  * most this many points (rt_desc.preview_points); default 1M */
+                                  * most this many points (rt_desc.preview_points); default 500k */
 } srv_opts;
 
 /* srv_parse_size: "512M", "4G", "1048576" (suffix K, M or G) into *out; at least 1 MiB.
