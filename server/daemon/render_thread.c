@@ -58,6 +58,10 @@ typedef struct rt_prepjob {
     pc_prepared *prep;          /* set once prepared, waiting for upload */
     lod_cloud *lod;             /* or this, for a cloud in the LOD form */
     int provisional;            /* prep is a provisional cloud of job (preview.h) */
+    int previewed;              /* a provisional cloud of this job was queued for upload */
+    int failed;                 /* the prep failed after that (err): the render thread
+                                 * releases the provisional cloud and posts FAILED */
+    sd_err err;
     rt_cloud_info info;
     struct rt_prepjob *next;
 } rt_prepjob;
@@ -265,7 +269,8 @@ static void do_upload(rt_ctx *rt, rnd_ctx *rnd, rt_prepjob *j)
     const rt_hooks *h = rt->d.hooks;
     /* the renderer (or the hook) owns it now, even on failure; a LOD cloud never reaches a
      * hook (splatd --mpi prepares every cloud flat) */
-    int64_t id = j->lod ? rnd_adopt_lod(rnd, j->lod, &err)
+    int64_t id = j->failed ? (err = j->err, (int64_t)-1)
+                 : j->lod ? rnd_adopt_lod(rnd, j->lod, &err)
                  : h && h->adopt && !j->provisional ? h->adopt(h->user, rnd, j->path, j->prep, &err)
                                                     : rnd_adopt(rnd, j->prep, &err);
     j->prep = NULL;
@@ -557,7 +562,7 @@ static int is_copc_name(const char *path)
  * as a provisional cloud, queued for upload ahead of the full prep. A failure is only logged:
  * the full prep runs anyway and answers the OPEN (with the loader's error when the file is
  * bad). Prep thread, mu not held. */
-static void prep_provisional(rt_ctx *rt, const rt_prepjob *j, int use_lod)
+static void prep_provisional(rt_ctx *rt, rt_prepjob *j, int use_lod)
 {
     if (!rt->d.preview_points || !is_copc_name(j->path)) return;
     if (!use_lod && cache_probe(j->path, rt->d.cache_dir, 0)) return; /* opens fast anyway */
@@ -593,6 +598,7 @@ static void prep_provisional(rt_ctx *rt, const rt_prepjob *j, int use_lod)
     pj->path = path;
     pj->prep = p;
     pj->provisional = 1;
+    j->previewed = 1;
     pthread_mutex_lock(&rt->mu);
     if (rt->up_tail) rt->up_tail->next = pj;
     else rt->up_head = pj;
@@ -653,6 +659,11 @@ static void *prep_main(void *arg)
             on_progress(&pp, PROTO_PHASE_UPLOAD, 0.0);
         } else {
             free(p);
+        }
+        if (rc != 0 && j->previewed) { /* the render thread releases the first image */
+            j->failed = 1;
+            j->err = err;
+            rc = 0;
         }
         pthread_mutex_lock(&rt->mu);
         rt->prepping = 0;
