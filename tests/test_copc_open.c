@@ -295,12 +295,46 @@ static void test_budget_rule(void **state)
     }
 }
 
+/* splat render: the first image with --set provisional=1 (level 0's points, points, said so);
+ * without it, the full cloud as before (then from memory: no provisional cloud any more). */
+static void test_cli(void **state)
+{
+    (void)state;
+    char dir[512], data[600], cache[600], copc[700], src[600], out[4096];
+    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    snprintf(data, sizeof data, "%s/data", dir);
+    snprintf(cache, sizeof cache, "%s/cache", dir);
+    assert_int_equal(mkdir(data, 0700), 0);
+    snprintf(copc, sizeof copc, "%s/ellipsoid.copc.laz", data);
+    assert_int_equal(tu_copy_file(tu_data("ellipsoid.copc.laz", src, sizeof src), copc), 0);
+    sums_ctx s;
+    level_sums(copc, &s);
+    char budget[32], want[64];
+    snprintf(budget, sizeof budget, "%llu", (unsigned long long)s.sums[0]);
+    tu_daemon d;
+    start(&d, dir, data, cache, budget);
+    assert_int_equal(tu_run(out, sizeof out, "%s --port %d render ellipsoid.copc.laz --size 160x120 "
+                            "--set provisional=1 -o %s/first.jpg 2>&1", tu_splat_bin(), d.port,
+                            dir), 0);
+    snprintf(want, sizeof want, "points jpeg");
+    assert_non_null(strstr(out, want));
+    snprintf(want, sizeof want, "%llu points (provisional", (unsigned long long)s.sums[0]);
+    if (!strstr(out, want)) fail_msg("splat render said: %s", out);
+    assert_int_equal(tu_run(out, sizeof out, "%s --port %d render ellipsoid.copc.laz --size 160x120 "
+                            "-o %s/full.jpg 2>&1", tu_splat_bin(), d.port, dir), 0);
+    if (!strstr(out, "splat jpeg") || !strstr(out, "100000 points") || strstr(out, "provisional"))
+        fail_msg("splat render said: %s", out);
+    assert_int_equal(tu_daemon_stop(&d), 0);
+    tu_rm_rf(dir);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_budget_rule),
         cmocka_unit_test(test_first_image),
         cmocka_unit_test(test_truncated),
+        cmocka_unit_test(test_cli),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
