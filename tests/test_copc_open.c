@@ -94,16 +94,23 @@ static void start(tu_daemon *d, const char *dir, const char *data, const char *c
     if (tu_daemon_start(d, dir, NULL, args) != 0) fail_msg("splatd did not start (log %s)", d->log);
 }
 
+/* make_dirs: a test directory dir with data/ holding ellipsoid.copc.laz (copc) and cache/. */
+static void make_dirs(char dir[512], char data[600], char cache[600], char copc[700])
+{
+    char src[600];
+    assert_non_null(tu_tmpdir(dir, 512));
+    snprintf(data, 600, "%s/data", dir);
+    snprintf(cache, 600, "%s/cache", dir);
+    assert_int_equal(mkdir(data, 0700), 0);
+    snprintf(copc, 700, "%s/ellipsoid.copc.laz", data);
+    assert_int_equal(tu_copy_file(tu_data("ellipsoid.copc.laz", src, sizeof src), copc), 0);
+}
+
 static void test_first_image(void **state)
 {
     (void)state;
-    char dir[512], data[600], cache[600], copc[700], src[600];
-    assert_non_null(tu_tmpdir(dir, sizeof dir));
-    snprintf(data, sizeof data, "%s/data", dir);
-    snprintf(cache, sizeof cache, "%s/cache", dir);
-    assert_int_equal(mkdir(data, 0700), 0);
-    snprintf(copc, sizeof copc, "%s/ellipsoid.copc.laz", data);
-    assert_int_equal(tu_copy_file(tu_data("ellipsoid.copc.laz", src, sizeof src), copc), 0);
+    char dir[512], data[600], cache[600], copc[700];
+    make_dirs(dir, data, cache, copc);
 
     /* the budget: level 0's points exactly, so that the rule's edge (<=) is what is tested and
      * level 1 is left out (the file has two levels) */
@@ -300,13 +307,8 @@ static void test_budget_rule(void **state)
 static void test_cli(void **state)
 {
     (void)state;
-    char dir[512], data[600], cache[600], copc[700], src[600], out[4096];
-    assert_non_null(tu_tmpdir(dir, sizeof dir));
-    snprintf(data, sizeof data, "%s/data", dir);
-    snprintf(cache, sizeof cache, "%s/cache", dir);
-    assert_int_equal(mkdir(data, 0700), 0);
-    snprintf(copc, sizeof copc, "%s/ellipsoid.copc.laz", data);
-    assert_int_equal(tu_copy_file(tu_data("ellipsoid.copc.laz", src, sizeof src), copc), 0);
+    char dir[512], data[600], cache[600], copc[700], out[4096];
+    make_dirs(dir, data, cache, copc);
     sums_ctx s;
     level_sums(copc, &s);
     char budget[32], want[64];
