@@ -216,6 +216,7 @@ static void test_first_image(void **state)
     memcpy(mine, g.rgba, (size_t)g.width * g.height * 4);
     spc_close(a);
     assert_int_equal(tu_daemon_log_count(&d, "cloud ellipsoid.copc.laz ready"), 1);
+    assert_int_equal(tu_daemon_log_count(&d, "released: the full cloud replaces it"), 1);
     assert_int_equal(tu_daemon_stop(&d), 0);
 
     /* another daemon on the same cache: no provisional cloud (the cache opens fast) */
@@ -302,6 +303,69 @@ static void test_budget_rule(void **state)
     }
 }
 
+/* first_level1: the byte offset of the first level-1 node's chunk (copc_visit's order). */
+typedef struct find_ctx {
+    uint64_t off;
+} find_ctx;
+
+static int find_level1(void *ctx, const copc_entry *e)
+{
+    find_ctx *f = ctx;
+    if (e->level != 1 || e->count <= 0) return 0;
+    f->off = e->off;
+    return 1;
+}
+
+/* A prep that fails after the first image: the file's level-1 chunk says it holds 2^32 - 1
+ * points (the count a layered chunk repeats after its first point), so the full decode fails
+ * while level 0 reads fine. The client sees the provisional INFO, then LOAD_FAILED for the
+ * OPEN naming the file (not where the server keeps it), and no open cloud after it. */
+static void test_fail_after_first_image(void **state)
+{
+    (void)state;
+    char dir[512], data[600], cache[600], copc[700];
+    make_dirs(dir, data, cache, copc);
+    sums_ctx s;
+    level_sums(copc, &s);
+    size_t len = 0;
+    uint8_t *bytes = tu_read_file(copc, &len);
+    assert_non_null(bytes);
+    laz_file lf;
+    sd_err err = {0};
+    find_ctx fc = {0};
+    if (laz_open(&lf, copc, bytes, len, &err) != 0) fail_msg("%s", err.msg);
+    assert_int_equal(copc_visit(&lf, 1, find_level1, &fc, &err), 1);
+    uint64_t at = fc.off + lf.h.rec_len;
+    laz_close(&lf);
+    assert_true(at + 4 <= len);
+    memset(bytes + at, 0xff, 4);
+    assert_int_equal(tu_write_file(copc, bytes, len), 0);
+    free(bytes);
+    char budget[32];
+    snprintf(budget, sizeof budget, "%llu", (unsigned long long)s.sums[0]);
+    tu_daemon d;
+    start(&d, dir, data, cache, budget);
+    spc_client *c = connect_to(&d, "copc-fail");
+    assert_int_equal(spc_set_param(c, "provisional=1"), 0);
+    spc_info in;
+    assert_int_equal(spc_open(c, "ellipsoid.copc.laz", &in, NULL, NULL), 0);
+    assert_true(in.attrs & SPC_INFO_PROVISIONAL);
+    assert_int_equal(in.points, s.sums[0]);
+    assert_int_equal(spc_wait_ready(c, &in, NULL, NULL), SPC_E_LOAD_FAILED);
+    print_message("%s\n", spc_errmsg(c));
+    assert_non_null(strstr(spc_errmsg(c), "ellipsoid.copc.laz"));
+    assert_null(strstr(spc_errmsg(c), data));
+    assert_int_equal(spc_open_provisional(c), 0);
+    spc_frame f;
+    assert_int_equal(spc_render(c, &f, 0), SPC_E_NOT_OPEN);
+    assert_int_equal(spc_ping(c, NULL), 0);
+    spc_close(c);
+    assert_int_equal(tu_daemon_log_count(&d, "cloud ellipsoid.copc.laz failed"), 1);
+    assert_int_equal(tu_daemon_log_count(&d, "released: the prep failed"), 1);
+    assert_int_equal(tu_daemon_stop(&d), 0);
+    tu_rm_rf(dir);
+}
+
 /* splat render: the first image with --set provisional=1 (level 0's points, points, said so);
  * without it, the full cloud as before (then from memory: no provisional cloud any more). */
 static void test_cli(void **state)
@@ -337,6 +401,7 @@ int main(void)
         cmocka_unit_test(test_first_image),
         cmocka_unit_test(test_truncated),
         cmocka_unit_test(test_cli),
+        cmocka_unit_test(test_fail_after_first_image),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

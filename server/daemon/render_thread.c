@@ -296,7 +296,11 @@ static void do_upload(rt_ctx *rt, rnd_ctx *rnd, rt_prepjob *j)
     pthread_mutex_lock(&rt->mu);
     uint32_t old = prov_finish(rt, j->job, id > 0 ? (uint32_t)id : 0);
     pthread_mutex_unlock(&rt->mu);
-    if (old) rnd_release(rnd, old);
+    if (old) {
+        rnd_release(rnd, old);
+        srv_log(NULL, NULL, "first image of %s released: %s", j->path,
+                id > 0 ? "the full cloud replaces it" : "the prep failed");
+    }
     if (id > 0) {
         prep_prog pp = {.rt = rt, .job = j->job, .phase = -1};
         on_progress(&pp, PROTO_PHASE_UPLOAD, 1.0);
