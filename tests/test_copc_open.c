@@ -94,8 +94,11 @@ static void start(tu_daemon *d, const char *dir, const char *data, const char *c
     if (tu_daemon_start(d, dir, NULL, args) != 0) fail_msg("splatd did not start (log %s)", d->log);
 }
 
-/* make_dirs: a test directory dir with data/ holding ellipsoid.copc.laz (copc) and cache/. */
-static void make_dirs(char dir[512], char data[600], char cache[600], char copc[700])
+/* make_dirs: a test directory dir with data/ holding ellipsoid.copc.laz (copc) and cache/;
+ * the file's level sums in *s and level 0's count as text in budget (the daemon's
+ * --copc-preview that keeps exactly level 0). */
+static void make_dirs(char dir[512], char data[600], char cache[600], char copc[700],
+                      sums_ctx *s, char budget[32])
 {
     char src[600];
     assert_non_null(tu_tmpdir(dir, 512));
@@ -104,18 +107,18 @@ static void make_dirs(char dir[512], char data[600], char cache[600], char copc[
     assert_int_equal(mkdir(data, 0700), 0);
     snprintf(copc, 700, "%s/ellipsoid.copc.laz", data);
     assert_int_equal(tu_copy_file(tu_data("ellipsoid.copc.laz", src, sizeof src), copc), 0);
+    level_sums(copc, s);
+    snprintf(budget, 32, "%llu", (unsigned long long)s->sums[0]);
 }
 
 static void test_first_image(void **state)
 {
     (void)state;
-    char dir[512], data[600], cache[600], copc[700];
-    make_dirs(dir, data, cache, copc);
-
+    char dir[512], data[600], cache[600], copc[700], budget[32];
+    sums_ctx s;
     /* the budget: level 0's points exactly, so that the rule's edge (<=) is what is tested and
      * level 1 is left out (the file has two levels) */
-    sums_ctx s;
-    level_sums(copc, &s);
+    make_dirs(dir, data, cache, copc, &s, budget);
     uint64_t total = 0;
     for (int l = 0; l <= s.depth; l++) total += s.sums[l];
     assert_int_equal(total, 100000); /* the header's count (test_io_laz checks that too) */
@@ -124,8 +127,6 @@ static void test_first_image(void **state)
     print_message("hierarchy: level 0 %llu, level 1 %llu points, %d levels; budget %llu\n",
                   (unsigned long long)s.sums[0], (unsigned long long)s.sums[1], s.depth + 1,
                   (unsigned long long)expect);
-    char budget[32];
-    snprintf(budget, sizeof budget, "%llu", (unsigned long long)expect);
 
     tu_daemon d;
     start(&d, dir, data, cache, budget);
@@ -323,10 +324,9 @@ static int find_level1(void *ctx, const copc_entry *e)
 static void test_fail_after_first_image(void **state)
 {
     (void)state;
-    char dir[512], data[600], cache[600], copc[700];
-    make_dirs(dir, data, cache, copc);
+    char dir[512], data[600], cache[600], copc[700], budget[32];
     sums_ctx s;
-    level_sums(copc, &s);
+    make_dirs(dir, data, cache, copc, &s, budget);
     size_t len = 0;
     uint8_t *bytes = tu_read_file(copc, &len);
     assert_non_null(bytes);
@@ -341,8 +341,6 @@ static void test_fail_after_first_image(void **state)
     memset(bytes + at, 0xff, 4);
     assert_int_equal(tu_write_file(copc, bytes, len), 0);
     free(bytes);
-    char budget[32];
-    snprintf(budget, sizeof budget, "%llu", (unsigned long long)s.sums[0]);
     tu_daemon d;
     start(&d, dir, data, cache, budget);
     spc_client *c = connect_to(&d, "copc-fail");
@@ -371,12 +369,9 @@ static void test_fail_after_first_image(void **state)
 static void test_cli(void **state)
 {
     (void)state;
-    char dir[512], data[600], cache[600], copc[700], out[4096];
-    make_dirs(dir, data, cache, copc);
+    char dir[512], data[600], cache[600], copc[700], out[4096], budget[32], want[64];
     sums_ctx s;
-    level_sums(copc, &s);
-    char budget[32], want[64];
-    snprintf(budget, sizeof budget, "%llu", (unsigned long long)s.sums[0]);
+    make_dirs(dir, data, cache, copc, &s, budget);
     tu_daemon d;
     start(&d, dir, data, cache, budget);
     assert_int_equal(tu_run(out, sizeof out, "%s --port %d render ellipsoid.copc.laz --size 160x120 "
