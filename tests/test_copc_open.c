@@ -48,15 +48,23 @@ static int add_entry(void *ctx, const copc_entry *e)
     return 0;
 }
 
+/* open_laz: path's bytes (malloc'd, *len of them) opened as LAZ into lf. */
+static uint8_t *open_laz(const char *path, laz_file *lf, size_t *len)
+{
+    uint8_t *data = tu_read_file(path, len);
+    assert_non_null(data);
+    sd_err err = {0};
+    if (laz_open(lf, path, data, *len, &err) != 0) fail_msg("%s", err.msg);
+    return data;
+}
+
 static void level_sums(const char *path, sums_ctx *s)
 {
     memset(s, 0, sizeof *s);
     size_t len = 0;
-    uint8_t *data = tu_read_file(path, &len);
-    assert_non_null(data);
     laz_file lf;
     sd_err err = {0};
-    if (laz_open(&lf, path, data, len, &err) != 0) fail_msg("%s", err.msg);
+    uint8_t *data = open_laz(path, &lf, &len);
     if (copc_visit(&lf, INT32_MAX, add_entry, s, &err) != 0) fail_msg("%s", err.msg);
     laz_close(&lf);
     free(data);
@@ -276,6 +284,18 @@ static void test_truncated(void **state)
     tu_rm_rf(dir);
 }
 
+/* check_budget: pc_read_copc_budget(path, budget) reads levels 0..level, points points. */
+static void check_budget(const char *path, uint64_t budget, int level, uint64_t points)
+{
+    pc_raw r = {0};
+    sd_err e = {0};
+    int got = -1;
+    if (pc_read_copc_budget(path, budget, &r, &got, &e) != 0) fail_msg("%s", e.msg);
+    assert_int_equal(got, level);
+    assert_int_equal(r.n, points);
+    pc_raw_free(&r);
+}
+
 /* The level rule of pc_read_copc_budget on its own: levels 0..L, L the deepest whose running
  * total fits the budget, at least the root. */
 static void test_budget_rule(void **state)
@@ -293,15 +313,8 @@ static void test_budget_rule(void **state)
         {s.sums[0] + s.sums[1], 1, s.sums[0] + s.sums[1]},
         {10000000, 1, s.sums[0] + s.sums[1]},
     };
-    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
-        pc_raw r = {0};
-        sd_err e = {0};
-        int level = -1;
-        if (pc_read_copc_budget(path, cases[i].budget, &r, &level, &e) != 0) fail_msg("%s", e.msg);
-        assert_int_equal(level, cases[i].level);
-        assert_int_equal(r.n, cases[i].points);
-        pc_raw_free(&r);
-    }
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
+        check_budget(path, cases[i].budget, cases[i].level, cases[i].points);
 }
 
 /* first_level1: the byte offset of the first level-1 node's chunk (copc_visit's order). */
@@ -328,12 +341,10 @@ static void test_fail_after_first_image(void **state)
     sums_ctx s;
     make_dirs(dir, data, cache, copc, &s, budget);
     size_t len = 0;
-    uint8_t *bytes = tu_read_file(copc, &len);
-    assert_non_null(bytes);
     laz_file lf;
     sd_err err = {0};
     find_ctx fc = {0};
-    if (laz_open(&lf, copc, bytes, len, &err) != 0) fail_msg("%s", err.msg);
+    uint8_t *bytes = open_laz(copc, &lf, &len);
     assert_int_equal(copc_visit(&lf, 1, find_level1, &fc, &err), 1);
     uint64_t at = fc.off + lf.h.rec_len;
     laz_close(&lf);
@@ -389,10 +400,81 @@ static void test_cli(void **state)
     tu_rm_rf(dir);
 }
 
+/* make_dup: the file copc with a new root hierarchy page (copc_dup.py's construction, in C):
+ * its level-0 node, then n1 level-1 and n2 level-2 nodes all referencing the root's chunk, the
+ * info VLR pointed at the page; written to dst. */
+static void make_dup(const char *copc, const char *dst, int n1, int n2)
+{
+    size_t len = 0;
+    laz_file lf;
+    sd_err err = {0};
+    uint8_t *in = open_laz(copc, &lf, &len);
+    assert_non_null(lf.copc_info);
+    size_t info = (size_t)(lf.copc_info - in);
+    copc_info ci;
+    assert_int_equal(copc_info_read(&lf, &ci, &err), 0);
+    copc_entry *e = NULL;
+    size_t n = 0;
+    assert_int_equal(copc_page_read(&lf, ci.root_off, ci.root_size, &e, &n, &err), 0);
+    laz_close(&lf);
+    const copc_entry *root = NULL;
+    for (size_t i = 0; i < n; i++)
+        if (e[i].level == 0) root = &e[i];
+    assert_non_null(root);
+    size_t np = 1 + (size_t)n1 + (size_t)n2, out_len = len + 32 * np;
+    uint8_t *out = malloc(out_len);
+    assert_non_null(out);
+    memcpy(out, in, len);
+    for (size_t k = 0; k < np; k++) {
+        int lv = k == 0 ? 0 : k <= (size_t)n1 ? 1 : 2;
+        size_t j = k == 0 ? 0 : lv == 1 ? k - 1 : k - 1 - (size_t)n1;
+        int32_t key[4] = {lv, (int32_t)(j % 2 + (lv == 2 ? 2 * (j / 8 % 2) : 0)),
+                          (int32_t)(j / 2 % 2), (int32_t)(j / 4 % 2)};
+        uint8_t *q = out + len + 32 * k;
+        memcpy(q, key, 16); /* little-endian host, as the tests assume elsewhere */
+        memcpy(q + 16, &root->off, 8);
+        memcpy(q + 24, &root->bytes, 4);
+        memcpy(q + 28, &root->count, 4);
+    }
+    uint64_t page[2] = {len, 32 * np};
+    memcpy(out + info + 40, page, 16);
+    assert_int_equal(tu_write_file(dst, out, out_len), 0);
+    free(out);
+    free(e);
+    free(in);
+}
+
+/* A hierarchy with several nodes per level (make_dup): the budget keeps whole levels only,
+ * and the counts add up from the file's own hierarchy. */
+static void test_budget_levels_of_many_nodes(void **state)
+{
+    (void)state;
+    char dir[512], data[600], cache[600], copc[700], budget[32], dup[800];
+    sums_ctx s;
+    make_dirs(dir, data, cache, copc, &s, budget);
+    snprintf(dup, sizeof dup, "%s/dup.copc.laz", dir);
+    make_dup(copc, dup, 6, 8);
+    sums_ctx d;
+    level_sums(dup, &d);
+    assert_int_equal(d.depth, 2);
+    assert_int_equal(d.sums[0], s.sums[0]);
+    assert_int_equal(d.sums[1], 6 * s.sums[0]);
+    assert_int_equal(d.sums[2], 8 * s.sums[0]);
+    const struct { uint64_t budget; int level; uint64_t points; } cases[] = {
+        {500000, 1, 7 * s.sums[0]},             /* 463,904: level 2 would make 994,080 */
+        {7 * s.sums[0] - 1, 0, s.sums[0]},
+        {15 * s.sums[0], 2, 15 * s.sums[0]},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
+        check_budget(dup, cases[i].budget, cases[i].level, cases[i].points);
+    tu_rm_rf(dir);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_budget_rule),
+        cmocka_unit_test(test_budget_levels_of_many_nodes),
         cmocka_unit_test(test_first_image),
         cmocka_unit_test(test_truncated),
         cmocka_unit_test(test_cli),

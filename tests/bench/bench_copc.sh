@@ -5,7 +5,9 @@
 # JPEG, the default camera framing) with provisional=1 (COPC's top levels, drawn with points)
 # and with provisional=0 (the full prep first, then the default splat pipeline). Medians of
 # COPC_RUNS runs (default 5). Files: tests/data's COPC files (ellipsoid.copc.laz, 100k points,
-# the only one: there is no COPC writer to make a larger one), plus $COPC_BENCH_FILES.
+# the only one: there is no COPC writer), a larger hierarchy made from it by copc_dup.py (its
+# top levels hold 463,904 points; the full prep still reads the chunk table's 100k), plus
+# $COPC_BENCH_FILES.
 set -eu
 bin=${SPLATD_BIN:-build/bin/splatd}
 bench=${SPLATD_BENCH:-build/bench}
@@ -43,8 +45,15 @@ one() {
 # median of column $1 of stdin
 median() { sort -n -k"$1","$1" | awk -v c="$1" '{v[NR]=$c} END {print v[int((NR+1)/2)]}'; }
 
-mkdir -p "$tmp/data"
-files=$(ls "$data"/*.copc.laz 2>/dev/null; for f in ${COPC_BENCH_FILES:-}; do echo "$f"; done)
+mkdir -p "$tmp/data" "$tmp/made"
+# A larger COPC without a COPC writer (copc_dup.py): ellipsoid's root chunk referenced by 1 + 6
+# level-0/1 nodes (463,904 points under the default 500k budget) and 8 level-2 nodes beyond it.
+dup=
+if command -v python3 >/dev/null 2>&1; then
+    python3 "$(dirname "$0")/copc_dup.py" "$data/ellipsoid.copc.laz" \
+        "$tmp/made/ellipsoid-dup464k.copc.laz" 6 8 >/dev/null && dup="$tmp/made/ellipsoid-dup464k.copc.laz"
+fi
+files=$(ls "$data"/*.copc.laz 2>/dev/null; echo $dup; for f in ${COPC_BENCH_FILES:-}; do echo "$f"; done)
 echo "## COPC: OPEN to first frame (fresh daemon and cache each run, median of $runs, 1280x720 JPEG)"
 echo
 echo "| file | first frame, provisional=1 (min-max) | points drawn | full INFO, provisional=1 | first frame, provisional=0 (min-max) | ratio |"
