@@ -199,6 +199,7 @@ int spc__wait(spc_client *c, uint32_t seq, unsigned type, proto_msg *m, spc_prog
             continue;
         }
         if (m->h.type == type && m->h.seq == seq) return 0;
+        spc__note(c, m);
         /* anything else (a streamed frame, the answer to a request nobody waits for) is
          * skipped: the protocol answers in order, so what we wait for comes later */
     }

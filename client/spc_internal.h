@@ -29,7 +29,18 @@ struct spc_client {
     fd_ctx *fdec;                 /* frame decoder, created on first use */
     uint32_t errseq;
     char errmsg[1400];
+    uint32_t open_pending;        /* an OPEN answered with a provisional INFO: its sequence,
+                                   * until the full INFO (or an ERROR) of it arrives */
+    int have_final;               /* that full INFO arrived while waiting for something else */
+    spc_progress_fn open_progress; /* spc_open's progress callback: also called for the
+                                   * PROGRESS of a provisional OPEN that later calls skip */
+    void *open_user;
+    proto_info final;
 };
+
+/* spc__note: m (a message no call is waiting for) may be the full INFO or an ERROR of a
+ * provisionally answered OPEN: recorded. */
+void spc__note(spc_client *c, const proto_msg *m);
 
 /* spc__fail: records a failure on c (message from fmt), closes the connection when the code
  * is fatal, and returns code (negative SPC_E_*). */

@@ -72,6 +72,73 @@ int spc_list(spc_client *c, spc_cloud **list)
 
 void spc_free_list(spc_cloud *list) { free(list); }
 
+static void info_from(const proto_info *in, spc_info *info)
+{
+    if (!info) return;
+    memset(info, 0, sizeof *info);
+    snprintf(info->name, sizeof info->name, "%s", in->name);
+    info->points = in->points;
+    info->dropped = in->dropped;
+    memcpy(info->bmin, in->bmin, sizeof in->bmin);
+    memcpy(info->bmax, in->bmax, sizeof in->bmax);
+    memcpy(info->offset, in->offset, sizeof in->offset);
+    info->attrs = in->attrs;
+    info->sigma = in->sigma;
+    info->k = in->k;
+    snprintf(info->format, sizeof info->format, "%s", in->format);
+}
+
+void spc__note(spc_client *c, const proto_msg *m)
+{
+    if (!c->open_pending || m->h.seq != c->open_pending) return;
+    proto_error e = {0};
+    proto_progress p;
+    if (m->h.type == PROTO_MSG_PROGRESS && c->open_progress &&
+        proto_parse_progress(m->payload, m->len, &p, &e) == 0) {
+        c->open_progress(c->open_user, proto_phase_name(p.phase), p.fraction, p.text);
+        return;
+    }
+    if (m->h.type == PROTO_MSG_INFO && proto_parse_info(m->payload, m->len, &c->final, &e) == 0 &&
+        !(c->final.attrs & PROTO_INFO_PROVISIONAL)) {
+        c->have_final = 1;
+        c->open_pending = 0;
+    }
+}
+
+int spc_open_provisional(const spc_client *c)
+{
+    return c && c->open_pending != 0;
+}
+
+int spc_wait_ready(spc_client *c, spc_info *info, spc_progress_fn progress, void *user)
+{
+    int rc = usable(c);
+    if (rc < 0) return rc;
+    if (c->have_final) {
+        c->have_final = 0;
+        info_from(&c->final, info);
+        return 1;
+    }
+    if (!c->open_pending) return 0;
+    proto_msg m;
+    uint32_t seq = c->open_pending;
+    for (;;) {
+        rc = spc__wait(c, seq, PROTO_MSG_INFO, &m, progress, user);
+        if (rc < 0) {
+            if (c->errseq == seq) c->open_pending = 0; /* the full prep failed */
+            return rc;
+        }
+        proto_error e = {0};
+        proto_info in;
+        if (proto_parse_info(m.payload, m.len, &in, &e) < 0)
+            return spc__fail(c, -e.code, "bad INFO from the server: %s", e.msg);
+        if (in.attrs & PROTO_INFO_PROVISIONAL) continue;
+        c->open_pending = 0;
+        info_from(&in, info);
+        return 1;
+    }
+}
+
 int spc_open(spc_client *c, const char *name, spc_info *info, spc_progress_fn progress,
              void *user)
 {
@@ -87,19 +154,11 @@ int spc_open(spc_client *c, const char *name, spc_info *info, spc_progress_fn pr
     proto_info in;
     if (proto_parse_info(m.payload, m.len, &in, &e) < 0)
         return spc__fail(c, -e.code, "bad INFO from the server: %s", e.msg);
-    if (info) {
-        memset(info, 0, sizeof *info);
-        snprintf(info->name, sizeof info->name, "%s", in.name);
-        info->points = in.points;
-        info->dropped = in.dropped;
-        memcpy(info->bmin, in.bmin, sizeof in.bmin);
-        memcpy(info->bmax, in.bmax, sizeof in.bmax);
-        memcpy(info->offset, in.offset, sizeof in.offset);
-        info->attrs = in.attrs;
-        info->sigma = in.sigma;
-        info->k = in.k;
-        snprintf(info->format, sizeof info->format, "%s", in.format);
-    }
+    c->open_pending = in.attrs & PROTO_INFO_PROVISIONAL ? seq : 0;
+    c->have_final = 0;
+    c->open_progress = progress;
+    c->open_user = user;
+    info_from(&in, info);
     return 0;
 }
 
@@ -375,6 +434,7 @@ static int fill_frame(spc_client *c, const proto_msg *m, spc_frame *f, int decod
     f->encode_us = pf.encode_us;
     f->points_drawn = pf.points_drawn;
     f->complete = (pf.flags & PROTO_FRAME_COMPLETE) != 0;
+    f->provisional = (pf.flags & PROTO_FRAME_PROVISIONAL) != 0;
     f->data = pf.data;
     f->data_len = pf.data_len;
     if (!decode) return 0;
@@ -416,6 +476,7 @@ int spc_recv_frame(spc_client *c, spc_frame *f, int decode)
         if ((rc = spc__recv(c, &m, deadline)) < 0) return rc;
         if (m.h.type == PROTO_MSG_ERROR) return spc__server_error(c, &m);
         if (m.h.type == PROTO_MSG_FRAME) return fill_frame(c, &m, f, decode);
+        spc__note(c, &m); /* the full INFO of a provisional OPEN */
         /* OK/PONG/... of requests nobody waits for: skip */
     }
 }

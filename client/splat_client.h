@@ -133,6 +133,8 @@ void spc_free_list(spc_cloud *list);
 
 enum { SPC_ATTR_RGB = 1, SPC_ATTR_NORMAL = 2, SPC_ATTR_INTENSITY = 4, SPC_ATTR_CLASS = 8,
        SPC_ATTR_RADIUS = 16, SPC_ATTR_SCALAR = 32, SPC_ATTR_F = 64 };
+/* spc_info.attrs bit 31: the cloud is provisional (see spc_open). */
+#define SPC_INFO_PROVISIONAL 0x80000000u
 
 typedef struct spc_info {
     char name[256];              /* resolved file name */
@@ -155,6 +157,19 @@ typedef void (*spc_progress_fn)(void *user, const char *phase, float fraction, c
  * SPC_E_BAD_NAME (checked locally first), SPC_E_NOT_FOUND, SPC_E_LOAD_FAILED, ... */
 int spc_open(spc_client *c, const char *name, spc_info *info, spc_progress_fn progress,
              void *user);
+/* Provisional clouds: after spc_set_param(c, "provisional=1"), an OPEN of a cloud the server
+ * is still preparing may return early with a provisional cloud (info->attrs has
+ * SPC_INFO_PROVISIONAL; today: a COPC file's top octree levels): frames render at once, drawn
+ * with `points` (spc_frame.provisional = 1) whatever `pipeline` says, while the server goes on
+ * preparing; then the server swaps in the full cloud and sends its INFO.
+ * Until the full INFO, progress and user of spc_open stay in use: every call on c that skips a
+ * PROGRESS of the OPEN passes it to progress.
+ * spc_open_provisional: 1 while the open cloud is provisional (its full INFO not yet seen by
+ * any call on c). spc_wait_ready: waits for that full INFO (calling progress for each PROGRESS,
+ * skipping frames) and fills info; returns 1 then, 0 at once when nothing was pending, or a
+ * code (SPC_E_LOAD_FAILED when the full preparation failed: the cloud is then closed). */
+int spc_open_provisional(const spc_client *c);
+int spc_wait_ready(spc_client *c, spc_info *info, spc_progress_fn progress, void *user);
 
 /* ---- camera ------------------------------------------------------------------------------ */
 
@@ -220,6 +235,7 @@ typedef struct spc_frame {
     const uint8_t *rgba;         /* decoded RGBA8, top-down rows, when asked for; else NULL */
     int complete;                /* 1: the view's every wanted node was drawn (always for a flat
                                     cloud); 0: a step of a LOD cloud's progressive refinement */
+    int provisional;             /* 1: drawn from a provisional cloud (spc_open), with `points` */
 } spc_frame;
 /* data and rgba belong to the handle and stay valid until the next call on it.
  *

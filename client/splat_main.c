@@ -159,6 +159,10 @@ static double now_s(void)
 /* open_cloud: OPEN with progress, then the --set parameters plus format (when not NULL). */
 static int open_cloud(spc_client *c, const cli_args *a, const char *format, spc_info *info)
 {
+    /* provisional=1 must precede the OPEN it changes; the other parameters follow it */
+    for (int i = 0; i < a->nsets; i++)
+        if (!strncmp(a->sets[i], "provisional=", 12) && spc_set_param(c, a->sets[i]) < 0)
+            return fail(c, "parameters");
     int rc = spc_open(c, a->name, info, on_progress, (void *)a);
     if (!a->quiet && isatty(2)) fprintf(stderr, "\r\033[K");
     if (rc < 0) return fail(c, a->name);
@@ -248,9 +252,10 @@ static int cmd_render(spc_client *c, const cli_args *a)
     }
     if (!a->quiet)
         fprintf(stderr, "wrote %s: %ux%u %s %s, %zu bytes; render %.1f ms, readback %.1f ms, "
-                "encode %.1f ms, %llu points\n", a->output, f.width, f.height, f.pipeline,
+                "encode %.1f ms, %llu points%s\n", a->output, f.width, f.height, f.pipeline,
                 f.format, f.data_len, f.render_us / 1e3, f.readback_us / 1e3, f.encode_us / 1e3,
-                (unsigned long long)f.points_drawn);
+                (unsigned long long)f.points_drawn,
+                f.provisional ? " (provisional: the first image, the full cloud still preparing)" : "");
     return 0;
 }
 

@@ -421,14 +421,23 @@ static void on_progress(void *user, const char *phase, float fraction, const cha
 static int session(shared *s, spc_client *c, char *err, size_t errlen)
 {
     spc_info info;
-    int rc = spc_open(c, s->name, &info, on_progress, s);
+    /* A COPC file still preparing shows its top levels at once (a server without the
+     * parameter refuses it: then the full cloud is waited for, as before). */
+    int rc = spc_set_param(c, "provisional=1");
+    if (rc < 0 && is_conn_error(rc)) goto fail;
+    rc = spc_open(c, s->name, &info, on_progress, s);
     if (rc < 0) goto fail;
+    int provisional = spc_open_provisional(c);
     pthread_mutex_lock(&s->mu);
     s->info = info;
     s->info_gen++;
     s->connected = 1;
     s->ever_connected = 1;
     s->status[0] = 0;
+    if (provisional)
+        snprintf(s->status, sizeof s->status, "first image: %llu points of %s's top levels, "
+                 "drawn with points; the full cloud is still preparing",
+                 (unsigned long long)info.points, s->name);
     pthread_mutex_unlock(&s->mu);
     push_event(s);
 
@@ -525,6 +534,10 @@ static int session(shared *s, spc_client *c, char *err, size_t errlen)
             if (rc < 0 && is_conn_error(rc)) goto fail;
             if (rc < 0) set_status(s, "%s", spc_errmsg(c));
             else if (f.rgba) publish_frame(s, &f);
+            if (provisional && !spc_open_provisional(c)) { /* the full cloud replaced it */
+                provisional = 0;
+                set_status(s, "%s", rc < 0 ? spc_errmsg(c) : "");
+            }
         }
     }
 fail:

@@ -40,7 +40,8 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(AXIS_A,       "axis_a",       SP_T_VEC3,  axis_a,       -1e9, 1e9,      "0,0,0",  NULL)     \
     X(AXIS_B,       "axis_b",       SP_T_VEC3,  axis_b,       -1e9, 1e9,      "0,0,1",  NULL)     \
     X(SOFT_FRAG_MIB, "soft_frag_mib", SP_T_INT, soft_frag_mib, 1,   65536,    "512",    NULL) \
-    X(LOD_FIRST,    "lod_first",    SP_T_INT,   lod_first,    0,    1,        "0",      NULL)
+    X(LOD_FIRST,    "lod_first",    SP_T_INT,   lod_first,    0,    1,        "0",      NULL) \
+    X(PROVISIONAL,  "provisional",  SP_T_INT,   provisional,  0,    1,        "0",      NULL)
 
 enum {
 #define SP_ID_(id, name, type, field, lo, hi, def, vals) SP_##id,
@@ -122,6 +123,9 @@ typedef struct sp_params {
     int64_t soft_frag_mib;  /* soft base/concentric: fragment memory cap, MiB (soft_lists.h) */
     int64_t lod_first;      /* 1: a RENDER of a LOD cloud answers its first frame, even when
                                nodes were still missing; 0: the complete frame */
+    int64_t provisional;    /* 1: an OPEN of a cloud being prepared answers INFO of a provisional
+                               cloud (COPC: its top levels) first, then the full INFO
+                               (PROTOCOL.md, OPEN); 0: INFO once the full cloud is ready */
 } sp_params;
 
 typedef struct sp_param_info {

@@ -255,6 +255,11 @@ typedef struct proto_welcome {        /* WELCOME, server -> client */
     char renderer[PROTO_MAX_NAME + 1];  /* GL renderer string */
 } proto_welcome;
 
+/* INFO attrs bit 31: the cloud is provisional (an OPEN with parameter provisional = 1 of a
+ * cloud still being prepared): it draws with `points` only, and a second INFO of the same
+ * OPEN's sequence follows when the full cloud replaces it (PROTOCOL.md, OPEN). */
+#define PROTO_INFO_PROVISIONAL (1u << 31)
+
 enum { PROTO_CLOUD_PREPARED = 1u << 0, /* a valid cache entry exists: OPEN is fast */
        PROTO_CLOUD_LOADED = 1u << 1 }; /* in the renderer now */
 
@@ -349,6 +354,9 @@ enum { PROTO_FRAME_HEAD_LEN = PROTO_HEADER_LEN + PROTO_FRAME_FIXED };
 /* SOFT_TRUNCATED = soft with model=base or concentric dropped samples past its memory cap
  * (soft_frag_mib) or past 32 overlapping spheres in a pixel: the soft layer is incomplete there. */
 enum { PROTO_FRAME_COMPLETE = 1, PROTO_FRAME_SOFT_TRUNCATED = 2 };
+/* FRAME flags bit 2: drawn from a provisional cloud (INFO attrs PROTO_INFO_PROVISIONAL), with
+ * the `points` pipeline whatever `pipeline` says. */
+enum { PROTO_FRAME_PROVISIONAL = 4 };
 
 typedef struct proto_frame {          /* FRAME, server -> client */
     uint32_t camera_seq;                /* sequence of the CAMERA it renders, 0 = default camera */

@@ -39,6 +39,7 @@ const PARAMS = {
   t: {type: T_FLOAT, min: 0, max: 1, def: 0.5},
   l_m: {type: T_FLOAT, min: 0, max: 1, def: 0},
   field: {type: T_ENUM, values: FIELDS, def: 0},
+  provisional: {type: T_INT, min: 0, max: 1, def: 0},
 };
 const E_BAD_PARAM_NAME = 7, E_BAD_PARAM_VALUE = 8, E_AUTH_FAILED = 13;
 const SETTLE_MS = 150, DRAG_QUALITY = 50, REST_QUALITY = 95, DRAG_BUDGET = 300000;
@@ -179,6 +180,7 @@ const S = {
 };
 window.splatStats = () => S.stats.join('\n');
 for (const k of Object.keys(PARAMS)) S.want[k] = S.applied[k] = PARAMS[k].def;
+S.want.provisional = 1; /* a COPC file still preparing shows its top levels at once */
 S.want.quality = REST_QUALITY;
 if (PIPELINES.includes(query.get('pipeline')))
   S.want.pipeline = PIPELINES.indexOf(query.get('pipeline'));
@@ -308,6 +310,7 @@ function onClouds(r) {
 function openCloud(name) {
   if (!S.authed || !name) return;
   S.cloud = name; S.opened = false; S.info = null; S.inflight = null;
+  sendParams(S.want); /* provisional=1 must come before the OPEN */
   const w = new Writer(); w.str8(name);
   send(P.OPEN, w.done(), {kind: 'open'});
   setStatus(`opening ${name}`);
@@ -316,6 +319,8 @@ function openCloud(name) {
 function onInfo(r) {
   const name = r.str8(), points = r.u64(), dropped = r.u64();
   const bmin = [r.f64(), r.f64(), r.f64()], bmax = [r.f64(), r.f64(), r.f64()];
+  r.f64(); r.f64(); r.f64(); /* offset */
+  const provisional = (r.u32() & 0x80000000) !== 0; /* a second INFO follows (PROTOCOL.md) */
   S.info = {name, points, dropped, bmin, bmax};
   S.opened = true;
   const [w, h] = fullSize();
@@ -324,7 +329,8 @@ function onInfo(r) {
   if (!keep) S.orbit = cloneOrbit(S.home);
   S.lastOpened = name;
   $('clouds').value = name;
-  setStatus(`${name}: ${points} points`);
+  setStatus(provisional ? `${name}: first image, ${points} points of its top levels ` +
+            '(drawn with points); preparing the full cloud' : `${name}: ${points} points`);
   touchRequest(performance.now());
 }
 

@@ -85,6 +85,10 @@ static void usage(FILE *f)
             "  --lod-inflight N     LOD nodes the loader thread reads at once (default 4); a frame\n"
             "                       draws a missing node's ancestor instead, and the next frames\n"
             "                       of the same view refine it\n"
+            "  --copc-preview N     a first OPEN of an unprepared .copc.laz shows COPC's top octree\n"
+            "                       levels (at most N points together; at least the root) to\n"
+            "                       clients that set provisional=1, while the full prep runs\n"
+            "                       (default 500000; 0: off)\n"
             "  --help               this text\n"
             "\n"
             "SIGTERM or SIGINT stops accepting, finishes the frames in flight (at most 5 s) and exits 0.\n");
@@ -122,6 +126,7 @@ void srv_opts_defaults(srv_opts *o)
     o->max_per_addr = 32;
     o->auth_delay_ms = 250;
     o->shutdown_ms = 5000;
+    o->preview_points = 500000;
 }
 
 /* parse_opts: fills o from argv. Returns 0, 1 for --help (exit 0), or -1 after printing the
@@ -130,7 +135,8 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
 {
     enum { O_LISTEN = 1000, O_DATA, O_CACHE, O_BACKEND, O_TOKEN, O_PRELOAD, O_SHADERS, O_MAXC,
            O_PORTFILE, O_HS, O_GPUMEM, O_LOD, O_PREPMEM, O_LODUP, O_FRAMEMEM, O_IDLE, O_RDTO, O_WRTO,
-           O_UNAUTH, O_PERADDR, O_AUTHDELAY, O_HTTP, O_TLSCERT, O_TLSKEY, O_HELP };
+           O_UNAUTH, O_PERADDR, O_AUTHDELAY, O_HTTP, O_TLSCERT, O_TLSKEY, O_HELP,
+           O_PREVIEW };
     static const struct option lo[] = {
         {"listen", required_argument, 0, O_LISTEN},   {"data", required_argument, 0, O_DATA},
         {"cache", required_argument, 0, O_CACHE},     {"backend", required_argument, 0, O_BACKEND},
@@ -146,6 +152,7 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
         {"auth-fail-delay", required_argument, 0, O_AUTHDELAY},
         {"http", required_argument, 0, O_HTTP},
         {"tls-cert", required_argument, 0, O_TLSCERT}, {"tls-key", required_argument, 0, O_TLSKEY},
+        {"copc-preview", required_argument, 0, O_PREVIEW},
         {"help", no_argument, 0, O_HELP},             {0, 0, 0, 0},
     };
     srv_opts_defaults(o);
@@ -212,6 +219,18 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
                 return -1;
             }
             break;
+        case O_PREVIEW: {
+            char *e = NULL;
+            errno = 0;
+            unsigned long long np = strtoull(optarg, &e, 10);
+            if (!e || *e || errno || optarg[0] == '-' || np > 100000000ull) {
+                fprintf(stderr, "splatd: --copc-preview '%s': expected 0 to 100000000 points\n",
+                        optarg);
+                return -1;
+            }
+            o->preview_points = np;
+            break;
+        }
         case O_LODUP: {
             char *e = NULL;
             long nup = strtol(optarg, &e, 10);
@@ -800,6 +819,7 @@ int srv_core_start(srv *sv, sd_err *err)
         /* splatd --mpi partitions flat clouds across the ranks; the LOD form is rank 0's own */
         .lod_mode = sv->hooks ? LOD_NEVER : sv->o.lod_mode, .prep_memory = sv->o.prep_memory,
         .frame_budget = sv->o.max_frame_bytes,
+        .preview_points = sv->hooks ? 0 : sv->o.preview_points,
         .pack = srv_pack_frame, .pack_user = sv, .hooks = sv->hooks,
     };
     sd_err rerr = {0};

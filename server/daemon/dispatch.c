@@ -131,7 +131,8 @@ int srv_pack_frame(void *user, const rt_frame_meta *m, const uint8_t *data, size
         .width = (uint32_t)m->width, .height = (uint32_t)m->height, .render_us = m->render_us,
         .readback_us = m->readback_us, .encode_us = m->encode_us, .points_drawn = m->points_drawn,
         .flags = (uint16_t)((m->complete ? PROTO_FRAME_COMPLETE : 0) |
-                            (m->flags & RND_FRAME_SOFT_TRUNCATED ? PROTO_FRAME_SOFT_TRUNCATED : 0)),
+                            (m->flags & RND_FRAME_SOFT_TRUNCATED ? PROTO_FRAME_SOFT_TRUNCATED : 0) |
+                            (m->provisional ? PROTO_FRAME_PROVISIONAL : 0)),
         .data_len = (uint32_t)len,
     };
     proto_frame_head(p, PROTO_VERSION, m->stream ? 0 : m->req_seq, &f);
@@ -190,7 +191,7 @@ static srv_cloud *cloud_start(srv *sv, const char *path)
     return c;
 }
 
-static int add_waiter(srv_cloud *c, uint32_t sess_id, uint32_t seq)
+static int add_waiter(srv_cloud *c, uint32_t sess_id, uint32_t seq, int shown)
 {
     if (c->nwait == c->capwait) {
         int cap = c->capwait ? c->capwait * 2 : 4;
@@ -199,7 +200,7 @@ static int add_waiter(srv_cloud *c, uint32_t sess_id, uint32_t seq)
         c->waiters = w;
         c->capwait = cap;
     }
-    c->waiters[c->nwait++] = (srv_waiter){sess_id, seq};
+    c->waiters[c->nwait++] = (srv_waiter){sess_id, seq, shown};
     return 0;
 }
 
@@ -413,8 +414,16 @@ static void on_open(srv *sv, sess *s, const proto_msg *m)
         return;
     }
     if (!c) c = cloud_start(sv, path);
-    if (!c || add_waiter(c, s->id, m->h.seq) != 0) {
+    int shown = c && c->prov_id && s->params.provisional;
+    if (!c || add_waiter(c, s->id, m->h.seq, shown) != 0) {
         send_error(sv, s, m->h.seq, PROTO_E_INTERNAL, "out of memory opening the cloud");
+        return;
+    }
+    if (shown) { /* its provisional cloud now, the full one later (PROTOCOL.md, OPEN) */
+        s->cloud = (int)(c - sv->clouds);
+        s->cloud_id = c->prov_id;
+        srv_log(sv, s, "open %s: %s (provisional while preparing)", name, c->name);
+        send_info(sv, s, c, m->h.seq);
         return;
     }
     srv_log(sv, s, "open %s: %s (preparing)", name, c->name);
@@ -584,6 +593,14 @@ void srv_decode_error(void *owner, sess *s, int code, const char *text)
 
 /* ---- worker events ---- */
 
+/* waiting: whether waiter w (session s) of cloud c (index idx) still waits for it: its OPEN
+ * is unanswered, or answered provisionally and s still has that cloud open. */
+static int waiting(const srv_cloud *c, const srv_waiter *w, const sess *s, int idx)
+{
+    (void)c;
+    return w->shown ? s->cloud == idx && s->opening < 0 : s->opening == idx;
+}
+
 static void on_progress_ev(srv *sv, const rt_event *ev)
 {
     srv_cloud *c = cloud_by_key(sv, ev->job);
@@ -596,7 +613,7 @@ static void on_progress_ev(srv *sv, const rt_event *ev)
              (int)(p.fraction * 100 + 0.5f));
     for (int i = 0; i < c->nwait; i++) {
         sess *s = srv_lookup(sv, c->waiters[i].sess);
-        if (!s || s->opening != (int)(c - sv->clouds)) continue;
+        if (!s || !waiting(c, &c->waiters[i], s, (int)(c - sv->clouds))) continue;
         proto_buf b = {.version = s->version};
         if (proto_enc_progress(&b, c->waiters[i].seq, &p) == 0) sess_send(s, &b);
         else proto_buf_free(&b);
@@ -628,6 +645,7 @@ static void on_cloud_done(srv *sv, const rt_event *ev)
     if (!c) return;
     int idx = (int)(c - sv->clouds);
     int ok = ev->kind == RT_EV_CLOUD_READY;
+    c->prov_id = 0; /* released by the render thread at the swap */
     if (ok) {
         c->state = SRV_CLOUD_READY;
         c->cloud_id = ev->cloud_id;
@@ -648,7 +666,23 @@ static void on_cloud_done(srv *sv, const rt_event *ev)
     if (!ok) c->state = SRV_CLOUD_FREE; /* a later OPEN retries */
     for (int i = 0; i < nw; i++) {
         sess *s = srv_lookup(sv, w[i].sess);
-        if (!s || s->opening != idx) continue;
+        if (!s || !waiting(&sv->clouds[idx], &w[i], s, idx)) continue;
+        if (w[i].shown) { /* the swap: its requests from now on draw the full cloud */
+            if (ok) {
+                s->cloud_id = sv->clouds[idx].cloud_id;
+                send_info(sv, s, &sv->clouds[idx], w[i].seq);
+                stream_update(sv, s, 0); /* a streaming client gets a frame of the full cloud */
+            } else {
+                s->cloud = -1;
+                s->cloud_id = 0;
+                s->have_camera = 0;
+                char msg[sizeof ev->err.msg + 256];
+                client_message(&sv->clouds[idx], ev->err.msg, msg, sizeof msg);
+                send_error(sv, s, w[i].seq, PROTO_E_LOAD_FAILED, msg);
+            }
+            sess_kick(s);
+            continue;
+        }
         s->opening = -1;
         s->paused = 0;
         if (ok) {
@@ -665,6 +699,35 @@ static void on_cloud_done(srv *sv, const rt_event *ev)
         sess_input(s); /* requests that waited behind the OPEN */
     }
     free(w);
+}
+
+/* on_cloud_provisional: a loading cloud's provisional form is drawable: the waiters that
+ * asked for it (parameter provisional) get its INFO and may render; they stay waiters for the
+ * PROGRESS and the full INFO. */
+static void on_cloud_provisional(srv *sv, const rt_event *ev)
+{
+    srv_cloud *c = cloud_by_key(sv, ev->job);
+    if (!c) return;
+    int idx = (int)(c - sv->clouds);
+    c->prov_id = ev->cloud_id;
+    c->info = ev->info;
+    srv_log(sv, NULL, "cloud %s: provisional, %llu points, in %.2f s", c->name,
+            (unsigned long long)c->info.summary.points,
+            (double)(ev_now_ms() - c->t_start_ms) / 1000.0);
+    int nw = c->nwait;
+    for (int i = 0; i < nw; i++) {
+        c = &sv->clouds[idx]; /* an earlier waiter's requests may have grown the table */
+        srv_waiter *w = &c->waiters[i];
+        sess *s = srv_lookup(sv, w->sess);
+        if (!s || w->shown || s->opening != idx || !s->params.provisional) continue;
+        w->shown = 1;
+        s->opening = -1;
+        s->paused = 0;
+        s->cloud = idx;
+        s->cloud_id = c->prov_id;
+        send_info(sv, s, c, w->seq);
+        sess_input(s); /* requests that waited behind the OPEN */
+    }
 }
 
 static void on_frame_ev(srv *sv, rt_event *ev)
@@ -722,6 +785,7 @@ void srv_on_worker_events(srv *sv)
         case RT_EV_PROGRESS: on_progress_ev(sv, ev); break;
         case RT_EV_CLOUD_READY:
         case RT_EV_CLOUD_FAILED: on_cloud_done(sv, ev); break;
+        case RT_EV_CLOUD_PROVISIONAL: on_cloud_provisional(sv, ev); break;
         }
         rt_event_free(ev);
         ev = next;

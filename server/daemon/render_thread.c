@@ -10,15 +10,23 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
 #include "encode.h"
+#include "preview.h"
 #include "ev.h"
 #include "srv.h"
 
-enum { RT_NFRAMES = 2 };
+enum { RT_NFRAMES = 2, RT_MAX_PROV = 64 };
+
+/* A provisional cloud and the full cloud that replaced it (0 until then): requests still
+ * naming the provisional id are drawn from the replacement. Render thread, mu held. */
+typedef struct rt_prov {
+    uint32_t job, prov_id, final_id;
+} rt_prov;
 
 typedef struct rt_slot {
     uint32_t id;                /* 0: free */
@@ -54,6 +62,11 @@ typedef struct rt_prepjob {
     char *path;
     pc_prepared *prep;          /* set once prepared, waiting for upload */
     lod_cloud *lod;             /* or this, for a cloud in the LOD form */
+    int provisional;            /* prep is a provisional cloud of job (preview.h) */
+    int previewed;              /* a provisional cloud of this job was queued for upload */
+    int failed;                 /* the prep failed after that (err): the render thread
+                                 * releases the provisional cloud and posts FAILED */
+    sd_err err;
     rt_cloud_info info;
     struct rt_prepjob *next;
 } rt_prepjob;
@@ -73,6 +86,8 @@ struct rt_ctx {
     rt_prepjob *up_head, *up_tail;       /* prepared, waiting for upload */
     int prepping;
     rt_event *ev_head, *ev_tail;
+    rt_prov prov[RT_MAX_PROV];          /* the latest provisional clouds, oldest dropped */
+    int nprov;
     int stop, render_done;
     int init_state;                      /* 0 pending, 1 ok, -1 failed */
     sd_err init_err;
@@ -216,6 +231,42 @@ typedef struct prep_prog {
 
 static void on_progress(void *user, int phase, double fraction);
 
+/* prov_add: records provisional cloud id of job (mu held). */
+static void prov_add(rt_ctx *rt, uint32_t job, uint32_t id)
+{
+    if (rt->nprov == RT_MAX_PROV) {
+        memmove(rt->prov, rt->prov + 1, sizeof rt->prov[0] * (RT_MAX_PROV - 1));
+        rt->nprov--;
+    }
+    rt->prov[rt->nprov++] = (rt_prov){job, id, 0};
+}
+
+/* prov_finish: job's full cloud is final_id (0: it failed); returns the provisional id to
+ * release, 0 when job had none (mu held). */
+static uint32_t prov_finish(rt_ctx *rt, uint32_t job, uint32_t final_id)
+{
+    for (int i = 0; i < rt->nprov; i++)
+        if (rt->prov[i].job == job && rt->prov[i].final_id == 0 && rt->prov[i].prov_id) {
+            uint32_t old = rt->prov[i].prov_id;
+            rt->prov[i].final_id = final_id;
+            if (!final_id) rt->prov[i].prov_id = 0; /* its requests fail as of an unknown cloud */
+            return old;
+        }
+    return 0;
+}
+
+/* prov_resolve: rq's cloud after swaps; 1 when that is still a provisional cloud (mu held). */
+static int prov_resolve(const rt_ctx *rt, rt_request *rq)
+{
+    for (int i = 0; i < rt->nprov; i++)
+        if (rt->prov[i].prov_id && rt->prov[i].prov_id == rq->cloud_id) {
+            if (!rt->prov[i].final_id) return 1;
+            rq->cloud_id = rt->prov[i].final_id;
+            return 0;
+        }
+    return 0;
+}
+
 /* do_upload: uploads one prepared cloud (mu not held), reports the upload phase complete, and
  * posts READY or FAILED. */
 static void do_upload(rt_ctx *rt, rnd_ctx *rnd, rt_prepjob *j)
@@ -225,11 +276,38 @@ static void do_upload(rt_ctx *rt, rnd_ctx *rnd, rt_prepjob *j)
     const rt_hooks *h = rt->d.hooks;
     /* the renderer (or the hook) owns it now, even on failure; a LOD cloud never reaches a
      * hook (splatd --mpi prepares every cloud flat) */
-    int64_t id = j->lod ? rnd_adopt_lod(rnd, j->lod, &err)
-                 : h && h->adopt ? h->adopt(h->user, rnd, j->path, j->prep, &err)
-                                 : rnd_adopt(rnd, j->prep, &err);
+    int64_t id = j->failed ? (err = j->err, (int64_t)-1)
+                 : j->lod ? rnd_adopt_lod(rnd, j->lod, &err)
+                 : h && h->adopt && !j->provisional ? h->adopt(h->user, rnd, j->path, j->prep, &err)
+                                                    : rnd_adopt(rnd, j->prep, &err);
     j->prep = NULL;
     j->lod = NULL;
+    if (j->provisional) {
+        pthread_mutex_lock(&rt->mu);
+        if (id > 0) prov_add(rt, j->job, (uint32_t)id);
+        if (ev && id > 0) {
+            ev->kind = RT_EV_CLOUD_PROVISIONAL;
+            ev->job = j->job;
+            ev->info = j->info;
+            ev->cloud_id = (uint32_t)id;
+            post(rt, ev);
+        } else {
+            free(ev); /* no first image: the full prep goes on and answers */
+        }
+        pthread_mutex_unlock(&rt->mu);
+        free(j->path);
+        free(j);
+        return;
+    }
+    /* The swap: from here on the job's provisional cloud is drawn from the full one. */
+    pthread_mutex_lock(&rt->mu);
+    uint32_t old = prov_finish(rt, j->job, id > 0 ? (uint32_t)id : 0);
+    pthread_mutex_unlock(&rt->mu);
+    if (old) {
+        rnd_release(rnd, old);
+        srv_log(NULL, NULL, "first image of %s released: %s", j->path,
+                id > 0 ? "the full cloud replaces it" : "the prep failed");
+    }
     if (id > 0) {
         prep_prog pp = {.rt = rt, .job = j->job, .phase = -1};
         on_progress(&pp, PROTO_PHASE_UPLOAD, 1.0);
@@ -346,6 +424,13 @@ static void *render_main(void *arg)
         rt_slot *s = fi >= 0 ? pick(rt, &rq, &stream) : NULL;
         if (!s) continue;
         slot_hold(rt, s, rt_frame_cost(&rq));
+        int prov = prov_resolve(rt, &rq);
+        if (prov) {
+            /* a provisional cloud has no normals, radii or F: `points`, in its colours */
+            rq.params.pipeline = SP_PIPE_POINTS;
+            if (rq.params.color == SP_COLOR_FIELD || rq.params.color == SP_COLOR_NORMAL)
+                rq.params.color = SP_COLOR_RGB;
+        }
         rt->frame_busy[fi] = 1;
         rt->rendering = 1;
         rt_encjob job = {.frame = fi, .params = rq.params};
@@ -355,6 +440,7 @@ static void *render_main(void *arg)
         job.meta.stream = stream;
         job.meta.pipeline = rq.params.pipeline;
         job.meta.format = rq.params.format;
+        job.meta.provisional = prov;
         pthread_mutex_unlock(&rt->mu);
 
         rnd_frame *f = &rt->frames[fi];
@@ -520,6 +606,62 @@ static void info_fill(proto_info *in, uint64_t n, uint64_t dropped, const double
     snprintf(in->format, sizeof in->format, "%s", format);
 }
 
+static int is_copc_name(const char *path)
+{
+    size_t n = strlen(path);
+    return n >= 9 && !strcasecmp(path + n - 9, ".copc.laz");
+}
+
+/* prep_provisional: for a COPC file without a flat cache (a LOD cache is not probed: a COPC
+ * file big enough for the LOD form always gets one), its top levels (rt_desc.preview_points)
+ * as a provisional cloud, queued for upload ahead of the full prep. A failure is only logged:
+ * the full prep runs anyway and answers the OPEN (with the loader's error when the file is
+ * bad). Prep thread, mu not held. */
+static void prep_provisional(rt_ctx *rt, rt_prepjob *j, int use_lod)
+{
+    if (!rt->d.preview_points || !is_copc_name(j->path)) return;
+    if (!use_lod && cache_probe(j->path, rt->d.cache_dir, 0)) return; /* opens fast anyway */
+    uint64_t t0 = now_us();
+    pc_raw raw = {0};
+    pc_cloud cl = {0};
+    sd_err err = {0};
+    int level = 0;
+    rt_prepjob *pj = calloc(1, sizeof *pj);
+    pc_prepared *p = calloc(1, sizeof *p);
+    char *path = strdup(j->path);
+    int rc = !pj || !p || !path ? sd_errf(&err, SD_ENOMEM, "out of memory for a first image")
+                                : pc_read_copc_budget(j->path, rt->d.preview_points, &raw, &level, &err);
+    if (rc == 0) rc = pc_finalize(&raw, &cl, j->path, &err);
+    pc_raw_free(&raw);
+    if (rc == 0) rc = prep_preview(&cl, p, &err);
+    pc_cloud_free(&cl);
+    if (rc) {
+        char clean[1200];
+        srv_clean_text(err.msg, clean, sizeof clean);
+        srv_log(NULL, NULL, "no first image of %s: %s", j->path, clean);
+        if (p) pc_prepared_free(p);
+        free(p);
+        free(pj);
+        free(path);
+        return;
+    }
+    info_fill(&pj->info.summary, p->n, p->n_dropped, p->bmin, p->bmax, p->offset,
+              p->attrs | PROTO_INFO_PROVISIONAL, 0, 0.0f, p->format);
+    srv_log(NULL, NULL, "first image of %s: COPC levels 0-%d, %llu points, read in %.3f s",
+            j->path, level, (unsigned long long)p->n, (double)(now_us() - t0) / 1e6);
+    pj->job = j->job;
+    pj->path = path;
+    pj->prep = p;
+    pj->provisional = 1;
+    j->previewed = 1;
+    pthread_mutex_lock(&rt->mu);
+    if (rt->up_tail) rt->up_tail->next = pj;
+    else rt->up_head = pj;
+    rt->up_tail = pj;
+    pthread_cond_signal(&rt->cv_render);
+    pthread_mutex_unlock(&rt->mu);
+}
+
 static void *prep_main(void *arg)
 {
     rt_ctx *rt = arg;
@@ -541,6 +683,7 @@ static void *prep_main(void *arg)
         sd_err err = {0};
         struct stat st;
         int use_lod = stat(j->path, &st) == 0 && lod_want(rt->d.lod_mode, (uint64_t)st.st_size);
+        prep_provisional(rt, j, use_lod);
         pc_prepared *p = use_lod ? NULL : calloc(1, sizeof *p);
         lod_cloud *lc = use_lod ? calloc(1, sizeof *lc) : NULL;
         int rc;
@@ -571,6 +714,11 @@ static void *prep_main(void *arg)
             on_progress(&pp, PROTO_PHASE_UPLOAD, 0.0);
         } else {
             free(p);
+        }
+        if (rc != 0 && j->previewed) { /* the render thread releases the first image */
+            j->failed = 1;
+            j->err = err;
+            rc = 0;
         }
         pthread_mutex_lock(&rt->mu);
         rt->prepping = 0;

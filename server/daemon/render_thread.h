@@ -37,6 +37,7 @@ typedef struct rt_frame_meta {
     uint64_t render_us, readback_us, encode_us, points_drawn;
     uint32_t flags;         /* rnd_frame.flags (RND_FRAME_*) */
     int complete;           /* rnd_frame.complete */
+    int provisional;        /* drawn from a provisional cloud (with `points`) */
 } rt_frame_meta;
 
 /* A render request as the loop submits it. */
@@ -80,6 +81,11 @@ typedef struct rt_desc {
     uint64_t frame_budget;  /* --max-frame-bytes: bytes all frames outstanding (rendering,
                              * encoding, waiting at the loop) may hold, by rt_frame_cost;
                              * default 0: a quarter of RAM, at least 256 MiB */
+    uint64_t preview_points; /* a first OPEN of a COPC file (name ending .copc.laz) without a
+                             * valid flat cache: its top octree levels holding at most this
+                             * many points (pc_read_copc_budget) are uploaded first, as a
+                             * provisional cloud (RT_EV_CLOUD_PROVISIONAL), while the full prep
+                             * runs; 0 (default): none */
     rt_pack_fn pack;        /* required */
     void *pack_user;
     const rt_hooks *hooks;  /* default NULL: the local renderer */
@@ -91,6 +97,11 @@ typedef enum {
     RT_EV_PROGRESS,         /* job, phase, fraction */
     RT_EV_CLOUD_READY,      /* job, cloud_id, info */
     RT_EV_CLOUD_FAILED,     /* job, err */
+    RT_EV_CLOUD_PROVISIONAL, /* job, cloud_id, info: a provisional cloud of a job still
+                             * preparing; that job's READY (or FAILED) follows. Requests for
+                             * the provisional id are drawn with `points` (meta.provisional),
+                             * and once the full cloud is uploaded the render thread draws
+                             * them from it instead (the provisional cloud is released then) */
 } rt_event_kind;
 
 /* The summary of a prepared cloud the loop keeps to answer OPEN (INFO). */

@@ -48,6 +48,8 @@ typedef struct srv_opts {
     int lod_mode;                /* --lod auto|always|never (LOD_*); default auto */
     int lod_uploads;             /* --lod-inflight: LOD nodes loading at once; default 0: 4 */
     uint64_t prep_memory;        /* --prep-memory: the LOD build's memory cap; default 2 GiB */
+    uint64_t preview_points;     /* --copc-preview: a COPC file's provisional cloud holds at
+                                  * most this many points (rt_desc.preview_points); default 500k */
 } srv_opts;
 
 /* srv_parse_size: "512M", "4G", "1048576" (suffix K, M or G) into *out; at least 1 MiB.
@@ -56,6 +58,8 @@ int srv_parse_size(const char *s, uint64_t *out);
 
 typedef struct srv_waiter {
     uint32_t sess, seq;
+    int shown;                   /* the session was answered the provisional INFO: it draws the
+                                  * provisional cloud and gets PROGRESS and the full INFO */
 } srv_waiter;
 
 /* One cloud known to the daemon, keyed by its real path. Loaded once, shared by all clients.
@@ -67,7 +71,8 @@ typedef struct srv_cloud {
     int state;                   /* SRV_CLOUD_* */
     uint16_t gen;                /* bumped each time the entry starts a load; kept when freed */
     uint32_t key, cloud_id;
-    rt_cloud_info info;
+    rt_cloud_info info;          /* READY: the cloud's; LOADING with prov_id: the provisional one's */
+    uint32_t prov_id;            /* LOADING: the renderer's provisional cloud, 0 when none */
     srv_waiter *waiters;
     int nwait, capwait;
     uint64_t t_start_ms;

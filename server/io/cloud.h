@@ -111,6 +111,11 @@ int pc_read_laz_threads(const char *path, pc_raw *raw, int threads, sd_err *err)
  * hierarchy read page by page, deeper pages left unread): a uniform preview of the whole
  * extent for a first image. SD_EFORMAT when the file is not COPC. io_copc.c. */
 int pc_read_copc_levels(const char *path, int max_level, pc_raw *raw, sd_err *err);
+/* pc_read_copc_budget: the top levels 0..L of a COPC file's octree, L the deepest level whose
+ * nodes together with all shallower ones hold at most budget points (at least level 0, even
+ * when the root alone holds more); *level (may be NULL) gets L. The daemon's first image of a
+ * COPC file (its provisional cloud). io_copc.c. */
+int pc_read_copc_budget(const char *path, uint64_t budget, pc_raw *raw, int *level, sd_err *err);
 
 /* pc_load: picks the reader from the file's extension (ply, pcd, las, laz, xyz, pts, txt; any
  * case; .copc.laz is laz), reads and finalizes. Returns 0 or a negative SD_E* code with err filled. */

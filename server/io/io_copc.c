@@ -17,6 +17,8 @@ typedef struct levels_job {
     const char *path;
     const pc__file *f;
     int32_t max_level;
+    uint64_t budget;            /* > 0: keep only the levels whose running total fits this */
+    int *level_out;
     pc_raw *raw;
     sd_err *err;
     /* everything allocated, reachable for the caller to free after a jump */
@@ -51,6 +53,25 @@ static int by_level(const void *a, const void *b)
                                 : (x->off < y->off ? -1 : x->off > y->off);
 }
 
+/* budget_cut: how many of the n nodes (sorted by level) to keep: every node of levels 0..L,
+ * L the deepest level whose nodes together with all shallower ones hold at most budget points;
+ * at least level 0 (the root alone may hold more). */
+static size_t budget_cut(const copc_entry *e, size_t n, uint64_t budget)
+{
+    size_t keep = 0, i = 0;
+    uint64_t sum = 0;
+    while (i < n) {
+        size_t k = i;
+        uint64_t lv = 0;
+        for (; k < n && e[k].level == e[i].level; k++) lv += (uint64_t)e[k].count;
+        if (keep && sum + lv > budget) break;
+        sum += lv;
+        keep = k;
+        i = k;
+    }
+    return keep;
+}
+
 static int levels_parse(void *arg)
 {
     levels_job *j = arg;
@@ -61,6 +82,8 @@ static int levels_parse(void *arg)
         return sd_errf(j->err, SD_EEMPTY, "%s: no COPC node of level %d or less holds points",
                        j->path, j->max_level);
     qsort(j->nodes, j->n, sizeof *j->nodes, by_level);
+    if (j->budget) j->n = budget_cut(j->nodes, j->n, j->budget);
+    if (j->level_out) *j->level_out = j->nodes[j->n - 1].level;
     const las_header *h = &j->lf.h;
     int has_rgb = pc__las_formats[h->format].rgb != 0;
     pc_raw *raw = j->raw;
@@ -87,12 +110,14 @@ static int levels_parse(void *arg)
     return 0;
 }
 
-int pc_read_copc_levels(const char *path, int max_level, pc_raw *raw, sd_err *err)
+static int read_levels(const char *path, int max_level, uint64_t budget, int *level, pc_raw *raw,
+                       sd_err *err)
 {
     pc__file file;
     int rc = pc__file_open(path, &file, err);
     if (rc) return rc;
-    levels_job j = {.path = path, .f = &file, .max_level = max_level, .raw = raw, .err = err};
+    levels_job j = {.path = path, .f = &file, .max_level = max_level, .budget = budget,
+                    .level_out = level, .raw = raw, .err = err};
     rc = pc__guarded(&file, path, levels_parse, &j, err);
     free(j.rgb16);
     free(j.buf);
@@ -101,4 +126,15 @@ int pc_read_copc_levels(const char *path, int max_level, pc_raw *raw, sd_err *er
     laz_close(&j.lf);
     pc__file_close(&file);
     return rc;
+}
+
+int pc_read_copc_levels(const char *path, int max_level, pc_raw *raw, sd_err *err)
+{
+    return read_levels(path, max_level, 0, NULL, raw, err);
+}
+
+int pc_read_copc_budget(const char *path, uint64_t budget, pc_raw *raw, int *level, sd_err *err)
+{
+    /* Level 24 is 2^72 cells: no real file reaches it; deeper pages stay unread. */
+    return read_levels(path, 24, budget ? budget : 1, level, raw, err);
 }
