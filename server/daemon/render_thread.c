@@ -396,7 +396,9 @@ static void *render_main(void *arg)
             /* a PREFETCH: the nodes of its cameras become the cloud's prefetch queue */
             rnd_camera cams[PROTO_MAX_PREFETCH];
             int n = ps->npcams;
-            uint32_t cloud = ps->pcloud;
+            rt_request cr = {.cloud_id = ps->pcloud};
+            prov_resolve(rt, &cr); /* a provisional cloud's id names its replacement */
+            uint32_t cloud = cr.cloud_id;
             sp_params params = ps->pparams;
             memcpy(cams, ps->pcams, (size_t)n * sizeof *cams);
             ps->has_prefetch = 0;
