@@ -127,6 +127,69 @@ static double now_s(void)
     return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
 }
 
+/* start_browser: headless Chromium with DevTools on 127.0.0.1 and a fresh profile in dir;
+ * returns its DevTools port (from the profile's DevToolsActivePort) or -1 with why. */
+static int start_browser(tu_wd *wd, const char *dir, int width, int height, int insecure,
+                         char *why, size_t len)
+{
+    char prof[700], portfile[760], profarg[720], winarg[64], blog[720];
+    snprintf(prof, sizeof prof, "%s/chromium-profile", dir);
+    snprintf(portfile, sizeof portfile, "%s/DevToolsActivePort", prof);
+    snprintf(profarg, sizeof profarg, "--user-data-dir=%s", prof);
+    snprintf(winarg, sizeof winarg, "--window-size=%d,%d", width, height);
+    snprintf(blog, sizeof blog, "%s/chromium.log", dir);
+    unlink(portfile);
+    pid_t pid = fork();
+    if (pid < 0) {
+        snprintf(why, len, "fork: %s", strerror(errno));
+        return -1;
+    }
+    if (pid == 0) {
+        int fd = open(blog, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        if (fd >= 0) {
+            dup2(fd, 1);
+            dup2(fd, 2);
+        }
+        setpgid(0, 0); /* its renderer and GPU processes go with it */
+        execl(browser_bin(), browser_bin(), "--headless", "--no-sandbox", "--disable-gpu",
+              "--disable-extensions", "--no-first-run", "--force-device-scale-factor=1", winarg,
+              "--remote-debugging-address=127.0.0.1", "--remote-debugging-port=0", profarg,
+              insecure ? "--ignore-certificate-errors" : "--no-default-browser-check",
+              "about:blank", (char *)NULL);
+        _exit(127);
+    }
+    wd->browser = pid;
+    double t0 = now_s();
+    while (now_s() - t0 < 20) {
+        FILE *f = fopen(portfile, "r");
+        int port = 0;
+        if (f) {
+            if (fscanf(f, "%d", &port) != 1) port = 0;
+            fclose(f);
+        }
+        if (port > 0) return port;
+        if (waitpid(pid, NULL, WNOHANG) == pid) {
+            wd->browser = 0;
+            snprintf(why, len, "chromium exited at start (see %s)", blog);
+            return -1;
+        }
+        usleep(50000);
+    }
+    snprintf(why, len, "chromium did not open its DevTools port in 20 s (see %s)", blog);
+    return -1;
+}
+
+static void stop_pid(pid_t pid)
+{
+    kill(-pid, SIGTERM);
+    kill(pid, SIGTERM);
+    for (int i = 0; i < 200 && waitpid(pid, NULL, WNOHANG) == 0; i++) usleep(10000);
+    if (waitpid(pid, NULL, WNOHANG) == 0) {
+        kill(-pid, SIGKILL);
+        waitpid(pid, NULL, 0);
+    }
+}
+
 static int wd_start(tu_wd *wd, const char *dir, int width, int height, int insecure, char *why,
                     size_t len)
 {
@@ -178,12 +241,19 @@ static int wd_start(tu_wd *wd, const char *dir, int width, int height, int insec
         }
         usleep(50000);
     }
+    /* The browser is started here with its DevTools on 127.0.0.1 and chromedriver attaches to
+     * it (debuggerAddress): a browser chromedriver starts itself is reached at "localhost",
+     * which does not resolve on a machine without /etc/hosts (a fresh debootstrap root). */
+    int dport = start_browser(wd, dir, width, height, insecure, why, len);
+    if (dport < 0) {
+        tu_wd_stop(wd);
+        return -1;
+    }
     char caps[1024];
     snprintf(caps, sizeof caps,
-             "{\"capabilities\":{\"alwaysMatch\":{%s\"goog:chromeOptions\":{\"binary\":\"%s\","
-             "\"args\":[\"--headless\",\"--no-sandbox\",\"--disable-gpu\",\"--disable-extensions\","
-             "\"--no-first-run\",\"--window-size=%d,%d\",\"--force-device-scale-factor=1\"]}}}}",
-             insecure ? "\"acceptInsecureCerts\":true," : "", browser_bin(), width, height);
+             "{\"capabilities\":{\"alwaysMatch\":{%s\"goog:chromeOptions\":"
+             "{\"debuggerAddress\":\"127.0.0.1:%d\"}}}}",
+             insecure ? "\"acceptInsecureCerts\":true," : "", dport);
     int st = request(wd, "POST", "/session", caps, &body, 30000);
     if (st != 200 || json_string(body, "sessionId", wd->session, sizeof wd->session) != 0) {
         snprintf(why, len, "no WebDriver session (HTTP %d): %.300s", st, body ? body : "");
@@ -281,14 +351,12 @@ void tu_wd_stop(tu_wd *wd)
     }
     wd->session[0] = 0;
     if (wd->pid) {
-        kill(-wd->pid, SIGTERM);
-        kill(wd->pid, SIGTERM);
-        for (int i = 0; i < 200 && waitpid(wd->pid, NULL, WNOHANG) == 0; i++) usleep(10000);
-        if (waitpid(wd->pid, NULL, WNOHANG) == 0) {
-            kill(-wd->pid, SIGKILL);
-            waitpid(wd->pid, NULL, 0);
-        }
+        stop_pid(wd->pid);
         wd->pid = 0;
+    }
+    if (wd->browser) {
+        stop_pid(wd->browser);
+        wd->browser = 0;
     }
 }
 

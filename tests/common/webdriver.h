@@ -7,6 +7,7 @@
 
 typedef struct tu_wd {
     pid_t pid;               /* chromedriver */
+    pid_t browser;           /* chromium, started by us: chromedriver attaches to it */
     int port;
     char session[128];
     char log[700];

@@ -34,9 +34,8 @@ fi
 CFLAGS="-std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer -Wall -Wextra -Wno-unused-parameter
         -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=undefined
         -Iprotocol $(for d in util io prep render pipelines enc net daemon cmd; do printf -- "-Iserver/%s " $d; done)-Iclient -Itests -Itests/common -Ibuild/gen -I/usr/include/OpenEXR"
-SRCS="$(ls protocol/*.c) server/io/io_text.c server/io/io_ply.c server/io/io_pcd.c server/io/io_las.c
-      server/io/io_xyz.c server/io/cloud.c server/io/lzf.c server/util/sd_err.c server/util/sd_hash.c server/net/ws.c server/net/http.c
-      $(ls server/io/laz*.c) server/io/io_laz.c server/io/las_header.c server/io/copc.c tests/common/fuzz_copc.c
+SRCS="$(ls protocol/*.c) $(ls server/io/*.c) server/util/sd_err.c server/util/sd_hash.c
+      server/net/ws.c server/net/http.c tests/common/fuzz_copc.c
       $(ls server/prep/*.c) client/frame_decode.c tests/common/fuzz_targets.c"
 LIBS="-lflann -lturbojpeg -llz4 -lxxhash -llzf -lcrypto -lpthread -lm"
 # The dispatch target: the rest of the server (all but its main), the embedded shaders.
