@@ -47,7 +47,7 @@ static void extreme(laz_gps *g, int32_t diff)
 }
 
 /* full: a new sequence whose time is coded whole (high 32 bits predicted, low raw). */
-static void full(laz_gps *g, laz_dec *d)
+static inline __attribute__((always_inline)) void full(laz_gps *g, laz_dec *d)
 {
     g->next = (g->next + 1) & 3;
     uint64_t hi = (uint32_t)laz_ic_decompress(&g->ic, d, (int32_t)(g->t[g->last] >> 32), 8);
@@ -57,8 +57,9 @@ static void full(laz_gps *g, laz_dec *d)
     g->extreme[g->last] = 0;
 }
 
-uint64_t laz_gps_read(laz_gps *g, laz_dec *d)
+uint64_t laz_gps_read(laz_gps *g, laz_dec *dp)
 {
+    laz_dec dd = *dp, *d = &dd;
     /* v = the version-2 symbol; version 3 codes v - 1 (it has no "unchanged" 0 / 511) */
     const uint32_t sh = g->v3 ? 1 : 0, code_full = MULTI - MULTI_MINUS + 2 - sh;
     /* a sequence switch re-reads with the new sequence (LASzip recurses); at most a few */
@@ -111,5 +112,6 @@ uint64_t laz_gps_read(laz_gps *g, laz_dec *d)
         }
         break;
     }
+    *dp = dd;
     return g->t[g->last];
 }

@@ -108,15 +108,16 @@ static laz_model *lazy(laz_model *m, uint8_t *on)
     return m;
 }
 
-static int p10_read(p10 *s, laz_dec *d, uint8_t *item)
+static int p10_read(p10 *s, laz_dec *dp, uint8_t *item)
 {
+    laz_dec dd = *dp, *d = &dd; /* the coder in registers for the whole point */
     uint8_t *l = s->last;
     uint32_t changed = laz_decode_symbol(d, &s->changed);
     unsigned r, n, m, lv;
     if (changed) {
         if (changed & 32) {
             laz_model *md = lazy(&s->bitbyte[l[14]], &s->bitbyte_on[l[14]]);
-            if (!md) return -1;
+            if (!md) goto nomem;
             l[14] = (uint8_t)laz_decode_symbol(d, md);
         }
         r = l[14] & 7;
@@ -132,7 +133,7 @@ static int p10_read(p10 *s, laz_dec *d, uint8_t *item)
         }
         if (changed & 8) {
             laz_model *md = lazy(&s->cls[l[15]], &s->cls_on[l[15]]);
-            if (!md) return -1;
+            if (!md) goto nomem;
             l[15] = (uint8_t)laz_decode_symbol(d, md);
         }
         if (changed & 4) {
@@ -141,7 +142,7 @@ static int p10_read(p10 *s, laz_dec *d, uint8_t *item)
         }
         if (changed & 2) {
             laz_model *md = lazy(&s->ud[l[17]], &s->ud_on[l[17]]);
-            if (!md) return -1;
+            if (!md) goto nomem;
             l[17] = (uint8_t)laz_decode_symbol(d, md);
         }
         if (changed & 1)
@@ -168,7 +169,11 @@ static int p10_read(p10 *s, laz_dec *d, uint8_t *item)
     put32(l + 8, (uint32_t)z);
     s->last_h[lv] = z;
     memcpy(item, l, 20);
+    *dp = dd;
     return 0;
+nomem:
+    *dp = dd;
+    return -1;
 }
 
 /* ---- RGB12 (also the RGB layer of RGB14 / RGBNIR14) ---- */
@@ -186,9 +191,10 @@ int laz__rgb_models_init(laz_model *used, laz_model *diff)
     return 0;
 }
 
-void laz__rgb_decode(laz_dec *d, laz_model *used, laz_model *dm, const uint16_t *last,
+void laz__rgb_decode(laz_dec *dp, laz_model *used, laz_model *dm, const uint16_t *last,
                      uint16_t *c)
 {
+    laz_dec dd = *dp, *d = &dd;
     uint32_t sym = laz_decode_symbol(d, used);
     int32_t lo0 = last[0] & 0xFF, hi0 = last[0] >> 8;
     c[0] = (sym & 1) ? laz_u8_fold((int32_t)laz_decode_symbol(d, &dm[0]) + lo0) : (uint16_t)lo0;
@@ -225,6 +231,7 @@ void laz__rgb_decode(laz_dec *d, laz_model *used, laz_model *dm, const uint16_t 
     } else {
         c[1] = c[2] = c[0];
     }
+    *dp = dd;
 }
 
 /* ---- the item list ---- */

@@ -196,12 +196,12 @@ static int pt14_read(pt14 *s, uint8_t *rec)
 {
     ctx14 *c = &s->c[s->cur];
     p14 *L = &c->last;
-    laz_dec *dxy = &s->d[L_XY];
+    laz_dec dd = s->d[L_XY], *dxy = &dd; /* the coder in registers for the point's fields */
     unsigned lpr = (L->ret == 1) + (L->ret >= L->nret ? 2u : 0u) + (L->gps_change ? 4u : 0u);
     uint32_t changed = laz_decode_symbol(dxy, &c->changed[lpr]);
     if (changed & 64) {
         unsigned ch = (s->cur + laz_decode_symbol(dxy, &c->channel) + 1) % 4;
-        if (s->c[ch].unused && ctx_start(&s->c[ch], L)) return -1;
+        if (s->c[ch].unused && ctx_start(&s->c[ch], L)) goto nomem;
         s->cur = ch;
         c = &s->c[ch];
         L = &c->last;
@@ -211,7 +211,7 @@ static int pt14_read(pt14 *s, uint8_t *rec)
     unsigned last_n = L->nret, last_r = L->ret, n, r;
     if (changed & 4) {
         laz_model *m = lazy(&c->nret[last_n], &c->nret_on[last_n], 16);
-        if (!m) return -1;
+        if (!m) goto nomem;
         n = laz_decode_symbol(dxy, m);
         L->nret = (uint8_t)n;
     } else {
@@ -224,7 +224,7 @@ static int pt14_read(pt14 *s, uint8_t *rec)
     default:
         if (gpsc) {
             laz_model *m = lazy(&c->rnum[last_r], &c->rnum_on[last_r], 16);
-            if (!m) return -1;
+            if (!m) goto nomem;
             r = laz_decode_symbol(dxy, m);
         } else {
             r = (last_r + laz_decode_symbol(dxy, &c->rgps_same) + 2) % 16;
@@ -244,6 +244,7 @@ static int pt14_read(pt14 *s, uint8_t *rec)
                              one + (kb < 20 ? (kb & ~1u) : 20));
     L->y = (int32_t)((uint32_t)L->y + (uint32_t)diff);
     laz_median5_add(&c->my[idx], diff);
+    s->d[L_XY] = dd;
 
     if (s->on[L_Z]) {
         kb = (c->dx.k + c->dy.k) / 2;
@@ -254,13 +255,13 @@ static int pt14_read(pt14 *s, uint8_t *rec)
     if (s->on[L_CLS]) {
         unsigned ccc = ((L->cls & 0x1Fu) << 1) + (cpr == 3);
         laz_model *md = lazy(&c->cls[ccc], &c->cls_on[ccc], 256);
-        if (!md) return -1;
+        if (!md) goto nomem;
         L->cls = (uint8_t)laz_decode_symbol(&s->d[L_CLS], md);
     }
     if (s->on[L_FLAGS]) {
         unsigned lf = (unsigned)L->edge << 5 | (unsigned)L->sdir << 4 | L->cflags;
         laz_model *md = lazy(&c->flags[lf], &c->flags_on[lf], 64);
-        if (!md) return -1;
+        if (!md) goto nomem;
         uint32_t f = laz_decode_symbol(&s->d[L_FLAGS], md);
         L->edge = (f >> 5) & 1;
         L->sdir = (f >> 4) & 1;
@@ -278,7 +279,7 @@ static int pt14_read(pt14 *s, uint8_t *rec)
     if (s->on[L_UD]) {
         unsigned k = L->ud / 4u;
         laz_model *md = lazy(&c->ud[k], &c->ud_on[k], 256);
-        if (!md) return -1;
+        if (!md) goto nomem;
         L->ud = (uint8_t)laz_decode_symbol(&s->d[L_UD], md);
     }
     if (s->on[L_PSID] && psc)
@@ -289,6 +290,9 @@ static int pt14_read(pt14 *s, uint8_t *rec)
     p14_pack(L, rec);
     L->gps_change = gpsc;
     return 0;
+nomem:
+    s->d[L_XY] = dd;
+    return -1;
 }
 
 /* ---- RGB14 / RGBNIR14 / BYTE14: per-channel contexts following POINT14's channel ---- */
