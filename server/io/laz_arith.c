@@ -68,19 +68,19 @@ void laz__model_update(laz_model *m)
     uint32_t scale = 0x80000000u / m->total, sum = 0;
     if (!m->table) {
         for (uint32_t k = 0; k < m->n; k++) {
-            m->dist[k] = (scale * sum) >> (31 - LAZ_DM_SHIFT);
+            m->dist[k] = (uint16_t)((scale * sum) >> (31 - LAZ_DM_SHIFT));
             sum += m->count[k];
         }
     } else {
         uint32_t s = 0;
         for (uint32_t k = 0; k < m->n; k++) {
-            m->dist[k] = (scale * sum) >> (31 - LAZ_DM_SHIFT);
+            m->dist[k] = (uint16_t)((scale * sum) >> (31 - LAZ_DM_SHIFT));
             sum += m->count[k];
             uint32_t w = m->dist[k] >> m->table_shift;
-            while (s < w) m->table[++s] = k - 1;
+            while (s < w) m->table[++s] = (uint16_t)(k - 1);
         }
         m->table[0] = 0;
-        while (s <= m->table_size) m->table[++s] = m->n - 1;
+        while (s <= m->table_size) m->table[++s] = (uint16_t)(m->n - 1);
     }
     m->cycle = (5 * m->cycle) >> 2;
     uint32_t max_cycle = (m->n + 6) << 3;
@@ -90,16 +90,18 @@ void laz__model_update(laz_model *m)
 
 int laz_model_init(laz_model *m, uint32_t n)
 {
-    if (!m->dist) {
+    if (!m->count) {
         uint32_t tbits = 0, tsize = 0;
         if (n > TABLE_MIN) {
             tbits = TABLE_BITS;
             tsize = 1u << tbits;
         }
-        m->dist = malloc(sizeof(uint32_t) * (2 * (size_t)n + (tsize ? tsize + 2 : 0)));
-        if (!m->dist) return -1;
-        m->count = m->dist + n;
-        m->table = tsize ? m->dist + 2 * n : NULL;
+        /* one block: n counts (u32), n distribution values and the table (u16: both < 2^15) */
+        m->count = malloc(sizeof(uint32_t) * (size_t)n +
+                          sizeof(uint16_t) * ((size_t)n + (tsize ? tsize + 2 : 0)));
+        if (!m->count) return -1;
+        m->dist = (uint16_t *)(m->count + n);
+        m->table = tsize ? m->dist + n : NULL;
         m->table_size = tsize;
         m->table_shift = tsize ? LAZ_DM_SHIFT - tbits : 0;
         m->n = n;
@@ -115,8 +117,9 @@ int laz_model_init(laz_model *m, uint32_t n)
 
 void laz_model_free(laz_model *m)
 {
-    free(m->dist);
-    m->dist = m->count = m->table = NULL;
+    free(m->count);
+    m->count = NULL;
+    m->dist = m->table = NULL;
 }
 
 /* ---- integer decompressor ---- */

@@ -30,9 +30,9 @@ typedef struct laz_bitmodel {
 } laz_bitmodel;
 
 typedef struct laz_model {
-    uint32_t *dist;         /* n cumulative probabilities (15 bits), then n counts, then table */
-    uint32_t *count;
-    uint32_t *table;        /* NULL for 4 symbols or fewer */
+    uint32_t *count;        /* n counts, then (same block) dist and table */
+    uint16_t *dist;         /* n cumulative probabilities (15 bits) */
+    uint16_t *table;        /* NULL for 4 symbols or fewer */
     uint32_t n, last, table_size, table_shift, total, cycle, until;
 } laz_model;
 
