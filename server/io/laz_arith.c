@@ -2,6 +2,7 @@
 #include "laz_arith.h"
 
 #include <stdlib.h>
+#include <string.h>
 
 #define AC_MAX_LENGTH 0xFFFFFFFFu
 #define BM_SHIFT LAZ_BM_SHIFT
@@ -72,15 +73,24 @@ void laz__model_update(laz_model *m)
             sum += m->count[k];
         }
     } else {
+        /* table[j] = the last symbol whose range starts below bucket j (a lower bound of the
+         * symbol of any value in bucket j). Symbol k - 1 fills buckets s+1 .. w: the first
+         * four with one unconditional 8-byte store (most runs are that short; an exit branch
+         * per run mispredicts), the rest in a loop. Stores past w are overwritten by the next
+         * symbols or the final fill; the block has 4 spare entries for them. */
         uint32_t s = 0;
+        uint16_t *t = m->table;
         for (uint32_t k = 0; k < m->n; k++) {
             m->dist[k] = (uint16_t)((scale * sum) >> (31 - LAZ_DM_SHIFT));
             sum += m->count[k];
             uint32_t w = m->dist[k] >> m->table_shift;
-            while (s < w) m->table[++s] = (uint16_t)(k - 1);
+            uint64_t four = (uint64_t)(uint16_t)(k - 1) * 0x0001000100010001ull;
+            memcpy(t + s + 1, &four, sizeof four);
+            for (uint32_t j = s + 5; j <= w; j++) t[j] = (uint16_t)(k - 1);
+            s = w;
         }
-        m->table[0] = 0;
-        while (s <= m->table_size) m->table[++s] = (uint16_t)(m->n - 1);
+        t[0] = 0;
+        while (s <= m->table_size) t[++s] = (uint16_t)(m->n - 1);
     }
     m->cycle = (5 * m->cycle) >> 2;
     uint32_t max_cycle = (m->n + 6) << 3;
@@ -98,7 +108,7 @@ int laz_model_init(laz_model *m, uint32_t n)
         }
         /* one block: n counts (u32), n distribution values and the table (u16: both < 2^15) */
         m->count = malloc(sizeof(uint32_t) * (size_t)n +
-                          sizeof(uint16_t) * ((size_t)n + (tsize ? tsize + 2 : 0)));
+                          sizeof(uint16_t) * ((size_t)n + (tsize ? tsize + 6 : 0)));
         if (!m->count) return -1;
         m->dist = (uint16_t *)(m->count + n);
         m->table = tsize ? m->dist + n : NULL;
