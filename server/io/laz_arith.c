@@ -103,15 +103,17 @@ int laz_model_init(laz_model *m, uint32_t n)
     if (!m->count) {
         uint32_t tbits = 0, tsize = 0;
         if (n > TABLE_MIN) {
-            tbits = TABLE_BITS;
+            tbits = 3;
+            while (tbits < TABLE_BITS && n > (1u << (tbits - 3))) ++tbits; /* 8n entries, at most 256 */
             tsize = 1u << tbits;
         }
         /* one block: n counts (u32), n distribution values and the table (u16: both < 2^15) */
         m->count = malloc(sizeof(uint32_t) * (size_t)n +
-                          sizeof(uint16_t) * ((size_t)n + (tsize ? tsize + 6 : 0)));
+                          sizeof(uint16_t) * ((size_t)n + 1 + (tsize ? tsize + 6 : 0)));
         if (!m->count) return -1;
         m->dist = (uint16_t *)(m->count + n);
-        m->table = tsize ? m->dist + n : NULL;
+        m->dist[n] = 0;        /* read, never used, by the decoder's branch-free last-symbol case */
+        m->table = tsize ? m->dist + n + 1 : NULL;
         m->table_size = tsize;
         m->table_shift = tsize ? LAZ_DM_SHIFT - tbits : 0;
         m->n = n;

@@ -115,7 +115,9 @@ LAZ_INLINE uint32_t laz_decode_symbol(laz_dec *d, laz_model *m)
             else sym = k;
         }
         x = m->dist[sym] * d->length;
-        if (sym != m->last) y = m->dist[sym + 1] * d->length;
+        /* dist has a spare entry at n, so this load is in bounds for the last symbol too */
+        uint32_t yn = m->dist[sym + 1] * d->length;
+        y = sym != m->last ? yn : y;
     } else {
         x = sym = 0;
         d->length >>= LAZ_DM_SHIFT;
@@ -237,7 +239,8 @@ static inline void laz_median5_add(laz_median5 *m, int32_t x)
 {
     int32_t *v = m->v, a[4], t = x;
     int hi = m->high;
-    for (int i = 0; i < 4; i++) a[i] = hi ? v[i] : v[i + 1];
+    const int32_t *keep = v + !hi; /* v[0..3] or v[1..4]: an offset, not a branch */
+    for (int i = 0; i < 4; i++) a[i] = keep[i];
     m->high = hi ? x < v[2] : x <= v[2];
     for (int i = 0; i < 4; i++) {
         int32_t lo = a[i] < t ? a[i] : t;
