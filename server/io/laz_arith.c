@@ -139,6 +139,7 @@ void laz_model_free(laz_model *m)
 int laz_ic_create(laz_ic *ic, unsigned bits, unsigned contexts)
 {
     *ic = (laz_ic){0};
+    if (bits && bits < 4) return -1; /* its bit-count models would have no decoder table */
     ic->contexts = contexts;
     ic->bits_high = 8;
     if (bits && bits < 32) {

@@ -54,8 +54,9 @@ int laz_model_init(laz_model *m, uint32_t n);
 void laz_model_free(laz_model *m);
 void laz_bitmodel_init(laz_bitmodel *m);
 
-/* laz_ic_create: an integer decompressor of bits (1..32; 32 for full-range values) and contexts
- * contexts, bits_high 8 as LASzip uses everywhere. Returns 0 or -1 (out of memory). */
+/* laz_ic_create: an integer decompressor of bits (4..32, 0 meaning 32: full-range values; LAZ
+ * uses 16 and 32) and contexts contexts, bits_high 8 as LASzip uses everywhere. Returns 0 or -1
+ * (out of memory, or bits 1..3). */
 int laz_ic_create(laz_ic *ic, unsigned bits, unsigned contexts);
 /* laz_ic_init: fresh models, as at the start of a chunk. Returns 0 or -1 (out of memory). */
 int laz_ic_init(laz_ic *ic);
@@ -99,47 +100,58 @@ LAZ_INLINE void laz_renorm(laz_dec *d)
     }
 }
 
-/* laz_decode_symbol: the next symbol of model m. */
-LAZ_INLINE uint32_t laz_decode_symbol(laz_dec *d, laz_model *m)
+/* laz__symbol_done: the interval and the model after decoding sym. */
+LAZ_INLINE uint32_t laz__symbol_done(laz_dec *d, laz_model *m, uint32_t sym, uint32_t x,
+                                     uint32_t y)
 {
-    uint32_t n, sym, x, y = d->length;
-    if (m->table) {
-        uint32_t dv = d->value / (d->length >>= LAZ_DM_SHIFT);
-        uint32_t t = dv >> m->table_shift;
-        if (t > m->table_size) t = m->table_size; /* value >= length: only in corrupt data */
-        sym = m->table[t];
-        n = m->table[t + 1] + 1;
-        while (n > sym + 1) {
-            uint32_t k = (sym + n) >> 1;
-            if (m->dist[k] > dv) n = k;
-            else sym = k;
-        }
-        x = m->dist[sym] * d->length;
-        /* dist has a spare entry at n, so this load is in bounds for the last symbol too */
-        uint32_t yn = m->dist[sym + 1] * d->length;
-        y = sym != m->last ? yn : y;
-    } else {
-        x = sym = 0;
-        d->length >>= LAZ_DM_SHIFT;
-        n = m->n;
-        uint32_t k = n >> 1;
-        do {
-            uint32_t z = d->length * m->dist[k];
-            if (z > d->value) {
-                n = k;
-                y = z;
-            } else {
-                sym = k;
-                x = z;
-            }
-        } while ((k = (sym + n) >> 1) != sym);
-    }
     d->value -= x;
     d->length = y - x;
     laz_renorm(d);
     ++m->count[sym];
     if (--m->until == 0) laz__model_update(m);
     return sym;
+}
+
+/* laz_decode_symbol_tab: the next symbol of m, a model with a decoder table (over 4 symbols;
+ * the item decoders call it where the model size says so, sparing the test). The symbol is
+ * the one whose range [dist[s], dist[s+1]) holds value / (length >> 15): the table gives the
+ * candidates of that quotient's bucket, a binary search the rest. */
+LAZ_INLINE uint32_t laz_decode_symbol_tab(laz_dec *d, laz_model *m)
+{
+    uint32_t y = d->length;
+    uint32_t dv = d->value / (d->length >>= LAZ_DM_SHIFT);
+    uint32_t t = dv >> m->table_shift;
+    if (t > m->table_size) t = m->table_size; /* value >= length: only in corrupt data */
+    uint32_t sym = m->table[t], n = m->table[t + 1] + 1u;
+    while (n > sym + 1) {
+        uint32_t k = (sym + n) >> 1;
+        if (m->dist[k] > dv) n = k;
+        else sym = k;
+    }
+    uint32_t x = m->dist[sym] * d->length;
+    /* dist has a spare entry at n, so this load is in bounds for the last symbol too */
+    uint32_t yn = m->dist[sym + 1] * d->length;
+    return laz__symbol_done(d, m, sym, x, sym != m->last ? yn : y);
+}
+
+/* laz_decode_symbol: the next symbol of any model (4 symbols or fewer: a binary search with
+ * multiplications only, as LASzip). */
+LAZ_INLINE uint32_t laz_decode_symbol(laz_dec *d, laz_model *m)
+{
+    if (m->table) return laz_decode_symbol_tab(d, m);
+    uint32_t y = d->length, x = 0, sym = 0, n = m->n, k = n >> 1;
+    d->length >>= LAZ_DM_SHIFT;
+    do {
+        uint32_t z = d->length * m->dist[k];
+        if (z > d->value) {
+            n = k;
+            y = z;
+        } else {
+            sym = k;
+            x = z;
+        }
+    } while ((k = (sym + n) >> 1) != sym);
+    return laz__symbol_done(d, m, sym, x, y);
 }
 
 /* laz_decode_bit: the next bit of model m. */
@@ -187,7 +199,7 @@ LAZ_INLINE uint32_t laz_read_int(laz_dec *d)
 /* laz_ic_decompress: pred plus the decoded correction, wrapped into the corrector's range. */
 LAZ_INLINE int32_t laz_ic_decompress(laz_ic *ic, laz_dec *d, int32_t pred, unsigned context)
 {
-    unsigned k = laz_decode_symbol(d, &ic->mbits[context]);
+    unsigned k = laz_decode_symbol_tab(d, &ic->mbits[context]); /* 17 or 33 symbols */
     ic->k = k;
     uint32_t c;
     if (k == 0) {

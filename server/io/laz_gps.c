@@ -66,7 +66,7 @@ uint64_t laz_gps_read(laz_gps *g, laz_dec *dp)
     for (int guard = 0; guard < 64; guard++) {
         unsigned L = g->last;
         if (g->diff[L] == 0) {
-            uint32_t v = laz_decode_symbol(d, &g->zdiff) + sh;
+            uint32_t v = laz_decode_symbol_tab(d, &g->zdiff) + sh;
             if (v == 1) {
                 g->diff[L] = laz_ic_decompress(&g->ic, d, 0, 0);
                 g->t[L] += (uint64_t)(int64_t)g->diff[L];
@@ -79,7 +79,7 @@ uint64_t laz_gps_read(laz_gps *g, laz_dec *dp)
             }
             break;
         }
-        uint32_t m = laz_decode_symbol(d, &g->multi);
+        uint32_t m = laz_decode_symbol_tab(d, &g->multi);
         if (m == 1) {
             g->t[L] += (uint64_t)(int64_t)laz_ic_decompress(&g->ic, d, g->diff[L], 1);
             g->extreme[L] = 0;

@@ -112,13 +112,13 @@ static int p10_read(p10 *s, laz_dec *dp, uint8_t *item)
 {
     laz_dec dd = *dp, *d = &dd; /* the coder in registers for the whole point */
     uint8_t *l = s->last;
-    uint32_t changed = laz_decode_symbol(d, &s->changed);
+    uint32_t changed = laz_decode_symbol_tab(d, &s->changed);
     unsigned r, n, m, lv;
     if (changed) {
         if (changed & 32) {
             laz_model *md = lazy(&s->bitbyte[l[14]], &s->bitbyte_on[l[14]]);
             if (!md) goto nomem;
-            l[14] = (uint8_t)laz_decode_symbol(d, md);
+            l[14] = (uint8_t)laz_decode_symbol_tab(d, md);
         }
         r = l[14] & 7;
         n = (l[14] >> 3) & 7;
@@ -134,16 +134,16 @@ static int p10_read(p10 *s, laz_dec *dp, uint8_t *item)
         if (changed & 8) {
             laz_model *md = lazy(&s->cls[l[15]], &s->cls_on[l[15]]);
             if (!md) goto nomem;
-            l[15] = (uint8_t)laz_decode_symbol(d, md);
+            l[15] = (uint8_t)laz_decode_symbol_tab(d, md);
         }
         if (changed & 4) {
-            uint32_t v = laz_decode_symbol(d, &s->scan[(l[14] >> 6) & 1]);
+            uint32_t v = laz_decode_symbol_tab(d, &s->scan[(l[14] >> 6) & 1]);
             l[16] = laz_u8_fold((int32_t)v + l[16]);
         }
         if (changed & 2) {
             laz_model *md = lazy(&s->ud[l[17]], &s->ud_on[l[17]]);
             if (!md) goto nomem;
-            l[17] = (uint8_t)laz_decode_symbol(d, md);
+            l[17] = (uint8_t)laz_decode_symbol_tab(d, md);
         }
         if (changed & 1)
             put16(l + 18, (uint16_t)laz_ic_decompress(&s->ic_psid, d, get16(l + 18), 0));
@@ -195,19 +195,19 @@ void laz__rgb_decode(laz_dec *dp, laz_model *used, laz_model *dm, const uint16_t
                      uint16_t *c)
 {
     laz_dec dd = *dp, *d = &dd;
-    uint32_t sym = laz_decode_symbol(d, used);
+    uint32_t sym = laz_decode_symbol_tab(d, used);
     int32_t lo0 = last[0] & 0xFF, hi0 = last[0] >> 8;
-    c[0] = (sym & 1) ? laz_u8_fold((int32_t)laz_decode_symbol(d, &dm[0]) + lo0) : (uint16_t)lo0;
-    c[0] |= (uint16_t)(((sym & 2) ? laz_u8_fold((int32_t)laz_decode_symbol(d, &dm[1]) + hi0)
+    c[0] = (sym & 1) ? laz_u8_fold((int32_t)laz_decode_symbol_tab(d, &dm[0]) + lo0) : (uint16_t)lo0;
+    c[0] |= (uint16_t)(((sym & 2) ? laz_u8_fold((int32_t)laz_decode_symbol_tab(d, &dm[1]) + hi0)
                                    : hi0) << 8);
     if (sym & 64) {
         int32_t diff = (c[0] & 0xFF) - lo0;
         int32_t lo1 = last[1] & 0xFF, lo2 = last[2] & 0xFF;
-        c[1] = (sym & 4) ? laz_u8_fold((int32_t)laz_decode_symbol(d, &dm[2]) +
+        c[1] = (sym & 4) ? laz_u8_fold((int32_t)laz_decode_symbol_tab(d, &dm[2]) +
                                        laz_u8_clamp(diff + lo1))
                          : (uint16_t)lo1;
         if (sym & 16) {
-            int32_t corr = (int32_t)laz_decode_symbol(d, &dm[4]);
+            int32_t corr = (int32_t)laz_decode_symbol_tab(d, &dm[4]);
             diff = (diff + ((c[1] & 0xFF) - lo1)) / 2;
             c[2] = laz_u8_fold(corr + laz_u8_clamp(diff + lo2));
         } else {
@@ -216,13 +216,13 @@ void laz__rgb_decode(laz_dec *dp, laz_model *used, laz_model *dm, const uint16_t
         diff = (c[0] >> 8) - hi0;
         int32_t hi1 = last[1] >> 8, hi2 = last[2] >> 8;
         if (sym & 8) {
-            int32_t corr = (int32_t)laz_decode_symbol(d, &dm[3]);
+            int32_t corr = (int32_t)laz_decode_symbol_tab(d, &dm[3]);
             c[1] |= (uint16_t)(laz_u8_fold(corr + laz_u8_clamp(diff + hi1)) << 8);
         } else {
             c[1] |= (uint16_t)(hi1 << 8);
         }
         if (sym & 32) {
-            int32_t corr = (int32_t)laz_decode_symbol(d, &dm[5]);
+            int32_t corr = (int32_t)laz_decode_symbol_tab(d, &dm[5]);
             diff = (diff + ((c[1] >> 8) - hi1)) / 2;
             c[2] |= (uint16_t)(laz_u8_fold(corr + laz_u8_clamp(diff + hi2)) << 8);
         } else {
@@ -368,7 +368,7 @@ int laz__v2_next(laz_v2 *s, size_t npts, uint8_t *out, const char **what)
                 }
             } else {
                 for (unsigned k = 0; k < x->it.size; k++) {
-                    uint32_t v = laz_decode_symbol(d, &x->bytes[k]);
+                    uint32_t v = laz_decode_symbol_tab(d, &x->bytes[k]);
                     item[k] = x->last_bytes[k] = laz_u8_fold((int32_t)v + x->last_bytes[k]);
                 }
             }

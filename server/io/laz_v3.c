@@ -198,7 +198,7 @@ static int pt14_read(pt14 *s, uint8_t *rec)
     p14 *L = &c->last;
     laz_dec dd = s->d[L_XY], *dxy = &dd; /* the coder in registers for the point's fields */
     unsigned lpr = (L->ret == 1) + (L->ret >= L->nret ? 2u : 0u) + (L->gps_change ? 4u : 0u);
-    uint32_t changed = laz_decode_symbol(dxy, &c->changed[lpr]);
+    uint32_t changed = laz_decode_symbol_tab(dxy, &c->changed[lpr]);
     if (changed & 64) {
         unsigned ch = (s->cur + laz_decode_symbol(dxy, &c->channel) + 1) % 4;
         if (s->c[ch].unused && ctx_start(&s->c[ch], L)) goto nomem;
@@ -212,7 +212,7 @@ static int pt14_read(pt14 *s, uint8_t *rec)
     if (changed & 4) {
         laz_model *m = lazy(&c->nret[last_n], &c->nret_on[last_n], 16);
         if (!m) goto nomem;
-        n = laz_decode_symbol(dxy, m);
+        n = laz_decode_symbol_tab(dxy, m);
         L->nret = (uint8_t)n;
     } else {
         n = last_n;
@@ -225,9 +225,9 @@ static int pt14_read(pt14 *s, uint8_t *rec)
         if (gpsc) {
             laz_model *m = lazy(&c->rnum[last_r], &c->rnum_on[last_r], 16);
             if (!m) goto nomem;
-            r = laz_decode_symbol(dxy, m);
+            r = laz_decode_symbol_tab(dxy, m);
         } else {
-            r = (last_r + laz_decode_symbol(dxy, &c->rgps_same) + 2) % 16;
+            r = (last_r + laz_decode_symbol_tab(dxy, &c->rgps_same) + 2) % 16;
         }
         break;
     }
@@ -256,13 +256,13 @@ static int pt14_read(pt14 *s, uint8_t *rec)
         unsigned ccc = ((L->cls & 0x1Fu) << 1) + (cpr == 3);
         laz_model *md = lazy(&c->cls[ccc], &c->cls_on[ccc], 256);
         if (!md) goto nomem;
-        L->cls = (uint8_t)laz_decode_symbol(&s->d[L_CLS], md);
+        L->cls = (uint8_t)laz_decode_symbol_tab(&s->d[L_CLS], md);
     }
     if (s->on[L_FLAGS]) {
         unsigned lf = (unsigned)L->edge << 5 | (unsigned)L->sdir << 4 | L->cflags;
         laz_model *md = lazy(&c->flags[lf], &c->flags_on[lf], 64);
         if (!md) goto nomem;
-        uint32_t f = laz_decode_symbol(&s->d[L_FLAGS], md);
+        uint32_t f = laz_decode_symbol_tab(&s->d[L_FLAGS], md);
         L->edge = (f >> 5) & 1;
         L->sdir = (f >> 4) & 1;
         L->cflags = f & 15;
@@ -280,7 +280,7 @@ static int pt14_read(pt14 *s, uint8_t *rec)
         unsigned k = L->ud / 4u;
         laz_model *md = lazy(&c->ud[k], &c->ud_on[k], 256);
         if (!md) goto nomem;
-        L->ud = (uint8_t)laz_decode_symbol(&s->d[L_UD], md);
+        L->ud = (uint8_t)laz_decode_symbol_tab(&s->d[L_UD], md);
     }
     if (s->on[L_PSID] && psc)
         L->psid = (uint16_t)laz_ic_decompress(&c->psid, &s->d[L_PSID], L->psid, 0);
@@ -377,7 +377,7 @@ static int itemx_read(itemx *x, unsigned context, uint8_t *item)
     if (x->it.type == LAZ_ITEM_BYTE14) {
         for (unsigned k = 0; k < x->it.size; k++) {
             if (x->on[k]) {
-                uint32_t v = laz_decode_symbol(&x->d[k], &c->bytes[k]);
+                uint32_t v = laz_decode_symbol_tab(&x->d[k], &c->bytes[k]);
                 item[k] = last[k] = laz_u8_fold((int32_t)v + last[k]);
             } else {
                 item[k] = last[k];
@@ -399,8 +399,8 @@ static int itemx_read(itemx *x, unsigned context, uint8_t *item)
             laz_dec *d = &x->d[1];
             uint32_t sym = laz_decode_symbol(d, &c->nused);
             uint32_t lo = last[6], hi = last[7];
-            if (sym & 1) lo = laz_u8_fold((int32_t)laz_decode_symbol(d, &c->ndiff[0]) + (int32_t)lo);
-            if (sym & 2) hi = laz_u8_fold((int32_t)laz_decode_symbol(d, &c->ndiff[1]) + (int32_t)hi);
+            if (sym & 1) lo = laz_u8_fold((int32_t)laz_decode_symbol_tab(d, &c->ndiff[0]) + (int32_t)lo);
+            if (sym & 2) hi = laz_u8_fold((int32_t)laz_decode_symbol_tab(d, &c->ndiff[1]) + (int32_t)hi);
             item[6] = last[6] = (uint8_t)lo;
             item[7] = last[7] = (uint8_t)hi;
         } else {
