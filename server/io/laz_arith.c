@@ -10,11 +10,12 @@
 #define DM_MAX_COUNT (1u << LAZ_DM_SHIFT)
 
 /* Decoder tables. LASzip gives models over 16 symbols a table of n/8 to n/4 entries; here
- * every model over TABLE_MIN symbols has 2^TABLE_BITS. The table only narrows the search for
- * the symbol (the symbol is the one whose cumulative range holds value / length, whatever the
- * table), and a finer table leaves fewer candidates: about 15 % faster on autzen_trim. */
+ * every model over TABLE_MIN symbols has 2^LAZ_TABLE_BITS. The table only narrows the search
+ * for the symbol (the symbol is the one whose cumulative range holds value / length, whatever
+ * the table), and a finer table leaves fewer candidates: about 15 % faster on autzen_trim.
+ * One size for all makes the bucket shift a constant. */
 #define TABLE_MIN 4
-#define TABLE_BITS 8
+#define TABLE_SIZE (1u << LAZ_TABLE_BITS)
 
 static inline uint32_t next_byte(laz_dec *d)
 {
@@ -31,6 +32,10 @@ void laz_dec_init(laz_dec *d, const uint8_t *p, const uint8_t *end)
     d->length = AC_MAX_LENGTH;
     uint32_t v = 0;
     for (int i = 0; i < 4; i++) v = (v << 8) | next_byte(d);
+    if (v == AC_MAX_LENGTH) {
+        d->overrun = 1;
+        v = AC_MAX_LENGTH - 1;
+    }
     d->value = v;
 }
 
@@ -83,14 +88,14 @@ void laz__model_update(laz_model *m)
         for (uint32_t k = 0; k < m->n; k++) {
             m->dist[k] = (uint16_t)((scale * sum) >> (31 - LAZ_DM_SHIFT));
             sum += m->count[k];
-            uint32_t w = m->dist[k] >> m->table_shift;
+            uint32_t w = m->dist[k] >> (LAZ_DM_SHIFT - LAZ_TABLE_BITS);
             uint64_t four = (uint64_t)(uint16_t)(k - 1) * 0x0001000100010001ull;
             memcpy(t + s + 1, &four, sizeof four);
             for (uint32_t j = s + 5; j <= w; j++) t[j] = (uint16_t)(k - 1);
             s = w;
         }
         t[0] = 0;
-        while (s <= m->table_size) t[++s] = (uint16_t)(m->n - 1);
+        while (s <= TABLE_SIZE) t[++s] = (uint16_t)(m->n - 1);
     }
     m->cycle = (5 * m->cycle) >> 2;
     uint32_t max_cycle = (m->n + 6) << 3;
@@ -101,12 +106,8 @@ void laz__model_update(laz_model *m)
 int laz_model_init(laz_model *m, uint32_t n)
 {
     if (!m->count) {
-        uint32_t tbits = 0, tsize = 0;
-        if (n > TABLE_MIN) {
-            tbits = 3;
-            while (tbits < TABLE_BITS && n > (1u << (tbits - 3))) ++tbits; /* 8n entries, at most 256 */
-            tsize = 1u << tbits;
-        }
+        uint32_t tsize = 0;
+        if (n > TABLE_MIN) tsize = TABLE_SIZE;
         /* one block: n counts (u32), n distribution values and the table (u16: both < 2^15) */
         m->count = malloc(sizeof(uint32_t) * (size_t)n +
                           sizeof(uint16_t) * ((size_t)n + 1 + (tsize ? tsize + 6 : 0)));
@@ -114,8 +115,6 @@ int laz_model_init(laz_model *m, uint32_t n)
         m->dist = (uint16_t *)(m->count + n);
         m->dist[n] = 0;        /* read, never used, by the decoder's branch-free last-symbol case */
         m->table = tsize ? m->dist + n + 1 : NULL;
-        m->table_size = tsize;
-        m->table_shift = tsize ? LAZ_DM_SHIFT - tbits : 0;
         m->n = n;
         m->last = n - 1;
     }

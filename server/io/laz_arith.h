@@ -33,7 +33,7 @@ typedef struct laz_model {
     uint32_t *count;        /* n counts, then (same block) dist and table */
     uint16_t *dist;         /* n cumulative probabilities (15 bits) */
     uint16_t *table;        /* NULL for 4 symbols or fewer */
-    uint32_t n, last, table_size, table_shift, total, cycle, until;
+    uint32_t n, last, total, cycle, until;
 } laz_model;
 
 typedef struct laz_ic {
@@ -45,7 +45,10 @@ typedef struct laz_ic {
     laz_model *corr;        /* corr[k] for k = 1 .. corr_bits (corr[0] unused) */
 } laz_ic;
 
-/* laz_dec_init: starts decoding the bytes [p, end): reads the first 4 bytes. */
+/* laz_dec_init: starts decoding the bytes [p, end): reads the first 4 bytes. Every step of the
+ * decoder keeps value < length once it holds at the start; a stream starting with 4 bytes of
+ * 0xFF (which no encoder writes: its code lies below the initial length 2^32 - 1) is corrupt:
+ * dec->overrun is set, and value made one less so that the decoder's bounds still hold. */
 void laz_dec_init(laz_dec *d, const uint8_t *p, const uint8_t *end);
 
 /* laz_model_init: (re)starts m as a fresh model of n symbols (2 <= n <= 2048), allocating on
@@ -65,6 +68,7 @@ void laz_ic_free(laz_ic *ic);
 #define LAZ_AC_MIN_LENGTH 0x01000000u /* renormalise below 2^24 */
 #define LAZ_DM_SHIFT 15               /* symbol model distribution bits */
 #define LAZ_BM_SHIFT 13               /* bit model probability bits */
+#define LAZ_TABLE_BITS 8              /* decoder table: 2^8 buckets of the 15-bit distribution */
 
 /* Internal to laz_arith.c, called from the inline decoder below. */
 void laz__model_update(laz_model *m);
@@ -120,8 +124,8 @@ LAZ_INLINE uint32_t laz_decode_symbol_tab(laz_dec *d, laz_model *m)
 {
     uint32_t y = d->length;
     uint32_t dv = d->value / (d->length >>= LAZ_DM_SHIFT);
-    uint32_t t = dv >> m->table_shift;
-    if (t > m->table_size) t = m->table_size; /* value >= length: only in corrupt data */
+    /* value < length always (laz_dec_init), so dv < 2^15 + 64 and t <= LAZ_TABLE_SIZE */
+    uint32_t t = dv >> (LAZ_DM_SHIFT - LAZ_TABLE_BITS);
     uint32_t sym = m->table[t], n = m->table[t + 1] + 1u;
     while (n > sym + 1) {
         uint32_t k = (sym + n) >> 1;
