@@ -57,7 +57,7 @@ static inline __attribute__((always_inline)) void full(laz_gps *g, laz_dec *d)
     g->extreme[g->last] = 0;
 }
 
-uint64_t laz_gps_read(laz_gps *g, laz_dec *dp)
+LAZ_CLONES uint64_t laz_gps_read(laz_gps *g, laz_dec *dp)
 {
     laz_dec dd = *dp, *d = &dd;
     /* v = the version-2 symbol; version 3 codes v - 1 (it has no "unchanged" 0 / 511) */

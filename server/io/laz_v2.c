@@ -108,7 +108,7 @@ static laz_model *lazy(laz_model *m, uint8_t *on)
     return m;
 }
 
-static int p10_read(p10 *s, laz_dec *dp, uint8_t *item)
+LAZ_CLONES static int p10_read(p10 *s, laz_dec *dp, uint8_t *item)
 {
     laz_dec dd = *dp, *d = &dd; /* the coder in registers for the whole point */
     uint8_t *l = s->last;
@@ -191,7 +191,7 @@ int laz__rgb_models_init(laz_model *used, laz_model *diff)
     return 0;
 }
 
-void laz__rgb_decode(laz_dec *dp, laz_model *used, laz_model *dm, const uint16_t *last,
+LAZ_CLONES void laz__rgb_decode(laz_dec *dp, laz_model *used, laz_model *dm, const uint16_t *last,
                      uint16_t *c)
 {
     laz_dec dd = *dp, *d = &dd;
@@ -345,7 +345,7 @@ int laz__v2_begin(laz_v2 *s, const uint8_t *p, const uint8_t *end, uint8_t *firs
     return 0;
 }
 
-int laz__v2_next(laz_v2 *s, size_t npts, uint8_t *out, const char **what)
+LAZ_CLONES int laz__v2_next(laz_v2 *s, size_t npts, uint8_t *out, const char **what)
 {
     laz_dec *d = &s->d;
     *what = "points";

@@ -192,7 +192,7 @@ static laz_model *lazy(laz_model *m, uint8_t *on, uint32_t n)
     return m;
 }
 
-static int pt14_read(pt14 *s, uint8_t *rec)
+LAZ_CLONES static int pt14_read(pt14 *s, uint8_t *rec)
 {
     ctx14 *c = &s->c[s->cur];
     p14 *L = &c->last;
@@ -360,7 +360,7 @@ static void ctxx_free(itemx *x, ctxx *c)
     free(c->lastb);
 }
 
-static int itemx_read(itemx *x, unsigned context, uint8_t *item)
+LAZ_CLONES static int itemx_read(itemx *x, unsigned context, uint8_t *item)
 {
     /* As LASzip: the previous context's last item stands in for one point when switching to
      * a context already used in this chunk. */
@@ -512,7 +512,7 @@ int laz__v3_begin(laz_v3 *s, const uint8_t *p, const uint8_t *end, size_t npts, 
     return 0;
 }
 
-int laz__v3_next(laz_v3 *s, size_t npts, uint8_t *out, const char **what)
+LAZ_CLONES int laz__v3_next(laz_v3 *s, size_t npts, uint8_t *out, const char **what)
 {
     pt14 *pt = s->pt;
     *what = "points";
