@@ -21,6 +21,7 @@
 #include "common/testutil.h"
 #include "copc.h"
 #include "laz.h"
+#include "laz_arith.h"
 
 static char g_tmp[512];
 
@@ -433,6 +434,48 @@ static void test_truncated_chunk(void **state)
     free(d);
 }
 
+/* A coded stream starting with 4 bytes of 0xFF: no encoder writes it (its code lies below the
+ * initial interval 2^32 - 1), and it is the one start that would let the decoder's value reach
+ * its interval (reading decoder tables out of bounds): the chunk is reported corrupt. */
+static void test_corrupt_stream_start(void **state)
+{
+    (void)state;
+    size_t len;
+    laz_file lf;
+    uint8_t *d = open_laz("point-color-time.las.laz", &len, &lf);
+    sd_err e = {0};
+    laz_chunk_dec *cd = laz_chunk_dec_create(lf.items, lf.nitems);
+    uint8_t *buf = NULL;
+    size_t cap = 0;
+    uint64_t bytes = lf.chunk_start[1] - lf.chunk_start[0];
+    /* the intact chunk decodes; the same chunk with its coded bytes starting FF FF FF FF not */
+    assert_int_equal(laz_read_span(&lf, cd, lf.chunk_start[0], bytes, lf.h.count, "chunk 0 of 1",
+                                   &buf, &cap, &e), 0);
+    memset(d + lf.chunk_start[0] + lf.h.rec_len, 0xFF, 4);
+    int rc = laz_read_span(&lf, cd, lf.chunk_start[0], bytes, lf.h.count, "chunk 0 of 1", &buf,
+                           &cap, &e);
+    assert_int_equal(rc, SD_EFORMAT);
+    assert_non_null(strstr(e.msg, "chunk 0 of 1"));
+    assert_non_null(strstr(e.msg, "corrupt"));
+    free(buf);
+    laz_chunk_dec_free(cd);
+    laz_close(&lf);
+    free(d);
+
+    /* the decoder itself: flagged at the start, with bytes to spare, and value < length, so a
+     * 256-symbol model's bucket stays inside its table for any bytes that follow */
+    uint8_t s[64];
+    memset(s, 0xFF, sizeof s);
+    laz_dec dec;
+    laz_dec_init(&dec, s, s + sizeof s);
+    assert_int_equal(dec.overrun, 1);
+    assert_true(dec.value < dec.length);
+    s[0] = 0xFE; /* one less: a possible code, not flagged */
+    laz_dec_init(&dec, s, s + sizeof s);
+    assert_int_equal(dec.overrun, 0);
+    assert_int_equal(dec.value, 0xFEFFFFFFu);
+}
+
 /* ---- COPC ---- */
 
 typedef struct node_acc {
@@ -616,6 +659,7 @@ int main(void)
         cmocka_unit_test(test_empty),
         cmocka_unit_test(test_malformed),
         cmocka_unit_test(test_truncated_chunk),
+        cmocka_unit_test(test_corrupt_stream_start),
         cmocka_unit_test(test_copc_hierarchy_and_nodes),
         cmocka_unit_test(test_copc_top_levels),
     };
