@@ -405,7 +405,8 @@ static void test_malformed(void **state)
     free(orig);
 }
 
-/* A chunk whose bytes end early: decoded directly so the chunk table stays valid. */
+/* A chunk whose bytes end early, or whose coded bytes start impossibly: decoded directly so
+ * the chunk table stays valid. */
 static void test_truncated_chunk(void **state)
 {
     (void)state;
@@ -428,42 +429,19 @@ static void test_truncated_chunk(void **state)
     rc = laz_read_span(&lf, cd, lf.chunk_start[0], 10, 1000000, "chunk 0 of 1", &buf, &cap, &e);
     assert_int_equal(rc, SD_EFORMAT);
     assert_non_null(strstr(e.msg, "more than the coder can hold"));
-    free(buf);
-    laz_chunk_dec_free(cd);
-    laz_close(&lf);
-    free(d);
-}
 
-/* A coded stream starting with 4 bytes of 0xFF: no encoder writes it (its code lies below the
- * initial interval 2^32 - 1), and it is the one start that would let the decoder's value reach
- * its interval (reading decoder tables out of bounds): the chunk is reported corrupt. */
-static void test_corrupt_stream_start(void **state)
-{
-    (void)state;
-    size_t len;
-    laz_file lf;
-    uint8_t *d = open_laz("point-color-time.las.laz", &len, &lf);
-    sd_err e = {0};
-    laz_chunk_dec *cd = laz_chunk_dec_create(lf.items, lf.nitems);
-    uint8_t *buf = NULL;
-    size_t cap = 0;
-    uint64_t bytes = lf.chunk_start[1] - lf.chunk_start[0];
-    /* the intact chunk decodes; the same chunk with its coded bytes starting FF FF FF FF not */
+    /* A coded stream starting with 4 bytes of 0xFF: no encoder writes it (its code lies below
+     * the initial interval 2^32 - 1), and it is the one start that would let the decoder's
+     * value reach its interval (and a decoder table be read past its end). The intact chunk
+     * decodes; the same chunk with its coded bytes starting FF FF FF FF is reported corrupt. */
     assert_int_equal(laz_read_span(&lf, cd, lf.chunk_start[0], bytes, lf.h.count, "chunk 0 of 1",
                                    &buf, &cap, &e), 0);
     memset(d + lf.chunk_start[0] + lf.h.rec_len, 0xFF, 4);
-    int rc = laz_read_span(&lf, cd, lf.chunk_start[0], bytes, lf.h.count, "chunk 0 of 1", &buf,
-                           &cap, &e);
+    rc = laz_read_span(&lf, cd, lf.chunk_start[0], bytes, lf.h.count, "chunk 0 of 1", &buf, &cap,
+                       &e);
     assert_int_equal(rc, SD_EFORMAT);
-    assert_non_null(strstr(e.msg, "chunk 0 of 1"));
     assert_non_null(strstr(e.msg, "corrupt"));
-    free(buf);
-    laz_chunk_dec_free(cd);
-    laz_close(&lf);
-    free(d);
-
-    /* the decoder itself: flagged at the start, with bytes to spare, and value < length, so a
-     * 256-symbol model's bucket stays inside its table for any bytes that follow */
+    /* the decoder itself: flagged at the start, with bytes to spare, and value < length */
     uint8_t s[64];
     memset(s, 0xFF, sizeof s);
     laz_dec dec;
@@ -474,6 +452,10 @@ static void test_corrupt_stream_start(void **state)
     laz_dec_init(&dec, s, s + sizeof s);
     assert_int_equal(dec.overrun, 0);
     assert_int_equal(dec.value, 0xFEFFFFFFu);
+    free(buf);
+    laz_chunk_dec_free(cd);
+    laz_close(&lf);
+    free(d);
 }
 
 /* ---- COPC ---- */
@@ -659,7 +641,6 @@ int main(void)
         cmocka_unit_test(test_empty),
         cmocka_unit_test(test_malformed),
         cmocka_unit_test(test_truncated_chunk),
-        cmocka_unit_test(test_corrupt_stream_start),
         cmocka_unit_test(test_copc_hierarchy_and_nodes),
         cmocka_unit_test(test_copc_top_levels),
     };
