@@ -81,8 +81,8 @@ void laz__model_update(laz_model *m)
         /* table[j] = the last symbol whose range starts below bucket j (a lower bound of the
          * symbol of any value in bucket j). Symbol k - 1 fills buckets s+1 .. w: the first
          * four with one unconditional 8-byte store (most runs are that short; an exit branch
-         * per run mispredicts), the rest in a loop. Stores past w are overwritten by the next
-         * symbols or the final fill; the block has 4 spare entries for them. */
+         * per run mispredicts), the rest four at a time. Stores past w (at most 3) are
+         * overwritten by the next symbols or the final fill; the block has spare entries. */
         uint32_t s = 0;
         uint16_t *t = m->table;
         for (uint32_t k = 0; k < m->n; k++) {
@@ -91,7 +91,7 @@ void laz__model_update(laz_model *m)
             uint32_t w = m->dist[k] >> (LAZ_DM_SHIFT - LAZ_TABLE_BITS);
             uint64_t four = (uint64_t)(uint16_t)(k - 1) * 0x0001000100010001ull;
             memcpy(t + s + 1, &four, sizeof four);
-            for (uint32_t j = s + 5; j <= w; j++) t[j] = (uint16_t)(k - 1);
+            for (uint32_t j = s + 5; j <= w; j += 4) memcpy(t + j, &four, sizeof four);
             s = w;
         }
         t[0] = 0;

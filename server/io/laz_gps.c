@@ -38,7 +38,7 @@ int laz_gps_begin(laz_gps *g, uint64_t first)
 static inline int32_t mul32(int32_t a, int32_t b) { return (int32_t)((uint32_t)a * (uint32_t)b); }
 
 /* extreme: after more than three differences far from the prediction, adopt the latest. */
-static void extreme(laz_gps *g, int32_t diff)
+static inline __attribute__((always_inline)) void extreme(laz_gps *g, int32_t diff)
 {
     if (++g->extreme[g->last] > 3) {
         g->diff[g->last] = diff;
