@@ -21,6 +21,7 @@
 #include "common/testutil.h"
 #include "copc.h"
 #include "laz.h"
+#include "laz_arith.h"
 
 static char g_tmp[512];
 
@@ -404,7 +405,8 @@ static void test_malformed(void **state)
     free(orig);
 }
 
-/* A chunk whose bytes end early: decoded directly so the chunk table stays valid. */
+/* A chunk whose bytes end early, or whose coded bytes start impossibly: decoded directly so
+ * the chunk table stays valid. */
 static void test_truncated_chunk(void **state)
 {
     (void)state;
@@ -427,6 +429,29 @@ static void test_truncated_chunk(void **state)
     rc = laz_read_span(&lf, cd, lf.chunk_start[0], 10, 1000000, "chunk 0 of 1", &buf, &cap, &e);
     assert_int_equal(rc, SD_EFORMAT);
     assert_non_null(strstr(e.msg, "more than the coder can hold"));
+
+    /* A coded stream starting with 4 bytes of 0xFF: no encoder writes it (its code lies below
+     * the initial interval 2^32 - 1), and it is the one start that would let the decoder's
+     * value reach its interval (and a decoder table be read past its end). The intact chunk
+     * decodes; the same chunk with its coded bytes starting FF FF FF FF is reported corrupt. */
+    assert_int_equal(laz_read_span(&lf, cd, lf.chunk_start[0], bytes, lf.h.count, "chunk 0 of 1",
+                                   &buf, &cap, &e), 0);
+    memset(d + lf.chunk_start[0] + lf.h.rec_len, 0xFF, 4);
+    rc = laz_read_span(&lf, cd, lf.chunk_start[0], bytes, lf.h.count, "chunk 0 of 1", &buf, &cap,
+                       &e);
+    assert_int_equal(rc, SD_EFORMAT);
+    assert_non_null(strstr(e.msg, "corrupt"));
+    /* the decoder itself: flagged at the start, with bytes to spare, and value < length */
+    uint8_t s[64];
+    memset(s, 0xFF, sizeof s);
+    laz_dec dec;
+    laz_dec_init(&dec, s, s + sizeof s);
+    assert_int_equal(dec.overrun, 1);
+    assert_true(dec.value < dec.length);
+    s[0] = 0xFE; /* one less: a possible code, not flagged */
+    laz_dec_init(&dec, s, s + sizeof s);
+    assert_int_equal(dec.overrun, 0);
+    assert_int_equal(dec.value, 0xFEFFFFFFu);
     free(buf);
     laz_chunk_dec_free(cd);
     laz_close(&lf);

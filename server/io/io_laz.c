@@ -2,10 +2,11 @@
  * an octree) into the raw cloud, its chunks decoded in parallel.
  *
  * Chunks are independent (each restarts the coder), so T threads decode T chunks at a time,
- * each into its own record buffer that grows only as points really decode. Between rounds the
- * calling thread converts the decoded records into the cloud (xyz, intensity, class, colour),
- * growing the cloud by what was decoded, never by what the chunk table claims. Each thread
- * reads the mapping under its own SIGBUS guard, so a file that shrinks mid-read fails cleanly. */
+ * each into its own record buffer that grows only as points really decode. After each round
+ * the calling thread grows the cloud by what was decoded, never by what the chunk table
+ * claims, and the same threads then convert their records into it (xyz, intensity, class,
+ * colour), each into its own range. Each thread reads the mapping under its own SIGBUS guard,
+ * so a file that shrinks mid-read fails cleanly. */
 #include "cloud.h"
 #include "io_text.h"
 #include "las_header.h"
@@ -25,6 +26,7 @@ typedef struct slot {
     size_t cap;
     size_t chunk;        /* this round's chunk, or SIZE_MAX for none */
     size_t npts;         /* the points decoded */
+    size_t at;           /* where they go in the cloud (the convert phase) */
     int rc;
     sd_err err;
 } slot;
@@ -39,6 +41,9 @@ typedef struct laz_run {
     pthread_mutex_t gate_mu;     /* the gate: workers wait here until every one started */
     pthread_cond_t gate_cv;
     int gate, quit;
+    int convert;                 /* this phase: 0 decode, 1 convert into raw / rgb16 */
+    pc_raw *raw;
+    uint16_t *rgb16;             /* colours of 16 bits, scaled once all are read; or NULL */
 } laz_run;
 
 typedef struct one_job {
@@ -63,8 +68,9 @@ typedef struct worker {
 } worker;
 
 /* The decoding threads: every one reads the mapping under its own SIGBUS guard; the calling
- * thread only hands out chunks and appends what they decoded, so it never touches the
- * mapping while they run (a jump out of it would leave them waiting). */
+ * thread only hands out chunks and grows the cloud, so it never touches the mapping while they
+ * run (a jump out of it would leave them waiting). In the convert phase each converts its
+ * slot's records into the cloud range the calling thread gave it (no mapping read there). */
 static void *worker_main(void *arg)
 {
     worker *w = arg;
@@ -77,7 +83,9 @@ static void *worker_main(void *arg)
         pthread_barrier_wait(&r->start);
         if (r->quit) break;
         slot *s = &r->s[w->tid];
-        if (s->chunk != SIZE_MAX) {
+        if (s->chunk != SIZE_MAX && r->convert) {
+            pc__las_convert(&r->lf.h, s->buf, s->npts, r->raw, s->at, 0, r->rgb16);
+        } else if (s->chunk != SIZE_MAX) {
             one_job j = {r, s};
             s->rc = pc__guarded(r->f, r->path, decode_one, &j, &s->err);
         }
@@ -86,9 +94,10 @@ static void *worker_main(void *arg)
     return NULL;
 }
 
-/* append: the decoded records of every slot, in chunk order, into raw (and rgb16). */
-static int append(laz_run *r, pc_raw *raw, uint16_t **rgb16, size_t *rgb_cap, int has_rgb,
-                  sd_err *err)
+/* grow: room in raw (and rgb16) for the records every slot decoded, and each slot's place
+ * there, in chunk order; the workers convert them next. */
+static int grow(laz_run *r, pc_raw *raw, uint16_t **rgb16, size_t *rgb_cap, int has_rgb,
+                sd_err *err)
 {
     size_t add = 0;
     for (int t = 0; t < r->threads; t++) add += r->s[t].chunk == SIZE_MAX ? 0 : r->s[t].npts;
@@ -110,11 +119,12 @@ static int append(laz_run *r, pc_raw *raw, uint16_t **rgb16, size_t *rgb_cap, in
             *rgb_cap = want;
         }
     }
+    size_t at = raw->n;
     for (int t = 0; t < r->threads; t++) {
         slot *s = &r->s[t];
         if (s->chunk == SIZE_MAX) continue;
-        pc__las_convert(&r->lf.h, s->buf, s->npts, raw, raw->n, 0, has_rgb ? *rgb16 : NULL);
-        raw->n += s->npts;
+        s->at = at;
+        at += s->npts;
     }
     return 0;
 }
@@ -172,7 +182,17 @@ static int decode_all(laz_run *r, pc_raw *raw, sd_err *err)
                 rc = r->s[t].rc;
                 if (err) *err = r->s[t].err;
             }
-        if (!rc) rc = append(r, raw, &rgb16, &rgb_cap, has_rgb, err);
+        if (!rc) rc = grow(r, raw, &rgb16, &rgb_cap, has_rgb, err);
+        if (!rc) {
+            r->raw = raw;
+            r->rgb16 = has_rgb ? rgb16 : NULL;
+            r->convert = 1;
+            pthread_barrier_wait(&r->start);
+            pthread_barrier_wait(&r->done);
+            r->convert = 0;
+            for (int t = 0; t < r->threads; t++)
+                if (r->s[t].chunk != SIZE_MAX) raw->n += r->s[t].npts;
+        }
     }
     r->quit = 1;
     pthread_barrier_wait(&r->start);

@@ -38,7 +38,7 @@ int laz_gps_begin(laz_gps *g, uint64_t first)
 static inline int32_t mul32(int32_t a, int32_t b) { return (int32_t)((uint32_t)a * (uint32_t)b); }
 
 /* extreme: after more than three differences far from the prediction, adopt the latest. */
-static void extreme(laz_gps *g, int32_t diff)
+static inline __attribute__((always_inline)) void extreme(laz_gps *g, int32_t diff)
 {
     if (++g->extreme[g->last] > 3) {
         g->diff[g->last] = diff;
@@ -47,7 +47,7 @@ static void extreme(laz_gps *g, int32_t diff)
 }
 
 /* full: a new sequence whose time is coded whole (high 32 bits predicted, low raw). */
-static void full(laz_gps *g, laz_dec *d)
+static inline __attribute__((always_inline)) void full(laz_gps *g, laz_dec *d)
 {
     g->next = (g->next + 1) & 3;
     uint64_t hi = (uint32_t)laz_ic_decompress(&g->ic, d, (int32_t)(g->t[g->last] >> 32), 8);
@@ -57,15 +57,16 @@ static void full(laz_gps *g, laz_dec *d)
     g->extreme[g->last] = 0;
 }
 
-uint64_t laz_gps_read(laz_gps *g, laz_dec *d)
+LAZ_CLONES uint64_t laz_gps_read(laz_gps *g, laz_dec *dp)
 {
+    laz_dec dd = *dp, *d = &dd;
     /* v = the version-2 symbol; version 3 codes v - 1 (it has no "unchanged" 0 / 511) */
     const uint32_t sh = g->v3 ? 1 : 0, code_full = MULTI - MULTI_MINUS + 2 - sh;
     /* a sequence switch re-reads with the new sequence (LASzip recurses); at most a few */
     for (int guard = 0; guard < 64; guard++) {
         unsigned L = g->last;
         if (g->diff[L] == 0) {
-            uint32_t v = laz_decode_symbol(d, &g->zdiff) + sh;
+            uint32_t v = laz_decode_symbol_tab(d, &g->zdiff) + sh;
             if (v == 1) {
                 g->diff[L] = laz_ic_decompress(&g->ic, d, 0, 0);
                 g->t[L] += (uint64_t)(int64_t)g->diff[L];
@@ -78,7 +79,7 @@ uint64_t laz_gps_read(laz_gps *g, laz_dec *d)
             }
             break;
         }
-        uint32_t m = laz_decode_symbol(d, &g->multi);
+        uint32_t m = laz_decode_symbol_tab(d, &g->multi);
         if (m == 1) {
             g->t[L] += (uint64_t)(int64_t)laz_ic_decompress(&g->ic, d, g->diff[L], 1);
             g->extreme[L] = 0;
@@ -111,5 +112,6 @@ uint64_t laz_gps_read(laz_gps *g, laz_dec *d)
         }
         break;
     }
+    *dp = dd;
     return g->t[g->last];
 }

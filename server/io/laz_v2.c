@@ -108,16 +108,17 @@ static laz_model *lazy(laz_model *m, uint8_t *on)
     return m;
 }
 
-static int p10_read(p10 *s, laz_dec *d, uint8_t *item)
+LAZ_CLONES static int p10_read(p10 *s, laz_dec *dp, uint8_t *item)
 {
+    laz_dec dd = *dp, *d = &dd; /* the coder in registers for the whole point */
     uint8_t *l = s->last;
-    uint32_t changed = laz_decode_symbol(d, &s->changed);
+    uint32_t changed = laz_decode_symbol_tab(d, &s->changed);
     unsigned r, n, m, lv;
     if (changed) {
         if (changed & 32) {
             laz_model *md = lazy(&s->bitbyte[l[14]], &s->bitbyte_on[l[14]]);
-            if (!md) return -1;
-            l[14] = (uint8_t)laz_decode_symbol(d, md);
+            if (!md) goto nomem;
+            l[14] = (uint8_t)laz_decode_symbol_tab(d, md);
         }
         r = l[14] & 7;
         n = (l[14] >> 3) & 7;
@@ -132,17 +133,17 @@ static int p10_read(p10 *s, laz_dec *d, uint8_t *item)
         }
         if (changed & 8) {
             laz_model *md = lazy(&s->cls[l[15]], &s->cls_on[l[15]]);
-            if (!md) return -1;
-            l[15] = (uint8_t)laz_decode_symbol(d, md);
+            if (!md) goto nomem;
+            l[15] = (uint8_t)laz_decode_symbol_tab(d, md);
         }
         if (changed & 4) {
-            uint32_t v = laz_decode_symbol(d, &s->scan[(l[14] >> 6) & 1]);
+            uint32_t v = laz_decode_symbol_tab(d, &s->scan[(l[14] >> 6) & 1]);
             l[16] = laz_u8_fold((int32_t)v + l[16]);
         }
         if (changed & 2) {
             laz_model *md = lazy(&s->ud[l[17]], &s->ud_on[l[17]]);
-            if (!md) return -1;
-            l[17] = (uint8_t)laz_decode_symbol(d, md);
+            if (!md) goto nomem;
+            l[17] = (uint8_t)laz_decode_symbol_tab(d, md);
         }
         if (changed & 1)
             put16(l + 18, (uint16_t)laz_ic_decompress(&s->ic_psid, d, get16(l + 18), 0));
@@ -168,7 +169,11 @@ static int p10_read(p10 *s, laz_dec *d, uint8_t *item)
     put32(l + 8, (uint32_t)z);
     s->last_h[lv] = z;
     memcpy(item, l, 20);
+    *dp = dd;
     return 0;
+nomem:
+    *dp = dd;
+    return -1;
 }
 
 /* ---- RGB12 (also the RGB layer of RGB14 / RGBNIR14) ---- */
@@ -186,22 +191,23 @@ int laz__rgb_models_init(laz_model *used, laz_model *diff)
     return 0;
 }
 
-void laz__rgb_decode(laz_dec *d, laz_model *used, laz_model *dm, const uint16_t *last,
+LAZ_CLONES void laz__rgb_decode(laz_dec *dp, laz_model *used, laz_model *dm, const uint16_t *last,
                      uint16_t *c)
 {
-    uint32_t sym = laz_decode_symbol(d, used);
+    laz_dec dd = *dp, *d = &dd;
+    uint32_t sym = laz_decode_symbol_tab(d, used);
     int32_t lo0 = last[0] & 0xFF, hi0 = last[0] >> 8;
-    c[0] = (sym & 1) ? laz_u8_fold((int32_t)laz_decode_symbol(d, &dm[0]) + lo0) : (uint16_t)lo0;
-    c[0] |= (uint16_t)(((sym & 2) ? laz_u8_fold((int32_t)laz_decode_symbol(d, &dm[1]) + hi0)
+    c[0] = (sym & 1) ? laz_u8_fold((int32_t)laz_decode_symbol_tab(d, &dm[0]) + lo0) : (uint16_t)lo0;
+    c[0] |= (uint16_t)(((sym & 2) ? laz_u8_fold((int32_t)laz_decode_symbol_tab(d, &dm[1]) + hi0)
                                    : hi0) << 8);
     if (sym & 64) {
         int32_t diff = (c[0] & 0xFF) - lo0;
         int32_t lo1 = last[1] & 0xFF, lo2 = last[2] & 0xFF;
-        c[1] = (sym & 4) ? laz_u8_fold((int32_t)laz_decode_symbol(d, &dm[2]) +
+        c[1] = (sym & 4) ? laz_u8_fold((int32_t)laz_decode_symbol_tab(d, &dm[2]) +
                                        laz_u8_clamp(diff + lo1))
                          : (uint16_t)lo1;
         if (sym & 16) {
-            int32_t corr = (int32_t)laz_decode_symbol(d, &dm[4]);
+            int32_t corr = (int32_t)laz_decode_symbol_tab(d, &dm[4]);
             diff = (diff + ((c[1] & 0xFF) - lo1)) / 2;
             c[2] = laz_u8_fold(corr + laz_u8_clamp(diff + lo2));
         } else {
@@ -210,13 +216,13 @@ void laz__rgb_decode(laz_dec *d, laz_model *used, laz_model *dm, const uint16_t 
         diff = (c[0] >> 8) - hi0;
         int32_t hi1 = last[1] >> 8, hi2 = last[2] >> 8;
         if (sym & 8) {
-            int32_t corr = (int32_t)laz_decode_symbol(d, &dm[3]);
+            int32_t corr = (int32_t)laz_decode_symbol_tab(d, &dm[3]);
             c[1] |= (uint16_t)(laz_u8_fold(corr + laz_u8_clamp(diff + hi1)) << 8);
         } else {
             c[1] |= (uint16_t)(hi1 << 8);
         }
         if (sym & 32) {
-            int32_t corr = (int32_t)laz_decode_symbol(d, &dm[5]);
+            int32_t corr = (int32_t)laz_decode_symbol_tab(d, &dm[5]);
             diff = (diff + ((c[1] >> 8) - hi1)) / 2;
             c[2] |= (uint16_t)(laz_u8_fold(corr + laz_u8_clamp(diff + hi2)) << 8);
         } else {
@@ -225,6 +231,7 @@ void laz__rgb_decode(laz_dec *d, laz_model *used, laz_model *dm, const uint16_t 
     } else {
         c[1] = c[2] = c[0];
     }
+    *dp = dd;
 }
 
 /* ---- the item list ---- */
@@ -338,7 +345,7 @@ int laz__v2_begin(laz_v2 *s, const uint8_t *p, const uint8_t *end, uint8_t *firs
     return 0;
 }
 
-int laz__v2_next(laz_v2 *s, size_t npts, uint8_t *out, const char **what)
+LAZ_CLONES int laz__v2_next(laz_v2 *s, size_t npts, uint8_t *out, const char **what)
 {
     laz_dec *d = &s->d;
     *what = "points";
@@ -361,7 +368,7 @@ int laz__v2_next(laz_v2 *s, size_t npts, uint8_t *out, const char **what)
                 }
             } else {
                 for (unsigned k = 0; k < x->it.size; k++) {
-                    uint32_t v = laz_decode_symbol(d, &x->bytes[k]);
+                    uint32_t v = laz_decode_symbol_tab(d, &x->bytes[k]);
                     item[k] = x->last_bytes[k] = laz_u8_fold((int32_t)v + x->last_bytes[k]);
                 }
             }

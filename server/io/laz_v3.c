@@ -79,7 +79,8 @@ static void p14_unpack(p14 *q, const uint8_t *r)
     q->gps_change = 0;
 }
 
-static void p14_pack(const p14 *q, uint8_t *r)
+/* inline: a default-target function is not inlined into the x86-64-v3 clones by itself */
+static inline __attribute__((always_inline)) void p14_pack(const p14 *q, uint8_t *r)
 {
     put32(r, (uint32_t)q->x);
     put32(r + 4, (uint32_t)q->y);
@@ -192,16 +193,16 @@ static laz_model *lazy(laz_model *m, uint8_t *on, uint32_t n)
     return m;
 }
 
-static int pt14_read(pt14 *s, uint8_t *rec)
+LAZ_CLONES static int pt14_read(pt14 *s, uint8_t *rec)
 {
     ctx14 *c = &s->c[s->cur];
     p14 *L = &c->last;
-    laz_dec *dxy = &s->d[L_XY];
+    laz_dec dd = s->d[L_XY], *dxy = &dd; /* the coder in registers for the point's fields */
     unsigned lpr = (L->ret == 1) + (L->ret >= L->nret ? 2u : 0u) + (L->gps_change ? 4u : 0u);
-    uint32_t changed = laz_decode_symbol(dxy, &c->changed[lpr]);
+    uint32_t changed = laz_decode_symbol_tab(dxy, &c->changed[lpr]);
     if (changed & 64) {
         unsigned ch = (s->cur + laz_decode_symbol(dxy, &c->channel) + 1) % 4;
-        if (s->c[ch].unused && ctx_start(&s->c[ch], L)) return -1;
+        if (s->c[ch].unused && ctx_start(&s->c[ch], L)) goto nomem;
         s->cur = ch;
         c = &s->c[ch];
         L = &c->last;
@@ -211,8 +212,8 @@ static int pt14_read(pt14 *s, uint8_t *rec)
     unsigned last_n = L->nret, last_r = L->ret, n, r;
     if (changed & 4) {
         laz_model *m = lazy(&c->nret[last_n], &c->nret_on[last_n], 16);
-        if (!m) return -1;
-        n = laz_decode_symbol(dxy, m);
+        if (!m) goto nomem;
+        n = laz_decode_symbol_tab(dxy, m);
         L->nret = (uint8_t)n;
     } else {
         n = last_n;
@@ -224,10 +225,10 @@ static int pt14_read(pt14 *s, uint8_t *rec)
     default:
         if (gpsc) {
             laz_model *m = lazy(&c->rnum[last_r], &c->rnum_on[last_r], 16);
-            if (!m) return -1;
-            r = laz_decode_symbol(dxy, m);
+            if (!m) goto nomem;
+            r = laz_decode_symbol_tab(dxy, m);
         } else {
-            r = (last_r + laz_decode_symbol(dxy, &c->rgps_same) + 2) % 16;
+            r = (last_r + laz_decode_symbol_tab(dxy, &c->rgps_same) + 2) % 16;
         }
         break;
     }
@@ -244,6 +245,7 @@ static int pt14_read(pt14 *s, uint8_t *rec)
                              one + (kb < 20 ? (kb & ~1u) : 20));
     L->y = (int32_t)((uint32_t)L->y + (uint32_t)diff);
     laz_median5_add(&c->my[idx], diff);
+    s->d[L_XY] = dd;
 
     if (s->on[L_Z]) {
         kb = (c->dx.k + c->dy.k) / 2;
@@ -254,14 +256,14 @@ static int pt14_read(pt14 *s, uint8_t *rec)
     if (s->on[L_CLS]) {
         unsigned ccc = ((L->cls & 0x1Fu) << 1) + (cpr == 3);
         laz_model *md = lazy(&c->cls[ccc], &c->cls_on[ccc], 256);
-        if (!md) return -1;
-        L->cls = (uint8_t)laz_decode_symbol(&s->d[L_CLS], md);
+        if (!md) goto nomem;
+        L->cls = (uint8_t)laz_decode_symbol_tab(&s->d[L_CLS], md);
     }
     if (s->on[L_FLAGS]) {
         unsigned lf = (unsigned)L->edge << 5 | (unsigned)L->sdir << 4 | L->cflags;
         laz_model *md = lazy(&c->flags[lf], &c->flags_on[lf], 64);
-        if (!md) return -1;
-        uint32_t f = laz_decode_symbol(&s->d[L_FLAGS], md);
+        if (!md) goto nomem;
+        uint32_t f = laz_decode_symbol_tab(&s->d[L_FLAGS], md);
         L->edge = (f >> 5) & 1;
         L->sdir = (f >> 4) & 1;
         L->cflags = f & 15;
@@ -278,8 +280,8 @@ static int pt14_read(pt14 *s, uint8_t *rec)
     if (s->on[L_UD]) {
         unsigned k = L->ud / 4u;
         laz_model *md = lazy(&c->ud[k], &c->ud_on[k], 256);
-        if (!md) return -1;
-        L->ud = (uint8_t)laz_decode_symbol(&s->d[L_UD], md);
+        if (!md) goto nomem;
+        L->ud = (uint8_t)laz_decode_symbol_tab(&s->d[L_UD], md);
     }
     if (s->on[L_PSID] && psc)
         L->psid = (uint16_t)laz_ic_decompress(&c->psid, &s->d[L_PSID], L->psid, 0);
@@ -289,6 +291,9 @@ static int pt14_read(pt14 *s, uint8_t *rec)
     p14_pack(L, rec);
     L->gps_change = gpsc;
     return 0;
+nomem:
+    s->d[L_XY] = dd;
+    return -1;
 }
 
 /* ---- RGB14 / RGBNIR14 / BYTE14: per-channel contexts following POINT14's channel ---- */
@@ -356,7 +361,7 @@ static void ctxx_free(itemx *x, ctxx *c)
     free(c->lastb);
 }
 
-static int itemx_read(itemx *x, unsigned context, uint8_t *item)
+LAZ_CLONES static int itemx_read(itemx *x, unsigned context, uint8_t *item)
 {
     /* As LASzip: the previous context's last item stands in for one point when switching to
      * a context already used in this chunk. */
@@ -373,7 +378,7 @@ static int itemx_read(itemx *x, unsigned context, uint8_t *item)
     if (x->it.type == LAZ_ITEM_BYTE14) {
         for (unsigned k = 0; k < x->it.size; k++) {
             if (x->on[k]) {
-                uint32_t v = laz_decode_symbol(&x->d[k], &c->bytes[k]);
+                uint32_t v = laz_decode_symbol_tab(&x->d[k], &c->bytes[k]);
                 item[k] = last[k] = laz_u8_fold((int32_t)v + last[k]);
             } else {
                 item[k] = last[k];
@@ -395,8 +400,8 @@ static int itemx_read(itemx *x, unsigned context, uint8_t *item)
             laz_dec *d = &x->d[1];
             uint32_t sym = laz_decode_symbol(d, &c->nused);
             uint32_t lo = last[6], hi = last[7];
-            if (sym & 1) lo = laz_u8_fold((int32_t)laz_decode_symbol(d, &c->ndiff[0]) + (int32_t)lo);
-            if (sym & 2) hi = laz_u8_fold((int32_t)laz_decode_symbol(d, &c->ndiff[1]) + (int32_t)hi);
+            if (sym & 1) lo = laz_u8_fold((int32_t)laz_decode_symbol_tab(d, &c->ndiff[0]) + (int32_t)lo);
+            if (sym & 2) hi = laz_u8_fold((int32_t)laz_decode_symbol_tab(d, &c->ndiff[1]) + (int32_t)hi);
             item[6] = last[6] = (uint8_t)lo;
             item[7] = last[7] = (uint8_t)hi;
         } else {
@@ -508,7 +513,7 @@ int laz__v3_begin(laz_v3 *s, const uint8_t *p, const uint8_t *end, size_t npts, 
     return 0;
 }
 
-int laz__v3_next(laz_v3 *s, size_t npts, uint8_t *out, const char **what)
+LAZ_CLONES int laz__v3_next(laz_v3 *s, size_t npts, uint8_t *out, const char **what)
 {
     pt14 *pt = s->pt;
     *what = "points";
