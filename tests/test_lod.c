@@ -662,7 +662,23 @@ static void test_daemon_progressive(void **state)
     assert_int_equal(spc_stream(c, 0, 0), 0);
     assert_int_equal(spc_render(c, &f, 1), 0);
     assert_int_equal(f.complete, 1);
-    assert_memory_equal(f.rgba, last, (size_t)240 * 160 * 4);
+    /* The same nodes at the same pool positions, drawn again: splat adds its weighted sums with
+     * float atomics whose order the threads decide, so a channel may round to the next level
+     * (seen once in many runs); more than one level, or more than a few pixels, is a real
+     * difference. */
+    int worst = 0, npix = 0;
+    for (size_t i = 0; i < (size_t)240 * 160; i++) {
+        int px = 0;
+        for (int k = 0; k < 4; k++) {
+            int dv = abs((int)f.rgba[4 * i + k] - (int)last[4 * i + k]);
+            if (dv > worst) worst = dv;
+            px |= dv != 0;
+        }
+        npix += px;
+    }
+    if (worst > 1 || npix > 40)
+        fail_msg("the RENDER differs from the last streamed frame: %d pixels, up to %d levels",
+                 npix, worst);
     free(last);
     spc_close(c);
     assert_int_equal(tu_daemon_stop(&d), 0);
