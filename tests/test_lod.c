@@ -458,6 +458,14 @@ static void camera(const rfix *f, rnd_camera *cam)
     rnd_camera_frame(lo, hi, 320, 200, cam);
 }
 
+/* cold_view: an empty pool (rfix_cold), the default camera and default parameters. */
+static void cold_view(rfix *f, rnd_camera *cam, sp_params *p)
+{
+    rfix_cold(f);
+    camera(f, cam);
+    sp_params_defaults(p);
+}
+
 /* Renders the LOD cloud until a frame says complete; returns how many frames that took. */
 static int render_complete(rfix *f, const rnd_camera *cam, const sp_params *p, rnd_frame *fr)
 {
@@ -490,11 +498,9 @@ static double psnr(const uint8_t *a, const uint8_t *b, size_t npx)
 static void test_budget_and_full_equals_flat(void **state)
 {
     rfix *f = *state;
-    rfix_cold(f);
     rnd_camera cam;
-    camera(f, &cam);
     sp_params p;
-    sp_params_defaults(&p);
+    cold_view(f, &cam, &p);
     rnd_frame a = {0}, b = {0};
     for (int pipe = 0; pipe < 2; pipe++) {
         p.pipeline = pipe == 0 ? SP_PIPE_POINTS : SP_PIPE_SPLAT;
@@ -533,11 +539,9 @@ static void test_budget_and_full_equals_flat(void **state)
 static void test_tenth_budget_psnr(void **state)
 {
     rfix *f = *state;
-    rfix_cold(f);
     rnd_camera cam;
-    camera(f, &cam);
     sp_params p;
-    sp_params_defaults(&p);
+    cold_view(f, &cam, &p);
     p.pipeline = SP_PIPE_SPLAT;
     rnd_frame a = {0}, b = {0};
     p.point_budget = (int64_t)f->n;
@@ -553,17 +557,84 @@ static void test_tenth_budget_psnr(void **state)
     rnd_frame_free(&b);
 }
 
+/* rnd_lod_settle (what a RENDER does first): with a cold pool it loads every node the camera
+ * wants without drawing, so the one frame drawn after it is complete and draws the points the
+ * budget allows; without it, the first frame is incomplete (test_progressive_ends_complete). */
+static void test_settle_then_one_frame(void **state)
+{
+    rfix *f = *state;
+    rnd_camera cam;
+    sp_params p;
+    cold_view(f, &cam, &p);
+    p.point_budget = 30000;
+    sd_err err = {0};
+    int rc = rnd_lod_settle(f->r, f->lod_id, &cam, &p, 20000, &err);
+    if (rc < 0) fail_msg("%s", err.msg);
+    assert_int_equal(rc, 1);
+    rnd_frame a = {0};
+    if (rnd_render(f->r, f->lod_id, &cam, &p, 0, &a, &err) != 0) fail_msg("%s", err.msg);
+    assert_int_equal(a.complete, 1);
+    assert_int_equal(a.lod_uploaded, 0); /* everything was resident already */
+    assert_true(a.points_drawn > 0 && a.points_drawn <= 30000);
+    print_message("settled: one frame, complete, %llu points\n",
+                  (unsigned long long)a.points_drawn);
+    /* a flat cloud has nothing to settle */
+    assert_int_equal(rnd_lod_settle(f->r, f->flat_id, &cam, &p, 20000, &err), 1);
+    rnd_frame_free(&a);
+}
+
+/* Prefetched nodes that the loader finishes while frames of another view are drawn are kept
+ * (uploaded by that frame) and the prefetched view is then complete at its first frame: view
+ * A (the whole cloud at a small budget) is made resident, B (a close-up of a corner) is
+ * prefetched, two frames of A hand B's nodes to the loader and take them back, idle steps
+ * finish the queue, and B's first frame is complete. */
+static void test_prefetch_across_frames(void **state)
+{
+    rfix *f = *state;
+    rfix_cold(f);
+    rnd_camera a, b;
+    camera(f, &a);
+    b = a;
+    for (int k = 0; k < 3; k++) {
+        b.target[k] = 0.75 * f->flat.bmin[k] + 0.25 * f->flat.bmax[k];
+        b.eye[k] = b.target[k] + 0.3 * (a.eye[k] - a.target[k]);
+    }
+    sp_params p;
+    sp_params_defaults(&p);
+    p.point_budget = 20000;
+    sd_err err = {0};
+    assert_int_equal(rnd_lod_settle(f->r, f->lod_id, &a, &p, 20000, &err), 1);
+    int queued = rnd_lod_prefetch(f->r, f->lod_id, &b, 1, &p, &err);
+    assert_true(queued > 0);
+    rnd_frame fr = {0};
+    for (int i = 0; i < 2; i++) {
+        if (rnd_render(f->r, f->lod_id, &a, &p, 0, &fr, &err) != 0) fail_msg("%s", err.msg);
+        assert_int_equal(fr.complete, 1);
+        rnd_lod_wait(f->r, f->lod_id, 2000);
+    }
+    int steps = 0, more;
+    while ((more = rnd_lod_idle(f->r, &err)) > 0 && steps < 2000) {
+        rnd_lod_wait(f->r, f->lod_id, 100);
+        steps++;
+    }
+    assert_true(more == 0);
+    if (rnd_render(f->r, f->lod_id, &b, &p, 0, &fr, &err) != 0) fail_msg("%s", err.msg);
+    print_message("prefetch across frames: %d nodes queued, %d idle steps, B complete %d\n",
+                  queued, steps, fr.complete);
+    assert_int_equal(fr.complete, 1);
+    assert_int_equal(fr.lod_uploaded, 0);
+    rnd_frame_free(&fr);
+}
+
 /* Progressive refinement: with a cold pool the first frame is incomplete, each next frame of
  * the same camera draws at least as many points, and the complete frame equals a repeat of it
  * once everything is resident (complete at once). */
 static void test_progressive_ends_complete(void **state)
 {
     rfix *f = *state;
-    rfix_cold(f);
     rnd_camera cam;
-    camera(f, &cam);
     sp_params p;
-    sp_params_defaults(&p);
+    cold_view(f, &cam, &p);
     p.point_budget = 30000;
     rnd_frame a = {0}, b = {0};
     sd_err err = {0};
@@ -768,11 +839,9 @@ static void test_pool_smaller_than_root(void **state)
 static void test_every_pipeline(void **state)
 {
     rfix *f = *state;
-    rfix_cold(f);
     rnd_camera cam;
-    camera(f, &cam);
     sp_params p;
-    sp_params_defaults(&p);
+    cold_view(f, &cam, &p);
     p.point_budget = 20000;
     rnd_frame a = {0};
     for (int pi = 0; pi < SP_PIPE_COUNT; pi++) {
@@ -803,6 +872,8 @@ int main(void)
         cmocka_unit_test(test_budget_and_full_equals_flat),
         cmocka_unit_test(test_tenth_budget_psnr),
         cmocka_unit_test(test_progressive_ends_complete),
+        cmocka_unit_test(test_settle_then_one_frame),
+        cmocka_unit_test(test_prefetch_across_frames),
         cmocka_unit_test(test_pool_smaller_than_root),
         cmocka_unit_test(test_every_pipeline),
     };

@@ -28,6 +28,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "rndtest.h"
 #include "common/daemonproc.h"
 #include "common/exrtest.h"
 #include "common/imgtest.h"
@@ -546,15 +547,9 @@ static void check_cells(const float *pos, uint64_t n, int np, const uint16_t *pa
 static void test_partition_cells_bunny(void **state)
 {
     (void)state;
-    char path[4096];
-    tu_data("bun000.ply", path, sizeof path);
-    sd_err err = {0};
-    pc_cloud cl;
-    if (pc_load(path, &cl, &err) < 0) fail_msg("%s", err.msg);
-    prep_desc pd = {0};
     pc_prepared pc;
-    if (prep_run(&cl, &pd, &pc, &err) < 0) fail_msg("%s", err.msg);
-    pc_cloud_free(&cl);
+    tu_prep_data("bun000.ply", &pc);
+    sd_err err = {0};
     assert_int_equal(pc.n, BUNNY_POINTS);
     uint16_t *part = malloc(pc.n * sizeof *part);
     assert_non_null(part);

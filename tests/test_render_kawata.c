@@ -406,15 +406,8 @@ static void test_bunny(void **state)
 {
     rnd_ctx *r = *state;
     enum { BW = 320, BH = 240 };
-    char path[4096];
-    tu_data("bunnyData.pts", path, sizeof path);
-    sd_err err = {0};
-    pc_cloud cl;
-    if (pc_load(path, &cl, &err) < 0) fail_msg("%s", err.msg);
-    prep_desc pd = {0};
     pc_prepared pc;
-    if (prep_run(&cl, &pd, &pc, &err) < 0) fail_msg("%s", err.msg);
-    pc_cloud_free(&cl);
+    tu_prep_data("bunnyData.pts", &pc);
     assert_false(pc.attrs & PC_ATTR_RGB);
     assert_true(pc.sigma > 0);
     uint32_t id = tu_upload(r, &pc);

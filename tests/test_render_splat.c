@@ -1137,15 +1137,8 @@ typedef struct gview {
 static void test_guanyin(void **state)
 {
     fixture *fx = *state;
-    char path[4096];
-    tu_data("Guanyin.ply", path, sizeof path);
-    sd_err err = {0};
-    pc_cloud cl;
-    if (pc_load(path, &cl, &err) < 0) fail_msg("%s", err.msg);
-    prep_desc pd = {0};
     pc_prepared pc;
-    if (prep_run(&cl, &pd, &pc, &err) < 0) fail_msg("%s", err.msg);
-    pc_cloud_free(&cl);
+    tu_prep_data("Guanyin.ply", &pc);
     uint32_t id = tu_upload(fx->egl, &pc);
     const gview views[2] = {
         {"default view", "golden_guanyin_splat.png", 640, 480, 4, SP_EWA_AUTO, 0.05},

@@ -533,6 +533,8 @@ int rnd__lod_prefetch(rnd_lod *l, const rnd_view *views, int n, uint64_t budget)
     uint64_t limit = budget && budget < l->cap ? budget : l->cap;
     l->pgen++;
     l->npq = l->pqhead = 0;
+    /* choose marks the views' nodes wanted at the current stamp: until the next frame they are
+     * kept like its nodes (uploaded, not evicted); after it, pmark keeps them */
     for (int j = 0; j < n; j++) {
         uint32_t nw = choose(l, &views[j], limit);
         for (uint32_t k = 0; k < nw; k++) {

@@ -636,6 +636,24 @@ int rnd_lod_wait(rnd_ctx *r, uint32_t cloud_id, int timeout_ms)
     return s && s->lod ? rnd__lod_wait(s->lod, timeout_ms) : 0;
 }
 
+/* lod_budget: the point budget of a LOD frame: params' point_budget, else the back end's. */
+static uint64_t lod_budget(const rnd_ctx *r, const sp_params *params)
+{
+    return params->point_budget > 0 ? (uint64_t)params->point_budget : r->lod_budget;
+}
+
+/* lod_room: makes room for a LOD cloud's node pool on its first use (frame, settle); the pool
+ * itself is made by lod_render.c. */
+static int lod_room(rnd_ctx *r, cloud_slot *slot, sd_err *err)
+{
+    if (slot->c.sets) return 0;
+    int rc = make_room(r, slot, slot->bytes, err);
+    if (rc < 0) return rc;
+    r->resident_bytes += slot->bytes;
+    r->uploads++;
+    return 0;
+}
+
 int rnd_lod_prefetch(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cams, int n,
                      const sp_params *params, sd_err *err)
 {
@@ -654,8 +672,7 @@ int rnd_lod_prefetch(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cams, int 
         int rc = rnd__view_setup(cam, s->c.offset, s->c.bmin, s->c.bmax, &v[j], err);
         if (rc < 0) return rc;
     }
-    uint64_t budget = params->point_budget > 0 ? (uint64_t)params->point_budget : r->lod_budget;
-    return rnd__lod_prefetch(s->lod, v, n, budget);
+    return rnd__lod_prefetch(s->lod, v, n, lod_budget(r, params));
 }
 
 int rnd_lod_settle(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam,
@@ -671,14 +688,9 @@ int rnd_lod_settle(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam,
     int rc = rnd__view_setup(cam, s->c.offset, s->c.bmin, s->c.bmax, &v, err);
     if (rc < 0) return rc;
     if ((rc = r->ops->make_current(r->be, err)) < 0) return rc;
-    if (!s->c.sets) {
-        if ((rc = make_room(r, s, s->bytes, err)) < 0) return rc;
-        r->resident_bytes += s->bytes;
-        r->uploads++;
-    }
-    uint64_t budget = params->point_budget > 0 ? (uint64_t)params->point_budget : r->lod_budget;
+    if ((rc = lod_room(r, s, err)) < 0) return rc;
     rnd_lod_frame lf;
-    rc = rnd__lod_settle(s->lod, &r->gl, &s->c, &v, budget, timeout_ms, &lf, err);
+    rc = rnd__lod_settle(s->lod, &r->gl, &s->c, &v, lod_budget(r, params), timeout_ms, &lf, err);
     if (lf.changed) detach_all(r, s);
     return rc < 0 ? rc : lf.complete;
 }
@@ -853,13 +865,8 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     slot->last_used = ++r->clock;
     rnd_lod_frame lf = {.complete = 1};
     if (slot->lod) {
-        if (!c->sets) {
-            if ((rc = make_room(r, slot, slot->bytes, err)) < 0) return rc;
-            r->resident_bytes += slot->bytes;
-            r->uploads++;
-        }
-        rc = rnd__lod_frame(slot->lod, gl, &slot->c, &v, budget ? budget : r->lod_budget, &lf,
-                            err);
+        if ((rc = lod_room(r, slot, err)) < 0) return rc;
+        rc = rnd__lod_frame(slot->lod, gl, &slot->c, &v, lod_budget(r, params), &lf, err);
         if (rc < 0) return rc;
         if (lf.changed) detach_all(r, slot); /* per-cloud data follows the pool's contents */
         v.nchunks = lf.nchunks;

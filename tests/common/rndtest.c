@@ -7,6 +7,9 @@
 
 #include "rndtest.h"
 
+#include "prep.h"
+#include "testutil.h"
+
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -74,4 +77,17 @@ void tu_finish_cloud(pc_prepared *pc, const double off[3])
         }
     }
     memcpy(pc->offset, off, 3 * sizeof *off);
+}
+
+void tu_prep_data(const char *name, pc_prepared *pc)
+{
+    char path[4096];
+    tu_data(name, path, sizeof path);
+    sd_err err = {0};
+    pc_cloud cl;
+    if (pc_load(path, &cl, &err) < 0) fail_msg("%s: %s", name, err.msg);
+    prep_desc pd = {0};
+    int rc = prep_run(&cl, &pd, pc, &err);
+    pc_cloud_free(&cl);
+    if (rc < 0) fail_msg("%s: %s", name, err.msg);
 }

@@ -12,6 +12,10 @@ extern rnd_ctx *tu_ctx;
 int tu_egl_group_setup(void **state);
 int tu_egl_group_teardown(void **state);
 
+/* tu_prep_data: the file tests/data/name loaded and prepared with prep's defaults into *pc;
+ * fails the test on an error. */
+void tu_prep_data(const char *name, pc_prepared *pc);
+
 /* tu_upload: rnd_upload of pc; fails the test when it returns no id. */
 uint32_t tu_upload(rnd_ctx *r, const pc_prepared *pc);
 
