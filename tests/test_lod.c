@@ -27,6 +27,8 @@
 #include "daemonproc.h"
 #include "imgtest.h"
 #include "lod.h"
+#include "laz_stream.h"
+#include "las_stream.h"
 #include "lod_src.h"
 #include "morton.h"
 #include "prep.h"
@@ -304,6 +306,142 @@ static void test_las_streamed(void **state)
         print_message("%s: %llu points streamed = pc_load\n", files[i],
                       (unsigned long long)stream_equals_load(path));
     }
+}
+
+/* The records of a LAZ file through the stream equal its uncompressed twin's, coordinates and
+ * colours bit for bit, for reads in file order of an odd size and for random reads (forwards,
+ * backwards, across rounds of chunks), with one to three decoding threads. */
+static void laz_stream_equals_twin(const char *laz, const char *las)
+{
+    sd_err err = {0};
+    pc_las_stream *b;
+    if (pc_las_stream_open(las, &b, &err) != 1) fail_msg("%s: %s", las, err.msg);
+    uint64_t n = pc_las_stream_count(b);
+    enum { M = PC_LAS_STREAM_BLOCK };
+    double *xa = malloc(3 * M * sizeof *xa), *xb = malloc(3 * M * sizeof *xb);
+    uint16_t *ca = malloc(3 * M * sizeof *ca), *cb = malloc(3 * M * sizeof *cb);
+    assert_true(xa && xb && ca && cb);
+    for (int threads = 1; threads <= 3; threads++) {
+        pc_laz_stream *a;
+        if (pc_laz_stream_open(laz, threads, &a, &err) != 1) fail_msg("%s: %s", laz, err.msg);
+        assert_int_equal(pc_laz_stream_count(a), n);
+        assert_int_equal(pc_laz_stream_has_rgb(a), pc_las_stream_has_rgb(b));
+        int rgb = pc_las_stream_has_rgb(b);
+        uint64_t bad = 0, reads = 0;
+        unsigned seed = 7u + (unsigned)threads;
+        for (int r = 0; r < 160; r++) {
+            uint64_t first;
+            size_t m;
+            if (r < 80) { /* in order, 777 at a time, wrapping round */
+                first = (uint64_t)r * 777 % n;
+                m = n - first < 777 ? (size_t)(n - first) : 777;
+            } else {
+                seed = seed * 1103515245u + 12345u;
+                first = (seed >> 8) % n;
+                seed = seed * 1103515245u + 12345u;
+                size_t left = n - first < M ? (size_t)(n - first) : M;
+                m = 1 + (seed >> 8) % left;
+            }
+            if (pc_laz_stream_read(a, first, m, xa, rgb ? ca : NULL, &err) != 0 ||
+                pc_las_stream_read(b, first, m, xb, rgb ? cb : NULL, &err) != 0)
+                fail_msg("%s", err.msg);
+            if (memcmp(xa, xb, 3 * m * sizeof *xa) != 0 ||
+                (rgb && memcmp(ca, cb, 3 * m * sizeof *ca) != 0))
+                bad++;
+            reads++;
+        }
+        assert_int_equal(bad, 0);
+        /* past the end: an error naming the file, nothing read */
+        assert_true(pc_laz_stream_read(a, n - 1, 2, xa, NULL, &err) < 0);
+        assert_non_null(strstr(err.msg, laz));
+        pc_laz_stream_close(a);
+        print_message("%s, %d threads: %llu reads equal to the twin's\n", laz, threads,
+                      (unsigned long long)reads);
+    }
+    pc_las_stream_close(b);
+    free(xa);
+    free(xb);
+    free(ca);
+    free(cb);
+}
+
+/* LAZ and COPC are streamed (io/laz_stream.c: a round of chunks decoded at a time, never the
+ * whole file): lod_src hands out exactly pc_load's points for the LAZ files of tests/data
+ * (formats 0, 3 and 7, extra bytes, COPC); the stream's reads equal the twins' records; the
+ * octree built from autzen_trim.laz (three chunks, split into chunks of 6000 points with
+ * halos) equals the in-memory prep; a truncated file is refused with its name. */
+static void test_laz_streamed(void **state)
+{
+    (void)state;
+    static const char *const files[] = {"autzen_trim.laz", "point10.las.laz",
+                                        "point-color-time.las.laz", "extrabytes.laz",
+                                        "ellipsoid-1.4.laz", "ellipsoid.copc.laz"};
+    char path[1024], twin[1024];
+    for (size_t i = 0; i < sizeof files / sizeof *files; i++) {
+        tu_data(files[i], path, sizeof path);
+        print_message("%s: %llu points streamed = pc_load\n", files[i],
+                      (unsigned long long)stream_equals_load(path));
+    }
+    tu_data("autzen_trim.laz", path, sizeof path);
+    tu_data("autzen_trim.las", twin, sizeof twin);
+    laz_stream_equals_twin(path, twin);
+    tu_data("point-color-time.las.laz", path, sizeof path);
+    tu_data("point-color-time.las", twin, sizeof twin);
+    laz_stream_equals_twin(path, twin);
+
+    char dir[512], cut[700], tiled[700], cmd[2048];
+    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    tu_data("autzen_trim.laz", path, sizeof path);
+    equals_in_memory_prep(dir, path);
+
+    /* laz_tile's 3 x 2 copies (18 chunks, a new chunk table, variable chunk sizes) stream as
+     * pc_load reads them, and copy (i, j) is the source moved by (i dx, j dy) in whole units of
+     * the scale, copy (0, 0) the source itself */
+    snprintf(tiled, sizeof tiled, "%s/tiled.laz", dir);
+    snprintf(cmd, sizeof cmd, "'%s/laz_tile' '%s' '%s' 3 2 > /dev/null",
+             tu_env("SPLATD_TOOLS", "build/tools"), path, tiled);
+    if (system(cmd) != 0) fail_msg("laz_tile failed; set SPLATD_TOOLS");
+    assert_int_equal(stream_equals_load(tiled), 6 * 110000);
+    sd_err err = {0};
+    pc_raw a = {0}, b = {0};
+    if (pc_read_laz(path, &a, &err) != 0 || pc_read_laz(tiled, &b, &err) != 0)
+        fail_msg("%s", err.msg);
+    assert_int_equal(b.n, 6 * a.n);
+    long long step[6][3];
+    uint64_t off = 0;
+    for (int c = 0; c < 6; c++) {
+        for (size_t i = 0; i < a.n; i++)
+            for (int k = 0; k < 3; k++) {
+                /* the files share scale 0.01 and offsets: compare the stored integers */
+                long long d = llround((b.xyz[3 * (c * a.n + i) + k] - a.xyz[3 * i + k]) / 0.01);
+                if (i == 0) step[c][k] = d;
+                else if (d != step[c][k]) off++;
+            }
+    }
+    assert_int_equal(off, 0);
+    for (int c = 0; c < 6; c++) {
+        assert_true(step[c][0] == (c % 3) * step[1][0] && step[c][1] == (c / 3) * step[3][1]);
+        assert_true(step[c][2] == 0);
+    }
+    assert_true(step[1][0] > 0 && step[3][1] > 0);
+    print_message("laz_tile 3 x 2: copies moved by %lld x %lld units\n", step[1][0], step[3][1]);
+    pc_raw_free(&a);
+    pc_raw_free(&b);
+    /* the first 300000 bytes: the chunk table's offset points past the end */
+    snprintf(cut, sizeof cut, "%s/cut.laz", dir);
+    FILE *in = fopen(path, "rb"), *out = fopen(cut, "wb");
+    assert_true(in && out);
+    static char buf[300000];
+    assert_int_equal(fread(buf, 1, sizeof buf, in), sizeof buf);
+    assert_int_equal(fwrite(buf, 1, sizeof buf, out), sizeof buf);
+    fclose(in);
+    fclose(out);
+    lod_src *src = NULL;
+    assert_true(lod_src_open(cut, &src, &err) < 0);
+    assert_null(src);
+    assert_non_null(strstr(err.msg, cut));
+    print_message("truncated: %s\n", err.msg);
+    tu_rm_rf(dir);
 }
 
 static int count_files(const char *dir)
@@ -864,6 +1002,7 @@ int main(void)
         cmocka_unit_test(test_octree_invariants),
         cmocka_unit_test(test_equals_in_memory_prep),
         cmocka_unit_test(test_las_streamed),
+        cmocka_unit_test(test_laz_streamed),
         cmocka_unit_test(test_kill9_never_leaves_a_loadable_cache),
         cmocka_unit_test(test_daemon_progressive),
         cmocka_unit_test(test_daemon_prefetch),

@@ -13,6 +13,7 @@
 
 #include "cloud.h"
 #include "las_stream.h"
+#include "laz_stream.h"
 
 enum { BLOCK = 1 << 16, MAX_PROPS = 64, MAX_HEADER = 64 * 1024 };
 enum { T_NONE, T_I8, T_U8, T_I16, T_U16, T_I32, T_U32, T_F32, T_F64 };
@@ -26,8 +27,9 @@ struct lod_src {
     uint64_t data_off, nrec, rec, next;  /* next record */
     int off[7], type[7];                 /* x y z red green blue alpha: offset, type */
     uint8_t *buf;
-    /* streamed LAS (uncompressed) */
+    /* streamed LAS: uncompressed (las) or LAZ and COPC (laz), as coordinates and 16-bit colours */
     pc_las_stream *las;
+    pc_laz_stream *laz;
     int las_wide;                        /* colours scaled down from 16 bits (pc_read_las's rule) */
     double *las_xyz;
     uint16_t *las_rgb;
@@ -216,16 +218,30 @@ static int bounds_pass(lod_src *s, sd_err *err)
     return 0;
 }
 
-/* las_bounds_pass: bounds, count and the colours' largest value of a streamed LAS file. */
+/* The streamed LAS or LAZ file's records [first, first + m) as coordinates and colours. */
+static int las_read(lod_src *s, uint64_t first, size_t m, int rgb, sd_err *err)
+{
+    uint16_t *c = rgb ? s->las_rgb : NULL;
+    return s->las ? pc_las_stream_read(s->las, first, m, s->las_xyz, c, err)
+                  : pc_laz_stream_read(s->laz, first, m, s->las_xyz, c, err);
+}
+
+static int las_has_rgb(const lod_src *s)
+{
+    return s->las ? pc_las_stream_has_rgb(s->las) : pc_laz_stream_has_rgb(s->laz);
+}
+
+/* las_bounds_pass: bounds, count and the colours' largest value of a streamed LAS or LAZ
+ * file. */
 static int las_bounds_pass(lod_src *s, sd_err *err)
 {
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    uint64_t n = pc_las_stream_count(s->las);
-    int rgb = pc_las_stream_has_rgb(s->las);
+    uint64_t n = s->las ? pc_las_stream_count(s->las) : pc_laz_stream_count(s->laz);
+    int rgb = las_has_rgb(s);
     unsigned cmax = 0;
     for (uint64_t r = 0; r < n;) {
         size_t m = n - r < BLOCK ? (size_t)(n - r) : BLOCK;
-        int rc = pc_las_stream_read(s->las, r, m, s->las_xyz, rgb ? s->las_rgb : NULL, err);
+        int rc = las_read(s, r, m, rgb, err);
         if (rc < 0) return rc;
         for (size_t i = 0; i < m; i++)
             for (int a = 0; a < 3; a++) {
@@ -245,7 +261,8 @@ static int las_bounds_pass(lod_src *s, sd_err *err)
     s->info.n = n; /* LAS coordinates are always finite */
     s->info.n_dropped = 0;
     s->info.attrs = rgb ? PC_ATTR_RGB : 0;
-    snprintf(s->info.format, sizeof s->info.format, "%s", pc_las_stream_format(s->las));
+    snprintf(s->info.format, sizeof s->info.format, "%s",
+             s->las ? pc_las_stream_format(s->las) : pc_laz_stream_format(s->laz));
     s->info.streamed = 1;
     return 0;
 }
@@ -253,11 +270,11 @@ static int las_bounds_pass(lod_src *s, sd_err *err)
 static int64_t las_next(lod_src *s, float *pos, uint32_t *rgba, size_t max, sd_err *err)
 {
     size_t k = 0;
-    int rgb = pc_las_stream_has_rgb(s->las);
+    int rgb = las_has_rgb(s);
     while (k < max && s->next < s->nrec) {
         size_t want = max - k < BLOCK ? max - k : BLOCK;
         size_t m = s->nrec - s->next < want ? (size_t)(s->nrec - s->next) : want;
-        int rc = pc_las_stream_read(s->las, s->next, m, s->las_xyz, rgb ? s->las_rgb : NULL, err);
+        int rc = las_read(s, s->next, m, rgb, err);
         if (rc < 0) return rc;
         for (size_t i = 0; i < m; i++, k++) {
             for (int a = 0; a < 3; a++)
@@ -292,10 +309,13 @@ int lod_src_open(const char *path, lod_src **out, sd_err *err)
     struct stat st;
     int rc = fstat(s->fd, &st) < 0 || !S_ISREG(st.st_mode)
                  ? sd_errf(err, SD_EIO, "%s: not a regular file", path) : try_ply_header(s, err);
-    if (rc == 1) {
+    int las = 0; /* 1: a streamed LAS or LAZ file */
+    if (rc == 0) las = rc = pc_las_stream_open(path, &s->las, err);
+    if (rc == 0) las = rc = pc_laz_stream_open(path, 0, &s->laz, err);
+    if (rc == 1 && !las) {
         s->buf = malloc((size_t)BLOCK * s->rec);
         rc = s->buf ? bounds_pass(s, err) : sd_errf(err, SD_ENOMEM, "out of memory");
-    } else if (rc == 0 && (rc = pc_las_stream_open(path, &s->las, err)) == 1) {
+    } else if (rc == 1) {
         s->las_xyz = malloc((size_t)BLOCK * 3 * sizeof(double));
         s->las_rgb = malloc((size_t)BLOCK * 3 * sizeof(uint16_t));
         rc = s->las_xyz && s->las_rgb ? las_bounds_pass(s, err)
@@ -348,6 +368,7 @@ void lod_src_close(lod_src *s)
     if (s->fd >= 0) close(s->fd);
     free(s->buf);
     pc_las_stream_close(s->las);
+    pc_laz_stream_close(s->laz);
     free(s->las_xyz);
     free(s->las_rgb);
     if (s->have_cloud) pc_cloud_free(&s->cloud);
@@ -379,7 +400,7 @@ int64_t lod_src_next(lod_src *s, float *pos, uint32_t *rgba, size_t max, sd_err 
         }
         return (int64_t)k;
     }
-    if (s->las) return las_next(s, pos, rgba, max, err);
+    if (s->las || s->laz) return las_next(s, pos, rgba, max, err);
     while (k < max && s->next < s->nrec) {
         size_t want = max - k < BLOCK ? max - k : BLOCK;
         size_t m = s->nrec - s->next < want ? (size_t)(s->nrec - s->next) : want;

@@ -2,9 +2,10 @@
  *
  * Binary little-endian PLY whose first element is the vertex element with scalar properties
  * (what scanners' exports and gen_cloud write) and uncompressed LAS (io/las_stream.h) are
- * streamed with pread in blocks: memory does not grow with the file. Any other file (other PLY
- * layouts, LAZ, PCD, XYZ) is read whole by pc_load (io/) and handed out from memory; that path is
- * in core, and says so in lod_src_info.streamed.
+ * streamed with pread in blocks, LAZ and COPC (io/laz_stream.h) a round of chunks at a time,
+ * decoded in parallel: memory does not grow with the file. Any other file (other PLY layouts,
+ * PCD, XYZ) is read whole by pc_load (io/) and handed out from memory; that path is in core,
+ * and says so in lod_src_info.streamed.
  *
  * Positions come out as prepared.h has them: float(x - offset), offset the double centre of
  * the bounding box of the finite points (pc_finalize's rule), non-finite points skipped, so
