@@ -444,6 +444,88 @@ static void test_laz_streamed(void **state)
     tu_rm_rf(dir);
 }
 
+/* writes text to dir/name, returns the path in out */
+static void write_text(const char *dir, const char *name, const char *text, char *out, size_t len)
+{
+    snprintf(out, len, "%s/%s", dir, name);
+    FILE *f = fopen(out, "w");
+    assert_non_null(f);
+    assert_int_equal(fputs(text, f) >= 0, 1);
+    fclose(f);
+}
+
+/* XYZ/PTS text is streamed (io/xyz_stream.h: pc_read_xyz's parser resumed a window at a time):
+ * lod_src hands out exactly pc_load's points for bunnyData.pts and for files that take each
+ * colour rule (8-bit, 16-bit, 0..1 floats, none), PTS count lines over several blocks, comments,
+ * a non-finite row, and more rows than one window; a bad row deep in a file gives pc_load's own
+ * error (the same line number); and the octree of a text file equals the in-memory prep. */
+static void test_text_streamed(void **state)
+{
+    (void)state;
+    char dir[512], path[700];
+    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    tu_data("bunnyData.pts", path, sizeof path);
+    print_message("bunnyData.pts: %llu points streamed = pc_load\n",
+                  (unsigned long long)stream_equals_load(path));
+    /* 70,000 rows in two PTS blocks, colours over 255 (16-bit), a comment and a NaN row */
+    size_t cap = 8u << 20, n = 0;
+    char *big = malloc(cap);
+    assert_non_null(big);
+    n += (size_t)snprintf(big + n, cap - n, "# two scans\n40001\n");
+    for (int i = 0; i < 70000; i++) {
+        if (i == 40000) n += (size_t)snprintf(big + n, cap - n, "30000\n");
+        if (i == 123) n += (size_t)snprintf(big + n, cap - n, "nan 1 2 7 0 0 0\n");
+        n += (size_t)snprintf(big + n, cap - n, "%d.%03d %d.25 %d 9 %d %d %d\n", i % 500,
+                              i % 1000, i / 500, i % 7, (i * 37) % 65536, (i * 11) % 300, i % 256);
+    }
+    write_text(dir, "big.pts", big, path, sizeof path);
+    assert_int_equal(stream_equals_load(path), 70000);
+    /* 0..1 float colours with CRLF line ends, 8-bit colours, no colours */
+    static const char *const small[][2] = {
+        {"f.xyz", "0 0 0 0.5 0.25 1\r\n1 0 0 0 1 0.125\r\n0 1 0 1 1 1\r\n0 0 1 0.3 0.3 0.3\r\n"},
+        {"b.txt", "0,0,0,10,20,30\n1,0,0,255,0,7\n0,1,0,1,2,3\n0,0,1,4,5,6\n"},
+        {"p.xyz", "// positions\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n2 2 2\n"}};
+    for (size_t i = 0; i < sizeof small / sizeof *small; i++) {
+        write_text(dir, small[i][0], small[i][1], path, sizeof path);
+        print_message("%s: %llu points streamed = pc_load\n", small[i][0],
+                      (unsigned long long)stream_equals_load(path));
+    }
+    /* a bad token on line 70,002 (past the first window): the same error as pc_load's */
+    n = 0;
+    for (int i = 0; i < 70000; i++)
+        n += (size_t)snprintf(big + n, cap - n, "%d %d %d\n", i % 300, i / 300, i % 7);
+    n += (size_t)snprintf(big + n, cap - n, "1 2 3\n1 2 x3\n4 5 6\n");
+    write_text(dir, "bad.xyz", big, path, sizeof path);
+    sd_err e1 = {0}, e2 = {0};
+    pc_cloud c;
+    lod_src *src = NULL;
+    assert_true(pc_load(path, &c, &e1) < 0);
+    assert_true(lod_src_open(path, &src, &e2) < 0);
+    assert_null(src);
+    assert_string_equal(e1.msg, e2.msg);
+    assert_non_null(strstr(e2.msg, "line 70002"));
+    print_message("bad row: %s\n", e2.msg);
+    free(big);
+    /* the out-of-core octree of a text file (gen_cloud's PLY written as x y z r g b) */
+    char ply[700];
+    gen(dir, 20000, ply, sizeof ply);
+    pc_cloud g;
+    sd_err err = {0};
+    if (pc_load(ply, &g, &err) != 0) fail_msg("%s", err.msg);
+    snprintf(path, sizeof path, "%s/g.xyz", dir);
+    FILE *f = fopen(path, "w");
+    assert_non_null(f);
+    for (size_t i = 0; i < g.n; i++)
+        fprintf(f, "%.9g %.9g %.9g %u %u %u\n", g.pos[3 * i] + g.offset[0],
+                g.pos[3 * i + 1] + g.offset[1], g.pos[3 * i + 2] + g.offset[2], g.rgba[4 * i],
+                g.rgba[4 * i + 1], g.rgba[4 * i + 2]);
+    fclose(f);
+    pc_cloud_free(&g);
+    assert_int_equal(stream_equals_load(path), 20000);
+    equals_in_memory_prep(dir, path);
+    tu_rm_rf(dir);
+}
+
 static int count_files(const char *dir)
 {
     DIR *d = opendir(dir);
@@ -1003,6 +1085,7 @@ int main(void)
         cmocka_unit_test(test_equals_in_memory_prep),
         cmocka_unit_test(test_las_streamed),
         cmocka_unit_test(test_laz_streamed),
+        cmocka_unit_test(test_text_streamed),
         cmocka_unit_test(test_kill9_never_leaves_a_loadable_cache),
         cmocka_unit_test(test_daemon_progressive),
         cmocka_unit_test(test_daemon_prefetch),

@@ -9,12 +9,16 @@
  * (scaled by 255/65535), and when all are within [0,1] with a fraction, as 0..1 floats. */
 #include "cloud.h"
 #include "io_text.h"
+#include "xyz_stream.h"
 
 #include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
+#include <sys/mman.h>
+#include <unistd.h>
 
 #define XYZ_MAX_COLS 7
 
@@ -35,7 +39,11 @@ typedef struct xyz_ctx {
     int col_frac;       /* some colour value has a fractional part */
     size_t count_line;  /* line of the current block's count line, 0 when none */
     uint64_t declared;  /* points that count line declares */
-    size_t block_start; /* raw->n when that block began */
+    uint64_t block_start; /* rows when that block began */
+    uint64_t rows;      /* data rows read so far */
+    size_t pos, ln;     /* where the next line starts, and the lines read */
+    int done;           /* every line read and checked */
+    int stream;         /* streamed: raw is a window, never reserved by a count line */
 } xyz_ctx;
 
 /* Splits the line [p, te) into numbers. Returns the count (XYZ_MAX_COLS + 1 when there are
@@ -103,25 +111,34 @@ static int set_layout(xyz_ctx *x, pc_raw *raw, int n, size_t ln)
     return 0;
 }
 
+/* The scale of the colours, from every value of the file. */
+static double colour_scale(const xyz_ctx *x)
+{
+    if (x->col_max > 255) return 255.0 / 65535.0;
+    if (x->col_max <= 1.0 && x->col_frac) return 255.0;
+    return 1.0;
+}
+
+/* One row's colour as read (3 floats) into RGBA8. */
+static void colour8(const float *c, double scale, uint8_t *out)
+{
+    for (int k = 0; k < 3; k++) {
+        double v = c[k] * scale;
+        out[k] = !(v > 0) ? 0 : v >= 255 ? 255 : (uint8_t)(v + 0.5);
+    }
+    out[3] = 255;
+}
+
 /* finish_colour: converts the colours read into raw->rgba with the scale the values imply. */
 static void finish_colour(xyz_ctx *x, pc_raw *raw)
 {
-    double scale = 1.0;
-    if (x->col_max > 255) scale = 255.0 / 65535.0;
-    else if (x->col_max <= 1.0 && x->col_frac) scale = 255.0;
-    for (size_t i = 0; i < raw->n; i++) {
-        for (int k = 0; k < 3; k++) {
-            double v = x->col[3 * i + k] * scale;
-            raw->rgba[4 * i + k] = !(v > 0) ? 0 : v >= 255 ? 255 : (uint8_t)(v + 0.5);
-        }
-        raw->rgba[4 * i + 3] = 255;
-    }
+    double scale = colour_scale(x);
+    for (size_t i = 0; i < raw->n; i++) colour8(x->col + 3 * i, scale, raw->rgba + 4 * i);
 }
 
 /* count_row: takes the single value v on line ln ([q, te)) as a PTS count line, which must be a
  * plain non-negative integer, and starts a block at raw->n. Returns 0 or SD_EFORMAT. */
-static int count_row(xyz_ctx *x, const pc_raw *raw, const char *q, const char *te, double v,
-                     size_t ln)
+static int count_row(xyz_ctx *x, const char *q, const char *te, double v, size_t ln)
 {
     size_t digits = 0;
     const char *t = q;
@@ -132,20 +149,20 @@ static int count_row(xyz_ctx *x, const pc_raw *raw, const char *q, const char *t
                        x->path, ln);
     x->declared = (uint64_t)v;
     x->count_line = ln;
-    x->block_start = raw->n;
+    x->block_start = x->rows;
     return 0;
 }
 
 /* check_block: when a count line opened the current block, its rows (ending before line ln)
  * must number what it declared. Returns 0, SD_ETRUNC (fewer) or SD_EFORMAT (more). */
-static int check_block(const xyz_ctx *x, const pc_raw *raw, size_t ln)
+static int check_block(const xyz_ctx *x, size_t ln)
 {
-    size_t rows = raw->n - x->block_start;
+    uint64_t rows = x->rows - x->block_start;
     if (!x->count_line || rows == x->declared) return 0;
     return sd_errf(x->err, x->declared > rows ? SD_ETRUNC : SD_EFORMAT,
-                   "%s: line %zu: the count line declares %llu points but %zu rows follow it "
+                   "%s: line %zu: the count line declares %llu points but %llu rows follow it "
                    "(up to line %zu)", x->path, x->count_line, (unsigned long long)x->declared,
-                   rows, ln);
+                   (unsigned long long)rows, ln);
 }
 
 /* first_row: sets the layout from the first data row (n values, line ln; cut when it is an
@@ -162,7 +179,7 @@ static int first_row(xyz_ctx *x, pc_raw *raw, int n, size_t ln, int cut)
              x->ncol == 3 ? "x y z" : x->ncol == 4 ? "x y z i"
              : x->ncol == 6 ? "x y z r g b" : "x y z i r g b");
     size_t want = x->declared < x->bound ? (size_t)x->declared : x->bound;
-    if (!x->count_line || want == 0) return 0;
+    if (!x->count_line || want == 0 || x->stream) return 0;
     rc = pc_raw_reserve(raw, want, x->err);
     if (rc < 0) return rc;
     if ((raw->attrs & PC_ATTR_RGB) && !(x->col = malloc(want * 3 * sizeof(float))))
@@ -176,6 +193,7 @@ static int store_row(xyz_ctx *x, pc_raw *raw, const double *v)
     int rc = grow(x, raw);
     if (rc < 0) return rc;
     size_t i = raw->n++;
+    x->rows++;
     raw->xyz[3 * i] = v[0];
     raw->xyz[3 * i + 1] = v[1];
     raw->xyz[3 * i + 2] = v[2];
@@ -197,10 +215,12 @@ typedef struct xyz_job {
     const pc__file *f;
     xyz_ctx *x;
     pc_raw *raw;
+    size_t limit;       /* stop once raw holds this many rows */
 } xyz_job;
 
-/* xyz_parse: every line of the file mapped in j->f, into j->raw. */
-static int xyz_parse(void *arg)
+/* xyz_lines: the lines of the file mapped in j->f from x->pos on, into j->raw, until it holds
+ * j->limit rows or the file ends (then x->done, the last block checked). */
+static int xyz_lines(void *arg)
 {
     xyz_job *j = arg;
     xyz_ctx *x = j->x;
@@ -209,9 +229,10 @@ static int xyz_parse(void *arg)
     sd_err *err = x->err;
     int rc = 0;
     const char *s = (const char *)j->f->data, *end = s + j->f->size;
-    const char *p = s;
-    size_t ln = 0;
-    for (; p < end; p = p < end ? p + 1 : p) { /* p is at a line's '\n' at the loop's end */
+    const char *p = s + x->pos;
+    size_t ln = x->ln;
+    for (; p < end && raw->n < j->limit; p = p < end ? p + 1 : p) {
+        /* p is at a line's '\n' at the loop's end */
         ln++;
         const char *le = pc__line_end(p, end), *te = pc__trim_cr(p, le);
         const char *q = p;
@@ -235,9 +256,9 @@ static int xyz_parse(void *arg)
         if (n == 1 && (x->ncol == 0 || x->count_line)) {
             /* A PTS count line: before the first row, or starting the next block of a
              * multi-scan file whose first block had one. */
-            rc = check_block(x, raw, ln);
+            rc = check_block(x, ln);
             if (rc < 0) return rc;
-            rc = count_row(x, raw, q, te, v[0], ln);
+            rc = count_row(x, q, te, v[0], ln);
             if (rc < 0) return rc;
             continue;
         }
@@ -255,13 +276,25 @@ static int xyz_parse(void *arg)
         rc = store_row(x, raw, v);
         if (rc < 0) return rc;
     }
-    rc = check_block(x, raw, ln);
+    x->pos = (size_t)(p - s);
+    x->ln = ln;
+    if (p < end) return 0;
+    rc = check_block(x, ln);
     if (rc < 0) return rc;
     if (x->ncol == 0 && !raw->format[0])
         snprintf(raw->format, sizeof raw->format, "%s text (no rows)",
                  x->count_line ? "PTS" : "XYZ");
-    if (raw->attrs & PC_ATTR_RGB) finish_colour(x, raw);
+    x->done = 1;
     return 0;
+}
+
+/* xyz_parse: every line of the file, then the colours scaled. */
+static int xyz_parse(void *arg)
+{
+    xyz_job *j = arg;
+    int rc = xyz_lines(j);
+    if (rc == 0 && (j->raw->attrs & PC_ATTR_RGB)) finish_colour(j->x, j->raw);
+    return rc;
 }
 
 int pc_read_xyz(const char *path, pc_raw *raw, sd_err *err)
@@ -271,9 +304,104 @@ int pc_read_xyz(const char *path, pc_raw *raw, sd_err *err)
     int rc = pc__file_open(path, &f, err);
     if (rc < 0) return rc;
     xyz_ctx x = {.path = path, .err = err, .bound = f.size / 6 + 1};
-    xyz_job j = {.f = &f, .x = &x, .raw = raw};
+    xyz_job j = {.f = &f, .x = &x, .raw = raw, .limit = SIZE_MAX};
     rc = pc__guarded(&f, path, xyz_parse, &j, err);
     free(x.col);
     pc__file_close(&f);
     return rc;
+}
+
+/* ---- the stream (xyz_stream.h) ---- */
+
+struct pc_xyz_stream {
+    char path[4096];
+    pc__file f;
+    xyz_ctx x;
+    pc_raw win;          /* the rows of the last window */
+    int final;           /* a whole pass read: layout, format and colour scale known */
+    double scale;
+    int has_rgb;
+    char format[64];
+};
+
+int pc_xyz_stream_open(const char *path, pc_xyz_stream **out, sd_err *err)
+{
+    *out = NULL;
+    const char *slash = strrchr(path, '/'), *dot = strrchr(slash ? slash : path, '.');
+    const char *e = dot ? dot + 1 : "";
+    if (strcasecmp(e, "xyz") && strcasecmp(e, "pts") && strcasecmp(e, "txt")) return 0;
+    pc_xyz_stream *s = calloc(1, sizeof *s);
+    if (!s) return sd_errf(err, SD_ENOMEM, "out of memory");
+    snprintf(s->path, sizeof s->path, "%s", path);
+    int rc = pc__file_open(path, &s->f, err);
+    if (rc < 0) {
+        free(s);
+        return rc;
+    }
+    s->x.path = s->path;
+    s->x.bound = s->f.size / 6 + 1;
+    s->x.stream = 1;
+    *out = s;
+    return 1;
+}
+
+void pc_xyz_stream_close(pc_xyz_stream *s)
+{
+    if (!s) return;
+    free(s->x.col);
+    pc_raw_free(&s->win);
+    pc__file_close(&s->f);
+    free(s);
+}
+
+void pc_xyz_stream_rewind(pc_xyz_stream *s)
+{
+    xyz_ctx *x = &s->x;
+    x->ncol = 0;
+    x->first_line = x->count_line = 0;
+    x->declared = x->block_start = x->rows = 0;
+    x->pos = x->ln = 0;
+    x->done = 0;
+}
+
+int64_t pc_xyz_stream_next(pc_xyz_stream *s, double *xyz, uint8_t *rgba, size_t max,
+                           sd_err *err)
+{
+    if (rgba && !s->final)
+        return sd_errf(err, SD_EINVAL, "%s: colours asked before a whole pass", s->path);
+    if (s->x.done || max == 0) return 0;
+    s->win.n = 0;
+    s->x.err = err;
+    xyz_job j = {.f = &s->f, .x = &s->x, .raw = &s->win, .limit = max};
+    int rc = pc__guarded(&s->f, s->path, xyz_lines, &j, err);
+    if (rc < 0) return rc;
+    size_t n = s->win.n;
+    memcpy(xyz, s->win.xyz, 3 * n * sizeof *xyz);
+    if (rgba) {
+        for (size_t i = 0; i < n; i++) {
+            if (s->has_rgb) colour8(s->x.col + 3 * i, s->scale, rgba + 4 * i);
+            else memset(rgba + 4 * i, 255, 4);
+        }
+    }
+    if (s->x.done) {
+        s->final = 1;
+        s->scale = colour_scale(&s->x);
+        s->has_rgb = (s->win.attrs & PC_ATTR_RGB) != 0;
+        snprintf(s->format, sizeof s->format, "%s", s->win.format);
+    }
+    /* the lines read are not needed again this pass: give their pages back */
+    long pg = sysconf(_SC_PAGESIZE);
+    size_t upto = pg > 0 ? s->x.pos & ~((size_t)pg - 1) : 0;
+    if (upto > 0 && s->f.map) (void)madvise(s->f.map, upto, MADV_DONTNEED);
+    return (int64_t)n;
+}
+
+const char *pc_xyz_stream_format(const pc_xyz_stream *s)
+{
+    return s->format;
+}
+
+int pc_xyz_stream_has_rgb(const pc_xyz_stream *s)
+{
+    return s->has_rgb;
 }
