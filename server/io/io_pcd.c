@@ -18,11 +18,15 @@
 #include "cloud.h"
 #include "io_text.h"
 #include "lzf.h"
+#include "pcd_stream.h"
 
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
+#include <sys/mman.h>
+#include <unistd.h>
 
 #if defined(__BYTE_ORDER__) && __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
 #error "io_pcd.c reads little-endian PCD values with memcpy; add byte swapping for this host"
@@ -700,24 +704,37 @@ static const char *ascii_value(const pcd_field *f, const char *s, const char *e,
     return q;
 }
 
-/* Reads the ascii body: one point per line, the values of all fields in order. */
+/* Where reading an ascii body stands: the next line's offset and number, the points read. */
+typedef struct ascii_pos {
+    uint64_t off;
+    int line;
+    uint64_t done;
+} ascii_pos;
+
+/* Reads want points of the ascii body from at (one point per line, the values of all fields in
+ * order) into raw, and moves at past them. rd->scratch holds the record buffer. */
 static int read_ascii(const char *path, const pcd_header *h, const uint8_t *data, size_t size,
-                      pcd_reader *rd, pc_raw *raw, sd_err *err)
+                      pcd_reader *rd, pc_raw *raw, ascii_pos *at, size_t want, sd_err *err)
 {
-    uint8_t *rec = malloc((size_t)h->point_size);
-    if (!rec) return sd_errf(err, SD_ENOMEM, "%s: out of memory", path);
-    rd->scratch = rec;
+    uint8_t *rec = rd->scratch;
+    if (!rec) {
+        rec = malloc((size_t)h->point_size);
+        if (!rec) return sd_errf(err, SD_ENOMEM, "%s: out of memory", path);
+        rd->scratch = rec;
+    }
     for (int u = 0; u < h->n_used; u++) {
         rd->base[u] = rec + h->f[h->used[u]].off;
         rd->stride[u] = 0;
     }
-    const char *s = (const char *)data + h->data_off, *end = (const char *)data + size;
-    int line = h->ln_data;
+    const char *s = (const char *)data + at->off, *end = (const char *)data + size;
+    int line = at->line;
     int rc = 0;
-    while (raw->n < h->points) {
+    size_t n0 = raw->n;
+    while (raw->n - n0 < want) {
         if (s >= end) {
             rc = sd_errf(err, SD_ETRUNC, "%s: the ascii data ends at line %d (offset %zu) after "
-                         "%zu of the %llu points the header declares", path, line, size, raw->n,
+                         "%llu of the %llu points the header declares", path, line, size,
+                         (unsigned long long)(at->done + (raw->n - n0)),
                          (unsigned long long)h->points);
             break;
         }
@@ -758,8 +775,9 @@ static int read_ascii(const char *path, const pcd_header *h, const uint8_t *data
         }
         decode_points(rd, 1, raw);
     }
-    rd->scratch = NULL;
-    free(rec);
+    at->off = (uint64_t)(s - (const char *)data);
+    at->line = line;
+    at->done += raw->n - n0;
     return rc;
 }
 
@@ -774,29 +792,24 @@ typedef struct pcd_job {
     sd_err *err;
 } pcd_job;
 
-/* pcd_parse: the header and body of the file mapped in j->f, into j->raw. */
-static int pcd_parse(void *arg)
+/* pcd_head: the header of the file mapped in j->f, checked, and the body's size checked
+ * against it (csize/usize: a compressed body's sizes). raw gets the attributes. */
+static int pcd_head(pcd_job *j, uint32_t *csize_out, uint32_t *usize_out)
 {
-    pcd_job *j = arg;
     const char *path = j->path;
     const pc__file file = *j->f;
     pcd_header *h = j->h;
-    pcd_reader *rd = j->rd;
     pc_raw *raw = j->raw;
     sd_err *err = j->err;
     int rc = 0;
-    if (file.size == 0) {
-        rc = sd_errf(err, SD_ETRUNC, "%s: the file is empty (no header at offset 0)", path);
-        goto out;
-    }
+    if (file.size == 0)
+        return sd_errf(err, SD_ETRUNC, "%s: the file is empty (no header at offset 0)", path);
     rc = parse_header_lines(path, file.data, file.size, h, err);
     if (!rc) rc = check_header(path, h, raw, err);
-    if (rc) goto out;
-    if (h->points == 0) {
-        rc = sd_errf(err, SD_EEMPTY, "%s: the header declares 0 points (line %d)", path,
-                     h->ln_points ? h->ln_points : h->ln_width);
-        goto out;
-    }
+    if (rc) return rc;
+    if (h->points == 0)
+        return sd_errf(err, SD_EEMPTY, "%s: the header declares 0 points (line %d)", path,
+                       h->ln_points ? h->ln_points : h->ln_width);
     int ascii = !strcmp(h->data, "ascii"), compressed = !strcmp(h->data, "binary_compressed");
     uint64_t left = file.size - h->data_off;
     uint32_t csize = 0, usize = 0;
@@ -813,23 +826,14 @@ static int pcd_parse(void *arg)
                      (unsigned long long)left, (unsigned long long)h->data_off);
     else if (compressed)
         rc = compressed_sizes(path, h, file.data, file.size, &csize, &usize, err);
-    if (rc) goto out;
-    /* Bounded by the file size (ascii, binary) or by the checked uncompressed size. */
-    rc = pc_raw_reserve(raw, (size_t)h->points, err);
-    if (rc) goto out;
-    if (h->sep_rgb) {
-        rd->col16 = malloc((size_t)h->points * 3 * sizeof *rd->col16);
-        if (!rd->col16) {
-            rc = sd_errf(err, SD_ENOMEM, "%s: out of memory for %llu colours", path,
-                         (unsigned long long)h->points);
-            goto out;
-        }
-    }
-    if (ascii) rc = read_ascii(path, h, file.data, file.size, rd, raw, err);
-    else if (compressed) rc = read_compressed(path, h, file.data, csize, usize, rd, raw, err);
-    else read_binary(h, file.data, rd, raw);
-    if (rc) goto out;
-    finish_colours(rd, raw);
+    *csize_out = csize;
+    *usize_out = usize;
+    return rc;
+}
+
+/* pcd_describe: the format name and the sensor's pose, when the file gives one. */
+static void pcd_describe(const pcd_header *h, pc_raw *raw)
+{
     snprintf(raw->format, sizeof raw->format, "PCD%s%s %s", h->version[0] ? " " : "", h->version,
              h->data);
     /* PCL writes the identity pose when it knows no sensor (its default): only another pose
@@ -841,6 +845,44 @@ static int pcd_parse(void *arg)
         raw->has_viewpoint = 1;
         memcpy(raw->viewpoint, h->viewpoint, sizeof raw->viewpoint);
     }
+}
+
+/* pcd_parse: the header and body of the file mapped in j->f, into j->raw. */
+static int pcd_parse(void *arg)
+{
+    pcd_job *j = arg;
+    const char *path = j->path;
+    const pc__file file = *j->f;
+    pcd_header *h = j->h;
+    pcd_reader *rd = j->rd;
+    pc_raw *raw = j->raw;
+    sd_err *err = j->err;
+    uint32_t csize = 0, usize = 0;
+    int rc = pcd_head(j, &csize, &usize);
+    if (rc) goto out;
+    int ascii = !strcmp(h->data, "ascii"), compressed = !strcmp(h->data, "binary_compressed");
+    /* Bounded by the file size (ascii, binary) or by the checked uncompressed size. */
+    rc = pc_raw_reserve(raw, (size_t)h->points, err);
+    if (rc) goto out;
+    if (h->sep_rgb) {
+        rd->col16 = malloc((size_t)h->points * 3 * sizeof *rd->col16);
+        if (!rd->col16) {
+            rc = sd_errf(err, SD_ENOMEM, "%s: out of memory for %llu colours", path,
+                         (unsigned long long)h->points);
+            goto out;
+        }
+    }
+    if (ascii) {
+        ascii_pos at = {h->data_off, h->ln_data, 0};
+        rc = read_ascii(path, h, file.data, file.size, rd, raw, &at, (size_t)h->points, err);
+    } else if (compressed) {
+        rc = read_compressed(path, h, file.data, csize, usize, rd, raw, err);
+    } else {
+        read_binary(h, file.data, rd, raw);
+    }
+    if (rc) goto out;
+    finish_colours(rd, raw);
+    pcd_describe(h, raw);
 out:
     return rc;
 }
@@ -859,4 +901,181 @@ int pc_read_pcd(const char *path, pc_raw *raw, sd_err *err)
     header_free(&h);
     pc__file_close(&file);
     return rc;
+}
+
+/* ---- the stream (pcd_stream.h) ---- */
+
+enum { PCD_WINDOW = 1 << 16 };
+
+struct pc_pcd_stream {
+    char path[4096];
+    pc__file f;
+    pcd_header h;
+    pcd_reader rd;
+    pc_raw win;              /* the points of the last window (attributes as the file's) */
+    uint8_t *ubuf;           /* binary_compressed: the decompressed body */
+    int ascii, compressed;
+    uint64_t next;           /* points read this pass */
+    ascii_pos at;            /* ascii: where the next window starts */
+    int final;               /* a whole pass read: the split colours' scale is known */
+    sd_err *err;             /* the current call's */
+    uint32_t csize, usize;
+};
+
+static int stream_head(void *arg)
+{
+    pc_pcd_stream *s = arg;
+    pcd_job j = {.path = s->path, .f = &s->f, .h = &s->h, .rd = &s->rd, .raw = &s->win,
+                 .err = s->err};
+    int rc = pcd_head(&j, &s->csize, &s->usize);
+    if (rc) return rc;
+    pcd_describe(&s->h, &s->win);
+    s->ascii = !strcmp(s->h.data, "ascii");
+    s->compressed = !strcmp(s->h.data, "binary_compressed");
+    if (!s->compressed) return 0;
+    s->ubuf = malloc(s->usize ? s->usize : 1);
+    if (!s->ubuf)
+        return sd_errf(s->err, SD_ENOMEM, "%s: out of memory for %u uncompressed bytes", s->path,
+                       s->usize);
+    return pc_lzf_decompress(s->f.data + s->h.data_off + 8, s->csize, s->ubuf, s->usize,
+                             s->path, s->h.data_off + 8, s->err);
+}
+
+int pc_pcd_stream_open(const char *path, pc_pcd_stream **out, sd_err *err)
+{
+    *out = NULL;
+    const char *slash = strrchr(path, '/'), *dot = strrchr(slash ? slash : path, '.');
+    if (!dot || strcasecmp(dot + 1, "pcd")) return 0;
+    pc_pcd_stream *s = calloc(1, sizeof *s);
+    if (!s) return sd_errf(err, SD_ENOMEM, "out of memory");
+    snprintf(s->path, sizeof s->path, "%s", path);
+    s->rd.h = &s->h;
+    s->err = err;
+    int rc = pc__file_open(path, &s->f, err);
+    if (rc == 0) rc = pc__guarded(&s->f, path, stream_head, s, err);
+    if (rc == 0) rc = pc_raw_reserve(&s->win, PCD_WINDOW, err);
+    if (rc == 0 && s->h.sep_rgb &&
+        !(s->rd.col16 = malloc((size_t)PCD_WINDOW * 3 * sizeof *s->rd.col16)))
+        rc = sd_errf(err, SD_ENOMEM, "%s: out of memory", path);
+    if (rc != 0) {
+        pc_pcd_stream_close(s);
+        return rc;
+    }
+    pc_pcd_stream_rewind(s);
+    *out = s;
+    return 1;
+}
+
+void pc_pcd_stream_close(pc_pcd_stream *s)
+{
+    if (!s) return;
+    free(s->rd.scratch);
+    free(s->rd.col16);
+    free(s->ubuf);
+    header_free(&s->h);
+    pc_raw_free(&s->win);
+    pc__file_close(&s->f);
+    free(s);
+}
+
+void pc_pcd_stream_rewind(pc_pcd_stream *s)
+{
+    s->next = 0;
+    s->at = (ascii_pos){s->h.data_off, s->h.ln_data, 0};
+}
+
+typedef struct window_job {
+    pc_pcd_stream *s;
+    size_t m;
+} window_job;
+
+/* The next m points into s->win, from the mapping (binary, ascii) or the decompressed body. */
+static int stream_window(void *arg)
+{
+    window_job *w = arg;
+    pc_pcd_stream *s = w->s;
+    const pcd_header *h = &s->h;
+    pcd_reader *rd = &s->rd;
+    s->win.n = 0;
+    if (s->ascii)
+        return read_ascii(s->path, h, s->f.data, s->f.size, rd, &s->win, &s->at, w->m, s->err);
+    for (int u = 0; u < h->n_used; u++) {
+        const pcd_field *f = &h->f[h->used[u]];
+        if (s->compressed) { /* each field's block, then this window's values in it */
+            rd->stride[u] = (size_t)f->size * f->count;
+            rd->base[u] = s->ubuf + f->off * h->points + s->next * rd->stride[u];
+        } else {
+            rd->stride[u] = (size_t)h->point_size;
+            rd->base[u] = s->f.data + h->data_off + s->next * h->point_size + f->off;
+        }
+    }
+    decode_points(rd, w->m, &s->win);
+    return 0;
+}
+
+int64_t pc_pcd_stream_next(pc_pcd_stream *s, double *xyz, uint8_t *rgba, size_t max,
+                           sd_err *err)
+{
+    const pcd_header *h = &s->h;
+    if (rgba && h->sep_rgb && !s->final)
+        return sd_errf(err, SD_EINVAL, "%s: colours asked before a whole pass", s->path);
+    uint64_t left = h->points - s->next;
+    size_t m = left < max ? (size_t)left : max;
+    if (m > PCD_WINDOW) m = PCD_WINDOW;
+    if (m == 0) {
+        s->final = 1;
+        return 0;
+    }
+    s->err = err;
+    window_job w = {s, m};
+    int rc = pc__guarded(&s->f, s->path, stream_window, &w, err);
+    if (rc) return rc;
+    memcpy(xyz, s->win.xyz, 3 * m * sizeof *xyz);
+    if (rgba) {
+        int wide = s->rd.col_max > 255;
+        for (size_t i = 0; i < m; i++) {
+            uint8_t *c = rgba + 4 * i;
+            if (h->sep_rgb) {
+                for (int k = 0; k < 3; k++) {
+                    uint32_t v = s->rd.col16[3 * i + k];
+                    c[k] = (uint8_t)(wide ? (v + 128) / 257 : v);
+                }
+                c[3] = 255;
+            } else if (s->win.attrs & PC_ATTR_RGB) {
+                memcpy(c, s->win.rgba + 4 * i, 4);
+            } else {
+                memset(c, 255, 4);
+            }
+        }
+    }
+    s->next += m;
+    if (s->next == h->points) s->final = 1;
+    /* give back the pages of the mapping this pass has read */
+    uint64_t done = s->compressed ? 0 : s->ascii ? s->at.off : h->data_off + s->next * h->point_size;
+    long pg = sysconf(_SC_PAGESIZE);
+    if (pg > 0 && s->f.map && done > (uint64_t)pg)
+        (void)madvise(s->f.map, (size_t)done & ~((size_t)pg - 1), MADV_DONTNEED);
+    return (int64_t)m;
+}
+
+uint64_t pc_pcd_stream_count(const pc_pcd_stream *s)
+{
+    return s->h.points;
+}
+
+const char *pc_pcd_stream_format(const pc_pcd_stream *s)
+{
+    return s->win.format;
+}
+
+int pc_pcd_stream_has_rgb(const pc_pcd_stream *s)
+{
+    return (s->win.attrs & PC_ATTR_RGB) != 0;
+}
+
+int pc_pcd_stream_viewpoint(const pc_pcd_stream *s, double xyz[3])
+{
+    if (!s->win.has_viewpoint) return 0;
+    memcpy(xyz, s->win.viewpoint, 3 * sizeof *xyz);
+    return 1;
 }

@@ -14,6 +14,7 @@
 #include "cloud.h"
 #include "las_stream.h"
 #include "laz_stream.h"
+#include "pcd_stream.h"
 #include "xyz_stream.h"
 
 enum { BLOCK = 1 << 16, MAX_PROPS = 64, MAX_HEADER = 64 * 1024 };
@@ -31,8 +32,9 @@ struct lod_src {
     /* streamed LAS: uncompressed (las) or LAZ and COPC (laz), as coordinates and 16-bit colours */
     pc_las_stream *las;
     pc_laz_stream *laz;
-    /* streamed XYZ/PTS text: coordinates in las_xyz, colours as RGBA8 */
+    /* streamed XYZ/PTS text (xyz) or PCD (pcd): coordinates in las_xyz, colours as RGBA8 */
     pc_xyz_stream *xyz;
+    pc_pcd_stream *pcd;
     uint8_t *xyz_rgba;
     int las_wide;                        /* colours scaled down from 16 bits (pc_read_las's rule) */
     double *las_xyz;
@@ -298,14 +300,21 @@ static int64_t las_next(lod_src *s, float *pos, uint32_t *rgba, size_t max, sd_e
     return (int64_t)k;
 }
 
-/* xyz_bounds_pass: bounds and count of the finite rows of a streamed text file; its format
- * and colours are known after it. */
-static int xyz_bounds_pass(lod_src *s, sd_err *err)
+/* The next rows of the streamed text or PCD file. */
+static int64_t rows_next(lod_src *s, uint8_t *rgba, size_t max, sd_err *err)
+{
+    return s->xyz ? pc_xyz_stream_next(s->xyz, s->las_xyz, rgba, max, err)
+                  : pc_pcd_stream_next(s->pcd, s->las_xyz, rgba, max, err);
+}
+
+/* rows_bounds_pass: bounds and count of the finite rows of a streamed text or PCD file; its
+ * format and colours are known after it. */
+static int rows_bounds_pass(lod_src *s, sd_err *err)
 {
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     uint64_t kept = 0, rows = 0;
     int64_t m;
-    while ((m = pc_xyz_stream_next(s->xyz, s->las_xyz, NULL, BLOCK, err)) > 0) {
+    while ((m = rows_next(s, NULL, BLOCK, err)) > 0) {
         for (int64_t i = 0; i < m; i++) {
             const double *p = s->las_xyz + 3 * i;
             if (!isfinite(p[0]) || !isfinite(p[1]) || !isfinite(p[2])) continue;
@@ -324,18 +333,21 @@ static int xyz_bounds_pass(lod_src *s, sd_err *err)
     if (rc < 0) return rc;
     s->info.n = kept;
     s->info.n_dropped = rows - kept;
-    s->info.attrs = pc_xyz_stream_has_rgb(s->xyz) ? PC_ATTR_RGB : 0;
-    snprintf(s->info.format, sizeof s->info.format, "%s", pc_xyz_stream_format(s->xyz));
+    int rgb = s->xyz ? pc_xyz_stream_has_rgb(s->xyz) : pc_pcd_stream_has_rgb(s->pcd);
+    s->info.attrs = rgb ? PC_ATTR_RGB : 0;
+    snprintf(s->info.format, sizeof s->info.format, "%s",
+             s->xyz ? pc_xyz_stream_format(s->xyz) : pc_pcd_stream_format(s->pcd));
+    if (s->pcd) s->info.has_viewpoint = pc_pcd_stream_viewpoint(s->pcd, s->info.viewpoint);
     s->info.streamed = 1;
     return 0;
 }
 
-static int64_t xyz_next(lod_src *s, float *pos, uint32_t *rgba, size_t max, sd_err *err)
+static int64_t rows_next_points(lod_src *s, float *pos, uint32_t *rgba, size_t max, sd_err *err)
 {
     size_t k = 0;
     while (k < max) {
         size_t want = max - k < BLOCK ? max - k : BLOCK;
-        int64_t m = pc_xyz_stream_next(s->xyz, s->las_xyz, s->xyz_rgba, want, err);
+        int64_t m = rows_next(s, s->xyz_rgba, want, err);
         if (m <= 0) return m < 0 ? m : (int64_t)k;
         for (int64_t i = 0; i < m; i++) {
             const double *x = s->las_xyz + 3 * i;
@@ -365,10 +377,13 @@ int lod_src_open(const char *path, lod_src **out, sd_err *err)
     int las = 0; /* 1: a streamed LAS or LAZ file */
     if (rc == 0) las = rc = pc_las_stream_open(path, &s->las, err);
     if (rc == 0) las = rc = pc_laz_stream_open(path, 0, &s->laz, err);
-    if (rc == 0 && (rc = pc_xyz_stream_open(path, &s->xyz, err)) == 1) {
+    int rows = 0; /* 1: a streamed text or PCD file */
+    if (rc == 0) rows = rc = pc_xyz_stream_open(path, &s->xyz, err);
+    if (rc == 0) rows = rc = pc_pcd_stream_open(path, &s->pcd, err);
+    if (rc == 1 && rows) {
         s->las_xyz = malloc((size_t)BLOCK * 3 * sizeof(double));
         s->xyz_rgba = malloc((size_t)BLOCK * 4);
-        rc = s->las_xyz && s->xyz_rgba ? xyz_bounds_pass(s, err)
+        rc = s->las_xyz && s->xyz_rgba ? rows_bounds_pass(s, err)
                                        : sd_errf(err, SD_ENOMEM, "out of memory");
     } else if (rc == 1 && !las) {
         s->buf = malloc((size_t)BLOCK * s->rec);
@@ -428,6 +443,7 @@ void lod_src_close(lod_src *s)
     pc_las_stream_close(s->las);
     pc_laz_stream_close(s->laz);
     pc_xyz_stream_close(s->xyz);
+    pc_pcd_stream_close(s->pcd);
     free(s->xyz_rgba);
     free(s->las_xyz);
     free(s->las_rgb);
@@ -445,6 +461,7 @@ int lod_src_rewind(lod_src *s, sd_err *err)
     (void)err;
     s->next = 0;
     if (s->xyz) pc_xyz_stream_rewind(s->xyz);
+    if (s->pcd) pc_pcd_stream_rewind(s->pcd);
     return 0;
 }
 
@@ -462,7 +479,7 @@ int64_t lod_src_next(lod_src *s, float *pos, uint32_t *rgba, size_t max, sd_err 
         return (int64_t)k;
     }
     if (s->las || s->laz) return las_next(s, pos, rgba, max, err);
-    if (s->xyz) return xyz_next(s, pos, rgba, max, err);
+    if (s->xyz || s->pcd) return rows_next_points(s, pos, rgba, max, err);
     while (k < max && s->next < s->nrec) {
         size_t want = max - k < BLOCK ? max - k : BLOCK;
         size_t m = s->nrec - s->next < want ? (size_t)(s->nrec - s->next) : want;

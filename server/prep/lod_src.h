@@ -3,9 +3,11 @@
  * Binary little-endian PLY whose first element is the vertex element with scalar properties
  * (what scanners' exports and gen_cloud write) and uncompressed LAS (io/las_stream.h) are
  * streamed with pread in blocks, LAZ and COPC (io/laz_stream.h) a round of chunks at a time,
- * decoded in parallel: memory does not grow with the file. Any other file (other PLY layouts,
- * PCD, XYZ) is read whole by pc_load (io/) and handed out from memory; that path is in core,
- * and says so in lod_src_info.streamed.
+ * decoded in parallel, XYZ/PTS text (io/xyz_stream.h) and PCD (io/pcd_stream.h; a
+ * binary_compressed body is decompressed whole first) a window of rows at a time: memory does
+ * not grow with the file. Any other file (ascii or big-endian PLY, PLY whose first element is
+ * not the vertices) is read whole by pc_load (io/) and handed out from memory; that path is in
+ * core, and says so in lod_src_info.streamed.
  *
  * Positions come out as prepared.h has them: float(x - offset), offset the double centre of
  * the bounding box of the finite points (pc_finalize's rule), non-finite points skipped, so
