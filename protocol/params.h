@@ -35,7 +35,7 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(T,            "t",            SP_T_FLOAT, t,            0,    1,        "0.5",    NULL)     \
     X(L_M,          "l_m",          SP_T_FLOAT, l_m,          0,    1,        "0",      NULL)     \
     X(FIELD,        "field",        SP_T_ENUM,  field,        0,    0,        "uncertainty", "uncertainty|height|intensity|scalar|quality|confidence|class|axis-distance") \
-    X(ORDER,        "order",        SP_T_ENUM,  order,        0,    0,        "auto",   "axis|tile|auto") \
+    X(ORDER,        "order",        SP_T_ENUM,  order,        0,    0,        "auto",   "axis|tile|auto|cpu") \
     X(CLASSES,      "classes",      SP_T_INT,   classes,      0,    4294967295, "0",    NULL)     \
     X(AXIS_A,       "axis_a",       SP_T_VEC3,  axis_a,       -1e9, 1e9,      "0,0,0",  NULL)     \
     X(AXIS_B,       "axis_b",       SP_T_VEC3,  axis_b,       -1e9, 1e9,      "0,0,1",  NULL)     \
@@ -85,13 +85,14 @@ enum {
     SP_FIELD_UNCERTAINTY = 0, SP_FIELD_HEIGHT, SP_FIELD_INTENSITY, SP_FIELD_SCALAR,
     SP_FIELD_QUALITY, SP_FIELD_CONFIDENCE, SP_FIELD_CLASS, SP_FIELD_AXIS
 };
-/* order: both composite the soft discs back to front in the order of the axis-sorted index
- * arrays (pipe_soft.c); axis = as GL point sprites blended in primitive order, tile = a compute
- * compositor that bins them into 8x8 pixel tiles keeping that order and blends per pixel;
- * auto = tile on a software renderer for clouds with more than SOFT_AUTO_TILE soft points
- * (pipe_soft.c: there its compute passes use every core, the sprites' front end one), axis
- * otherwise. */
-enum { SP_ORDER_AXIS = 0, SP_ORDER_TILE, SP_ORDER_AUTO };
+/* order: every value composites the soft discs back to front in the order of the axis-sorted
+ * index arrays (pipe_soft.c); axis = as GL point sprites blended in primitive order, tile = a
+ * compute compositor that bins them into 8x8 pixel tiles keeping that order and blends per
+ * pixel, cpu = the discs as the GL projected them, read back and composited on the host in 64x64
+ * tiles by every core (soft_cpu.h), the layer put over the frame by the GL; auto = cpu on a
+ * software renderer (where the GL is the CPU: there it is the fastest on every cloud measured),
+ * axis on a GPU. */
+enum { SP_ORDER_AXIS = 0, SP_ORDER_TILE, SP_ORDER_AUTO, SP_ORDER_CPU };
 
 typedef struct sp_params {
     int32_t pipeline;

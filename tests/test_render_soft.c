@@ -221,6 +221,10 @@ static double phi19(double lambda, double d)
  * under 0.97 r (the rim, where the sprite's cut-off and the analytic radius may disagree by a
  * fraction of a pixel, is left out); the centre pixel and the pixels nearest d = r / 2 are
  * reported. */
+/* The three ways of compositing the Express-Model's discs (the analytic tests run each). */
+static const int orders[3] = {SP_ORDER_AXIS, SP_ORDER_TILE, SP_ORDER_CPU};
+static const char *const onames[3] = {"axis", "tile", "cpu"};
+
 static void test_disc_opacity_eq19(void **state)
 {
     (void)state;
@@ -233,8 +237,8 @@ static void test_disc_opacity_eq19(void **state)
     /* the light along the view axis: the shading of the disc (its normal faces the camera) is
      * exactly 1, so the colour is eq. 19's opacity alone */
     p.light[0] = 0.0f, p.light[1] = 0.0f, p.light[2] = 1.0f;
-    for (int ord = 0; ord < 2; ord++) {
-    p.order = ord;
+    for (int oi = 0; oi < 3; oi++) {
+    p.order = orders[oi];
     rnd_frame f = {0};
     tu_render(tu_ctx, id, &cam, &p, 0, &f);
     double rpx = disc_px(0.5, 4.0), cx = 0.5 * W, cy = 0.5 * H;
@@ -256,7 +260,7 @@ static void test_disc_opacity_eq19(void **state)
     double dc = hypot(0.5, 0.5) / rpx;
     printf("soft disc, order=%s: %.1f px radius, %d pixels inside; centre pixel %d (eq. 19: "
            "%.2f), at d = %.3f r %d (eq. 19: %.2f); largest error %d levels\n",
-           ord ? "tile" : "axis", rpx, nin, c0, 255.0 * phi19(p.lambda, dc), at_half, half_px,
+           onames[oi], rpx, nin, c0, 255.0 * phi19(p.lambda, dc), at_half, half_px,
            255.0 * phi19(p.lambda, at_half), worst);
     assert_true(nin > 1000);
     assert_true(worst <= 1);
@@ -283,8 +287,8 @@ static void test_two_layers_order(void **state)
     sp_params_defaults(&p);
     p.pipeline = SP_PIPE_SOFT, p.t = 0.5f, p.lambda = 0.8f;
     p.light[0] = 0.0f, p.light[1] = 0.0f, p.light[2] = 1.0f; /* shading 1 (test_disc_opacity_eq19) */
-    for (int side = 0; side < 4; side++) {
-        p.order = side / 2; /* axis, then tile */
+    for (int side = 0; side < 6; side++) {
+        p.order = orders[side / 2]; /* axis, tile, then cpu */
         double ez = side % 2 == 0 ? 4.0 : -4.0;
         rnd_camera cam = cam_z(ez);
         rnd_frame f = {0};
@@ -308,7 +312,7 @@ static void test_two_layers_order(void **state)
                      abs((int)lround(255 * gw) - (int)lround(255 * g));
             if (wr < wrong_min) wrong_min = wr;
             printf("two layers, order=%s, from %s z, pixel (%d, %d): got (%d, %d), over gives "
-                   "(%.1f, %.1f), the other order (%.1f, %.1f)\n", p.order ? "tile" : "axis",
+                   "(%.1f, %.1f), the other order (%.1f, %.1f)\n", onames[side / 2],
                    side % 2 == 0 ? "+" : "-", x, y, px[0], px[1],
                    255 * r, 255 * g, 255 * rw, 255 * gw);
         }
@@ -511,13 +515,9 @@ static void test_tile_matches_axis(void **state)
     sp_params p;
     sp_params_defaults(&p);
     p.pipeline = SP_PIPE_SOFT, p.t = 0.4f, p.lambda = 0.5f, p.l_m = 0.6f;
-    rnd_frame a = {0}, b = {0}, c = {0};
+    rnd_frame a = {0}, b = {0}, c = {0}, u = {0};
     p.order = SP_ORDER_AXIS;
     tu_render(tu_ctx, id, &cam, &p, 0, &a);
-    p.order = SP_ORDER_AUTO; /* few soft points: auto is axis, exactly */
-    tu_render(tu_ctx, id, &cam, &p, 0, &c);
-    assert_memory_equal(a.rgba8, c.rgba8, (size_t)W * H * 4);
-    rnd_frame_free(&c);
     p.order = SP_ORDER_TILE;
     tu_render(tu_ctx, id, &cam, &p, 0, &b);
     int n, m = max_diff(&a, &b, &n), cov = 0;
@@ -526,8 +526,24 @@ static void test_tile_matches_axis(void **state)
            "differ)\n", m, n, cov);
     assert_true(cov > W * H / 4);
     assert_true(m <= 4);
+    /* order=cpu: the same discs, order and float blending as tile, on the host */
+    p.order = SP_ORDER_CPU;
+    tu_render(tu_ctx, id, &cam, &p, 0, &c);
+    int nc, mc = max_diff(&a, &c, &nc), nt, mt = max_diff(&b, &c, &nt);
+    printf("order=cpu vs axis: max %d levels (%d pixels); vs tile: max %d (%d pixels)\n", mc, nc,
+           mt, nt);
+    assert_true(mc <= 4);
+    assert_true(mt <= 1); /* both float: one rounding, float sums in another order at most */
+    /* order=auto is cpu on a software renderer, axis on a GPU: exactly */
+    const char *rs = rnd_renderer_string(tu_ctx);
+    int software = strstr(rs, "llvmpipe") || strstr(rs, "softpipe") || strstr(rs, "swrast");
+    p.order = SP_ORDER_AUTO;
+    tu_render(tu_ctx, id, &cam, &p, 0, &u);
+    assert_memory_equal(u.rgba8, (software ? c : a).rgba8, (size_t)W * H * 4);
     rnd_frame_free(&a);
     rnd_frame_free(&b);
+    rnd_frame_free(&c);
+    rnd_frame_free(&u);
     rnd_release(tu_ctx, id);
 }
 
@@ -582,9 +598,9 @@ static void test_buffer_sets(void **state)
  * Every pixel inside the plane's screen square must be covered (not the background): the
  * projection walks all discs (before the fix, the discs past 131072 in the sorted order were
  * left unprojected and the plane had a hole at one end). Tolerance: none of the pixels inside
- * the square, 2 pixels in from its edges, is background. With more than 200000 soft points,
- * order=auto is the tile compositor on a software renderer (the image equals order=tile's
- * exactly) and the sprites on a GPU. */
+ * the square, 2 pixels in from its edges, is background, with every order. order=auto is the
+ * host compositor on a software renderer (the image equals order=cpu's exactly) and the sprites
+ * on a GPU. */
 static void test_many_soft_points(void **state)
 {
     (void)state;
@@ -615,17 +631,18 @@ static void test_many_soft_points(void **state)
     rnd_frame same = {0};
     p.order = SP_ORDER_AUTO;
     tu_render(tu_ctx, id, &cam, &p, 0, &same);
-    for (int ord = 0; ord < 2; ord++) {
+    for (int oi = 0; oi < 3; oi++) {
+        int ord = orders[oi];
         p.order = ord;
         rnd_frame f = {0};
         tu_render(tu_ctx, id, &cam, &p, 0, &f);
-        if (ord == (software ? SP_ORDER_TILE : SP_ORDER_AXIS))
+        if (ord == (software ? SP_ORDER_CPU : SP_ORDER_AXIS))
             assert_memory_equal(f.rgba8, same.rgba8, (size_t)W * H * 4);
         int empty = 0, n = 0;
         for (int y = x0; y <= x1; y++)
             for (int x = x0; x <= x1; x++, n++) empty += pix(&f, x, y)[0] == 0;
         printf("many soft points, order=%s: %d of %d pixels in the plane's square empty\n",
-               ord ? "tile" : "axis", empty, n);
+               onames[oi], empty, n);
         assert_true(n > 5000);
         assert_int_equal(empty, 0);
         rnd_frame_free(&f);

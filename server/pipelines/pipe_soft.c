@@ -49,9 +49,15 @@
  * testing every disc of its tile; 8x8: binning ~75 ms of which the projection ~30, the serial
  * per-block count and scatter ~40, the per-pixel blend the rest). The sprites cost about 1 us a
  * soft disc whatever its size (1-pixel sprites cost the same; two triangles a disc instead of a
- * point sprite: 275 against 193 ms). In wall time the compositor wins where soft points are
- * many (its compute passes use both cores; the sprites' front end is one thread): order=auto
- * (the default) takes it on a software renderer above SOFT_AUTO_TILE soft points.
+ * point sprite: 275 against 193 ms).
+ *   cpu   the host compositor (soft_cpu.h): soft_bin.comp PASS 0's projection read back, each
+ *         stripe's visibility keys read back, the discs binned into 64x64 tiles in draw order
+ *         and blended by every core over only the pixels they cover, the rows they reached
+ *         uploaded as the layer soft_resolve puts over the target. ~95 ms of CPU on the same
+ *         Guanyin frame (of which the blending ~30, the GL projection ~25), half of axis and
+ *         tile, and the fastest in wall time on every cloud measured (bench_soft.sh), so
+ *         order=auto (the default) takes it on a software renderer; on a GPU the sprites stay.
+ *         Clouds of more than 64 buffer sets take the sprites.
  *
  * Transparency modulation (eq. 22). For t < F < l_m the opacity is interpolated between the
  * model's Phi and a near-solid disc, with W = (F - t) / (l_m - t): Phi_f = (1 - d/r)(1 - W) +
@@ -75,9 +81,11 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "pipe.h"
 #include "shaders.h"
+#include "soft_cpu.h"
 #include "soft_field.h"
 #include "soft_lists.h"
 #include "splat_passes.h"
@@ -99,11 +107,6 @@ enum { C_PROJ = 0, C_BIN1, C_BIN3, C_SCAN, C_BLEND, C_RESOLVE, C_COUNT };
 enum {
     SOFT_TILE = 8,             /* tile side in pixels: one 8x8 work group of soft_blend */
     SOFT_BLOCKS = 64,          /* binning blocks: invocations walking the order serially */
-    /* order=auto takes the compositor on a software renderer above this many soft points:
-     * measured on llvmpipe (2 cores, 1280x720, wall ms/frame, three runs under load): the 1M
-     * cloud with half vegetation, tile 389-822 against axis 838-1341; Guanyin (157k soft) on
-     * par; autzen_trim (fewer) axis 65 against tile 108. On a GPU the sprites stay. */
-    SOFT_AUTO_TILE = 200000,
 };
 
 typedef struct soft_state {
@@ -121,6 +124,15 @@ typedef struct soft_state {
     uint64_t proj_bytes, cells_bytes, list_bytes, layer_bytes;
     GLuint proj_tex, cells_tex, list_tex, layer_tex;
     soft_lists lists;          /* model=base|concentric (soft_lists.h) */
+    /* order=cpu (soft_cpu.h): the projected discs of every set read back, their segments, the
+     * draw-order scratch, the stripe's keys and the layer, all on the host */
+    float *h_proj, *h_layer;
+    uint32_t *h_keys;
+    size_t h_proj_cap, h_layer_cap, h_keys_cap;   /* in elements */
+    soft_cpu_mem mem;
+    soft_cpu_seg segs[64];
+    int nsegs;
+    int threads;
 } soft_state;
 
 /* Per buffer set of a cloud: what the split needs on the CPU and the soft index arrays. */
@@ -130,7 +142,8 @@ typedef struct soft_set {
     uint32_t *runs;            /* solid runs: (first, count) pairs, in point order */
     uint32_t nruns;
     uint32_t nsoft;            /* soft points for the current split */
-    GLuint idx_buf;            /* 3 * nsoft uint32: the soft points of sorted[0..2] */
+    GLuint idx_buf;            /* 4 * nsoft uint32: the soft points, then of sorted[0..2] */
+    uint32_t *idx;             /* the same on the host (order=cpu) */
     float centre[3];           /* mean of the set's bounds: the order of sets */
 } soft_set;
 
@@ -162,6 +175,8 @@ static void soft_destroy(rnd_kit *k, void *state)
         if (texs[i]) gl->DeleteTextures(1, &texs[i]);
     }
     free(s->chunks);
+    free(s->h_proj), free(s->h_layer), free(s->h_keys);
+    soft_cpu_mem_free(&s->mem);
     memset(s, 0, sizeof *s);
     free(s);
 }
@@ -172,6 +187,8 @@ static int soft_create(rnd_kit *k, void **state, sd_err *err)
     const gl_api *gl = k->gl;
     soft_state *s = calloc(1, sizeof *s);
     if (!s) return sd_errf(err, SD_ENOMEM, "out of memory creating the soft pipeline");
+    long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
+    s->threads = ncpu < 1 ? 1 : ncpu > 16 ? 16 : (int)ncpu;
     int rc = splat__create_filtered(k, &s->splat, err);
     if (rc < 0) {
         soft_destroy(k, s);
@@ -241,6 +258,7 @@ static void soft_detach(rnd_kit *k, void *state, void *cloud_data)
         soft_set *ss = &sc->sets[i];
         free(ss->runs);
         for (int a = 0; a < 3; a++) free(ss->sorted[a]);
+        free(ss->idx);
         if (ss->idx_buf) k->gl->DeleteBuffers(1, &ss->idx_buf);
     }
     free(sc->sets);
@@ -381,7 +399,9 @@ static int make_split(const gl_api *gl, soft_cloud *sc, float t, sd_err *err)
         gl->BufferData(GL_TEXTURE_BUFFER, (GLsizeiptr)((nsoft ? nsoft : 1) * 4ull * 4), idx,
                        GL_STATIC_DRAW);
         gl->BindBuffer(GL_TEXTURE_BUFFER, 0);
-        free(idx), free(at);
+        free(ss->idx);
+        ss->idx = idx;
+        free(at);
         free(soft);
     }
     sc->have_split = 1, sc->t = t;
@@ -640,6 +660,22 @@ static int tile_bin(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_clo
     return 0;
 }
 
+/* resolve_layer: soft_resolve puts the layer (rows [y0, y0 + n) of the frame) over the
+ * target. */
+static void resolve_layer(rnd_kit *k, soft_state *s, const rnd_draw *d, int y0, int n)
+{
+    const gl_api *gl = k->gl;
+    const rnd_view *v = d->view;
+    gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_LAYER);
+    gl->BindTexture(GL_TEXTURE_BUFFER, s->layer_tex);
+    gl->ActiveTexture(GL_TEXTURE0);
+    GLuint pr = s->cprog[C_RESOLVE];
+    gl->UseProgram(pr);
+    gl->Uniform2i(gl_uniform(gl, pr, "u_size"), v->width, v->height);
+    gl->Uniform2i(gl_uniform(gl, pr, "u_rows"), y0, n);
+    rnd_kit_over_rows(k, s->vao, d->target, v->width, v->height, y0, n);
+}
+
 /* tile_blend: the compositor over rows [y0, y0 + n): soft_blend.comp into the layer, then
  * soft_resolve puts the layer over the target. keys, yb, nb as draw_soft. */
 static void tile_blend(rnd_kit *k, soft_state *s, const rnd_draw *d, int keys, int y0, int n,
@@ -671,14 +707,78 @@ static void tile_blend(rnd_kit *k, soft_state *s, const rnd_draw *d, int keys, i
     gl->Uniform1i(gl_uniform(gl, pb, "u_ty0"), ty0);
     gl->DispatchCompute((GLuint)ntx, (GLuint)(ty1 - ty0 + 1), 1);
     gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
-    gl->ActiveTexture(GL_TEXTURE0 + RND_T_SOFT_LAYER);
-    gl->BindTexture(GL_TEXTURE_BUFFER, s->layer_tex);
-    gl->ActiveTexture(GL_TEXTURE0);
-    GLuint pr = s->cprog[C_RESOLVE];
-    gl->UseProgram(pr);
-    gl->Uniform2i(gl_uniform(gl, pr, "u_size"), v->width, v->height);
-    gl->Uniform2i(gl_uniform(gl, pr, "u_rows"), y0, n);
-    rnd_kit_over_rows(k, s->vao, d->target, v->width, v->height, y0, n);
+    resolve_layer(k, s, d, y0, n);
+}
+
+/* cpu_project: order=cpu, the soft discs of every set projected by the GL (soft_bin.comp PASS 0,
+ * as for the sprites) and read back, one segment per set in the sets' order. Returns 0 or SD_E*. */
+static int cpu_project(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
+                       const soft_order *o, sd_err *err)
+{
+    const gl_api *gl = k->gl;
+    uint32_t nsets = sc->nsets < 64 ? sc->nsets : 64;
+    size_t total = 0;
+    for (uint32_t si = 0; si < nsets; si++) total += sc->sets[si].nsoft;
+    if (soft_cpu_grow((void **)&s->h_proj, &s->h_proj_cap, 8 * total, sizeof(float)))
+        return sd_errf(err, SD_ENOMEM, "soft: out of memory for %zu soft discs", total);
+    s->nsegs = 0;
+    size_t at = 0;
+    for (uint32_t oi = 0; oi < nsets; oi++) {
+        uint32_t si = o->set_order[oi];
+        const soft_set *ss = &sc->sets[si];
+        if (ss->nsoft == 0) continue;
+        int rc = project_set(k, s, d, sc, o, si, err);
+        if (rc < 0) return rc;
+        gl->MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->proj_buf);
+        gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)ss->nsoft * 32,
+                             s->h_proj + at);
+        s->segs[s->nsegs++] = (soft_cpu_seg){s->h_proj + at, ss->idx + (size_t)(1 + o->axis) *
+                                             ss->nsoft, ss->nsoft, o->rev};
+        at += 8 * (size_t)ss->nsoft;
+    }
+    return 0;
+}
+
+/* cpu_blend: order=cpu over rows [y0, y0 + n): the stripe's visibility keys read back (keys,
+ * yb, nb as draw_soft), the discs composited on the host (soft_cpu.h), the rows they reached
+ * uploaded into the layer and put over the target by soft_resolve. Returns 0 or SD_E*. */
+static int cpu_blend(rnd_kit *k, soft_state *s, const rnd_draw *d, int keys, int y0, int n,
+                     int yb, int nb, sd_err *err)
+{
+    const gl_api *gl = k->gl;
+    const rnd_view *v = d->view;
+    size_t w = (size_t)v->width;
+    if (s->nsegs == 0) return 0; /* no soft disc */
+    if (soft_cpu_grow((void **)&s->h_layer, &s->h_layer_cap, w * (size_t)n * 4, sizeof(float)) ||
+        (keys && soft_cpu_grow((void **)&s->h_keys, &s->h_keys_cap, w * (size_t)nb, 4)))
+        return sd_errf(err, SD_ENOMEM, "soft: out of memory for a %dx%d layer", v->width, n);
+    if (keys) {
+        uint64_t have = 0;
+        GLuint kbuf = splat__keys_buffer(s->splat, &have);
+        if (have < (uint64_t)w * (uint64_t)nb * 4)
+            return sd_errf(err, SD_EINVAL, "soft: the visibility keys hold %llu bytes, not the "
+                           "%d rows of the stripe", (unsigned long long)have, nb);
+        gl->MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, kbuf);
+        gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)(w * (size_t)nb * 4),
+                             s->h_keys);
+    }
+    soft_cpu_job job = {.segs = s->segs, .nsegs = s->nsegs, .lambda = d->params->lambda,
+                        .width = v->width, .y0 = y0, .rows = n,
+                        .keys = keys ? s->h_keys : NULL, .kb = yb, .nk = nb,
+                        .layer = s->h_layer, .mem = &s->mem, .threads = s->threads};
+    if (soft_cpu_composite(&job) != 0)
+        return sd_errf(err, SD_ENOMEM, "soft: out of memory compositing the soft discs");
+    if (job.touched[0] < 0) return 0; /* no disc reached these rows */
+    int r0 = job.touched[0], rn = job.touched[1] - job.touched[0] + 1;
+    uint64_t bytes = (uint64_t)w * (uint64_t)rn * 16;
+    buf_tex(gl, &s->layer_buf, &s->layer_bytes, bytes, s->layer_tex, GL_RGBA32F);
+    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->layer_buf);
+    gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)bytes,
+                      s->h_layer + (size_t)(r0 - y0) * w * 4);
+    resolve_layer(k, s, d, r0, rn);
+    return 0;
 }
 
 /* render: the split (remade when field or t changed), the splat passes over the solid runs,
@@ -709,12 +809,15 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     order_sets(d->view, sc, &o);
     int draw = p->lambda > 0.0f || (!lists && p->l_m > p->t);
     /* order=tile: the compositor, for one buffer set (the usual case); several take the
-     * sprites. order=auto: see SOFT_AUTO_TILE. */
-    int want_tile = p->order == SP_ORDER_TILE ||
-                    (p->order == SP_ORDER_AUTO && k->software && sc->nsets == 1 &&
-                     sc->sets[0].nsoft > SOFT_AUTO_TILE);
+     * sprites. */
+    int want_tile = p->order == SP_ORDER_TILE;
     int tile = !lists && draw && want_tile && sc->nsets == 1 && sc->sets[0].nsoft > 0;
     if (tile && (rc = tile_bin(k, s, d, sc, &o, err)) < 0) return rc;
+    /* order=cpu, or auto on a software renderer: the host compositor (soft_cpu.h), for clouds
+     * of up to 64 sets (more take the sprites) */
+    int cpu = !lists && draw && !tile && sc->nsets <= 64 &&
+              (p->order == SP_ORDER_CPU || (p->order == SP_ORDER_AUTO && k->software));
+    if (cpu && (rc = cpu_project(k, s, d, sc, &o, err)) < 0) return rc;
 
     splat_frame f;
     int nstripes = splat__frame_begin(k, s->splat, &sd, &f, err);
@@ -742,6 +845,8 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
                                      yb, nb, err);
             } else if (tile) {
                 tile_blend(k, s, d, 1, f.y0, f.n, yb, nb);
+            } else if (cpu) {
+                rc = cpu_blend(k, s, d, 1, f.y0, f.n, yb, nb, err);
             } else if (draw) {
                 rc = draw_soft(k, s, d, sc, &o, 1, f.y0, f.n, yb, nb, err);
             }
@@ -757,6 +862,8 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
                              d->view->height, 0, d->view->height, err);
     } else if (nstripes == 0 && tile && whole_fits)
         tile_blend(k, s, d, 0, 0, d->view->height, 0, d->view->height);
+    else if (nstripes == 0 && cpu)
+        rc = cpu_blend(k, s, d, 0, 0, d->view->height, 0, d->view->height, err);
     else if (nstripes == 0 && draw)
         rc = draw_soft(k, s, d, sc, &o, 0, 0, d->view->height, 0, d->view->height, err);
     int end = splat__frame_end(k, s->splat, err);

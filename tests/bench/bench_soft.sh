@@ -18,7 +18,7 @@ data=${SPLATD_TESTDATA:-tests/data}
 frames=${SPLATD_BENCH_SOFT_FRAMES:-5}
 backend=${SPLATD_BENCH_BACKEND:-auto}
 size=1280x720
-pipes=points,splat,olt,soft,soft:order=axis,soft:order=tile,soft:model=concentric,soft:model=base
+pipes=points,splat,olt,soft,soft:order=axis,soft:order=tile,soft:order=cpu,soft:model=concentric,soft:model=base
 
 for f in "$bench/render_bench" "$tools/gen_cloud"; do
     if [ ! -x "$f" ]; then
@@ -35,8 +35,8 @@ echo "### Soft Transparency (${size}, t = 0.5, lambda = 0.5, field=uncertainty, 
 echo
 echo "load average at the start: $(cut -d' ' -f1-3 /proc/loadavg)"
 echo
-echo "| cloud | points | SP ms | OLT ms | ST ms (auto) | ST axis ms | ST tile ms | Concentric ms | Base ms | ST/SP | OLT/SP | Base/Express | CPU: ST/SP, OLT/SP, Base/Express |"
-echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"
+echo "| cloud | points | SP ms | OLT ms | ST ms (auto) | ST axis ms | ST tile ms | ST cpu ms | Concentric ms | Base ms | ST/SP | OLT/SP | Base/Express | CPU: ST/SP, OLT/SP, Base/Express |"
+echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"
 for c in autzen_trim Guanyin veg-1M; do
     case $c in
         autzen_trim) f="$data/autzen_trim.las" ;;
@@ -46,7 +46,7 @@ for c in autzen_trim Guanyin veg-1M; do
     o="$tmp/$c"
     if ! "$bench/render_bench" "$f" --frames "$frames" --size "$size" --backend "$backend" \
            --pipelines "$pipes" --label "$c" > "$o.out" 2> "$o.err"; then
-        echo "| $c | render_bench failed: $(tail -1 "$o.err") | | | | | | | | | | | |"
+        echo "| $c | render_bench failed: $(tail -1 "$o.err") | | | | | | | | | | | | |"
         continue
     fi
     awk -F'|' -v c="$c" '
@@ -54,8 +54,9 @@ for c in autzen_trim Guanyin veg-1M; do
         $4 ~ /[a-z]/ { name = $4; gsub(/^ +| +$/, "", name); ms[name] = $5 + 0; n = $3 + 0 }
         END {
             sp = ms["splat"]; st = ms["soft"]; b = ms["soft:model=base"]
-            printf "| %s | %d | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.2f | %.2f | %.1f | %.2f, %.2f, %.1f |\n",
+            printf "| %s | %d | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.2f | %.2f | %.1f | %.2f, %.2f, %.1f |\n",
                 c, n, sp, ms["olt"], st, ms["soft:order=axis"], ms["soft:order=tile"],
+                ms["soft:order=cpu"],
                 ms["soft:model=concentric"], b,
                 sp / st, sp / ms["olt"], b / st, cpu["splat"] / cpu["soft"],
                 cpu["splat"] / cpu["olt"], cpu["soft:model=base"] / cpu["soft"]

@@ -1,0 +1,321 @@
+/* soft_cpu.c — the soft discs composited on the CPU (soft_cpu.h). */
+#include "soft_cpu.h"
+
+#include <math.h>
+#include <pthread.h>
+#include <stdlib.h>
+#include <string.h>
+
+enum { MAX_THREADS = 16, TILE_SHIFT = 6 }; /* tiles of 64 x 64 pixels */
+
+/* cos(pi d) for d in [0, 1] as a polynomial in d^2: its Taylor series to d^14, within 4.2e-6
+ * of the cosine there (the next term bounds the error), far below an 8-bit step. */
+static inline float cos_pi(float d)
+{
+    static const float c[8] = {1.0f, -4.934802200544679f, 4.0587121264167676f,
+                               -1.3352627688545893f, 0.23533063035889312f,
+                               -0.025806891390014051f, 0.0019295743094039221f,
+                               -0.00010463810492484565f};
+    float u = d * d;
+    return c[0] + u * (c[1] + u * (c[2] + u * (c[3] + u * (c[4] + u * (c[5] + u * (c[6] +
+           u * c[7]))))));
+}
+
+/* floor and ceil of v for |v| < 2^31 without libm calls (the baseline x86-64 has no rounding
+ * instruction: ceilf and floorf are calls there). */
+#if defined(__SSE2__)
+#include <emmintrin.h>
+/* cos_pi on four lanes, the same operations in the same order */
+static inline __m128 cos_pi4(__m128 d)
+{
+    static const float c[8] = {1.0f, -4.934802200544679f, 4.0587121264167676f,
+                               -1.3352627688545893f, 0.23533063035889312f,
+                               -0.025806891390014051f, 0.0019295743094039221f,
+                               -0.00010463810492484565f};
+    __m128 u = _mm_mul_ps(d, d), s = _mm_set1_ps(c[7]);
+    for (int i = 6; i >= 0; i--) s = _mm_add_ps(_mm_set1_ps(c[i]), _mm_mul_ps(u, s));
+    return s;
+}
+#endif
+
+static inline int ifloor(float v)
+{
+    int i = (int)v;
+    return i - (v < (float)i);
+}
+
+static inline int iceil(float v)
+{
+    int i = (int)v;
+    return i + (v > (float)i);
+}
+
+static inline float key_depth(uint32_t key)
+{
+    uint32_t b = ~key;
+    float f;
+    memcpy(&f, &b, sizeof f);
+    return f;
+}
+
+/* The pixel rectangle [x0, x1] x [y0, y1] whose centres can lie inside disc q, clipped to
+ * columns [0, width) and rows [ylo, yhi). Returns 0 when it is empty (or the disc has no
+ * radius). Floats are clamped before any conversion to int. */
+static inline int disc_rect(const float *q, int width, int ylo, int yhi, int *x0, int *x1,
+                            int *y0, int *y1)
+{
+    float r = q[2], cx = q[0], cy = q[1];
+    if (!(r > 0.0f)) return 0;
+    float vy0 = cy - r - 0.5f, vy1 = cy + r - 0.5f, vx0 = cx - r - 0.5f, vx1 = cx + r - 0.5f;
+    if (!(vy1 >= (float)ylo && vy0 < (float)yhi && vx1 >= 0.0f && vx0 < (float)width)) return 0;
+    *y0 = iceil(fmaxf(vy0, (float)ylo));
+    *y1 = ifloor(fminf(vy1, (float)(yhi - 1)));
+    *x0 = iceil(fmaxf(vx0, 0.0f));
+    *x1 = ifloor(fminf(vx1, (float)(width - 1)));
+    return *x0 <= *x1 && *y0 <= *y1;
+}
+
+typedef struct worker {
+    soft_cpu_job *job;
+    int t, nt;
+    uint64_t ndiscs;
+    int ntx, nty;
+    int lo, hi;                /* touched rows, this thread's */
+} worker;
+
+/* The gather: the discs in draw order, for sequential walks; part t of nt of every segment. */
+static void *gather_main(void *arg)
+{
+    worker *w = arg;
+    const soft_cpu_job *job = w->job;
+    float *out = job->mem->discs;
+    for (int s = 0; s < job->nsegs; s++) {
+        const soft_cpu_seg *g = &job->segs[s];
+        uint32_t n = g->n;
+        uint32_t a = (uint32_t)((uint64_t)n * (uint64_t)w->t / (uint64_t)w->nt);
+        uint32_t b = (uint32_t)((uint64_t)n * (uint64_t)(w->t + 1) / (uint64_t)w->nt);
+        for (uint32_t k = a; k < b; k++) {
+            uint32_t j = g->order[g->rev ? n - 1 - k : k];
+            memcpy(out + 8 * (size_t)k, g->proj + 8 * (size_t)j, 8 * sizeof(float));
+        }
+        out += 8 * (size_t)n;
+    }
+    return NULL;
+}
+
+/* One disc over the pixels of rectangle [x0, x1] x [y0, y1] (inside the disc's own). */
+static void blend_disc(const soft_cpu_job *job, const float *q, int x0, int x1, int y0, int y1,
+                       int *lo, int *hi)
+{
+    const int width = job->width;
+    float cx = q[0], cy = q[1], r = q[2], depth = q[3], cr = q[4], cg = q[5], cb = q[6];
+    float wm = q[7], lambda = job->lambda;
+    float r2 = r * r, inv_r = 1.0f / r;
+    for (int y = y0; y <= y1; y++) {
+        float dy = (float)y + 0.5f - cy, dy2 = dy * dy;
+        if (!(dy2 < r2)) continue;
+        /* this row's chord: centres within sqrt(r^2 - dy^2) of cx (a pixel more each side for
+         * rounding; the test below decides) */
+        float half = sqrtf(r2 - dy2);
+        int xa = iceil(fmaxf(cx - half - 1.5f, (float)x0));
+        int xb = ifloor(fminf(cx + half + 0.5f, (float)x1));
+        float *row = job->layer + 4 * ((size_t)(y - job->y0) * (size_t)width);
+        const uint32_t *krow = job->keys ? job->keys + (size_t)(y - job->kb) * (size_t)width
+                                         : NULL;
+        int any = 0, x = xa;
+#if defined(__SSE2__)
+        /* four pixels at a time, with the same operations in the same order as the loop below
+         * (so the same results): lanes outside the disc or behind the solid surface are left
+         * alone */
+        const __m128 vcx = _mm_set1_ps(cx), vdy2 = _mm_set1_ps(dy2), vr2 = _mm_set1_ps(r2);
+        const __m128 vinv = _mm_set1_ps(inv_r), one = _mm_set1_ps(1.0f), half_ = _mm_set1_ps(0.5f);
+        const __m128 vdepth = _mm_set1_ps(depth), vlam = _mm_set1_ps(lambda);
+        const __m128 vwm = _mm_set1_ps(wm), vomw = _mm_set1_ps(1.0f - wm);
+        const __m128 col = _mm_set_ps(1.0f, cb, cg, cr);
+        /* a chord is a few pixels: the last group is masked (lanes past xb), and taken so
+         * while its four keys lie inside the row (else the loop below finishes it) */
+        const __m128 vxb = _mm_set1_ps((float)xb);
+        for (; x <= xb && x + 3 < width; x += 4) {
+            __m128 xs = _mm_set_ps((float)(x + 3), (float)(x + 2), (float)(x + 1), (float)x);
+            __m128 dx = _mm_sub_ps(_mm_add_ps(xs, half_), vcx);
+            __m128 d2 = _mm_add_ps(_mm_mul_ps(dx, dx), vdy2);
+            __m128 in = _mm_and_ps(_mm_cmplt_ps(d2, vr2), _mm_cmple_ps(xs, vxb));
+            __m128 d = _mm_mul_ps(_mm_sqrt_ps(d2), vinv);
+            in = _mm_and_ps(in, _mm_cmplt_ps(d, one));
+            if (krow) {
+                __m128i k4 = _mm_loadu_si128((const __m128i *)(krow + x));
+                __m128i empty = _mm_cmpeq_epi32(k4, _mm_setzero_si128());
+                __m128 kd = _mm_castsi128_ps(_mm_xor_si128(k4, _mm_set1_epi32(-1)));
+                __m128 vis = _mm_or_ps(_mm_castsi128_ps(empty), _mm_cmplt_ps(vdepth, kd));
+                in = _mm_and_ps(in, vis);
+            }
+            int m = _mm_movemask_ps(in);
+            if (!m) continue;
+            any = 1;
+            __m128 phi = _mm_mul_ps(_mm_mul_ps(vlam, _mm_add_ps(cos_pi4(d), one)), half_);
+            phi = _mm_add_ps(_mm_mul_ps(_mm_sub_ps(one, d), vomw), _mm_mul_ps(phi, vwm));
+            phi = _mm_and_ps(phi, in);
+            float ph[4];
+            _mm_storeu_ps(ph, phi);
+            for (int i = 0; i < 4; i++) {
+                if (!(m >> i & 1)) continue;
+                float *L = row + 4 * (size_t)(x + i);
+                __m128 p = _mm_set1_ps(ph[i]);
+                __m128 l = _mm_loadu_ps(L);
+                _mm_storeu_ps(L, _mm_add_ps(_mm_mul_ps(col, p), _mm_mul_ps(_mm_sub_ps(one, p), l)));
+            }
+        }
+#endif
+        for (; x <= xb; x++) {
+            float dx = (float)x + 0.5f - cx, d2 = dx * dx + dy2;
+            if (!(d2 < r2)) continue;
+            float d = sqrtf(d2) * inv_r; /* soft.frag's length(...) / r */
+            if (!(d < 1.0f)) continue;
+            if (krow) {
+                uint32_t key = krow[x];
+                if (key != 0u && depth >= key_depth(key)) continue;
+            }
+            float phi = lambda * (cos_pi(d) + 1.0f) * 0.5f;
+            phi = (1.0f - d) * (1.0f - wm) + phi * wm; /* mix(1 - d, phi, W) */
+            float *L = row + 4 * (size_t)x, keep = 1.0f - phi;
+            L[0] = cr * phi + keep * L[0];
+            L[1] = cg * phi + keep * L[1];
+            L[2] = cb * phi + keep * L[2];
+            L[3] = phi + keep * L[3];
+            any = 1;
+        }
+        if (any) {
+            if (y < *lo) *lo = y;
+            if (y > *hi) *hi = y;
+        }
+    }
+}
+
+/* The tiles t, t + nt, ...: each its list of discs, back to front, clipped to the tile. */
+static void *blend_main(void *arg)
+{
+    worker *w = arg;
+    const soft_cpu_job *job = w->job;
+    const soft_cpu_mem *m = job->mem;
+    const int y0 = job->y0, y1 = job->y0 + job->rows;
+    int lo = y1, hi = -1;
+    int ntiles = w->ntx * w->nty;
+    for (int tile = w->t; tile < ntiles; tile += w->nt) {
+        int tx = tile % w->ntx, ty = tile / w->ntx;
+        int tx0 = tx << TILE_SHIFT, tx1 = tx0 + (1 << TILE_SHIFT) - 1;
+        int ty0 = y0 + (ty << TILE_SHIFT), ty1 = ty0 + (1 << TILE_SHIFT) - 1;
+        if (tx1 >= job->width) tx1 = job->width - 1;
+        if (ty1 >= y1) ty1 = y1 - 1;
+        for (uint32_t e = m->first[tile]; e < m->first[tile + 1]; e++) {
+            const float *q = m->discs + 8 * (size_t)m->list[e];
+            int x0, x1, ya, yb;
+            if (!disc_rect(q, job->width, y0, y1, &x0, &x1, &ya, &yb)) continue;
+            x0 = x0 > tx0 ? x0 : tx0, x1 = x1 < tx1 ? x1 : tx1;
+            ya = ya > ty0 ? ya : ty0, yb = yb < ty1 ? yb : ty1;
+            if (x0 <= x1 && ya <= yb) blend_disc(job, q, x0, x1, ya, yb, &lo, &hi);
+        }
+    }
+    w->lo = lo;
+    w->hi = hi;
+    return NULL;
+}
+
+/* Runs fn on every worker, the first on this thread; a part whose thread cannot start runs
+ * here too (the parts are independent). */
+static void run_all(worker *w, int nt, void *(*fn)(void *))
+{
+    pthread_t th[MAX_THREADS];
+    int started[MAX_THREADS] = {0};
+    for (int t = 1; t < nt; t++) started[t] = pthread_create(&th[t], NULL, fn, &w[t]) == 0;
+    fn(&w[0]);
+    for (int t = 1; t < nt; t++) {
+        if (started[t]) pthread_join(th[t], NULL);
+        else fn(&w[t]);
+    }
+}
+
+int soft_cpu_grow(void **p, size_t *cap, size_t n, size_t sz)
+{
+    if (n <= *cap) return 0;
+    size_t c = *cap ? *cap : 4096;
+    while (c < n) c *= 2;
+    void *q = realloc(*p, c * sz);
+    if (!q) return -1;
+    *p = q;
+    *cap = c;
+    return 0;
+}
+
+/* The binning: per tile the discs that reach it, in draw order (a counting sort: counts,
+ * prefix sums, then a fill in draw order). */
+static int bin(soft_cpu_job *job, uint64_t n, int ntx, int nty)
+{
+    soft_cpu_mem *m = job->mem;
+    size_t ntiles = (size_t)ntx * (size_t)nty;
+    if (soft_cpu_grow((void **)&m->first, &m->first_cap, ntiles + 1, sizeof *m->first)) return -1;
+    memset(m->first, 0, (ntiles + 1) * sizeof *m->first);
+    const int y0 = job->y0, y1 = job->y0 + job->rows;
+    uint64_t total = 0;
+    for (uint64_t k = 0; k < n; k++) {
+        int x0, x1, ya, yb;
+        if (!disc_rect(m->discs + 8 * k, job->width, y0, y1, &x0, &x1, &ya, &yb)) continue;
+        for (int ty = (ya - y0) >> TILE_SHIFT; ty <= (yb - y0) >> TILE_SHIFT; ty++)
+            for (int tx = x0 >> TILE_SHIFT; tx <= x1 >> TILE_SHIFT; tx++) {
+                m->first[(size_t)ty * (size_t)ntx + (size_t)tx + 1]++;
+                total++;
+            }
+    }
+    if (total > UINT32_MAX ||
+        soft_cpu_grow((void **)&m->list, &m->list_cap, total, sizeof *m->list))
+        return -1;
+    for (size_t i = 0; i < ntiles; i++) m->first[i + 1] += m->first[i];
+    /* fill: first[t] walks tile t's range, and ends at the next tile's start */
+    for (uint64_t k = 0; k < n; k++) {
+        int x0, x1, ya, yb;
+        if (!disc_rect(m->discs + 8 * k, job->width, y0, y1, &x0, &x1, &ya, &yb)) continue;
+        for (int ty = (ya - y0) >> TILE_SHIFT; ty <= (yb - y0) >> TILE_SHIFT; ty++)
+            for (int tx = x0 >> TILE_SHIFT; tx <= x1 >> TILE_SHIFT; tx++)
+                m->list[m->first[(size_t)ty * (size_t)ntx + (size_t)tx]++] = (uint32_t)k;
+    }
+    /* each first[t] now holds tile t's end: shift back to the starts */
+    memmove(m->first + 1, m->first, ntiles * sizeof *m->first);
+    m->first[0] = 0;
+    return 0;
+}
+
+int soft_cpu_composite(soft_cpu_job *job)
+{
+    memset(job->layer, 0, (size_t)job->width * (size_t)job->rows * 4 * sizeof(float));
+    job->touched[0] = job->touched[1] = -1;
+    uint64_t n = 0;
+    for (int s = 0; s < job->nsegs; s++) n += job->segs[s].n;
+    if (n == 0 || job->rows <= 0 || job->width <= 0) return 0;
+    if (n > UINT32_MAX || soft_cpu_grow((void **)&job->mem->discs, &job->mem->discs_cap, 8 * n,
+                               sizeof(float)))
+        return -1;
+    int nt = job->threads < 1 ? 1 : job->threads > MAX_THREADS ? MAX_THREADS : job->threads;
+    int ntx = (job->width + (1 << TILE_SHIFT) - 1) >> TILE_SHIFT;
+    int nty = (job->rows + (1 << TILE_SHIFT) - 1) >> TILE_SHIFT;
+    worker w[MAX_THREADS];
+    for (int t = 0; t < nt; t++) w[t] = (worker){job, t, nt, n, ntx, nty, 0, -1};
+    run_all(w, nt, gather_main);
+    if (bin(job, n, ntx, nty) != 0) return -1;
+    run_all(w, nt, blend_main);
+    int lo = job->y0 + job->rows, hi = -1;
+    for (int t = 0; t < nt; t++) {
+        if (w[t].hi < 0) continue;
+        if (w[t].lo < lo) lo = w[t].lo;
+        if (w[t].hi > hi) hi = w[t].hi;
+    }
+    job->touched[0] = hi >= 0 ? lo : -1;
+    job->touched[1] = hi;
+    return 0;
+}
+
+void soft_cpu_mem_free(soft_cpu_mem *m)
+{
+    free(m->discs);
+    free(m->list);
+    free(m->first);
+    memset(m, 0, sizeof *m);
+}

@@ -1,0 +1,60 @@
+/* soft_cpu.h — the Express-Model's soft discs composited on the CPU (`order=cpu`, pipe_soft.c).
+ *
+ * On a software renderer the GL is the CPU, and what costs there is not the blending but the
+ * GL's way to it: ~1 us of set-up per point sprite on llvmpipe's one front-end thread
+ * (order=axis), or a compute compositor whose per-pixel loop over every disc of its tile does
+ * three times the work the discs cover (order=tile). This compositor takes the discs as the GL
+ * projected them (soft_bin.comp PASS 0: centre and radius in window pixels, eye depth, shaded
+ * colour, W of eq. 22), in the same back-to-front order (the axis-sorted arrays), and for each
+ * disc visits only the pixels whose centres lie inside it: the fragments soft.frag would get,
+ * with soft.frag's opacity (eq. 19, modulated by eq. 22) and its test against the solid
+ * surface's visibility keys, blended with the premultiplied "over" in float.
+ *
+ * The discs come in axis order, which jumps about the frame: blending them so would miss the
+ * cache at nearly every row a disc touches. So they are first binned into 64x64-pixel tiles by
+ * a counting sort that keeps the draw order within each tile (count, prefix sum, fill in
+ * order), and the threads take whole tiles, whose layer and keys stay in cache. A pixel's
+ * discs are the same, in the same order, whatever the thread count. */
+#pragma once
+#include <stddef.h>
+#include <stdint.h>
+
+/* The discs of one buffer set: proj holds 8 floats per disc j (x, y, r in window pixels, eye
+ * depth, shaded r, g, b, W); the k-th back to front is j = order[k] (rev: order[n - 1 - k]). */
+typedef struct soft_cpu_seg {
+    const float *proj;
+    const uint32_t *order;
+    uint32_t n;
+    int rev;
+} soft_cpu_seg;
+
+/* The compositor's working memory, kept between frames (grown as needed). */
+typedef struct soft_cpu_mem {
+    float *discs;              /* 8 floats per disc, in draw order */
+    uint32_t *list, *first;    /* the tiles' lists of discs, and where each tile's starts */
+    size_t discs_cap, list_cap, first_cap;
+} soft_cpu_mem;
+
+typedef struct soft_cpu_job {
+    const soft_cpu_seg *segs;  /* back to front: the sets in their order */
+    int nsegs;
+    float lambda;
+    int width;                 /* frame width */
+    int y0, rows;              /* the window rows composited: [y0, y0 + rows) */
+    const uint32_t *keys;      /* visibility keys of rows [kb, kb + nk) (width each), ~floatBits
+                                * of the solid eye depth, 0 where empty; NULL: no solid surface */
+    int kb, nk;
+    float *layer;              /* width * rows * 4: premultiplied RGBA, written here */
+    soft_cpu_mem *mem;
+    int threads;               /* 1 to 16 (more are taken as 16) */
+    int touched[2];            /* out: the first and last row any disc reached (-1: none) */
+} soft_cpu_job;
+
+/* soft_cpu_composite: fills job->layer (cleared first) and job->touched. Returns 0, or -1 when
+ * the working memory cannot grow (the layer is then left cleared). */
+int soft_cpu_composite(soft_cpu_job *job);
+void soft_cpu_mem_free(soft_cpu_mem *m);
+
+/* soft_cpu_grow: makes the array *p of *cap elements of sz bytes hold n (doubling, from 4096),
+ * for the compositor's host buffers. Returns 0, or -1 (nothing changed) when out of memory. */
+int soft_cpu_grow(void **p, size_t *cap, size_t n, size_t sz);
