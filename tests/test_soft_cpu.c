@@ -68,7 +68,8 @@ static void make_scene(scene *sc, uint32_t seed)
         int j = (int)(rng(&s) % (uint32_t)(i + 1));
         uint32_t t = sc->order2[i]; sc->order2[i] = sc->order2[j]; sc->order2[j] = t;
     }
-    for (int i = 0; i < W * NK; i++) sc->keys[i] = rng(&s) % 3 == 0 ? 0u : key_of(frand(&s, 1.0f, 10.0f));
+    for (int i = 0; i < W * NK; i++)
+        sc->keys[i] = rng(&s) % 3 == 0 ? 0u : key_of(frand(&s, 1.0f, 10.0f));
     sc->segs[0] = (soft_cpu_seg){sc->proj, sc->order1, N1, 0};
     sc->segs[1] = (soft_cpu_seg){sc->proj + 8 * N1, sc->order2, N2, 1};
 }

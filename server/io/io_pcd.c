@@ -1051,7 +1051,9 @@ int64_t pc_pcd_stream_next(pc_pcd_stream *s, double *xyz, uint8_t *rgba, size_t 
     s->next += m;
     if (s->next == h->points) s->final = 1;
     /* give back the pages of the mapping this pass has read */
-    uint64_t done = s->compressed ? 0 : s->ascii ? s->at.off : h->data_off + s->next * h->point_size;
+    uint64_t done = s->compressed ? 0
+                    : s->ascii    ? s->at.off
+                                  : h->data_off + s->next * h->point_size;
     long pg = sysconf(_SC_PAGESIZE);
     if (pg > 0 && s->f.map && done > (uint64_t)pg)
         (void)madvise(s->f.map, (size_t)done & ~((size_t)pg - 1), MADV_DONTNEED);

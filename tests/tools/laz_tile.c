@@ -255,7 +255,8 @@ int main(int argc, char **argv)
                 size_t len = (size_t)(lf.chunk_start[c + 1] - lf.chunk_start[c]);
                 memcpy(buf, d + lf.chunk_start[c], len);
                 int64_t x = rdi32(buf) + (int64_t)i * sx, y = rdi32(buf + 4) + (int64_t)j * sy;
-                if (x > INT32_MAX || y > INT32_MAX) return die("the copies leave int32 range", NULL);
+                if (x > INT32_MAX || y > INT32_MAX)
+                    return die("the copies leave int32 range", NULL);
                 wr32(buf, (uint32_t)(int32_t)x);
                 wr32(buf + 4, (uint32_t)(int32_t)y);
                 bad |= fwrite(buf, 1, len, out) != len;
