@@ -52,7 +52,7 @@
 #include "render.h"
 #include "sd_err.h"
 
-enum { MAX_FRAMES = 1000, MAX_PIPES = 8 };
+enum { MAX_FRAMES = 1000, MAX_PIPES = 12 };
 
 typedef struct bench_opts {
     const char *file;
