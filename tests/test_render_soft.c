@@ -547,6 +547,42 @@ static void test_tile_matches_axis(void **state)
     rnd_release(tu_ctx, id);
 }
 
+/* A frame whose float layer exceeds order=cpu's band (64 MiB: 2100 x 2100 x 16 bytes = 67 MiB,
+ * two bands, and on llvmpipe several splat stripes): the bands meet without a seam. Against
+ * order=tile (the GL's compositor, the same float blending) at most 1 level, as in
+ * test_tile_matches_axis, and every covered pixel of the rows at the band's edge present. */
+static void test_cpu_bands(void **state)
+{
+    (void)state;
+    pc_prepared pc;
+    random_plane(&pc, 90, 90, 0.02f, 3);
+    for (uint64_t i = 0; i < pc.n; i++)
+        if (pc.F[i] > 0.4f) pc.pos[3 * i + 2] = 0.05f + 0.1f * pc.F[i];
+    tu_finish_cloud(&pc, OFF);
+    uint32_t id = tu_upload(tu_ctx, &pc);
+    pc_prepared_free(&pc);
+    rnd_camera cam = cam_z(2.2);
+    cam.width = 2100, cam.height = 2100;
+    sp_params p;
+    sp_params_defaults(&p);
+    p.pipeline = SP_PIPE_SOFT, p.t = 0.4f, p.lambda = 0.5f, p.l_m = 0.6f;
+    rnd_frame a = {0}, b = {0};
+    p.order = SP_ORDER_TILE;
+    tu_render(tu_ctx, id, &cam, &p, 0, &a);
+    p.order = SP_ORDER_CPU;
+    tu_render(tu_ctx, id, &cam, &p, 0, &b);
+    int n, m = max_diff(&a, &b, &n), cov = 0;
+    for (size_t i = 0; i < (size_t)a.width * a.height; i++)
+        cov += a.rgba8[4 * i] || a.rgba8[4 * i + 1] || a.rgba8[4 * i + 2];
+    printf("2100x2100, order=cpu (two bands) vs tile: max %d levels (%d of %d covered pixels "
+           "differ)\n", m, n, cov);
+    assert_true(cov > 2100 * 2100 / 4);
+    assert_true(m <= 1);
+    rnd_frame_free(&a);
+    rnd_frame_free(&b);
+    rnd_release(tu_ctx, id);
+}
+
 /* A cloud in several buffer sets (rnd_desc.max_set_points, as the renderer splits clouds over
  * GL_MAX_TEXTURE_BUFFER_SIZE / 3 points): the solid points then go through the splat passes as
  * runs of the view's chunks instead of the one-set filter, and the soft discs set by set (sets
@@ -661,6 +697,7 @@ int main(void)
         cmocka_unit_test(test_modulation),
         cmocka_unit_test(test_field_height),
         cmocka_unit_test(test_tile_matches_axis),
+        cmocka_unit_test(test_cpu_bands),
         cmocka_unit_test(test_buffer_sets),
         cmocka_unit_test(test_many_soft_points),
     };

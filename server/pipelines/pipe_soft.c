@@ -108,6 +108,9 @@ enum {
     SOFT_TILE = 8,             /* tile side in pixels: one 8x8 work group of soft_blend */
     SOFT_BLOCKS = 64,          /* binning blocks: invocations walking the order serially */
 };
+/* order=cpu composites at most this many bytes of float layer at a time (rows of a band): a
+ * 1280x720 frame is one band; an 8192x8192 one, whose layer would be 1 GiB, sixteen. */
+#define SOFT_CPU_LAYER (64ull << 20)
 
 typedef struct soft_state {
     void *splat;               /* the splat passes' own state (splat__create) */
@@ -741,8 +744,9 @@ static int cpu_project(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_
 }
 
 /* cpu_blend: order=cpu over rows [y0, y0 + n): the stripe's visibility keys read back (keys,
- * yb, nb as draw_soft), the discs composited on the host (soft_cpu.h), the rows they reached
- * uploaded into the layer and put over the target by soft_resolve. Returns 0 or SD_E*. */
+ * yb, nb as draw_soft), then in bands of at most SOFT_CPU_LAYER bytes of layer (and of a storage
+ * block) the discs composited on the host (soft_cpu.h), the rows they reached uploaded as the
+ * layer and put over the target by soft_resolve. Returns 0 or SD_E*. */
 static int cpu_blend(rnd_kit *k, soft_state *s, const rnd_draw *d, int keys, int y0, int n,
                      int yb, int nb, sd_err *err)
 {
@@ -750,9 +754,14 @@ static int cpu_blend(rnd_kit *k, soft_state *s, const rnd_draw *d, int keys, int
     const rnd_view *v = d->view;
     size_t w = (size_t)v->width;
     if (s->nsegs == 0) return 0; /* no soft disc */
-    if (soft_cpu_grow((void **)&s->h_layer, &s->h_layer_cap, w * (size_t)n * 4, sizeof(float)) ||
+    uint64_t cap = SOFT_CPU_LAYER < (uint64_t)k->max_ssbo ? SOFT_CPU_LAYER : (uint64_t)k->max_ssbo;
+    uint64_t band = cap / (w * 16);
+    if (band < 1) band = 1;
+    if (band > (uint64_t)n) band = (uint64_t)n;
+    if (soft_cpu_grow((void **)&s->h_layer, &s->h_layer_cap, w * band * 4, sizeof(float)) ||
         (keys && soft_cpu_grow((void **)&s->h_keys, &s->h_keys_cap, w * (size_t)nb, 4)))
-        return sd_errf(err, SD_ENOMEM, "soft: out of memory for a %dx%d layer", v->width, n);
+        return sd_errf(err, SD_ENOMEM, "soft: out of memory for a %dx%d layer", v->width,
+                       (int)band);
     if (keys) {
         uint64_t have = 0;
         GLuint kbuf = splat__keys_buffer(s->splat, &have);
@@ -764,20 +773,23 @@ static int cpu_blend(rnd_kit *k, soft_state *s, const rnd_draw *d, int keys, int
         gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)(w * (size_t)nb * 4),
                              s->h_keys);
     }
-    soft_cpu_job job = {.segs = s->segs, .nsegs = s->nsegs, .lambda = d->params->lambda,
-                        .width = v->width, .y0 = y0, .rows = n,
-                        .keys = keys ? s->h_keys : NULL, .kb = yb, .nk = nb,
-                        .layer = s->h_layer, .mem = &s->mem, .threads = s->threads};
-    if (soft_cpu_composite(&job) != 0)
-        return sd_errf(err, SD_ENOMEM, "soft: out of memory compositing the soft discs");
-    if (job.touched[0] < 0) return 0; /* no disc reached these rows */
-    int r0 = job.touched[0], rn = job.touched[1] - job.touched[0] + 1;
-    uint64_t bytes = (uint64_t)w * (uint64_t)rn * 16;
-    buf_tex(gl, &s->layer_buf, &s->layer_bytes, bytes, s->layer_tex, GL_RGBA32F);
-    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->layer_buf);
-    gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)bytes,
-                      s->h_layer + (size_t)(r0 - y0) * w * 4);
-    resolve_layer(k, s, d, r0, rn);
+    for (int b0 = y0; b0 < y0 + n; b0 += (int)band) {
+        int bn = y0 + n - b0 < (int)band ? y0 + n - b0 : (int)band;
+        soft_cpu_job job = {.segs = s->segs, .nsegs = s->nsegs, .lambda = d->params->lambda,
+                            .width = v->width, .y0 = b0, .rows = bn,
+                            .keys = keys ? s->h_keys : NULL, .kb = yb, .nk = nb,
+                            .layer = s->h_layer, .mem = &s->mem, .threads = s->threads};
+        if (soft_cpu_composite(&job) != 0)
+            return sd_errf(err, SD_ENOMEM, "soft: out of memory compositing the soft discs");
+        if (job.touched[0] < 0) continue; /* no disc reached these rows */
+        int r0 = job.touched[0], rn = job.touched[1] - job.touched[0] + 1;
+        uint64_t bytes = (uint64_t)w * (uint64_t)rn * 16;
+        buf_tex(gl, &s->layer_buf, &s->layer_bytes, bytes, s->layer_tex, GL_RGBA32F);
+        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->layer_buf);
+        gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)bytes,
+                          s->h_layer + (size_t)(r0 - b0) * w * 4);
+        resolve_layer(k, s, d, r0, rn);
+    }
     return 0;
 }
 
