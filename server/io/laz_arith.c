@@ -103,11 +103,12 @@ void laz__model_update(laz_model *m)
     m->until = m->cycle;
 }
 
-int laz_model_init(laz_model *m, uint32_t n)
+/* model_init: laz_model_init, with a decoder table whatever n when tab is set. */
+static int model_init(laz_model *m, uint32_t n, int tab)
 {
     if (!m->count) {
         uint32_t tsize = 0;
-        if (n > TABLE_MIN) tsize = TABLE_SIZE;
+        if (n > TABLE_MIN || tab) tsize = TABLE_SIZE;
         /* one block: n counts (u32), n distribution values and the table (u16: both < 2^15) */
         m->count = malloc(sizeof(uint32_t) * (size_t)n +
                           sizeof(uint16_t) * ((size_t)n + 1 + (tsize ? tsize + 6 : 0)));
@@ -125,6 +126,8 @@ int laz_model_init(laz_model *m, uint32_t n)
     m->cycle = m->until = (n + 6) >> 1;
     return 0;
 }
+
+int laz_model_init(laz_model *m, uint32_t n) { return model_init(m, n, 0); }
 
 void laz_model_free(laz_model *m)
 {
@@ -164,8 +167,10 @@ int laz_ic_init(laz_ic *ic)
     for (unsigned c = 0; c < ic->contexts; c++)
         if (laz_model_init(&ic->mbits[c], ic->corr_bits + 1)) return -1;
     laz_bitmodel_init(&ic->corr0);
+    /* every correction model has a table, the 2- and 4-symbol ones too: one decoding path
+     * for every k, no branch on the model's size (k is data, the branch mispredicted) */
     for (unsigned i = 1; i <= ic->corr_bits; i++)
-        if (laz_model_init(&ic->corr[i], 1u << (i <= ic->bits_high ? i : ic->bits_high)))
+        if (model_init(&ic->corr[i], 1u << (i <= ic->bits_high ? i : ic->bits_high), 1))
             return -1;
     ic->k = 0;
     return 0;

@@ -171,14 +171,10 @@ LAZ_INLINE uint32_t laz_decode_symbol(laz_dec *d, laz_model *m)
 LAZ_INLINE uint32_t laz_decode_bit(laz_dec *d, laz_bitmodel *m)
 {
     uint32_t x = m->bit0_prob * (d->length >> LAZ_BM_SHIFT);
-    uint32_t sym = d->value >= x;
-    if (!sym) {
-        d->length = x;
-        ++m->bit0_count;
-    } else {
-        d->value -= x;
-        d->length -= x;
-    }
+    uint32_t sym = d->value >= x, one = -sym; /* masks, not a branch: bits are coin tosses */
+    d->value -= x & one;
+    d->length = (x & ~one) | ((d->length - x) & one);
+    m->bit0_count += sym ^ 1u;
     laz_renorm(d);
     if (--m->until == 0) laz__bitmodel_update(m);
     return sym;
@@ -218,11 +214,9 @@ LAZ_INLINE int32_t laz_ic_decompress(laz_ic *ic, laz_dec *d, int32_t pred, unsig
     if (k == 0) {
         c = laz_decode_bit(d, &ic->corr0);
     } else if (k < 32) {
-        if (k <= ic->bits_high) {
-            c = laz_decode_symbol(d, &ic->corr[k]);
-        } else {
+        c = laz_decode_symbol_tab(d, &ic->corr[k]); /* every corr model has a table */
+        if (k > ic->bits_high) {
             unsigned k1 = k - ic->bits_high;
-            c = laz_decode_symbol(d, &ic->corr[k]);
             c = (c << k1) | laz_read_bits(d, k1);
         }
         /* c in [0, 2^k): the upper half maps to [2^(k-1)+1, 2^k], the lower to negatives
@@ -262,16 +256,25 @@ static inline void laz_median5_init(laz_median5 *m)
  * (the insertion point is data-dependent and mispredicts); same values as the branchy form. */
 static inline void laz_median5_add(laz_median5 *m, int32_t x)
 {
-    int32_t *v = m->v, a[4], t = x;
+    int32_t *v = m->v, t = x;
     int hi = m->high;
     const int32_t *keep = v + !hi; /* v[0..3] or v[1..4]: an offset, not a branch */
-    for (int i = 0; i < 4; i++) a[i] = keep[i];
-    m->high = hi ? x < v[2] : x <= v[2];
-    for (int i = 0; i < 4; i++) {
-        int32_t lo = a[i] < t ? a[i] : t;
-        t = a[i] < t ? t : a[i];
-        v[i] = lo;
-    }
+    /* x < v[2] (high) or x <= v[2] (low), as one 64-bit compare: no branch */
+    m->high = (int64_t)x < (int64_t)v[2] + !hi;
+    int32_t k0 = keep[0], k1 = keep[1], k2 = keep[2], k3 = keep[3];
+    /* written out: a loop here was left rolled, its exit a mispredicted branch */
+    int32_t lo = k0 < t ? k0 : t;
+    t = k0 < t ? t : k0;
+    v[0] = lo;
+    lo = k1 < t ? k1 : t;
+    t = k1 < t ? t : k1;
+    v[1] = lo;
+    lo = k2 < t ? k2 : t;
+    t = k2 < t ? t : k2;
+    v[2] = lo;
+    lo = k3 < t ? k3 : t;
+    t = k3 < t ? t : k3;
+    v[3] = lo;
     v[4] = t;
 }
 static inline int32_t laz_median5_get(const laz_median5 *m) { return m->v[2]; }
