@@ -32,7 +32,8 @@ typedef struct laz_bitmodel {
 typedef struct laz_model {
     uint32_t *count;        /* n counts, then (same block) dist and table */
     uint16_t *dist;         /* n cumulative probabilities (15 bits) */
-    uint16_t *table;        /* NULL for 4 symbols or fewer */
+    uint8_t *table;         /* the decoder table of a model of 5 .. 256 symbols, else NULL */
+    uint16_t *table16;      /* the same over 256 symbols (GPS time's multiplier), else NULL */
     uint32_t n, last, total, cycle, until;
 } laz_model;
 
@@ -129,29 +130,39 @@ LAZ_INLINE uint32_t laz__symbol_done(laz_dec *d, laz_model *m, uint32_t sym, uin
  * the item decoders call it where the model size says so, sparing the test). The symbol is
  * the one whose range [dist[s], dist[s+1]) holds value / (length >> 15): the table gives the
  * candidates of that quotient's bucket, a binary search the rest. */
+#define LAZ_DECODE_TAB(tbl)                                                                \
+    uint32_t y = d->length;                                                                  \
+    uint32_t dv = d->value / (d->length >>= LAZ_DM_SHIFT);                                   \
+    /* value < length always (laz_dec_init), so dv < 2^15 + 64 and t <= LAZ_TABLE_SIZE */    \
+    uint32_t t = dv >> (LAZ_DM_SHIFT - LAZ_TABLE_BITS);                                      \
+    uint32_t sym = m->tbl[t], n = m->tbl[t + 1] + 1u;                                    \
+    while (n > sym + 1) {                                                                    \
+        uint32_t k = (sym + n) >> 1;                                                         \
+        if (m->dist[k] > dv) n = k;                                                          \
+        else sym = k;                                                                        \
+    }                                                                                        \
+    uint32_t x = m->dist[sym] * d->length;                                                   \
+    /* dist has a spare entry at n, so this load is in bounds for the last symbol too */     \
+    uint32_t yn = m->dist[sym + 1] * d->length;                                              \
+    return laz__symbol_done(d, m, sym, x, sym != m->last ? yn : y)
+
+/* Tables of bytes for models up to 256 symbols (all but one): half the cache lines of u16
+ * entries; the table load is on the decoder's serial chain. */
 LAZ_INLINE uint32_t laz_decode_symbol_tab(laz_dec *d, laz_model *m)
 {
-    uint32_t y = d->length;
-    uint32_t dv = d->value / (d->length >>= LAZ_DM_SHIFT);
-    /* value < length always (laz_dec_init), so dv < 2^15 + 64 and t <= LAZ_TABLE_SIZE */
-    uint32_t t = dv >> (LAZ_DM_SHIFT - LAZ_TABLE_BITS);
-    uint32_t sym = m->table[t], n = m->table[t + 1] + 1u;
-    while (n > sym + 1) {
-        uint32_t k = (sym + n) >> 1;
-        if (m->dist[k] > dv) n = k;
-        else sym = k;
-    }
-    uint32_t x = m->dist[sym] * d->length;
-    /* dist has a spare entry at n, so this load is in bounds for the last symbol too */
-    uint32_t yn = m->dist[sym + 1] * d->length;
-    return laz__symbol_done(d, m, sym, x, sym != m->last ? yn : y);
+    LAZ_DECODE_TAB(table);
 }
-
+/* laz_decode_symbol_tab16: the same for a model over 256 symbols. */
+LAZ_INLINE uint32_t laz_decode_symbol_tab16(laz_dec *d, laz_model *m)
+{
+    LAZ_DECODE_TAB(table16);
+}
 /* laz_decode_symbol: the next symbol of any model (4 symbols or fewer: a binary search with
  * multiplications only, as LASzip). */
 LAZ_INLINE uint32_t laz_decode_symbol(laz_dec *d, laz_model *m)
 {
     if (m->table) return laz_decode_symbol_tab(d, m);
+    if (m->table16) return laz_decode_symbol_tab16(d, m);
     uint32_t y = d->length, x = 0, sym = 0, n = m->n, k = n >> 1;
     d->length >>= LAZ_DM_SHIFT;
     do {
