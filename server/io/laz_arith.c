@@ -67,26 +67,26 @@ void laz__bitmodel_update(laz_bitmodel *m)
 
 /* FILL_TABLE: dist from the counts, and the decoder table of entries of type T (u8 or u16).
  * table[j] = the last symbol whose range starts below bucket j (a lower bound of the symbol
- * of any value in bucket j). Symbol k - 1 fills buckets s+1 .. w: the first 8 / sizeof(T)
- * with one unconditional 8-byte store (most runs are that short; an exit branch per run
+ * of any value in bucket j). Symbol k - 1 fills buckets s+1 .. w: the first 16 / sizeof(T)
+ * with one unconditional 16-byte store (most runs are that short; an exit branch per run
  * mispredicts), the rest as many at a time. Stores past w are overwritten by the next symbols
  * or the final fill; the block has spare entries. */
 #define FILL_TABLE(T, tab, splat)                                                            \
     do {                                                                                     \
-        const uint32_t per = 8 / sizeof(T);                                                  \
+        const uint32_t per = 16 / sizeof(T);                                                 \
         uint32_t s = 0;                                                                      \
         T *t = (tab);                                                                        \
         for (uint32_t k = 0; k < m->n; k++) {                                                \
             m->dist[k] = (uint16_t)((scale * sum) >> (31 - LAZ_DM_SHIFT));                   \
             sum += m->count[k];                                                              \
             uint32_t w = m->dist[k] >> (LAZ_DM_SHIFT - LAZ_TABLE_BITS);                      \
-            uint64_t all = (uint64_t)(T)(k - 1) * (splat);                                   \
-            memcpy(t + s + 1, &all, sizeof all);                                             \
-            for (uint32_t j = s + 1 + per; j <= w; j += per) memcpy(t + j, &all, sizeof all); \
+            uint64_t a = (uint64_t)(T)(k - 1) * (splat), all[2] = {a, a};                    \
+            memcpy(t + s + 1, all, sizeof all);                                              \
+            for (uint32_t j = s + 1 + per; j <= w; j += per) memcpy(t + j, all, sizeof all); \
             s = w;                                                                           \
         }                                                                                    \
         t[0] = 0;                                                                            \
-        while (s <= TABLE_SIZE) t[++s] = (T)(m->n - 1);                                      \
+        for (uint32_t j = s + 1; j <= TABLE_SIZE + 1; j++) t[j] = (T)(m->n - 1);             \
     } while (0)
 
 void laz__model_update(laz_model *m)
@@ -119,8 +119,8 @@ static int model_init(laz_model *m, uint32_t n, int tab)
         uint32_t tsize = 0;
         if (n > TABLE_MIN || tab) tsize = TABLE_SIZE;
         /* one block: n counts (u32), n + 1 distribution values (u16, < 2^15) and the table
-         * (bytes up to 256 symbols, else u16; 8 spare entries for the 8-byte stores) */
-        size_t tbytes = tsize ? (tsize + 9) * (n > 256 ? 2 : 1) : 0;
+         * (bytes up to 256 symbols, else u16; 16 spare entries for the 16-byte stores) */
+        size_t tbytes = tsize ? (tsize + 17) * (n > 256 ? 2 : 1) : 0;
         m->count = malloc(sizeof(uint32_t) * (size_t)n + sizeof(uint16_t) * ((size_t)n + 1) +
                           tbytes);
         if (!m->count) return -1;
