@@ -265,6 +265,20 @@ static void test_pc_load_equals_twin(void **state)
     assert_int_equal(a.n, 100000);
     assert_non_null(strstr(a.format, "COPC LAZ 1.4 format 7"));
     pc_cloud_free(&a);
+
+    /* five chunks (octree nodes of 66272 .. a few thousand points) on three threads: chunks
+     * finish out of order, record buffers are reused, idle threads convert what others
+     * decoded; the cloud equals the one-thread read in every array */
+    assert_int_equal(pc_read_laz_threads(p1, &r1, 1, &e), 0);
+    assert_int_equal(pc_read_laz_threads(p1, &r2, 3, &e), 0);
+    assert_int_equal(r1.n, 100000);
+    assert_int_equal(r2.n, r1.n);
+    assert_memory_equal(r1.xyz, r2.xyz, 3 * sizeof(double) * r1.n);
+    assert_memory_equal(r1.rgba, r2.rgba, 4 * r1.n);
+    assert_memory_equal(r1.intensity, r2.intensity, sizeof *r1.intensity * r1.n);
+    assert_memory_equal(r1.cls, r2.cls, sizeof *r1.cls * r1.n);
+    pc_raw_free(&r1);
+    pc_raw_free(&r2);
 }
 
 /* A LAZ file named .las: the LAS reader sees the compression bits and hands it over. */

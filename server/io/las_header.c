@@ -118,13 +118,17 @@ void pc__las_convert(const las_header *h, const uint8_t *rec, size_t n, pc_raw *
     }
 }
 
-void pc__las_rgb16(const uint16_t *rgb16, size_t n, pc_raw *raw)
+int pc__las_rgb16_wide(const uint16_t *rgb16, size_t n)
 {
     unsigned cmax = 0;
     for (size_t i = 0; i < 3 * n; i++)
         if (rgb16[i] > cmax) cmax = rgb16[i];
-    int wide = cmax > 255;
-    for (size_t i = 0; i < n; i++) {
+    return cmax > 255;
+}
+
+void pc__las_rgb16_range(const uint16_t *rgb16, size_t lo, size_t hi, int wide, pc_raw *raw)
+{
+    for (size_t i = lo; i < hi; i++) {
         uint8_t *c = raw->rgba + 4 * i;
         for (int k = 0; k < 3; k++) {
             unsigned v = rgb16[3 * i + k];
@@ -132,4 +136,9 @@ void pc__las_rgb16(const uint16_t *rgb16, size_t n, pc_raw *raw)
         }
         c[3] = 255;
     }
+}
+
+void pc__las_rgb16(const uint16_t *rgb16, size_t n, pc_raw *raw)
+{
+    pc__las_rgb16_range(rgb16, 0, n, pc__las_rgb16_wide(rgb16, n), raw);
 }

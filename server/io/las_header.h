@@ -56,4 +56,8 @@ void pc__las_convert(const las_header *h, const uint8_t *rec, size_t n, pc_raw *
 /* pc__las_rgb16: raw->rgba of the n points from their 16-bit colours, scaled down only when
  * some value needs more than 8 bits (many writers store 8-bit values in the 16-bit fields). */
 void pc__las_rgb16(const uint16_t *rgb16, size_t n, pc_raw *raw);
+/* pc__las_rgb16 in parts (a threaded reader): whether any of n colours needs more than 8 bits,
+ * and raw->rgba of points lo .. hi-1 from rgb16, divided down when wide. */
+int pc__las_rgb16_wide(const uint16_t *rgb16, size_t n);
+void pc__las_rgb16_range(const uint16_t *rgb16, size_t lo, size_t hi, int wide, pc_raw *raw);
 

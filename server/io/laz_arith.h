@@ -32,7 +32,8 @@ typedef struct laz_bitmodel {
 typedef struct laz_model {
     uint32_t *count;        /* n counts, then (same block) dist and table */
     uint16_t *dist;         /* n cumulative probabilities (15 bits) */
-    uint16_t *table;        /* NULL for 4 symbols or fewer */
+    uint8_t *table;         /* the decoder table of a model of 5 .. 256 symbols, else NULL */
+    uint16_t *table16;      /* the same over 256 symbols (GPS time's multiplier), else NULL */
     uint32_t n, last, total, cycle, until;
 } laz_model;
 
@@ -129,29 +130,39 @@ LAZ_INLINE uint32_t laz__symbol_done(laz_dec *d, laz_model *m, uint32_t sym, uin
  * the item decoders call it where the model size says so, sparing the test). The symbol is
  * the one whose range [dist[s], dist[s+1]) holds value / (length >> 15): the table gives the
  * candidates of that quotient's bucket, a binary search the rest. */
+#define LAZ_DECODE_TAB(tbl)                                                                \
+    uint32_t y = d->length;                                                                  \
+    uint32_t dv = d->value / (d->length >>= LAZ_DM_SHIFT);                                   \
+    /* value < length always (laz_dec_init), so dv < 2^15 + 64 and t <= LAZ_TABLE_SIZE */    \
+    uint32_t t = dv >> (LAZ_DM_SHIFT - LAZ_TABLE_BITS);                                      \
+    uint32_t sym = m->tbl[t], n = m->tbl[t + 1] + 1u;                                    \
+    while (n > sym + 1) {                                                                    \
+        uint32_t k = (sym + n) >> 1;                                                         \
+        if (m->dist[k] > dv) n = k;                                                          \
+        else sym = k;                                                                        \
+    }                                                                                        \
+    uint32_t x = m->dist[sym] * d->length;                                                   \
+    /* dist has a spare entry at n, so this load is in bounds for the last symbol too */     \
+    uint32_t yn = m->dist[sym + 1] * d->length;                                              \
+    return laz__symbol_done(d, m, sym, x, sym != m->last ? yn : y)
+
+/* Tables of bytes for models up to 256 symbols (all but one): half the cache lines of u16
+ * entries; the table load is on the decoder's serial chain. */
 LAZ_INLINE uint32_t laz_decode_symbol_tab(laz_dec *d, laz_model *m)
 {
-    uint32_t y = d->length;
-    uint32_t dv = d->value / (d->length >>= LAZ_DM_SHIFT);
-    /* value < length always (laz_dec_init), so dv < 2^15 + 64 and t <= LAZ_TABLE_SIZE */
-    uint32_t t = dv >> (LAZ_DM_SHIFT - LAZ_TABLE_BITS);
-    uint32_t sym = m->table[t], n = m->table[t + 1] + 1u;
-    while (n > sym + 1) {
-        uint32_t k = (sym + n) >> 1;
-        if (m->dist[k] > dv) n = k;
-        else sym = k;
-    }
-    uint32_t x = m->dist[sym] * d->length;
-    /* dist has a spare entry at n, so this load is in bounds for the last symbol too */
-    uint32_t yn = m->dist[sym + 1] * d->length;
-    return laz__symbol_done(d, m, sym, x, sym != m->last ? yn : y);
+    LAZ_DECODE_TAB(table);
 }
-
+/* laz_decode_symbol_tab16: the same for a model over 256 symbols. */
+LAZ_INLINE uint32_t laz_decode_symbol_tab16(laz_dec *d, laz_model *m)
+{
+    LAZ_DECODE_TAB(table16);
+}
 /* laz_decode_symbol: the next symbol of any model (4 symbols or fewer: a binary search with
  * multiplications only, as LASzip). */
 LAZ_INLINE uint32_t laz_decode_symbol(laz_dec *d, laz_model *m)
 {
     if (m->table) return laz_decode_symbol_tab(d, m);
+    if (m->table16) return laz_decode_symbol_tab16(d, m);
     uint32_t y = d->length, x = 0, sym = 0, n = m->n, k = n >> 1;
     d->length >>= LAZ_DM_SHIFT;
     do {
@@ -171,14 +182,10 @@ LAZ_INLINE uint32_t laz_decode_symbol(laz_dec *d, laz_model *m)
 LAZ_INLINE uint32_t laz_decode_bit(laz_dec *d, laz_bitmodel *m)
 {
     uint32_t x = m->bit0_prob * (d->length >> LAZ_BM_SHIFT);
-    uint32_t sym = d->value >= x;
-    if (!sym) {
-        d->length = x;
-        ++m->bit0_count;
-    } else {
-        d->value -= x;
-        d->length -= x;
-    }
+    uint32_t sym = d->value >= x, one = -sym; /* masks, not a branch: bits are coin tosses */
+    d->value -= x & one;
+    d->length = (x & ~one) | ((d->length - x) & one);
+    m->bit0_count += sym ^ 1u;
     laz_renorm(d);
     if (--m->until == 0) laz__bitmodel_update(m);
     return sym;
@@ -218,11 +225,9 @@ LAZ_INLINE int32_t laz_ic_decompress(laz_ic *ic, laz_dec *d, int32_t pred, unsig
     if (k == 0) {
         c = laz_decode_bit(d, &ic->corr0);
     } else if (k < 32) {
-        if (k <= ic->bits_high) {
-            c = laz_decode_symbol(d, &ic->corr[k]);
-        } else {
+        c = laz_decode_symbol_tab(d, &ic->corr[k]); /* every corr model has a table */
+        if (k > ic->bits_high) {
             unsigned k1 = k - ic->bits_high;
-            c = laz_decode_symbol(d, &ic->corr[k]);
             c = (c << k1) | laz_read_bits(d, k1);
         }
         /* c in [0, 2^k): the upper half maps to [2^(k-1)+1, 2^k], the lower to negatives
@@ -262,16 +267,25 @@ static inline void laz_median5_init(laz_median5 *m)
  * (the insertion point is data-dependent and mispredicts); same values as the branchy form. */
 static inline void laz_median5_add(laz_median5 *m, int32_t x)
 {
-    int32_t *v = m->v, a[4], t = x;
+    int32_t *v = m->v, t = x;
     int hi = m->high;
     const int32_t *keep = v + !hi; /* v[0..3] or v[1..4]: an offset, not a branch */
-    for (int i = 0; i < 4; i++) a[i] = keep[i];
-    m->high = hi ? x < v[2] : x <= v[2];
-    for (int i = 0; i < 4; i++) {
-        int32_t lo = a[i] < t ? a[i] : t;
-        t = a[i] < t ? t : a[i];
-        v[i] = lo;
-    }
+    /* x < v[2] (high) or x <= v[2] (low), as one 64-bit compare: no branch */
+    m->high = (int64_t)x < (int64_t)v[2] + !hi;
+    int32_t k0 = keep[0], k1 = keep[1], k2 = keep[2], k3 = keep[3];
+    /* written out: a loop here was left rolled, its exit a mispredicted branch */
+    int32_t lo = k0 < t ? k0 : t;
+    t = k0 < t ? t : k0;
+    v[0] = lo;
+    lo = k1 < t ? k1 : t;
+    t = k1 < t ? t : k1;
+    v[1] = lo;
+    lo = k2 < t ? k2 : t;
+    t = k2 < t ? t : k2;
+    v[2] = lo;
+    lo = k3 < t ? k3 : t;
+    t = k3 < t ? t : k3;
+    v[3] = lo;
     v[4] = t;
 }
 static inline int32_t laz_median5_get(const laz_median5 *m) { return m->v[2]; }

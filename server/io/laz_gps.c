@@ -79,7 +79,7 @@ LAZ_CLONES uint64_t laz_gps_read(laz_gps *g, laz_dec *dp)
             }
             break;
         }
-        uint32_t m = laz_decode_symbol_tab(d, &g->multi);
+        uint32_t m = laz_decode_symbol_tab16(d, &g->multi); /* over 256 symbols */
         if (m == 1) {
             g->t[L] += (uint64_t)(int64_t)laz_ic_decompress(&g->ic, d, g->diff[L], 1);
             g->extreme[L] = 0;

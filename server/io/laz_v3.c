@@ -237,22 +237,9 @@ LAZ_CLONES static int pt14_read(pt14 *s, uint8_t *rec)
     unsigned cpr = (r == 1) + (r >= n ? 2u : 0u);
     unsigned idx = (m << 1) | (unsigned)gpsc, one = n == 1;
 
-    int32_t diff = laz_ic_decompress(&c->dx, dxy, laz_median5_get(&c->mx[idx]), one);
-    L->x = (int32_t)((uint32_t)L->x + (uint32_t)diff);
-    laz_median5_add(&c->mx[idx], diff);
-    unsigned kb = c->dx.k;
-    diff = laz_ic_decompress(&c->dy, dxy, laz_median5_get(&c->my[idx]),
-                             one + (kb < 20 ? (kb & ~1u) : 20));
-    L->y = (int32_t)((uint32_t)L->y + (uint32_t)diff);
-    laz_median5_add(&c->my[idx], diff);
-    s->d[L_XY] = dd;
-
-    if (s->on[L_Z]) {
-        kb = (c->dx.k + c->dy.k) / 2;
-        L->z = laz_ic_decompress(&c->z, &s->d[L_Z], c->last_z[lv],
-                                 one + (kb < 18 ? (kb & ~1u) : 18));
-        c->last_z[lv] = L->z;
-    }
+    /* The layers are separate streams: the fields that need only the return counts decode
+     * between x and y, so that their serial chains sit next to the x/y chain in the
+     * instruction stream and overlap with it (z waits for x's and y's bit counts). */
     if (s->on[L_CLS]) {
         unsigned ccc = ((L->cls & 0x1Fu) << 1) + (cpr == 3);
         laz_model *md = lazy(&c->cls[ccc], &c->cls_on[ccc], 256);
@@ -268,21 +255,37 @@ LAZ_CLONES static int pt14_read(pt14 *s, uint8_t *rec)
         L->sdir = (f >> 4) & 1;
         L->cflags = f & 15;
     }
+    int32_t diff = laz_ic_decompress(&c->dx, dxy, laz_median5_get(&c->mx[idx]), one);
+    L->x = (int32_t)((uint32_t)L->x + (uint32_t)diff);
+    laz_median5_add(&c->mx[idx], diff);
+    unsigned kb = c->dx.k;
     if (s->on[L_INT]) {
         unsigned k = (cpr << 1) | (unsigned)gpsc;
         L->intensity = (uint16_t)laz_ic_decompress(&c->intensity, &s->d[L_INT], c->last_int[k],
                                                    cpr);
         c->last_int[k] = L->intensity;
     }
-    if (s->on[L_SCAN] && sac)
-        L->scan_angle = (int16_t)(uint16_t)laz_ic_decompress(&c->scan, &s->d[L_SCAN],
-                                                              L->scan_angle, (unsigned)gpsc);
     if (s->on[L_UD]) {
         unsigned k = L->ud / 4u;
         laz_model *md = lazy(&c->ud[k], &c->ud_on[k], 256);
         if (!md) goto nomem;
         L->ud = (uint8_t)laz_decode_symbol_tab(&s->d[L_UD], md);
     }
+    diff = laz_ic_decompress(&c->dy, dxy, laz_median5_get(&c->my[idx]),
+                             one + (kb < 20 ? (kb & ~1u) : 20));
+    L->y = (int32_t)((uint32_t)L->y + (uint32_t)diff);
+    laz_median5_add(&c->my[idx], diff);
+    s->d[L_XY] = dd;
+
+    if (s->on[L_Z]) {
+        kb = (c->dx.k + c->dy.k) / 2;
+        L->z = laz_ic_decompress(&c->z, &s->d[L_Z], c->last_z[lv],
+                                 one + (kb < 18 ? (kb & ~1u) : 18));
+        c->last_z[lv] = L->z;
+    }
+    if (s->on[L_SCAN] && sac)
+        L->scan_angle = (int16_t)(uint16_t)laz_ic_decompress(&c->scan, &s->d[L_SCAN],
+                                                              L->scan_angle, (unsigned)gpsc);
     if (s->on[L_PSID] && psc)
         L->psid = (uint16_t)laz_ic_decompress(&c->psid, &s->d[L_PSID], L->psid, 0);
     if (s->on[L_GPS] && gpsc) {
