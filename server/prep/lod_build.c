@@ -556,7 +556,10 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         }
         nown = ns;
         if ((size_t)K >= m) { exact = full; if (!full) goto done; }
-        rc = prep_knn_build(r.pos, m, NULL, &kn, err);
+        /* in the cloud's frame the region is in Morton order already: no sort, and the
+         * queries (region order) run in the index's order */
+        prep_knn_opts ko = {.frame = &b->f, .codes = r.code};
+        rc = prep_knn_build(r.pos, m, &ko, &kn, err);
         if (rc < 0) goto done;
         j.kn = kn;
         j.nbr = malloc(m * (size_t)K * 4);
