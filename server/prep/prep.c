@@ -22,12 +22,49 @@ static double now_s(void)
 
 /* ---- selection ---- */
 
+typedef float v8f __attribute__((vector_size(32)));
+typedef int v8i __attribute__((vector_size(32)));
+enum { SMALL_MAX = 64 };
+
+/* The value of rank want among the n <= SMALL_MAX values v (a neighbourhood's radii: called
+ * once a point), by counting for each value how many are smaller and how many equal: the value
+ * quickselect finds, without its data-dependent branches. 0 when there is none (NaN among the
+ * values: the caller falls back to quickselect). */
+static int select_small(const float *v, size_t n, size_t want, float *out)
+{
+    v8f a[SMALL_MAX / 8];
+    size_t nv = (n + 7) / 8;
+    float *f = (float *)a;
+    memcpy(f, v, n * sizeof *v);
+    for (size_t j = n; j < nv * 8; j++) f[j] = NAN; /* neither smaller nor equal to anything */
+    for (size_t i = 0; i < n; i++) {
+        const v8f x = (v8f){0, 0, 0, 0, 0, 0, 0, 0} + v[i];
+        v8i lt = {0, 0, 0, 0, 0, 0, 0, 0}, eq = lt;
+        for (size_t b = 0; b < nv; b++) {
+            lt -= a[b] < x; /* true lanes are -1 */
+            eq -= a[b] == x;
+        }
+        size_t nlt = 0, neq = 0;
+        for (int l = 0; l < 8; l++) {
+            nlt += (size_t)lt[l];
+            neq += (size_t)eq[l];
+        }
+        if (nlt <= want && want < nlt + neq) {
+            *out = v[i];
+            return 1;
+        }
+    }
+    return 0;
+}
+
 float prep_percentile(float *v, size_t n, double q)
 {
     if (n == 0) return 0;
     if (!(q >= 0)) q = 0;
     if (q > 1) q = 1;
     ptrdiff_t want = (ptrdiff_t)floor(q * (double)(n - 1) + 0.5);
+    float r;
+    if (n <= SMALL_MAX && select_small(v, n, (size_t)want, &r)) return r;
     ptrdiff_t lo = 0, hi = (ptrdiff_t)n - 1;
     /* Quickselect with Hoare partitioning around a median of three; scans stop on elements
      * equal to the pivot, so runs of equal values (regular grids, clamped F) stay O(n). */
@@ -223,23 +260,24 @@ static int check_input(const pc_cloud *in, const prep_desc *desc, prep_desc *d, 
 }
 
 /* Step 1: Morton order, attribute permutation, batches, summary. Allocates out. */
-static int reorder(const pc_cloud *in, int K, pc_prepared *out, double centroid[3], sd_err *err)
+static int reorder(const pc_cloud *in, int K, pc_prepared *out, double centroid[3],
+                   prep_morton_frame *f, uint64_t **codes_out, sd_err *err)
 {
     size_t n = in->n;
-    prep_morton_frame f;
-    prep_morton_frame_of(in->pos, n, &f);
+    prep_morton_frame_of(in->pos, n, f);
     uint64_t *codes = malloc(n * sizeof *codes);
     uint32_t *perm = malloc(n * sizeof *perm);
     if (!codes || !perm) {
         free(codes); free(perm);
         return sd_errf(err, SD_ENOMEM, "prep: out of memory ordering %zu points", n);
     }
-    int rc = prep_morton_sort(in->pos, n, &f, codes, perm, err);
-    free(codes);
+    int rc = prep_morton_sort(in->pos, n, f, codes, perm, err);
     if (rc != 0) {
+        free(codes);
         free(perm);
         return rc;
     }
+    *codes_out = codes; /* the kNN index takes them: the points are in their order now */
     out->n = n;
     out->attrs = (in->attrs & (PC_ATTR_RGB | PC_ATTR_NORMAL | PC_ATTR_INTENSITY | PC_ATTR_CLASS |
                                PC_ATTR_RADIUS | PC_ATTR_SCALAR)) |
@@ -249,6 +287,8 @@ static int reorder(const pc_cloud *in, int K, pc_prepared *out, double centroid[
     rc = pc_prepared_alloc(out, err);
     if (rc != 0) {
         free(perm);
+        free(codes);
+        *codes_out = NULL;
         return rc;
     }
     double c[3] = {0, 0, 0};
@@ -320,6 +360,8 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
     jb.need_normal = !(in->attrs & PC_ATTR_NORMAL);
     jb.need_radius = !(in->attrs & PC_ATTR_RADIUS);
     prep_knn *kn = NULL;
+    prep_morton_frame frame;
+    uint64_t *codes = NULL;
     worker *w = NULL;
     float *tmp = NULL;
     size_t nchunks = (n + CHUNK - 1) / CHUNK;
@@ -328,7 +370,7 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
 
     double t0 = now_s();
     prep_progress_begin(&pr, d.progress, d.user, PROTO_PHASE_REORDER);
-    rc = reorder(in, K, out, jb.centroid, err);
+    rc = reorder(in, K, out, jb.centroid, &frame, &codes, err);
     if (in->has_viewpoint) { /* into the cloud's local coordinates, as the positions */
         jb.has_vp = 1;
         for (int a = 0; a < 3; a++) jb.vp[a] = in->viewpoint[a] - in->offset[a];
@@ -338,12 +380,14 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
     out->stats.t_reorder = now_s() - t0;
     if (n == 1) {
         single_point(out, !jb.need_normal, !jb.need_radius);
+        free(codes);
         return 0;
     }
 
     t0 = now_s();
     prep_progress_begin(&pr, d.progress, d.user, PROTO_PHASE_KNN);
-    prep_knn_opts ko = {.method = d.knn, .leaf_size = d.knn_leaf, .flann_cores = 1};
+    prep_knn_opts ko = {.method = d.knn, .leaf_size = d.knn_leaf, .flann_cores = 1,
+                        .frame = &frame, .codes = codes};
     rc = prep_knn_build(out->pos, n, &ko, &kn, err);
     if (rc != 0) goto fail;
     prep_progress_end(&pr);
@@ -424,5 +468,6 @@ done:
     free(jb.svar);
     free(jb.nbr);
     prep_knn_free(kn);
+    free(codes);
     return rc;
 }
