@@ -37,6 +37,7 @@
 #endif
 
 #include "morton.h"
+#include "simd.h"
 
 enum {
     GRID_CAP = 4096, /* candidates above which a leaf's queries search individually */
@@ -461,16 +462,8 @@ static uint32_t fbits(float d)
     return u;
 }
 
-typedef float v8f __attribute__((vector_size(32)));
-typedef int v8i __attribute__((vector_size(32)));
-
-/* On x86-64 the portable distance and ranking loops are compiled twice, for AVX2 and for the baseline (where each
- * 8-wide operation becomes two SSE ones); the loader picks one for the CPU at hand. */
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
-#define PREP_CLONES __attribute__((target_clones("avx2", "default")))
-#else
-#define PREP_CLONES
-#endif
+typedef prep_v8f v8f;
+typedef prep_v8i v8i;
 
 /* The squared distances from q of the m8 candidates x, y, z (a multiple of 8) into d2. */
 PREP_CLONES static void distances(const cand_set *cs, size_t m8, const float q[3], float *d2)

@@ -10,6 +10,7 @@
 
 #include "morton.h"
 #include "pca.h"
+#include "simd.h"
 
 enum { CHUNK = 16384 }; /* queries per parallel work unit */
 
@@ -22,37 +23,35 @@ static double now_s(void)
 
 /* ---- selection ---- */
 
-typedef float v8f __attribute__((vector_size(32)));
-typedef int v8i __attribute__((vector_size(32)));
 enum { SMALL_MAX = 64 };
 
 /* The value of rank want among the n <= SMALL_MAX values v (a neighbourhood's radii: called
- * once a point), by counting for each value how many are smaller and how many equal: the value
- * quickselect finds, without its data-dependent branches. 0 when there is none (NaN among the
- * values: the caller falls back to quickselect). */
-static int select_small(const float *v, size_t n, size_t want, float *out)
+ * once a point), by counting for 8 values at a time how many are smaller and how many equal:
+ * the value quickselect finds, without its data-dependent branches. 0 when v holds a NaN (the
+ * caller falls back to quickselect). */
+PREP_CLONES static int select_small(const float *v, size_t n, size_t want, float *out)
 {
-    v8f a[SMALL_MAX / 8];
+    prep_v8f a[SMALL_MAX / 8];
     size_t nv = (n + 7) / 8;
     float *f = (float *)a;
+    for (size_t j = 0; j < n; j++)
+        if (v[j] != v[j]) return 0;
     memcpy(f, v, n * sizeof *v);
     for (size_t j = n; j < nv * 8; j++) f[j] = NAN; /* neither smaller nor equal to anything */
-    for (size_t i = 0; i < n; i++) {
-        const v8f x = (v8f){0, 0, 0, 0, 0, 0, 0, 0} + v[i];
-        v8i lt = {0, 0, 0, 0, 0, 0, 0, 0}, eq = lt;
-        for (size_t b = 0; b < nv; b++) {
-            lt -= a[b] < x; /* true lanes are -1 */
-            eq -= a[b] == x;
+    const prep_v8i zero = {0, 0, 0, 0, 0, 0, 0, 0}, w = zero + (int)want;
+    for (size_t b = 0; b < nv; b++) {
+        prep_v8i lt = zero, eq = zero;
+        for (size_t j = 0; j < n; j++) {
+            const prep_v8f x = (prep_v8f){0, 0, 0, 0, 0, 0, 0, 0} + v[j];
+            lt -= x < a[b]; /* true lanes are -1 */
+            eq -= x == a[b];
         }
-        size_t nlt = 0, neq = 0;
-        for (int l = 0; l < 8; l++) {
-            nlt += (size_t)lt[l];
-            neq += (size_t)eq[l];
-        }
-        if (nlt <= want && want < nlt + neq) {
-            *out = v[i];
-            return 1;
-        }
+        prep_v8i hit = (lt <= w) & (w < lt + eq);
+        for (int l = 0; l < 8; l++)
+            if (hit[l]) {
+                *out = f[8 * b + (size_t)l];
+                return 1;
+            }
     }
     return 0;
 }
