@@ -98,6 +98,7 @@ typedef struct build {
     uint64_t normals_done;    /* points through the normals pass so far */
     int radius_pass;          /* chunk_hist: which histograms */
     double t_pass;            /* when the normals pass began */
+    double tph[8];            /* the normals pass's phases, wall seconds (PH_*) */
     pthread_mutex_t mu;
     nodeent *nodes;
     size_t nnodes, capnodes;
@@ -417,11 +418,7 @@ static int inside(const region *r, const float *p, float d2)
     return 1;
 }
 
-typedef struct tls {
-    uint64_t hist[3][65536];
-} tls;
-
-enum { QBLOCK = 16384 };
+enum { QBLOCK = 4096, QBLOCK_K = QBLOCK * PREP_MAX_K };
 
 static int cmp_u32(const void *a, const void *b)
 {
@@ -429,7 +426,15 @@ static int cmp_u32(const void *a, const void *b)
     return x < y ? -1 : x > y;
 }
 
-/* One chunk's normals pass, its steps run in parallel over blocks of QBLOCK points. */
+typedef struct tls {
+    uint64_t hist[3][65536];
+    float d2[QBLOCK_K];       /* one block's neighbour distances */
+    uint32_t idx[QBLOCK_K];   /* one block's neighbours, where they do not go in place */
+} tls;
+
+/* One chunk's normals pass, its steps run in parallel over blocks of QBLOCK points. The
+ * points S of the step: the chunk's own points (slots 0..nown), then their neighbours from the
+ * halo (slots nown..ns); region indices in list. */
 typedef struct njob {
     build *b;
     region *r;
@@ -437,10 +442,12 @@ typedef struct njob {
     prep_knn_scratch **ks;    /* per thread */
     tls **t;                  /* per thread */
     int K;
-    uint32_t *list, *nbr;     /* S = own points then their neighbours; K neighbours each */
-    int32_t *slot;
-    float *d2, *r20, *nrm, *svar;
-    size_t first, count;      /* the step's range of S */
+    uint32_t *list, *nbr;     /* S: region index of each slot; K neighbours (region indices) each */
+    int32_t *slot;            /* region index -> slot, or -1 */
+    float *kd2, *nn2;         /* squared distance to the K-th and to the nearest neighbour */
+    float *r20, *nrm, *svar;
+    const uint32_t *qslot;    /* nj_query: the slots to query (NULL: first..first+count) */
+    size_t first, count;      /* the step's range of S (or of qslot) */
     arec *out;
     double vp[3];
 } njob;
@@ -448,9 +455,23 @@ typedef struct njob {
 static int nj_query(void *ctx, size_t blk, int tid, sd_err *err)
 {
     njob *j = ctx;
-    size_t a = j->first + blk * QBLOCK, m = j->first + j->count - a < QBLOCK ? j->first + j->count - a : QBLOCK;
-    return prep_knn_query(j->kn, j->list + a, 0, m, j->K, j->nbr + a * j->K, j->d2 + a * j->K,
-                          j->ks[tid], err);
+    int K = j->K;
+    tls *t = j->t[tid];
+    size_t a = blk * QBLOCK, m = j->count - a < QBLOCK ? j->count - a : QBLOCK;
+    uint32_t q[QBLOCK];
+    for (size_t i = 0; i < m; i++)
+        q[i] = j->list[j->qslot ? j->qslot[a + i] : j->first + a + i];
+    /* contiguous slots get their lists in place; scattered ones through the thread's buffer */
+    uint32_t *idx = j->qslot ? t->idx : j->nbr + (j->first + a) * K;
+    int rc = prep_knn_query(j->kn, q, 0, m, K, idx, t->d2, j->ks[tid], err);
+    if (rc != 0) return rc;
+    for (size_t i = 0; i < m; i++) {
+        size_t s = j->qslot ? j->qslot[a + i] : j->first + a + i;
+        if (j->qslot) memcpy(j->nbr + s * K, idx + i * K, (size_t)K * sizeof *idx);
+        j->kd2[s] = t->d2[i * K + K - 1];
+        if (j->nn2) j->nn2[s] = t->d2[i * K];
+    }
+    return 0;
 }
 
 static int nj_pca(void *ctx, size_t blk, int tid, sd_err *err)
@@ -461,7 +482,7 @@ static int nj_pca(void *ctx, size_t blk, int tid, sd_err *err)
     size_t a = blk * QBLOCK, e = a + QBLOCK < j->count ? a + QBLOCK : j->count;
     float inv_sqrt_k = (float)(1.0 / sqrt((double)j->K));
     for (size_t i = a; i < e; i++) {
-        j->r20[i] = 2.0f * sqrtf(j->d2[i * j->K + j->K - 1]) * inv_sqrt_k;
+        j->r20[i] = 2.0f * sqrtf(j->kd2[i]) * inv_sqrt_k;
         prep_pca_normal(j->r->pos, j->list[i], j->nbr + i * j->K, j->K, j->nrm + 3 * i, j->svar + i);
         prep_orient_normal(j->nrm + 3 * i, j->r->pos + 3 * (size_t)j->list[i], j->b->info.centroid,
                j->b->info.has_viewpoint, j->vp);
@@ -501,7 +522,7 @@ static int nj_own(void *ctx, size_t blk, int tid, sd_err *err)
         o->svar = j->svar[i];
         float f = j->r20[i] * s / (float)K;
         o->Fraw = f >= 0 && f <= FLT_MAX ? f : 0.0f;
-        o->nnd = sqrtf(j->d2[i * K]);
+        o->nnd = sqrtf(j->nn2[i]);
         t->hist[0][fbits(o->r20) >> 16]++;
         t->hist[1][fbits(o->Fraw) >> 16]++;
         t->hist[2][fbits(o->nnd) >> 16]++;
@@ -514,7 +535,56 @@ static size_t nblocks(size_t n)
     return (n + QBLOCK - 1) / QBLOCK;
 }
 
-/* The normals pass of chunk ci (the chunks run one after the other, each on every thread). */
+/* The slots s (of nq) whose ball (k-th distance) leaves the region: their count; the halo they
+ * need grows *need. */
+static size_t check_balls(const build *b, const chunk *c, const region *r, const njob *j,
+                          size_t first, size_t n, uint8_t *exact, float *need)
+{
+    size_t bad = 0;
+    for (size_t s = first; s < first + n; s++) {
+        if (exact && exact[s]) continue;
+        const float *pp = r->pos + 3 * (size_t)j->list[s];
+        if (inside(r, pp, j->kd2[s])) {
+            if (exact) exact[s] = 1;
+            continue;
+        }
+        bad++;
+        float nd = halo_need(c, pp, j->kd2[s]);
+        if (nd > *need) *need = nd;
+    }
+    (void)b;
+    return bad;
+}
+
+/* The chunk's own results across a halo that grew: the neighbours of the own points found
+ * exact in the smaller region old, renamed to the indices of the same points in r (a
+ * superset, both in (code, file index) order). */
+static void remap_own(const region *old, const region *r, njob *j, size_t nown,
+                      const uint8_t *exact)
+{
+    uint32_t *map = (uint32_t *)j->slot; /* free until the slots are assigned */
+    for (size_t i = 0, k = 0; i < old->m; i++) {
+        while (r->gidx[k] != old->gidx[i]) k++;
+        map[i] = (uint32_t)k++;
+    }
+    for (size_t s = 0; s < nown; s++)
+        if (exact[s])
+            for (int q = 0; q < j->K; q++) j->nbr[s * j->K + q] = map[j->nbr[s * j->K + q]];
+}
+
+enum { PH_LOAD, PH_INDEX, PH_QOWN, PH_CHECK, PH_QNBR, PH_PCA, PH_F, PH_WRITE, PH_N };
+
+static void phase_end(build *b, int ph, double *t)
+{
+    double now = now_s();
+    b->tph[ph] += now - *t;
+    *t = now;
+}
+
+/* The normals pass of chunk ci (the chunks run one after the other, each on every thread).
+ * When a ball leaves the region, the halo grows to hold it and the region is loaded again; the
+ * own points already exact keep their neighbours (renamed to the new region), only the others
+ * are queried again. */
 static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
 {
     build *b = ctx;
@@ -533,101 +603,116 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         tl[t] = calloc(1, sizeof *tl[t]);
         if (!ks[t] || !tl[t]) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory");
     }
+    size_t nown = c->count;
+    njob j;
+    memset(&j, 0, sizeof j);
+    j.b = b, j.K = K, j.ks = ks, j.t = tl;
+    for (int a = 0; a < 3; a++) j.vp[a] = b->info.viewpoint[a] - b->info.offset[a];
+    j.nbr = malloc(nown * (size_t)K * 4);
+    j.kd2 = malloc(nown * 4);
+    j.nn2 = malloc(nown * 4);
+    uint8_t *exact = calloc(nown, 1);
+    uint32_t *redo = malloc(nown * 4);
+    if (rc == 0 && (!j.nbr || !j.kd2 || !j.nn2 || !exact || !redo))
+        rc = sd_errf(err, SD_ENOMEM, "lod: out of memory");
+    region r, old;
+    memset(&r, 0, sizeof r);
+    memset(&old, 0, sizeof old);
+    int attempt = 0;
     while (rc == 0) {
-        region r;
+        double t = now_s();
         rc = load_region(b, ci, h, &r, err);
         if (rc < 0) break;
+        phase_end(b, PH_LOAD, &t);
         size_t m = r.m;
         int full = r.edge[0] && r.edge[1] && r.edge[2] && r.edge[3] && r.edge[4] && r.edge[5];
-        njob j;
-        memset(&j, 0, sizeof j);
-        j.b = b, j.r = &r, j.K = K, j.ks = ks, j.t = tl;
-        for (int a = 0; a < 3; a++) j.vp[a] = b->info.viewpoint[a] - b->info.offset[a];
+        j.r = &r;
         prep_knn *kn = NULL;
-        int exact = 1;
+        int done = 0;
         float need = 0;
+        free(j.slot);
+        free(j.list);
         j.slot = malloc(m * sizeof *j.slot);
         j.list = malloc(m * sizeof *j.list);
-        if (!j.slot || !j.list) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
-        size_t ns = 0, nown;
+        if (!j.slot || !j.list) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
+        if (attempt > 0) remap_own(&old, &r, &j, nown, exact);
+        region_free(&old);
+        size_t ns = 0;
         for (size_t i = 0; i < m; i++) {
             j.slot[i] = -1;
             if (r.own[i]) j.slot[i] = (int32_t)ns, j.list[ns++] = (uint32_t)i;
         }
-        nown = ns;
-        if ((size_t)K >= m) { exact = full; if (!full) goto done; }
+        if ((size_t)K >= m) { /* too few points to query: the whole cloud, or a bigger halo */
+            if (full) rc = sd_errf(err, SD_EINVAL, "lod: %zu points for k = %d", m, K);
+            goto next;
+        }
         /* in the cloud's frame the region is in Morton order already: no sort, and the
          * queries (region order) run in the index's order */
         prep_knn_opts ko = {.frame = &b->f, .codes = r.code};
         rc = prep_knn_build(r.pos, m, &ko, &kn, err);
-        if (rc < 0) goto done;
+        if (rc < 0) goto next;
+        phase_end(b, PH_INDEX, &t);
         j.kn = kn;
-        j.nbr = malloc(m * (size_t)K * 4);
-        j.d2 = malloc(m * (size_t)K * 4);
-        if (!j.nbr || !j.d2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
-        j.first = 0, j.count = nown;
-        rc = prep_par_for(T, nblocks(nown), nj_query, &j, NULL, err);
-        if (rc < 0) goto done;
+        size_t nq = 0;
+        for (size_t s = 0; s < nown; s++)
+            if (!exact[s]) redo[nq++] = (uint32_t)s;
+        j.qslot = nq < nown ? redo : NULL, j.first = 0, j.count = nq;
+        rc = prep_par_for(T, nblocks(nq), nj_query, &j, NULL, err);
+        if (rc < 0) goto next;
+        phase_end(b, PH_QOWN, &t);
         /* A result is exact when its ball lies in the region; else the region grows to the
          * farthest ball (the computed k-th distance bounds the true one from above). */
-        for (size_t i = 0; i < nown; i++) {
-            const float *pp = r.pos + 3 * (size_t)j.list[i];
-            if (!full && !inside(&r, pp, j.d2[i * K + K - 1])) {
-                exact = 0;
-                float nd = halo_need(c, pp, j.d2[i * K + K - 1]);
-                if (nd > need) need = nd;
-            }
-            if (!exact) continue;
+        if (full) memset(exact, 1, nown);
+        else if (check_balls(b, c, &r, &j, 0, nown, exact, &need) > 0) goto next;
+        for (size_t s = 0; s < nown; s++)
             for (int q = 0; q < K; q++) {
-                uint32_t pq = j.nbr[i * K + q];
+                uint32_t pq = j.nbr[s * K + q];
                 if (j.slot[pq] < 0) j.slot[pq] = (int32_t)ns, j.list[ns++] = pq;
             }
-        }
-        if (!exact) goto done;
         /* the neighbours in region (Morton) order: the grid search is fast for queries in
          * that order only (knn.h) */
         qsort(j.list + nown, ns - nown, sizeof *j.list, cmp_u32);
         for (size_t i = nown; i < ns; i++) j.slot[j.list[i]] = (int32_t)i;
-        j.first = nown, j.count = ns - nown;
+        phase_end(b, PH_CHECK, &t);
+        uint32_t *nb2 = realloc(j.nbr, ns * (size_t)K * 4);
+        float *kd2 = nb2 ? realloc(j.kd2, ns * 4) : NULL;
+        if (nb2) j.nbr = nb2;
+        if (kd2) j.kd2 = kd2;
+        if (!nb2 || !kd2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
+        float *nn2 = j.nn2;
+        j.nn2 = NULL, j.qslot = NULL, j.first = nown, j.count = ns - nown;
         if (ns > nown) rc = prep_par_for(T, nblocks(ns - nown), nj_query, &j, NULL, err);
-        if (rc < 0) goto done;
-        for (size_t i = nown; i < ns; i++) {
-            const float *pp = r.pos + 3 * (size_t)j.list[i];
-            if (!full && !inside(&r, pp, j.d2[i * K + K - 1])) {
-                exact = 0;
-                float nd = halo_need(c, pp, j.d2[i * K + K - 1]);
-                if (nd > need) need = nd;
-            }
-        }
-        if (!exact) goto done;
+        j.nn2 = nn2;
+        if (rc < 0) goto next;
+        if (!full && check_balls(b, c, &r, &j, nown, ns - nown, NULL, &need) > 0) goto next;
+        phase_end(b, PH_QNBR, &t);
         j.r20 = malloc(ns * 4);
         j.nrm = malloc(ns * 12);
         j.svar = malloc(ns * 4);
         j.out = malloc(nown * sizeof *j.out);
-        if (!j.r20 || !j.nrm || !j.svar || !j.out) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
-        j.count = ns;
+        if (!j.r20 || !j.nrm || !j.svar || !j.out) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
+        j.first = 0, j.count = ns;
         rc = prep_par_for(T, nblocks(ns), nj_pca, &j, NULL, err);
-        if (rc < 0) goto done;
+        if (rc < 0) goto next;
+        phase_end(b, PH_PCA, &t);
         j.count = nown;
         rc = prep_par_for(T, nblocks(nown), nj_own, &j, NULL, err);
-        if (rc < 0) goto done;
+        if (rc < 0) goto next;
+        phase_end(b, PH_F, &t);
         if (lod__pwrite_all(c->fd_a, j.out, nown * sizeof *j.out, 0))
             rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
-    done:
-        free(j.slot);
-        free(j.list);
-        free(j.nbr);
-        free(j.d2);
-        free(j.r20);
-        free(j.nrm);
-        free(j.svar);
-        free(j.out);
+        phase_end(b, PH_WRITE, &t);
+        done = 1;
+    next:
         prep_knn_free(kn);
-        region_free(&r);
-        if (rc < 0 || exact) break;
+        if (rc < 0 || done) break;
+        /* keep what is exact, grow the halo, load again */
+        attempt++;
         c->retried = 1;
         b->halo = 0;
         h = need * 1.05f > h * 1.5f ? need * 1.05f : h * 1.5f;
+        old = r;
+        memset(&r, 0, sizeof r);
     }
     if (rc == 0 && !b->halo) b->halo = h;
     if (rc == 0) { /* a status line per chunk: the normals pass is most of the build */
@@ -642,6 +727,19 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         prep_knn_scratch_free(ks[t]);
         free(tl[t]);
     }
+    region_free(&r);
+    region_free(&old);
+    free(j.slot);
+    free(j.list);
+    free(j.nbr);
+    free(j.kd2);
+    free(j.nn2);
+    free(j.r20);
+    free(j.nrm);
+    free(j.svar);
+    free(j.out);
+    free(exact);
+    free(redo);
     return rc;
 }
 
@@ -1132,6 +1230,15 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
         b->chunks[i].fd_in = -1;
     }
     res->halo_retries = b->nchunks ? (double)retried / (double)b->nchunks : 0;
+    if (d->status) { /* where the normals pass went, wall seconds */
+        char line[256];
+        snprintf(line, sizeof line, "lod normals: region loads %.2f s, indexes %.2f, kNN of the "
+                 "chunks %.2f, ball checks %.2f, kNN of halo neighbours %.2f, normals %.2f, F "
+                 "%.2f, scratch writes %.2f", b->tph[PH_LOAD], b->tph[PH_INDEX], b->tph[PH_QOWN],
+                 b->tph[PH_CHECK], b->tph[PH_QNBR], b->tph[PH_PCA], b->tph[PH_F],
+                 b->tph[PH_WRITE]);
+        d->status(d->user, line);
+    }
     /* quantiles: r20 median, sigma, F p99 and the reported F percentiles */
     static const struct { int which; double q; } want[NQ] = {
         {0, 0.5}, {2, 0.5}, {1, 0.99}, {1, 0.01}, {1, 0.25}, {1, 0.5}, {1, 0.75}};
