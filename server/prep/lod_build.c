@@ -925,17 +925,6 @@ static int add_node(build *b, const lod_node *n, sd_err *err)
  * vegetation), each group in a fixed pseudo-random order (a hash of the file index). A frame
  * whose budget ends inside a node draws a prefix of it: so that prefix is a uniform sample
  * of the node, surfaces first, not one corner of it (the Morton order the points come in). */
-typedef struct okey {
-    uint64_t key;
-    uint32_t i;
-} okey;
-
-static int cmp_okey(const void *a, const void *b)
-{
-    const okey *x = a, *y = b;
-    return x->key < y->key ? -1 : x->key > y->key;
-}
-
 static uint32_t mix32(uint32_t v)
 {
     v ^= v >> 16;
@@ -951,22 +940,26 @@ static int emit(build *b, const pt *p, const uint32_t *idx_in, size_t cnt, int l
 {
     size_t len = (size_t)lod_node_bytes((uint32_t)cnt);
     float *buf = malloc(len ? len : 1);
-    okey *ok = malloc((cnt ? cnt : 1) * sizeof *ok);
+    uint64_t *key = malloc((cnt ? cnt : 1) * sizeof *key);
     uint32_t *idx = malloc((cnt ? cnt : 1) * sizeof *idx);
-    if (!buf || !ok || !idx) {
+    if (!buf || !key || !idx) {
         free(buf);
-        free(ok);
+        free(key);
         free(idx);
         return sd_errf(err, SD_ENOMEM, "lod: out of memory for a node");
     }
     for (size_t i = 0; i < cnt; i++) {
         const pt *q = &p[idx_in[i]];
-        ok[i].key = (uint64_t)!q->surface << 63 | (uint64_t)mix32(q->gidx) << 31 | q->gidx;
-        ok[i].i = idx_in[i];
+        key[i] = (uint64_t)!q->surface << 63 | (uint64_t)mix32(q->gidx) << 31 | q->gidx;
+        idx[i] = idx_in[i];
     }
-    qsort(ok, cnt, sizeof *ok, cmp_okey);
-    for (size_t i = 0; i < cnt; i++) idx[i] = ok[i].i;
-    free(ok);
+    int rc = prep_radix_sort64(key, idx, cnt, err); /* the keys differ (file indices do) */
+    free(key);
+    if (rc < 0) {
+        free(buf);
+        free(idx);
+        return rc;
+    }
     float *pos = buf, *nrm = pos + 3 * cnt, *rad = nrm + 3 * cnt, *rl = rad + cnt, *F = rl + cnt;
     uint32_t *rgba = (uint32_t *)(F + cnt);
     float sp = spacing_of(b, level);
@@ -993,7 +986,7 @@ static int emit(build *b, const pt *p, const uint32_t *idx_in, size_t cnt, int l
     n.code = code;
     n.spacing = sp;
     n.hash = sd_hash64(buf, len, 0);
-    int rc = lod__writer_append(&b->w, buf, len, &n.offset, err);
+    rc = lod__writer_append(&b->w, buf, len, &n.offset, err);
     free(buf);
     free(idx);
     return rc < 0 ? rc : add_node(b, &n, err);
