@@ -6,8 +6,11 @@
  *             depth D), chunk_max from the memory cap: memory / 400 bytes, the bytes a point
  *             of a chunk costs in the normals pass with its halo (chunks are processed one at a
  *             time, each on every thread, so the cap does not grow with the thread count).
- *   distribute every point (position, colour, index in the file) into its chunk's scratch file
- *             (unnamed files in the cache directory: nothing is left behind by kill -9).
+ *   distribute every point (Morton code, position, colour, index in the file) into its chunk's
+ *             scratch file (unnamed files in the cache directory: nothing is left behind by
+ *             kill -9); then each chunk file sorted by code, in parallel over the chunks. The
+ *             chunks are octree cells in Morton order, so a region (a chunk and its halo) is
+ *             the filtered concatenation of its chunks' files, in order without a sort.
  *   normals   chunk by chunk, each in parallel over blocks of points: the chunk and a halo (every point within H of its cube,
  *             read from the neighbouring chunks' files) in (Morton code, file index) order, the
  *             order prep.c gives the whole cloud; kNN of the chunk's points and of their
@@ -51,8 +54,9 @@ enum { COUNT_DEPTH_MAX = 7, BLOCK = 1 << 16, NQ = 7 };
 #define BYTES_PER_CHUNK_POINT 400u /* the normals pass of one chunk (with its halo) */
 
 typedef struct rec {          /* a point in a chunk file */
+    uint64_t code;            /* Morton code in the cloud's frame */
     float pos[3];
-    uint32_t rgba, gidx;
+    uint32_t rgba, gidx, pad;
 } rec;
 
 typedef struct arec {         /* a chunk's point after the normals pass */
@@ -76,6 +80,7 @@ typedef struct chunk {
     int fd_in, fd_a;          /* scratch files: recs, arecs */
     float lo[3], hi[3];       /* its cube */
     int retried;
+    int sorted;               /* fd_in is in (code, file index) order (guarded by sort_mu) */
 } chunk;
 
 typedef struct nodeent {      /* a written node, before the table */
@@ -101,6 +106,7 @@ typedef struct build {
     double tph[7];            /* the normals pass's phases, wall seconds (PH_*) */
     struct prefetch *pf;      /* the next chunk's region, loaded while this one computes */
     pthread_mutex_t mu;
+    pthread_mutex_t sort_mu;  /* the chunk files' sorting */
     nodeent *nodes;
     size_t nnodes, capnodes;
     urec *up;
@@ -243,11 +249,14 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
     uint32_t gidx = 0;
     while (rc == 0 && (m = lod_src_next(s, pos, rgba, BLOCK, err)) > 0) {
         for (int64_t i = 0; i < m && rc == 0; i++) {
-            uint32_t c = b->cell_chunk[count_cell(b, pos + 3 * i)];
+            uint64_t code = prep_morton_code(&b->f, pos + 3 * i);
+            uint32_t c = b->cell_chunk[code >> (3 * (PREP_MORTON_BITS - b->cdepth))];
             rec *r = &buf[(size_t)c * PER + fill[c]++];
+            r->code = code;
             memcpy(r->pos, pos + 3 * i, 12);
             r->rgba = rgba[i];
             r->gidx = gidx++;
+            r->pad = 0;
             if (fill[c] == PER) {
                 if (lod__pwrite_all(b->chunks[c].fd_in, buf + (size_t)c * PER, PER * sizeof *buf, off[c]))
                     rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
@@ -291,7 +300,60 @@ static void region_free(region *r)
     memset(r, 0, sizeof *r);
 }
 
-/* Loads chunk ci with every point within h of its cube, in (code, file index) order. */
+/* Reads chunk j's records into *tmp (grown to *tcap) in (code, file index) order. The chunks'
+ * files are written in file order; the first reader of each sorts it (stable radix sort by
+ * code) and writes it back, so every later region reads it sorted. */
+static int read_chunk_sorted(build *b, size_t j, rec **tmp, size_t *tcap, sd_err *err)
+{
+    chunk *o = &b->chunks[j];
+    size_t n = o->count;
+    if (n > *tcap) {
+        rec *t = realloc(*tmp, n * sizeof *t);
+        if (!t) return sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+        *tmp = t;
+        *tcap = n;
+    }
+    pthread_mutex_lock(&b->sort_mu);
+    int sorted = o->sorted, rc = 0;
+    if (sorted) pthread_mutex_unlock(&b->sort_mu);
+    if (lod__pread_all(o->fd_in, *tmp, n * sizeof **tmp, 0))
+        rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
+    if (sorted) return rc;
+    uint64_t *key = rc == 0 ? malloc((n ? n : 1) * sizeof *key) : NULL;
+    uint32_t *perm = rc == 0 ? malloc((n ? n : 1) * sizeof *perm) : NULL;
+    rec *out = rc == 0 ? malloc((n ? n : 1) * sizeof *out) : NULL;
+    if (rc == 0 && (!key || !perm || !out))
+        rc = sd_errf(err, SD_ENOMEM, "lod: out of memory sorting a chunk");
+    for (size_t i = 0; rc == 0 && i < n; i++) key[i] = (*tmp)[i].code, perm[i] = (uint32_t)i;
+    if (rc == 0) rc = prep_radix_sort64(key, perm, n, err);
+    if (rc == 0) {
+        for (size_t i = 0; i < n; i++) out[i] = (*tmp)[perm[i]];
+        if (lod__pwrite_all(o->fd_in, out, n * sizeof *out, 0))
+            rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
+        memcpy(*tmp, out, n * sizeof *out);
+    }
+    if (rc == 0) o->sorted = 1;
+    pthread_mutex_unlock(&b->sort_mu);
+    free(key);
+    free(perm);
+    free(out);
+    return rc;
+}
+
+/* The sorting pass: chunk ci's file sorted (and the records dropped again). */
+static int chunk_sort(void *ctx, size_t ci, int tid, sd_err *err)
+{
+    (void)tid;
+    rec *tmp = NULL;
+    size_t cap = 0;
+    int rc = read_chunk_sorted(ctx, ci, &tmp, &cap, err);
+    free(tmp);
+    return rc;
+}
+
+/* Loads chunk ci with every point within h of its cube, in (code, file index) order: the
+ * chunks are octree cells in Morton order, so each one's sorted points are a run of that
+ * order and the region is their filtered concatenation. */
 static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
 {
     memset(r, 0, sizeof *r);
@@ -302,95 +364,46 @@ static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
         r->edge[a] = r->lo[a] <= (float)b->f.origin[a];
         r->edge[3 + a] = r->hi[a] >= (float)(b->f.origin[a] + b->f.side);
     }
-    size_t cap = 0, m = 0;
-    rec *tmp = NULL;
+    size_t cap = 0;
+    for (size_t j = 0; j < b->nchunks; j++) {
+        const chunk *o = &b->chunks[j];
+        int hit = 1;
+        for (int a = 0; a < 3; a++)
+            if (o->lo[a] > r->hi[a] || o->hi[a] < r->lo[a]) hit = 0;
+        if (hit) cap += o->count;
+    }
     int rc = 0;
-    float *pos = NULL;
-    uint32_t *rgba = NULL, *gi = NULL;
-    uint8_t *own = NULL;
+    r->pos = malloc((cap ? cap : 1) * 12); /* at most; pages past the points stay untouched */
+    r->rgba = malloc((cap ? cap : 1) * 4);
+    r->gidx = malloc((cap ? cap : 1) * 4);
+    r->code = malloc((cap ? cap : 1) * 8);
+    r->own = malloc(cap ? cap : 1);
+    if (!r->pos || !r->rgba || !r->gidx || !r->code || !r->own)
+        rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+    rec *tmp = NULL;
+    size_t tcap = 0, m = 0;
     for (size_t j = 0; j < b->nchunks && rc == 0; j++) {
         const chunk *o = &b->chunks[j];
         int hit = 1;
         for (int a = 0; a < 3; a++)
             if (o->lo[a] > r->hi[a] || o->hi[a] < r->lo[a]) hit = 0;
         if (!hit) continue;
-        rec *t2 = realloc(tmp, o->count * sizeof *tmp);
-        if (!t2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk"); break; }
-        tmp = t2;
-        if (lod__pread_all(o->fd_in, tmp, o->count * sizeof *tmp, 0)) {
-            rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
-            break;
-        }
-        if (m + o->count > cap) {
-            size_t nc = (m + o->count) * 2;
-            float *p2 = realloc(pos, nc * 12);
-            if (p2) pos = p2;
-            uint32_t *r2 = realloc(rgba, nc * 4);
-            if (r2) rgba = r2;
-            uint32_t *g2 = realloc(gi, nc * 4);
-            if (g2) gi = g2;
-            uint8_t *o2 = realloc(own, nc);
-            if (o2) own = o2;
-            if (!p2 || !r2 || !g2 || !o2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk"); break; }
-            cap = nc;
-        }
-        for (uint64_t i = 0; i < o->count; i++) {
+        rc = read_chunk_sorted(b, j, &tmp, &tcap, err);
+        for (uint64_t i = 0; rc == 0 && i < o->count; i++) {
             const float *p = tmp[i].pos;
             if (j != ci && (p[0] < r->lo[0] || p[0] > r->hi[0] || p[1] < r->lo[1] ||
                             p[1] > r->hi[1] || p[2] < r->lo[2] || p[2] > r->hi[2]))
                 continue;
-            memcpy(pos + 3 * m, p, 12);
-            rgba[m] = tmp[i].rgba;
-            gi[m] = tmp[i].gidx;
-            own[m] = j == ci;
+            memcpy(r->pos + 3 * m, p, 12);
+            r->rgba[m] = tmp[i].rgba;
+            r->gidx[m] = tmp[i].gidx;
+            r->code[m] = tmp[i].code;
+            r->own[m] = j == ci;
             m++;
         }
     }
     free(tmp);
-    uint64_t *codes = NULL;
-    uint32_t *perm = NULL;
-    if (rc == 0) {
-        codes = malloc((m ? m : 1) * sizeof *codes);
-        perm = malloc((m ? m : 1) * sizeof *perm);
-        r->pos = malloc((m ? m : 1) * 12);
-        r->rgba = malloc((m ? m : 1) * 4);
-        r->gidx = malloc((m ? m : 1) * 4);
-        r->code = malloc((m ? m : 1) * 8);
-        r->own = malloc(m ? m : 1);
-        if (!codes || !perm || !r->pos || !r->rgba || !r->gidx || !r->code || !r->own)
-            rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
-    }
-    /* (code, file index) order: the stable radix sort by code, then the (rare) runs of equal
-     * codes, which come from several chunk files, by file index */
-    if (rc == 0) rc = prep_morton_sort(pos, m, &b->f, codes, perm, err);
-    if (rc == 0) {
-        for (size_t i = 0; i < m;) {
-            size_t e = i + 1;
-            while (e < m && codes[e] == codes[i]) e++;
-            for (size_t x = i + 1; x < e; x++) /* insertion sort of the run by gidx */
-                for (size_t y = x; y > i && gi[perm[y]] < gi[perm[y - 1]]; y--) {
-                    uint32_t t = perm[y];
-                    perm[y] = perm[y - 1];
-                    perm[y - 1] = t;
-                }
-            i = e;
-        }
-        for (size_t i = 0; i < m; i++) {
-            uint32_t k = perm[i];
-            memcpy(r->pos + 3 * i, pos + 3 * k, 12);
-            r->rgba[i] = rgba[k];
-            r->gidx[i] = gi[k];
-            r->code[i] = codes[i];
-            r->own[i] = own[k];
-        }
-        r->m = m;
-    }
-    free(codes);
-    free(perm);
-    free(pos);
-    free(rgba);
-    free(gi);
-    free(own);
+    r->m = m;
     if (rc < 0) region_free(r);
     return rc;
 }
@@ -1268,6 +1281,11 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
         if (!b->hist_hi[q]) return sd_errf(err, SD_ENOMEM, "lod: out of memory");
     }
     int rc = count_and_distribute(b, s, err);
+    if (rc == 0) {
+        double ts = now_s();
+        rc = prep_par_for(b->threads, b->nchunks, chunk_sort, b, NULL, err);
+        if (rc == 0) status(b, "sort", 0.14, b->info.n, now_s() - ts);
+    }
     if (rc < 0) return rc;
     res->chunks = b->nchunks;
     prep_progress pr;
@@ -1407,6 +1425,7 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     b.threads = d.threads;
     b.t0 = t0;
     pthread_mutex_init(&b.mu, NULL);
+    pthread_mutex_init(&b.sort_mu, NULL);
     lod_src *s = NULL;
     prep_progress pr;
     prep_progress_begin(&pr, d.progress, d.user, PROTO_PHASE_LOAD);
@@ -1429,6 +1448,7 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     free(b.nodes);
     free(b.up);
     pthread_mutex_destroy(&b.mu);
+    pthread_mutex_destroy(&b.sort_mu);
     if (rc < 0) return rc;
     char why[256];
     if (lod_load_file(rr.path, src, d.k, out, why, sizeof why) != 1)
