@@ -258,8 +258,49 @@ static int check_input(const pc_cloud *in, const prep_desc *desc, prep_desc *d, 
     return 0;
 }
 
-/* Step 1: Morton order, attribute permutation, batches, summary. Allocates out. */
-static int reorder(const pc_cloud *in, int K, pc_prepared *out, double centroid[3],
+/* Step 1's parallel parts, over blocks of CHUNK points: the codes, then the permutation. */
+typedef struct order_job {
+    const pc_cloud *in;
+    pc_prepared *out;
+    const prep_morton_frame *f;
+    uint64_t *codes;
+    uint32_t *perm;
+} order_job;
+
+static int order_codes(void *ctx, size_t c, int tid, sd_err *err)
+{
+    order_job *o = ctx;
+    size_t a = c * CHUNK, e = a + CHUNK < o->in->n ? a + CHUNK : o->in->n;
+    for (size_t j = a; j < e; j++) {
+        o->codes[j] = prep_morton_code(o->f, o->in->pos + 3 * j);
+        o->perm[j] = (uint32_t)j;
+    }
+    return 0;
+}
+
+static int order_gather(void *ctx, size_t c, int tid, sd_err *err)
+{
+    order_job *o = ctx;
+    const pc_cloud *in = o->in;
+    pc_prepared *out = o->out;
+    size_t a = c * CHUNK, e = a + CHUNK < in->n ? a + CHUNK : in->n;
+    for (size_t i = a; i < e; i++) {
+        size_t s = o->perm[i];
+        memcpy(out->pos + 3 * i, in->pos + 3 * s, 3 * sizeof(float));
+        if (in->attrs & PC_ATTR_NORMAL) memcpy(out->normal + 3 * i, in->normal + 3 * s, 12);
+        if (in->attrs & PC_ATTR_RADIUS) out->radius[i] = in->radius[s];
+        if (in->attrs & PC_ATTR_RGB) memcpy(out->rgba + 4 * i, in->rgba + 4 * s, 4);
+        if (in->attrs & PC_ATTR_INTENSITY) out->intensity[i] = in->intensity[s];
+        if (in->attrs & PC_ATTR_CLASS) out->cls[i] = in->cls[s];
+        if (in->attrs & PC_ATTR_SCALAR) out->scalar[i] = in->scalar[s];
+    }
+    return 0;
+}
+
+/* Step 1: Morton order, attribute permutation, batches, summary. Allocates out. The codes and
+ * the permutation run on threads threads; the sort and the centroid (a sum in point order,
+ * the same bits at any thread count) on one. */
+static int reorder(const pc_cloud *in, int K, int threads, pc_prepared *out, double centroid[3],
                    prep_morton_frame *f, uint64_t **codes_out, sd_err *err)
 {
     size_t n = in->n;
@@ -270,7 +311,10 @@ static int reorder(const pc_cloud *in, int K, pc_prepared *out, double centroid[
         free(codes); free(perm);
         return sd_errf(err, SD_ENOMEM, "prep: out of memory ordering %zu points", n);
     }
-    int rc = prep_morton_sort(in->pos, n, f, codes, perm, err);
+    order_job oj = {.in = in, .out = out, .f = f, .codes = codes, .perm = perm};
+    size_t nblk = (n + CHUNK - 1) / CHUNK;
+    int rc = prep_par_for(threads, nblk, order_codes, &oj, NULL, err);
+    if (rc == 0) rc = prep_radix_sort64(codes, perm, n, err);
     if (rc != 0) {
         free(codes);
         free(perm);
@@ -290,19 +334,16 @@ static int reorder(const pc_cloud *in, int K, pc_prepared *out, double centroid[
         *codes_out = NULL;
         return rc;
     }
-    double c[3] = {0, 0, 0};
-    for (size_t i = 0; i < n; i++) {
-        size_t s = perm[i];
-        memcpy(out->pos + 3 * i, in->pos + 3 * s, 3 * sizeof(float));
-        for (int a = 0; a < 3; a++) c[a] += out->pos[3 * i + a];
-        if (in->attrs & PC_ATTR_NORMAL) memcpy(out->normal + 3 * i, in->normal + 3 * s, 12);
-        if (in->attrs & PC_ATTR_RADIUS) out->radius[i] = in->radius[s];
-        if (in->attrs & PC_ATTR_RGB) memcpy(out->rgba + 4 * i, in->rgba + 4 * s, 4);
-        if (in->attrs & PC_ATTR_INTENSITY) out->intensity[i] = in->intensity[s];
-        if (in->attrs & PC_ATTR_CLASS) out->cls[i] = in->cls[s];
-        if (in->attrs & PC_ATTR_SCALAR) out->scalar[i] = in->scalar[s];
-    }
+    rc = prep_par_for(threads, nblk, order_gather, &oj, NULL, err);
     free(perm);
+    if (rc != 0) {
+        free(codes);
+        *codes_out = NULL;
+        return rc; /* out is freed by the caller */
+    }
+    double c[3] = {0, 0, 0};
+    for (size_t i = 0; i < n; i++)
+        for (int a = 0; a < 3; a++) c[a] += out->pos[3 * i + a];
     for (int a = 0; a < 3; a++) centroid[a] = c[a] / (double)n;
     pc_prepared_make_batches(out, PC_BATCH_POINTS);
     memcpy(out->offset, in->offset, sizeof out->offset);
@@ -369,7 +410,7 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
 
     double t0 = now_s();
     prep_progress_begin(&pr, d.progress, d.user, PROTO_PHASE_REORDER);
-    rc = reorder(in, K, out, jb.centroid, &frame, &codes, err);
+    rc = reorder(in, K, d.threads, out, jb.centroid, &frame, &codes, err);
     if (in->has_viewpoint) { /* into the cloud's local coordinates, as the positions */
         jb.has_vp = 1;
         for (int a = 0; a < 3; a++) jb.vp[a] = in->viewpoint[a] - in->offset[a];
