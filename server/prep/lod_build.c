@@ -80,7 +80,6 @@ typedef struct chunk {
     int fd_in, fd_a;          /* scratch files: recs, arecs */
     float lo[3], hi[3];       /* its cube */
     int retried;
-    int sorted;               /* fd_in is in (code, file index) order (guarded by sort_mu) */
 } chunk;
 
 typedef struct nodeent {      /* a written node, before the table */
@@ -106,7 +105,6 @@ typedef struct build {
     double tph[7];            /* the normals pass's phases, wall seconds (PH_*) */
     struct prefetch *pf;      /* the next chunk's region, loaded while this one computes */
     pthread_mutex_t mu;
-    pthread_mutex_t sort_mu;  /* the chunk files' sorting */
     nodeent *nodes;
     size_t nnodes, capnodes;
     urec *up;
@@ -300,60 +298,39 @@ static void region_free(region *r)
     memset(r, 0, sizeof *r);
 }
 
-/* Reads chunk j's records into *tmp (grown to *tcap) in (code, file index) order. The chunks'
- * files are written in file order; the first reader of each sorts it (stable radix sort by
- * code) and writes it back, so every later region reads it sorted. */
-static int read_chunk_sorted(build *b, size_t j, rec **tmp, size_t *tcap, sd_err *err)
-{
-    chunk *o = &b->chunks[j];
-    size_t n = o->count;
-    if (n > *tcap) {
-        rec *t = realloc(*tmp, n * sizeof *t);
-        if (!t) return sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
-        *tmp = t;
-        *tcap = n;
-    }
-    pthread_mutex_lock(&b->sort_mu);
-    int sorted = o->sorted, rc = 0;
-    if (sorted) pthread_mutex_unlock(&b->sort_mu);
-    if (lod__pread_all(o->fd_in, *tmp, n * sizeof **tmp, 0))
-        rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
-    if (sorted) return rc;
-    uint64_t *key = rc == 0 ? malloc((n ? n : 1) * sizeof *key) : NULL;
-    uint32_t *perm = rc == 0 ? malloc((n ? n : 1) * sizeof *perm) : NULL;
-    rec *out = rc == 0 ? malloc((n ? n : 1) * sizeof *out) : NULL;
-    if (rc == 0 && (!key || !perm || !out))
-        rc = sd_errf(err, SD_ENOMEM, "lod: out of memory sorting a chunk");
-    for (size_t i = 0; rc == 0 && i < n; i++) key[i] = (*tmp)[i].code, perm[i] = (uint32_t)i;
-    if (rc == 0) rc = prep_radix_sort64(key, perm, n, err);
-    if (rc == 0) {
-        for (size_t i = 0; i < n; i++) out[i] = (*tmp)[perm[i]];
-        if (lod__pwrite_all(o->fd_in, out, n * sizeof *out, 0))
-            rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
-        memcpy(*tmp, out, n * sizeof *out);
-    }
-    if (rc == 0) o->sorted = 1;
-    pthread_mutex_unlock(&b->sort_mu);
-    free(key);
-    free(perm);
-    free(out);
-    return rc;
-}
-
-/* The sorting pass: chunk ci's file sorted (and the records dropped again). */
+/* The sorting pass for chunk ci: its file, written in file order, rewritten in (code, file
+ * index) order (a stable radix sort by code). */
 static int chunk_sort(void *ctx, size_t ci, int tid, sd_err *err)
 {
+    build *b = ctx;
     (void)tid;
-    rec *tmp = NULL;
-    size_t cap = 0;
-    int rc = read_chunk_sorted(ctx, ci, &tmp, &cap, err);
-    free(tmp);
+    chunk *o = &b->chunks[ci];
+    size_t n = o->count;
+    rec *in = malloc((n ? n : 1) * sizeof *in), *out = malloc((n ? n : 1) * sizeof *out);
+    uint64_t *key = malloc((n ? n : 1) * sizeof *key);
+    uint32_t *perm = malloc((n ? n : 1) * sizeof *perm);
+    int rc = 0;
+    if (!in || !out || !key || !perm) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory sorting a chunk");
+    if (rc == 0 && lod__pread_all(o->fd_in, in, n * sizeof *in, 0))
+        rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
+    for (size_t i = 0; rc == 0 && i < n; i++) key[i] = in[i].code, perm[i] = (uint32_t)i;
+    if (rc == 0) rc = prep_radix_sort64(key, perm, n, err);
+    if (rc == 0) {
+        for (size_t i = 0; i < n; i++) out[i] = in[perm[i]];
+        if (lod__pwrite_all(o->fd_in, out, n * sizeof *out, 0))
+            rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
+    }
+    free(in);
+    free(out);
+    free(key);
+    free(perm);
     return rc;
 }
 
 /* Loads chunk ci with every point within h of its cube, in (code, file index) order: the
- * chunks are octree cells in Morton order, so each one's sorted points are a run of that
- * order and the region is their filtered concatenation. */
+ * chunks are octree cells in Morton order and their files are sorted (chunk_sort), so each
+ * one's points are a run of that order and the region is their filtered concatenation, read
+ * a block at a time. */
 static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
 {
     memset(r, 0, sizeof *r);
@@ -380,26 +357,32 @@ static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
     r->own = malloc(cap ? cap : 1);
     if (!r->pos || !r->rgba || !r->gidx || !r->code || !r->own)
         rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
-    rec *tmp = NULL;
-    size_t tcap = 0, m = 0;
+    enum { RBLOCK = 1 << 15 }; /* records read at a time */
+    rec *tmp = rc == 0 ? malloc(RBLOCK * sizeof *tmp) : NULL;
+    if (rc == 0 && !tmp) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+    size_t m = 0;
     for (size_t j = 0; j < b->nchunks && rc == 0; j++) {
         const chunk *o = &b->chunks[j];
         int hit = 1;
         for (int a = 0; a < 3; a++)
             if (o->lo[a] > r->hi[a] || o->hi[a] < r->lo[a]) hit = 0;
         if (!hit) continue;
-        rc = read_chunk_sorted(b, j, &tmp, &tcap, err);
-        for (uint64_t i = 0; rc == 0 && i < o->count; i++) {
-            const float *p = tmp[i].pos;
-            if (j != ci && (p[0] < r->lo[0] || p[0] > r->hi[0] || p[1] < r->lo[1] ||
-                            p[1] > r->hi[1] || p[2] < r->lo[2] || p[2] > r->hi[2]))
-                continue;
-            memcpy(r->pos + 3 * m, p, 12);
-            r->rgba[m] = tmp[i].rgba;
-            r->gidx[m] = tmp[i].gidx;
-            r->code[m] = tmp[i].code;
-            r->own[m] = j == ci;
-            m++;
+        for (size_t i0 = 0; i0 < o->count && rc == 0; i0 += RBLOCK) {
+            size_t nb = o->count - i0 < RBLOCK ? o->count - i0 : RBLOCK;
+            if (lod__pread_all(o->fd_in, tmp, nb * sizeof *tmp, i0 * sizeof *tmp))
+                rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
+            for (size_t i = 0; rc == 0 && i < nb; i++) {
+                const float *p = tmp[i].pos;
+                if (j != ci && (p[0] < r->lo[0] || p[0] > r->hi[0] || p[1] < r->lo[1] ||
+                                p[1] > r->hi[1] || p[2] < r->lo[2] || p[2] > r->hi[2]))
+                    continue;
+                memcpy(r->pos + 3 * m, p, 12);
+                r->rgba[m] = tmp[i].rgba;
+                r->gidx[m] = tmp[i].gidx;
+                r->code[m] = tmp[i].code;
+                r->own[m] = j == ci;
+                m++;
+            }
         }
     }
     free(tmp);
@@ -850,16 +833,28 @@ static float pick_value(build *b, int q)
     return v;
 }
 
-static int read_arecs(build *b, size_t ci, arec **out, sd_err *err)
+enum { AREC_BLOCK = 1 << 16 }; /* records read at a time by the passes after the normals */
+
+/* Calls fn(ctx, records, count, first index) for chunk ci's records, AREC_BLOCK at a time
+ * through one buffer (the passes after the normals pass stream the records: no chunk-sized
+ * buffer and its fresh pages each pass). */
+static int each_arec_block(build *b, size_t ci, void (*fn)(void *, const arec *, size_t, size_t),
+                           void *ctx, sd_err *err)
 {
-    chunk *c = &b->chunks[ci];
-    *out = malloc((c->count ? c->count : 1) * sizeof **out);
-    if (!*out) return sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
-    if (lod__pread_all(c->fd_a, *out, c->count * sizeof **out, 0)) {
-        free(*out);
-        return sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
+    const chunk *c = &b->chunks[ci];
+    size_t blk = c->count < AREC_BLOCK ? c->count : AREC_BLOCK;
+    arec *a = malloc((blk ? blk : 1) * sizeof *a);
+    if (!a) return sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+    int rc = 0;
+    for (size_t i = 0; i < c->count && rc == 0; i += blk) {
+        size_t m = c->count - i < blk ? c->count - i : blk;
+        if (lod__pread_all(c->fd_a, a, m * sizeof *a, i * sizeof *a))
+            rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
+        else
+            fn(ctx, a, m, i);
     }
-    return 0;
+    free(a);
+    return rc;
 }
 
 static float final_radius(const build *b, const arec *a)
@@ -877,16 +872,12 @@ static float final_F(const build *b, float raw)
 
 /* A counting pass over the normals pass's records: with b->radius_pass 0 the bottom-16-bit
  * histograms of the NQ quantiles' buckets, with 1 the top-16-bit histogram of the final radii. */
-static int chunk_hist(void *ctx, size_t ci, int tid, sd_err *err)
+static void hist_block(void *ctx, const arec *a, size_t n, size_t first)
 {
     build *b = ctx;
-    (void)tid;
-    arec *a;
-    int rc = read_arecs(b, ci, &a, err);
-    if (rc < 0) return rc;
-    uint64_t n = b->chunks[ci].count;
-    pthread_mutex_lock(&b->mu);
-    for (uint64_t i = 0; i < n; i++) {
+    (void)first;
+    pthread_mutex_lock(&b->mu); /* the other thread reads its next block meanwhile */
+    for (size_t i = 0; i < n; i++) {
         if (b->radius_pass) {
             b->hist_hi[3][fbits(final_radius(b, &a[i])) >> 16]++;
             continue;
@@ -897,8 +888,12 @@ static int chunk_hist(void *ctx, size_t ci, int tid, sd_err *err)
         }
     }
     pthread_mutex_unlock(&b->mu);
-    free(a);
-    return 0;
+}
+
+static int chunk_hist(void *ctx, size_t ci, int tid, sd_err *err)
+{
+    (void)tid;
+    return each_arec_block(ctx, ci, hist_block, ctx, err);
 }
 
 /* ---- octree ---- */
@@ -1102,40 +1097,53 @@ static int process(octx *o, uint32_t *idx, size_t cnt, int level, uint64_t code,
     return rc;
 }
 
+typedef struct final_job {
+    build *b;
+    pt *p;
+    uint32_t *idx, *lo;
+} final_job;
+
+/* A block of a chunk's records with their final values, into the octree pass's points. */
+static void final_block(void *ctx, const arec *a, size_t n, size_t first)
+{
+    final_job *f = ctx;
+    build *b = f->b;
+    for (size_t k = 0; k < n; k++) {
+        pt *q = &f->p[first + k];
+        q->code = a[k].code;
+        q->gidx = a[k].gidx;
+        q->rgba = a[k].rgba;
+        memcpy(q->pos, a[k].pos, 12);
+        memcpy(q->normal, a[k].normal, 12);
+        q->radius = final_radius(b, &a[k]);
+        q->F = final_F(b, a[k].Fraw);
+        /* a surface point: a planar neighbourhood, and not a stray point whose radius the
+         * neighbours' radii had to limit (prep.h step 4): noise above a plane has planar
+         * neighbours, but its own eq. 20 radius reaches down to them */
+        q->surface = !(a[k].svar > PREP_SURFACE_VAR_MAX) && !(a[k].r20 > a[k].capn);
+        f->idx[first + k] = (uint32_t)(first + k);
+        uint32_t u = fbits(q->radius);
+        if (u >> 16 == b->qs[NQ].hi) f->lo[u & 0xffff]++;
+    }
+}
+
 static int chunk_octree(void *ctx, size_t ci, int tid, sd_err *err)
 {
     build *b = ctx;
     (void)tid;
     chunk *c = &b->chunks[ci];
-    arec *a;
-    int rc = read_arecs(b, ci, &a, err);
-    if (rc < 0) return rc;
+    int rc = 0;
     uint64_t n = c->count;
     pt *p = malloc((n ? n : 1) * sizeof *p);
     uint32_t *idx = malloc((n ? n : 1) * 4), *scr = malloc((n ? n : 1) * 4);
     uint32_t *lo = calloc(65536, 4);
     if (!p || !idx || !scr || !lo) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
-    for (uint64_t i = 0; rc == 0 && i < n; i++) {
-        p[i].code = a[i].code;
-        p[i].gidx = a[i].gidx;
-        p[i].rgba = a[i].rgba;
-        memcpy(p[i].pos, a[i].pos, 12);
-        memcpy(p[i].normal, a[i].normal, 12);
-        p[i].radius = final_radius(b, &a[i]);
-        p[i].F = final_F(b, a[i].Fraw);
-        /* a surface point: a planar neighbourhood, and not a stray point whose radius the
-         * neighbours' radii had to limit (prep.h step 4): noise above a plane has planar
-         * neighbours, but its own eq. 20 radius reaches down to them */
-        p[i].surface = !(a[i].svar > PREP_SURFACE_VAR_MAX) && !(a[i].r20 > a[i].capn);
-        idx[i] = (uint32_t)i;
-        uint32_t u = fbits(p[i].radius);
-        if (u >> 16 == b->qs[NQ].hi) lo[u & 0xffff]++;
-    }
-    free(a);
+    final_job fj = {.b = b, .p = p, .idx = idx, .lo = lo};
+    if (rc == 0) rc = each_arec_block(b, ci, final_block, &fj, err);
     octx o = {.b = b, .p = p, .scratch = scr, .cdepth = (int)c->depth};
     if (rc == 0 && n) rc = process(&o, idx, n, 0, 0, err);
     pthread_mutex_lock(&b->mu);
-    for (int i = 0; i < 65536; i++) b->qs[NQ].lo[i] += lo[i];
+    for (int i = 0; lo && i < 65536; i++) b->qs[NQ].lo[i] += lo[i];
     if (rc == 0 && o.nup) {
         if (b->nup + o.nup > b->capup) {
             size_t nc = (b->nup + o.nup) * 2;
@@ -1425,7 +1433,6 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     b.threads = d.threads;
     b.t0 = t0;
     pthread_mutex_init(&b.mu, NULL);
-    pthread_mutex_init(&b.sort_mu, NULL);
     lod_src *s = NULL;
     prep_progress pr;
     prep_progress_begin(&pr, d.progress, d.user, PROTO_PHASE_LOAD);
@@ -1448,7 +1455,6 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     free(b.nodes);
     free(b.up);
     pthread_mutex_destroy(&b.mu);
-    pthread_mutex_destroy(&b.sort_mu);
     if (rc < 0) return rc;
     char why[256];
     if (lod_load_file(rr.path, src, d.k, out, why, sizeof why) != 1)
