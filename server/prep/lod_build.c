@@ -11,14 +11,19 @@
  *             kill -9); then each chunk file sorted by code, in parallel over the chunks. The
  *             chunks are octree cells in Morton order, so a region (a chunk and its halo) is
  *             the filtered concatenation of its chunks' files, in order without a sort.
- *   normals   chunk by chunk, each in parallel over blocks of points: the chunk and a halo (every point within H of its cube,
- *             read from the neighbouring chunks' files) in (Morton code, file index) order, the
- *             order prep.c gives the whole cloud; kNN of the chunk's points and of their
- *             neighbours; a result is exact when its k-th neighbour is closer than the halo's
- *             edge, else H doubles and the chunk starts again. Then prep.c's per-point values:
- *             eq. 20 radius, PCA normal and surface variation, oriented as prep.c does, raw F,
- *             the neighbours' median radius, the nearest distance. Written to the chunk's
- *             second scratch file; histograms of the values whose percentiles prep.c takes.
+ *   normals   chunk by chunk, each in parallel over blocks of points: the chunk and a halo
+ *             (every point within H of its cube, read from the neighbouring chunks' files) in
+ *             (Morton code, file index) order, the order prep.c gives the whole cloud, indexed
+ *             in the cloud's Morton frame (no sort: the region is in that order already); kNN
+ *             of the chunk's points and of their neighbours; a result is exact when its k-th
+ *             neighbour is closer than the halo's edge, else H grows to the farthest ball and
+ *             the region is loaded again, the exact results kept (renamed into the bigger
+ *             region) and only the others queried again. The next chunk's region loads on a
+ *             thread of its own meanwhile. Then prep.c's per-point values: eq. 20 radius, PCA
+ *             normal and surface variation, oriented as prep.c does, raw F, the neighbours'
+ *             median radius, the nearest distance, written block by block by the threads to
+ *             the chunk's second scratch file; histograms of the values whose percentiles
+ *             prep.c takes. A status line gives the pass's phases in wall seconds.
  *   quantiles exact percentiles out of core: the top 16 bits of each (non-negative) float
  *             counted in the normals pass, the bottom 16 bits of the values in the bucket that
  *             holds the wanted rank counted here: the radius median (scatter cap), F's 99th
