@@ -109,6 +109,8 @@ typedef struct build {
     double t_pass;            /* when the normals pass began */
     double tph[7];            /* the normals pass's phases, wall seconds (PH_*) */
     struct prefetch *pf;      /* the next chunk's region, loaded while this one computes */
+    void *keep[10];           /* the normals pass's per-chunk arrays, kept across chunks (KB_*) */
+    size_t keepcap[10];
     pthread_mutex_t mu;
     nodeent *nodes;
     size_t nnodes, capnodes;
@@ -628,6 +630,23 @@ static void remap_own(const region *old, const region *r, njob *j, size_t nown,
 }
 
 enum { PH_LOAD, PH_INDEX, PH_QOWN, PH_CHECK, PH_QNBR, PH_PCA, PH_F, PH_N };
+enum { KB_NBR, KB_KD2, KB_NN2, KB_EXACT, KB_REDO, KB_SLOT, KB_LIST, KB_R20, KB_NRM, KB_SVAR };
+
+/* One of the normals pass's arrays, at least bytes long, its contents kept when it grows. The
+ * arrays live across chunks (grown, never shrunk): each chunk reuses the pages the previous
+ * ones faulted in instead of faulting in fresh ones (at 10M points that was a third of the
+ * build's system time). NULL when out of memory. */
+static void *keep_buf(build *b, int which, size_t bytes)
+{
+    if (bytes == 0) bytes = 1;
+    if (bytes > b->keepcap[which]) {
+        void *p = realloc(b->keep[which], bytes);
+        if (!p) return NULL;
+        b->keep[which] = p;
+        b->keepcap[which] = bytes;
+    }
+    return b->keep[which];
+}
 
 static void phase_end(build *b, int ph, double *t)
 {
@@ -663,13 +682,14 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
     memset(&j, 0, sizeof j);
     j.b = b, j.K = K, j.ks = ks, j.t = tl;
     for (int a = 0; a < 3; a++) j.vp[a] = b->info.viewpoint[a] - b->info.offset[a];
-    j.nbr = malloc(nown * (size_t)K * 4);
-    j.kd2 = malloc(nown * 4);
-    j.nn2 = malloc(nown * 4);
-    uint8_t *exact = calloc(nown, 1);
-    uint32_t *redo = malloc(nown * 4);
+    j.nbr = keep_buf(b, KB_NBR, nown * (size_t)K * 4);
+    j.kd2 = keep_buf(b, KB_KD2, nown * 4);
+    j.nn2 = keep_buf(b, KB_NN2, nown * 4);
+    uint8_t *exact = keep_buf(b, KB_EXACT, nown);
+    uint32_t *redo = keep_buf(b, KB_REDO, nown * 4);
     if (rc == 0 && (!j.nbr || !j.kd2 || !j.nn2 || !exact || !redo))
         rc = sd_errf(err, SD_ENOMEM, "lod: out of memory");
+    if (rc == 0) memset(exact, 0, nown);
     region r, old;
     memset(&r, 0, sizeof r);
     memset(&old, 0, sizeof old);
@@ -692,10 +712,8 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         prep_knn *kn = NULL;
         int done = 0;
         float need = 0;
-        free(j.slot);
-        free(j.list);
-        j.slot = malloc(m * sizeof *j.slot);
-        j.list = malloc(m * sizeof *j.list);
+        j.slot = keep_buf(b, KB_SLOT, m * sizeof *j.slot);
+        j.list = keep_buf(b, KB_LIST, m * sizeof *j.list);
         if (!j.slot || !j.list) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
         if (attempt > 0) remap_own(&old, &r, &j, nown, exact);
         region_free(&old);
@@ -736,11 +754,10 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         qsort(j.list + nown, ns - nown, sizeof *j.list, cmp_u32);
         for (size_t i = nown; i < ns; i++) j.slot[j.list[i]] = (int32_t)i;
         phase_end(b, PH_CHECK, &t);
-        uint32_t *nb2 = realloc(j.nbr, ns * (size_t)K * 4);
-        float *kd2 = nb2 ? realloc(j.kd2, ns * 4) : NULL;
-        if (nb2) j.nbr = nb2;
-        if (kd2) j.kd2 = kd2;
+        uint32_t *nb2 = keep_buf(b, KB_NBR, ns * (size_t)K * 4);
+        float *kd2 = nb2 ? keep_buf(b, KB_KD2, ns * 4) : NULL;
         if (!nb2 || !kd2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
+        j.nbr = nb2, j.kd2 = kd2;
         float *nn2 = j.nn2;
         j.nn2 = NULL, j.qslot = NULL, j.first = nown, j.count = ns - nown;
         if (ns > nown) rc = prep_par_for(T, nblocks(ns - nown), nj_query, &j, NULL, err);
@@ -748,9 +765,9 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         if (rc < 0) goto next;
         if (!full && check_balls(b, c, &r, &j, nown, ns - nown, NULL, &need) > 0) goto next;
         phase_end(b, PH_QNBR, &t);
-        j.r20 = malloc(ns * 4);
-        j.nrm = malloc(ns * 12);
-        j.svar = malloc(ns * 4);
+        j.r20 = keep_buf(b, KB_R20, ns * 4);
+        j.nrm = keep_buf(b, KB_NRM, ns * 12);
+        j.svar = keep_buf(b, KB_SVAR, ns * 4);
         if (!j.r20 || !j.nrm || !j.svar) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
         j.first = 0, j.count = ns;
         rc = prep_par_for(T, nblocks(ns), nj_pca, &j, NULL, err);
@@ -792,17 +809,7 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
     }
     region_free(&r);
     region_free(&old);
-    free(j.slot);
-    free(j.list);
-    free(j.nbr);
-    free(j.kd2);
-    free(j.nn2);
-    free(j.r20);
-    free(j.nrm);
-    free(j.svar);
-    free(exact);
-    free(redo);
-    return rc;
+    return rc; /* the arrays stay in b->keep for the next chunk */
 }
 
 /* ---- quantiles ---- */
@@ -1459,6 +1466,7 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     for (int q = 0; q <= NQ; q++) free(b.qs[q].lo);
     free(b.nodes);
     free(b.up);
+    for (int i = 0; i < 10; i++) free(b.keep[i]);
     pthread_mutex_destroy(&b.mu);
     if (rc < 0) return rc;
     char why[256];
