@@ -613,6 +613,48 @@ static size_t check_balls(const build *b, const chunk *c, const region *r, const
     return bad;
 }
 
+/* The checks after the chunk's own queries, in parallel over blocks of own slots: whose ball
+ * leaves the region (with the halo they need), and the neighbours that are not own points. */
+typedef struct cblock {
+    size_t bad, n, cap;
+    float need;
+    uint32_t *x;              /* halo neighbours met in the block (repeats included) */
+} cblock;
+
+typedef struct cjob {
+    build *b;
+    const chunk *c;
+    const region *r;
+    const njob *j;
+    uint8_t *exact;           /* NULL: the region is the whole cloud, every ball is inside */
+    cblock *blk;
+} cjob;
+
+static int nj_check(void *ctx, size_t blk, int tid, sd_err *err)
+{
+    cjob *cj = ctx;
+    (void)tid;
+    const njob *j = cj->j;
+    cblock *o = &cj->blk[blk];
+    size_t a = blk * QBLOCK, e = a + QBLOCK < j->count ? a + QBLOCK : j->count;
+    if (cj->exact) o->bad = check_balls(cj->b, cj->c, cj->r, j, a, e - a, cj->exact, &o->need);
+    if (o->bad) return 0;
+    for (size_t s = a; s < e; s++)
+        for (int q = 0; q < j->K; q++) {
+            uint32_t pq = j->nbr[s * (size_t)j->K + q];
+            if (cj->r->own[pq]) continue;
+            if (o->n == o->cap) {
+                size_t nc = o->cap ? 2 * o->cap : 256;
+                uint32_t *x = realloc(o->x, nc * sizeof *x);
+                if (!x) return sd_errf(err, SD_ENOMEM, "lod: out of memory");
+                o->x = x;
+                o->cap = nc;
+            }
+            o->x[o->n++] = pq;
+        }
+    return 0;
+}
+
 /* The chunk's own results across a halo that grew: the neighbours of the own points found
  * exact in the smaller region old, renamed to the indices of the same points in r (a
  * superset, both in (code, file index) order). */
@@ -743,16 +785,35 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         /* A result is exact when its ball lies in the region; else the region grows to the
          * farthest ball (the computed k-th distance bounds the true one from above). */
         if (full) memset(exact, 1, nown);
-        else if (check_balls(b, c, &r, &j, 0, nown, exact, &need) > 0) goto next;
-        for (size_t s = 0; s < nown; s++)
-            for (int q = 0; q < K; q++) {
-                uint32_t pq = j.nbr[s * K + q];
-                if (j.slot[pq] < 0) j.slot[pq] = (int32_t)ns, j.list[ns++] = pq;
-            }
-        /* the neighbours in region (Morton) order: the grid search is fast for queries in
-         * that order only (knn.h) */
-        qsort(j.list + nown, ns - nown, sizeof *j.list, cmp_u32);
-        for (size_t i = nown; i < ns; i++) j.slot[j.list[i]] = (int32_t)i;
+        cjob cj = {.b = b, .c = c, .r = &r, .j = &j, .exact = full ? NULL : exact};
+        j.first = 0, j.count = nown;
+        size_t nb = nblocks(nown);
+        cj.blk = calloc(nb ? nb : 1, sizeof *cj.blk);
+        if (!cj.blk) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
+        rc = prep_par_for(T, nb, nj_check, &cj, NULL, err);
+        size_t bad = 0, nx = 0;
+        for (size_t i = 0; i < nb; i++) {
+            bad += cj.blk[i].bad;
+            nx += cj.blk[i].n;
+            if (cj.blk[i].need > need) need = cj.blk[i].need;
+        }
+        /* the halo neighbours once each, in region (Morton) order: the grid search is fast
+         * for queries in that order only (knn.h) */
+        uint32_t *xs = rc == 0 && bad == 0 ? malloc((nx ? nx : 1) * sizeof *xs) : NULL;
+        if (rc == 0 && bad == 0 && !xs) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory");
+        for (size_t i = 0, o = 0; xs && i < nb; i++) {
+            memcpy(xs + o, cj.blk[i].x, cj.blk[i].n * sizeof *xs);
+            o += cj.blk[i].n;
+        }
+        for (size_t i = 0; i < nb; i++) free(cj.blk[i].x);
+        free(cj.blk);
+        if (xs) {
+            qsort(xs, nx, sizeof *xs, cmp_u32);
+            for (size_t i = 0; i < nx; i++)
+                if (i == 0 || xs[i] != xs[i - 1]) j.slot[xs[i]] = (int32_t)ns, j.list[ns++] = xs[i];
+            free(xs);
+        }
+        if (rc < 0 || bad > 0) goto next;
         phase_end(b, PH_CHECK, &t);
         uint32_t *nb2 = keep_buf(b, KB_NBR, ns * (size_t)K * 4);
         float *kd2 = nb2 ? keep_buf(b, KB_KD2, ns * 4) : NULL;
