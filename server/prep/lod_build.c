@@ -1378,6 +1378,11 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     b->pf = b->threads > 1 ? &pf : NULL;
     rc = prep_par_for(1, b->nchunks, chunk_normals, b, &pr, err); /* each chunk on every thread */
     b->pf = NULL;
+    for (int i = 0; i < 10; i++) { /* the normals pass's arrays: not needed after it */
+        free(b->keep[i]);
+        b->keep[i] = NULL;
+        b->keepcap[i] = 0;
+    }
     region left;
     memset(&left, 0, sizeof left);
     if (prefetch_take(&pf, pf.ci, 0, &left, NULL) == 0) region_free(&left);
