@@ -802,6 +802,7 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         uint32_t *xs = rc == 0 && bad == 0 ? malloc((nx ? nx : 1) * sizeof *xs) : NULL;
         if (rc == 0 && bad == 0 && !xs) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory");
         for (size_t i = 0, o = 0; xs && i < nb; i++) {
+            if (!cj.blk[i].n) continue; /* x is NULL then */
             memcpy(xs + o, cj.blk[i].x, cj.blk[i].n * sizeof *xs);
             o += cj.blk[i].n;
         }
