@@ -17,6 +17,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "morton.h"
 #include "sd_err.h"
 
 typedef enum prep_knn_method {
@@ -30,6 +31,14 @@ typedef struct prep_knn_opts {
     int flann_cores;        /* default 1: FLANN's own OpenMP threads per query call. prep runs
                                its own threads with 1 each instead: measured faster (1M points,
                                2 cores: 3.1 s against 5.3 s with cores = 2, bench_prep.sh) */
+    /* Grid only, both optional. frame: the Morton cube to index in (default: the points' own
+     * bounding cube); it must contain every point. codes: the points' codes in that frame
+     * (prep_morton_code), read until prep_knn_free; when they are non-decreasing the points are
+     * taken as already in Morton order and neither coded nor sorted again (a prepared cloud, or
+     * a region of one loaded in order: queries then run in the index's own order). Results do
+     * not depend on either. */
+    const prep_morton_frame *frame;
+    const uint64_t *codes;
 } prep_knn_opts;
 
 typedef struct prep_knn prep_knn;                 /* an index over one point set */

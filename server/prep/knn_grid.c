@@ -16,22 +16,28 @@
  *  4. otherwise the k-th distance found bounds the true one, and the block of cells that wide
  *     settles it in one more step (with too few candidates: the finest coarser level whose
  *     block holds k + 1 points). Level 0 is the whole cloud, so every search ends exact.
- * Selection computes all candidate distances eight at a time (AVX2 where the CPU has it),
- * counts those within a few radii around the previous k-th distance, and sorts only the
- * (distance, index) keys within the smallest radius that holds k + 1. A leaf whose block holds more than GRID_CAP points (a
+ * Selection computes all candidate distances eight at a time and, in the same pass, left-packs
+ * those within the previous k-th distance (times a little) into a short list (AVX2 where the
+ * CPU has it: one compare, one table lookup and two permutes per 8 candidates, no branch per
+ * candidate); when that holds fewer than k + 1, wider radii, then all. The k + 1 smallest
+ * (distance, index) pairs of the list are placed by counting, for each, the pairs that precede
+ * it (8 at a time): no sort. A leaf whose block holds more than GRID_CAP points (a
  * sparse cell next to a dense one: outliers near a surface) starts from the finest level
  * whose block still holds k + 1 points. Measured against FLANN's exact kd-tree on the same
- * Morton-ordered points (tests/bench/bench_prep.sh): about 2x less CPU time. */
+ * Morton-ordered points (tests/bench/bench_prep.sh): about 2x less CPU time (before the packed
+ * selection, which took the 2M synthetic scene's queries from 1.66 to 1.15 us each here). */
 #include "knn_grid.h"
 
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
-#if defined(__SSE2__)
-#include <emmintrin.h>
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#define PREP_X86_AVX2 1 /* an AVX2 path beside the portable one, chosen per CPU at build */
 #endif
 
 #include "morton.h"
+#include "simd.h"
 
 enum {
     GRID_CAP = 4096, /* candidates above which a leaf's queries search individually */
@@ -42,6 +48,11 @@ enum {
 /* The predicted k-th distance is the previous query's times this (measured on the synthetic
  * 1M scene: 1.0 widens 1.5 % of the blocks, 1.15 0.5 % and is fastest, 1.3 gathers more). */
 #define R_SCALE 1.15
+/* select_k's first filter keeps the candidates within the previous query's k-th distance times
+ * sqrt(FILTER_GROW) (measured on the synthetic 2M scene: see select_k). */
+#ifndef FILTER_GROW
+#define FILTER_GROW 1.3f
+#endif
 
 struct prep__grid {
     size_t n;
@@ -49,6 +60,8 @@ struct prep__grid {
     const float *spos;       /* the points in Morton order (pos itself when already sorted) */
     float *spos_own;
     uint64_t *codes;         /* sorted Morton codes */
+    int codes_borrowed;      /* codes are the caller's (prep_knn_opts.codes) */
+    int avx2;                /* the CPU has AVX2: select_k's vector paths */
     uint32_t *order;         /* sorted position -> index in pos; NULL: identity */
     uint32_t *rank;          /* index in pos -> sorted position; NULL: identity */
     uint32_t *leaf_first;    /* nleaves + 1 entries; the last is n */
@@ -73,8 +86,11 @@ struct prep__grid_scratch {
     cand_set set[NSLOTS];
     uint64_t clock;
     float *d2;               /* candidate distances */
-    uint64_t *key;           /* (distance, index) keys of the candidates that pass the filter */
-    size_t d2cap;
+    uint64_t *key;           /* (distance, index) keys, for selections from many candidates */
+    uint32_t *kd, *kid;      /* the candidates that pass the filter: distance bits, index */
+    size_t d2cap;            /* entries in d2 and key; kd and kid hold 8 more */
+    uint8_t pack[256][8];    /* for each 8-bit mask, its set lanes in order (left-packing) */
+    uint8_t popc[256];
     float hd[256 + 2];       /* the selected pairs */
     uint32_t hid[256 + 2];
     int have_prev;           /* the previous query, for the level choice and select_k's filter */
@@ -153,32 +169,46 @@ static int split(prep__grid *g, size_t lo, size_t hi, int level, size_t m)
     return 0;
 }
 
-int prep__grid_build(const float *pos, size_t n, int leaf_size, prep__grid **out, sd_err *err)
+int prep__grid_build(const float *pos, size_t n, int leaf_size, const prep_morton_frame *frame,
+                     const uint64_t *codes, prep__grid **out, sd_err *err)
 {
     prep__grid *g = calloc(1, sizeof *g);
     if (!g) return sd_errf(err, SD_ENOMEM, "out of memory for a kNN grid");
     g->n = n;
     g->pos = pos;
     g->spos = pos;
-    prep_morton_frame_of(pos, n, &g->f);
+    if (frame) g->f = *frame;
+    else prep_morton_frame_of(pos, n, &g->f);
     for (int l = 0; l <= MAXLEVEL; l++) g->cell[l] = g->f.side / (double)(1u << l);
     g->eps = 1e-6 * g->f.side;
-    g->codes = malloc((n ? n : 1) * sizeof *g->codes);
-    uint32_t *perm = malloc((n ? n : 1) * sizeof *perm);
-    if (!g->codes || !perm) {
-        free(perm);
-        prep__grid_free(g);
-        return sd_errf(err, SD_ENOMEM, "out of memory for the kNN grid of %zu points", n);
-    }
-    int rc = prep_morton_sort(pos, n, &g->f, g->codes, perm, err);
-    if (rc != 0) {
-        free(perm);
-        prep__grid_free(g);
-        return rc;
+#ifdef PREP_X86_AVX2
+    g->avx2 = __builtin_cpu_supports("avx2") != 0;
+#endif
+    size_t sorted = 1;
+    if (codes)
+        while (sorted < n && codes[sorted - 1] <= codes[sorted]) sorted++;
+    uint32_t *perm = NULL;
+    if (codes && sorted >= n) {
+        g->codes = (uint64_t *)codes; /* the caller's, in order: index them as they are */
+        g->codes_borrowed = 1;
+    } else {
+        g->codes = malloc((n ? n : 1) * sizeof *g->codes);
+        perm = malloc((n ? n : 1) * sizeof *perm);
+        if (!g->codes || !perm) {
+            free(perm);
+            prep__grid_free(g);
+            return sd_errf(err, SD_ENOMEM, "out of memory for the kNN grid of %zu points", n);
+        }
+        int rc = prep_morton_sort(pos, n, &g->f, g->codes, perm, err);
+        if (rc != 0) {
+            free(perm);
+            prep__grid_free(g);
+            return rc;
+        }
     }
     size_t i = 0;
-    while (i < n && perm[i] == i) i++;
-    if (i == n) {
+    while (perm && i < n && perm[i] == i) i++;
+    if (!perm || i == n) {
         free(perm); /* already in Morton order: index the caller's array directly */
     } else {
         g->order = perm;
@@ -211,7 +241,7 @@ void prep__grid_free(prep__grid *g)
 {
     if (!g) return;
     free(g->spos_own);
-    free(g->codes);
+    if (!g->codes_borrowed) free(g->codes);
     free(g->order);
     free(g->rank);
     free(g->leaf_first);
@@ -223,7 +253,15 @@ void prep__grid_free(prep__grid *g)
 
 prep__grid_scratch *prep__grid_scratch_new(void)
 {
-    return calloc(1, sizeof(prep__grid_scratch));
+    prep__grid_scratch *s = calloc(1, sizeof(prep__grid_scratch));
+    if (!s) return NULL;
+    for (int m = 0; m < 256; m++) {
+        int c = 0;
+        for (int l = 0; l < 8; l++)
+            if (m >> l & 1) s->pack[m][c++] = (uint8_t)l;
+        s->popc[m] = (uint8_t)c;
+    }
+    return s;
 }
 
 void prep__grid_scratch_free(prep__grid_scratch *s)
@@ -237,6 +275,8 @@ void prep__grid_scratch_free(prep__grid_scratch *s)
     }
     free(s->d2);
     free(s->key);
+    free(s->kd);
+    free(s->kid);
     free(s);
 }
 
@@ -348,14 +388,21 @@ static cand_set *get_set(const prep__grid *g, prep__grid_scratch *s, uint64_t ce
     if (!cs->too_big) {
         if (reserve(cs, b.count) != 0) return NULL;
         size_t m = 0;
-        for (size_t r = 0; r < b.nr; r++)
-            for (size_t p = b.ra[r]; p < b.rb[r]; p++, m++) {
-                const float *v = g->spos + 3 * p;
-                cs->x[m] = v[0];
-                cs->y[m] = v[1];
-                cs->z[m] = v[2];
-                cs->id[m] = g->order ? g->order[p] : (uint32_t)p;
+        float *restrict x = cs->x, *restrict y = cs->y, *restrict z = cs->z;
+        uint32_t *restrict id = cs->id;
+        const float *restrict sp = g->spos;
+        for (size_t r = 0; r < b.nr; r++) {
+            size_t pa = b.ra[r], pb = b.rb[r];
+            for (size_t p = pa; p < pb; p++) {
+                x[m + p - pa] = sp[3 * p];
+                y[m + p - pa] = sp[3 * p + 1];
+                z[m + p - pa] = sp[3 * p + 2];
             }
+            if (g->order) memcpy(id + m, g->order + pa, (pb - pa) * sizeof *id);
+            else
+                for (size_t p = pa; p < pb; p++) id[m + p - pa] = (uint32_t)p;
+            m += pb - pa;
+        }
         cs->m = m;
         for (; m & 7; m++) { cs->x[m] = cs->y[m] = cs->z[m] = 0; cs->id[m] = 0; }
     }
@@ -372,35 +419,11 @@ static int pair_less(float d, uint32_t id, float e, uint32_t jd)
     return d < e || (d == e && id < jd);
 }
 
-/* (d, id) as one integer key whose order is pair_less's: a non-negative float's bits compare
- * like the float. */
-static uint64_t pair_key(float d, uint32_t id)
-{
-    uint32_t u;
-    memcpy(&u, &d, sizeof u);
-    return (uint64_t)u << 32 | id;
-}
-
 static void insertion_sort_keys(uint64_t *a, size_t n)
 {
     for (size_t i = 1; i < n; i++) {
         uint64_t v = a[i];
         size_t j = i;
-        while (j > 0 && a[j - 1] > v) { a[j] = a[j - 1]; j--; }
-        a[j] = v;
-    }
-}
-
-/* Makes a[0..k) the k smallest of the n keys a, ascending (k <= n), by insertion into a sorted
- * prefix: for n a little over k, as select_k's filter leaves it, this beats a quickselect. */
-static void smallest_sorted(uint64_t *a, size_t n, size_t k)
-{
-    if (k == 0) return;
-    insertion_sort_keys(a, k);
-    for (size_t i = k; i < n; i++) {
-        uint64_t v = a[i];
-        if (v >= a[k - 1]) continue;
-        size_t j = k - 1;
         while (j > 0 && a[j - 1] > v) { a[j] = a[j - 1]; j--; }
         a[j] = v;
     }
@@ -432,69 +455,133 @@ static void smallest_keys(uint64_t *a, size_t n, size_t k)
     insertion_sort_keys(a, k);
 }
 
-typedef float v8f __attribute__((vector_size(32)));
-typedef int v8i __attribute__((vector_size(32)));
+static uint32_t fbits(float d)
+{
+    uint32_t u;
+    memcpy(&u, &d, sizeof u);
+    return u;
+}
 
-/* On x86-64 the distance loop is compiled twice, for AVX2 and for the baseline (where each
- * 8-wide operation becomes two SSE ones); the loader picks one for the CPU at hand. */
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
-#define PREP_CLONES __attribute__((target_clones("avx2", "default")))
-#else
-#define PREP_CLONES
-#endif
+typedef prep_v8f v8f;
+typedef prep_v8i v8i;
 
-/* Squared distances from q of the m8 candidates x, y, z (m8 a multiple of 8) into d2, and in
- * cnt[i] how many are <= t[i], for the four thresholds t. */
-PREP_CLONES static void distances(const float *x, const float *y, const float *z, size_t m8,
-                                  const float q[3], const float t[4], float *d2, size_t cnt[4])
+/* The squared distances from q of the m8 candidates x, y, z (a multiple of 8) into d2. */
+PREP_CLONES static void distances(const cand_set *cs, size_t m8, const float q[3], float *d2)
 {
     const v8f zero = {0, 0, 0, 0, 0, 0, 0, 0};
     const v8f qx = zero + q[0], qy = zero + q[1], qz = zero + q[2];
-    const v8f t0 = zero + t[0], t1 = zero + t[1], t2 = zero + t[2], t3 = zero + t[3];
-    v8i c0 = {0, 0, 0, 0, 0, 0, 0, 0}, c1 = c0, c2 = c0, c3 = c0;
     for (size_t j = 0; j < m8; j += 8) {
         v8f vx, vy, vz;
-        memcpy(&vx, x + j, sizeof vx);
-        memcpy(&vy, y + j, sizeof vy);
-        memcpy(&vz, z + j, sizeof vz);
+        memcpy(&vx, cs->x + j, sizeof vx);
+        memcpy(&vy, cs->y + j, sizeof vy);
+        memcpy(&vz, cs->z + j, sizeof vz);
         v8f dx = vx - qx, dy = vy - qy, dz = vz - qz;
         v8f d = dx * dx + dy * dy + dz * dz;
         memcpy(d2 + j, &d, sizeof d);
-        c0 += d <= t0; /* true lanes are -1 */
-        c1 += d <= t1;
-        c2 += d <= t2;
-        c3 += d <= t3;
-    }
-    const v8i cs[4] = {c0, c1, c2, c3};
-    for (int i = 0; i < 4; i++) {
-        int sum = 0;
-        for (int l = 0; l < 8; l++) sum -= cs[i][l];
-        cnt[i] = (size_t)sum;
     }
 }
 
-/* Writes the keys of the candidates j < m whose d2[j] <= t to key; returns how many. The
- * candidates near q come in runs, so most groups of four have none: one mask test skips them,
- * and set lanes are visited by their bits. */
-static size_t compact(const float *d2, const uint32_t *id, size_t m, size_t m8, float t,
-                      uint64_t *key)
+/* The squared distances from q of the m candidates x, y, z into d2 (with fresh; otherwise they
+ * are in d2 already), and the candidates with d2 <= t left-packed into kd (distance bits) and
+ * kid (index); returns how many. Every distance is dx * dx + dy * dy + dz * dz in float, in
+ * that order, on both paths: the same bits either way. */
+static size_t pack_scalar(const cand_set *cs, const float q[3], float t, int fresh, float *d2,
+                          uint32_t *kd, uint32_t *kid)
 {
     size_t c = 0;
-#if defined(__SSE2__)
-    const __m128 tv = _mm_set1_ps(t);
-    for (size_t j = 0; j < m8; j += 4) {
-        unsigned mask = (unsigned)_mm_movemask_ps(_mm_cmple_ps(_mm_loadu_ps(d2 + j), tv));
-        while (mask) {
-            size_t jj = j + (size_t)__builtin_ctz(mask);
-            mask &= mask - 1;
-            if (jj < m) key[c++] = pair_key(d2[jj], id[jj]);
+    if (fresh) distances(cs, (cs->m + 7) & ~(size_t)7, q, d2);
+    for (size_t j = 0; j < cs->m; j++) {
+        kd[c] = fbits(d2[j]); /* written always, counted when it passes: no branch */
+        kid[c] = cs->id[j];
+        c += d2[j] <= t;
+    }
+    return c;
+}
+
+#ifdef PREP_X86_AVX2
+/* pack_scalar 8 candidates at a time (arrays padded to a multiple of 8; kd, kid 8 more). */
+__attribute__((target("avx2"))) static size_t pack_avx2(const prep__grid_scratch *s,
+                                                        const cand_set *cs, const float q[3],
+                                                        float t, int fresh, float *d2,
+                                                        uint32_t *kd, uint32_t *kid)
+{
+    const __m256 qx = _mm256_set1_ps(q[0]), qy = _mm256_set1_ps(q[1]), qz = _mm256_set1_ps(q[2]);
+    const __m256 tv = _mm256_set1_ps(t);
+    const float *restrict x = cs->x, *restrict y = cs->y, *restrict z = cs->z;
+    const uint32_t *restrict id = cs->id;
+    const uint8_t(*restrict lut)[8] = s->pack, *restrict popc = s->popc;
+    size_t m = cs->m, c = 0;
+    for (size_t j = 0; j < m; j += 8) {
+        __m256 d;
+        if (fresh) {
+            __m256 dx = _mm256_sub_ps(_mm256_loadu_ps(x + j), qx);
+            __m256 dy = _mm256_sub_ps(_mm256_loadu_ps(y + j), qy);
+            __m256 dz = _mm256_sub_ps(_mm256_loadu_ps(z + j), qz);
+            d = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
+                              _mm256_mul_ps(dz, dz));
+            _mm256_storeu_ps(d2 + j, d);
+        } else {
+            d = _mm256_loadu_ps(d2 + j);
+        }
+        unsigned mask = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(d, tv, _CMP_LE_OQ));
+        if (m - j < 8) mask &= (1u << (m - j)) - 1; /* padding lanes */
+        __m256i perm = _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)lut[mask]));
+        __m256i vd = _mm256_permutevar8x32_epi32(_mm256_castps_si256(d), perm);
+        __m256i vi = _mm256_permutevar8x32_epi32(_mm256_loadu_si256((const __m256i *)(id + j)),
+                                                 perm);
+        _mm256_storeu_si256((__m256i *)(kd + c), vd);
+        _mm256_storeu_si256((__m256i *)(kid + c), vi);
+        c += popc[mask];
+    }
+    return c;
+}
+#endif
+
+static size_t pack(const prep__grid *g, const prep__grid_scratch *s, const cand_set *cs,
+                   const float q[3], float t, int fresh, float *d2, uint32_t *kd, uint32_t *kid)
+{
+#ifdef PREP_X86_AVX2
+    if (g->avx2) return pack_avx2(s, cs, q, t, fresh, d2, kd, kid);
+#endif
+    (void)g;
+    (void)s;
+    return pack_scalar(cs, q, t, fresh, d2, kd, kid);
+}
+
+/* The rank of each of the c packed pairs in (distance, index) order, 8 pairs at a time; those
+ * of rank < found go to hd / hid at their rank: the found smallest, ascending, with no sort and
+ * no branch per pair. The pairs are distinct (indices are), so the ranks are 0..c-1, each once.
+ * Distance bits of non-negative floats order like the floats and are below 2^31, so signed
+ * compares do. kd and kid have room for c rounded up to 8 (padded here with a pair greater
+ * than any). A distance shared with another pair (rare: duplicate points, regular grids)
+ * settles its rank by the indices, in a scalar loop. */
+PREP_CLONES static void rank_pairs(uint32_t *kd, uint32_t *kid, size_t c, int found, float *hd,
+                                   uint32_t *hid)
+{
+    size_t c8 = (c + 7) & ~(size_t)7;
+    for (size_t j = c; j < c8; j++) kd[j] = kid[j] = 0x7fffffffu;
+    for (size_t i = 0; i < c; i++) {
+        const v8i di = (v8i){0, 0, 0, 0, 0, 0, 0, 0} + (int)kd[i];
+        v8i lt = {0, 0, 0, 0, 0, 0, 0, 0}, eq = lt;
+        for (size_t j = 0; j < c8; j += 8) {
+            v8i dj;
+            memcpy(&dj, kd + j, sizeof dj);
+            lt += dj < di; /* true lanes are -1 */
+            eq += dj == di;
+        }
+        /* both counts in one horizontal sum: lt in the high half-words, eq in the low */
+        v8i v = (lt << 16) + eq;
+        int sum = 0;
+        for (int l = 0; l < 8; l++) sum += v[l];
+        uint32_t u = (uint32_t)-sum;
+        size_t r = u >> 16;
+        if ((u & 0xffff) > 1) /* ties on the distance: the smaller indices come first */
+            for (size_t j = 0; j < c; j++) r += kd[j] == kd[i] && kid[j] < kid[i];
+        if (r < (size_t)found) {
+            memcpy(&hd[r], &kd[i], sizeof kd[i]);
+            hid[r] = kid[i];
         }
     }
-#else
-    for (size_t j = 0; j < m; j++)
-        if (d2[j] <= t) key[c++] = pair_key(d2[j], id[j]);
-#endif
-    return c;
 }
 
 /* Grows the scratch's per-candidate buffers to hold m8 entries. */
@@ -507,10 +594,16 @@ static int reserve_scratch(prep__grid_scratch *s, size_t m8)
     if (d) s->d2 = d;
     uint64_t *ky = realloc(s->key, nc * sizeof *ky);
     if (ky) s->key = ky;
-    if (!d || !ky) return -1;
+    uint32_t *kd = realloc(s->kd, (nc + 8) * sizeof *kd);
+    if (kd) s->kd = kd;
+    uint32_t *ki = realloc(s->kid, (nc + 8) * sizeof *ki);
+    if (ki) s->kid = ki;
+    if (!d || !ky || !kd || !ki) return -1;
     s->d2cap = nc;
     return 0;
 }
+
+enum { RANK_MAX = 96 }; /* selections from more candidates sort keys instead of ranking */
 
 /* The k nearest candidates of q other than self (by index), ascending, into s->hd / s->hid;
  * returns how many (k, or fewer when the set is small), or -1 when out of memory.
@@ -518,44 +611,40 @@ static int reserve_scratch(prep__grid_scratch *s, size_t m8)
  * Selects the k + 1 smallest pairs of all candidates, then removes self where found, else the
  * last (self is among the k + 1 smallest unless k + 1 other points precede it, and then the k
  * smallest are all other points). To make selection cheap, candidates are first filtered by
- * a radius guessed from the previous query's k-th distance. The filter only prunes when at
- * least k + 1 candidates pass it (then the k + 1 smallest are among them), otherwise all are
- * used, so the result never depends on the guess. */
-static int select_k(prep__grid_scratch *s, const cand_set *cs, const float q[3], uint32_t self,
-                    int k)
+ * a radius guessed from the previous query's k-th distance, in the same pass that computes
+ * the distances. The filter only prunes when at least k + 1 candidates pass it (then the
+ * k + 1 smallest are among them); otherwise wider radii are tried, and at last all candidates
+ * are used, so the result never depends on the guess. The few that pass are ranked against
+ * each other (no sort, no branch per candidate). */
+static int select_k(const prep__grid *g, prep__grid_scratch *s, const cand_set *cs,
+                    const float q[3], uint32_t self, int k)
 {
     size_t m = cs->m, m8 = (m + 7) & ~(size_t)7;
     if (reserve_scratch(s, m8) != 0) return -1;
     float *d2 = s->d2;
-    /* Consecutive queries are neighbours in Morton order with similar k-th distances: count
-     * the candidates within radii a little over the previous query's while computing the
-     * distances, and keep only those within the smallest radius that holds k + 1. */
-    enum { NT = 4 };
-    static const float mult[NT] = {1.05f, 1.3f, 1.8f, 4.0f};
-    float tp = s->have_prev ? s->prev_kd2 : -1.0f, t[NT];
-    for (int i = 0; i < NT; i++) t[i] = tp * mult[i];
-    size_t cnt[NT];
-    distances(cs->x, cs->y, cs->z, m8, q, t, d2, cnt);
+    uint32_t *kd = s->kd, *kid = s->kid;
     int k1 = k + 1, found;
-    uint64_t *key = s->key;
-    size_t c = 0;
-    for (int i = 0; i < NT; i++) {
-        /* padding lanes (j >= m) have coordinates 0 and may count: an over-count only makes
-         * the compaction below come up short, and then every candidate is used */
-        if (cnt[i] < (size_t)k1) continue;
-        c = compact(d2, cs->id, m, m8, t[i], key);
-        break;
+    /* Consecutive queries are neighbours in Morton order with similar k-th distances. */
+    float tp = s->have_prev ? s->prev_kd2 : INFINITY;
+    size_t c = pack(g, s, cs, q, tp * FILTER_GROW, 1, d2, kd, kid);
+    if (c < (size_t)k1 && c < m) {
+        static const float wider[2] = {2.0f, 4.0f};
+        for (int i = 0; i < 3 && c < (size_t)k1; i++)
+            c = pack(g, s, cs, q, i < 2 ? tp * wider[i] : INFINITY, 0, d2, kd, kid);
     }
-    if (c < (size_t)k1)
-        for (c = 0; c < m; c++) key[c] = pair_key(d2[c], cs->id[c]);
     s->cnt.filtered += c;
     found = c < (size_t)k1 ? (int)c : k1;
-    if (c <= 64) smallest_sorted(key, c, (size_t)found);
-    else smallest_keys(key, c, (size_t)found);
-    for (int i = 0; i < found; i++) {
-        uint32_t u = (uint32_t)(key[i] >> 32);
-        memcpy(&s->hd[i], &u, sizeof u);
-        s->hid[i] = (uint32_t)key[i];
+    if (c <= RANK_MAX) {
+        rank_pairs(kd, kid, c, found, s->hd, s->hid);
+    } else {
+        uint64_t *key = s->key;
+        for (size_t j = 0; j < c; j++) key[j] = (uint64_t)kd[j] << 32 | kid[j];
+        smallest_keys(key, c, (size_t)found);
+        for (int i = 0; i < found; i++) {
+            uint32_t u = (uint32_t)(key[i] >> 32);
+            memcpy(&s->hd[i], &u, sizeof u);
+            s->hid[i] = (uint32_t)key[i];
+        }
     }
     int drop = -1;
     for (int i = 0; i < found && drop < 0; i++)
@@ -628,10 +717,11 @@ static int level_for(const prep__grid *g, double r)
 static int exact_enough(const prep__grid *g, const cand_set *cs, const float q[3], int found,
                         int k, float maxd2)
 {
-    double dmin = INFINITY;
+    double dmin = INFINITY; /* no NaN here (finite q, faces finite or infinite): fmin's result */
     for (int a = 0; a < 3; a++) {
-        dmin = fmin(dmin, (double)q[a] - cs->lo[a]);
-        dmin = fmin(dmin, cs->hi[a] - (double)q[a]);
+        double lo = (double)q[a] - cs->lo[a], hi = cs->hi[a] - (double)q[a];
+        if (lo < dmin) dmin = lo;
+        if (hi < dmin) dmin = hi;
     }
     if (dmin == INFINITY) return 1; /* the block is the whole cloud */
     if (found < k) return 0;
@@ -672,7 +762,7 @@ static int query_one(const prep__grid *g, prep__grid_scratch *s, uint32_t qi, in
     for (;;) {
         cs = get_set(g, s, code >> 3 * (MAXLEVEL - level), level, h, 0, sp);
         if (!cs) return -1;
-        found = select_k(s, cs, q, qi, k);
+        found = select_k(g, s, cs, q, qi, k);
         if (found < 0) return -1;
         s->cnt.candidates += cs->m;
         if (exact_enough(g, cs, q, found, k, found > 0 ? s->hd[found - 1] : 0)) break;

@@ -6,16 +6,24 @@
  *             depth D), chunk_max from the memory cap: memory / 400 bytes, the bytes a point
  *             of a chunk costs in the normals pass with its halo (chunks are processed one at a
  *             time, each on every thread, so the cap does not grow with the thread count).
- *   distribute every point (position, colour, index in the file) into its chunk's scratch file
- *             (unnamed files in the cache directory: nothing is left behind by kill -9).
- *   normals   chunk by chunk, each in parallel over blocks of points: the chunk and a halo (every point within H of its cube,
- *             read from the neighbouring chunks' files) in (Morton code, file index) order, the
- *             order prep.c gives the whole cloud; kNN of the chunk's points and of their
- *             neighbours; a result is exact when its k-th neighbour is closer than the halo's
- *             edge, else H doubles and the chunk starts again. Then prep.c's per-point values:
- *             eq. 20 radius, PCA normal and surface variation, oriented as prep.c does, raw F,
- *             the neighbours' median radius, the nearest distance. Written to the chunk's
- *             second scratch file; histograms of the values whose percentiles prep.c takes.
+ *   distribute every point (Morton code, position, colour, index in the file) into its chunk's
+ *             scratch file (unnamed files in the cache directory: nothing is left behind by
+ *             kill -9); then each chunk file sorted by code, in parallel over the chunks. The
+ *             chunks are octree cells in Morton order, so a region (a chunk and its halo) is
+ *             the filtered concatenation of its chunks' files, in order without a sort.
+ *   normals   chunk by chunk, each in parallel over blocks of points: the chunk and a halo
+ *             (every point within H of its cube, read from the neighbouring chunks' files) in
+ *             (Morton code, file index) order, the order prep.c gives the whole cloud, indexed
+ *             in the cloud's Morton frame (no sort: the region is in that order already); kNN
+ *             of the chunk's points and of their neighbours; a result is exact when its k-th
+ *             neighbour is closer than the halo's edge, else H grows to the farthest ball and
+ *             the region is loaded again, the exact results kept (renamed into the bigger
+ *             region) and only the others queried again. The next chunk's region loads on a
+ *             thread of its own meanwhile. Then prep.c's per-point values: eq. 20 radius, PCA
+ *             normal and surface variation, oriented as prep.c does, raw F, the neighbours'
+ *             median radius, the nearest distance, written block by block by the threads to
+ *             the chunk's second scratch file; histograms of the values whose percentiles
+ *             prep.c takes. A status line gives the pass's phases in wall seconds.
  *   quantiles exact percentiles out of core: the top 16 bits of each (non-negative) float
  *             counted in the normals pass, the bottom 16 bits of the values in the bucket that
  *             holds the wanted rank counted here: the radius median (scatter cap), F's 99th
@@ -51,8 +59,9 @@ enum { COUNT_DEPTH_MAX = 7, BLOCK = 1 << 16, NQ = 7 };
 #define BYTES_PER_CHUNK_POINT 400u /* the normals pass of one chunk (with its halo) */
 
 typedef struct rec {          /* a point in a chunk file */
+    uint64_t code;            /* Morton code in the cloud's frame */
     float pos[3];
-    uint32_t rgba, gidx;
+    uint32_t rgba, gidx, pad;
 } rec;
 
 typedef struct arec {         /* a chunk's point after the normals pass */
@@ -98,6 +107,10 @@ typedef struct build {
     uint64_t normals_done;    /* points through the normals pass so far */
     int radius_pass;          /* chunk_hist: which histograms */
     double t_pass;            /* when the normals pass began */
+    double tph[7];            /* the normals pass's phases, wall seconds (PH_*) */
+    struct prefetch *pf;      /* the next chunk's region, loaded while this one computes */
+    void *keep[10];           /* the normals pass's per-chunk arrays, kept across chunks (KB_*) */
+    size_t keepcap[10];
     pthread_mutex_t mu;
     nodeent *nodes;
     size_t nnodes, capnodes;
@@ -241,11 +254,14 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
     uint32_t gidx = 0;
     while (rc == 0 && (m = lod_src_next(s, pos, rgba, BLOCK, err)) > 0) {
         for (int64_t i = 0; i < m && rc == 0; i++) {
-            uint32_t c = b->cell_chunk[count_cell(b, pos + 3 * i)];
+            uint64_t code = prep_morton_code(&b->f, pos + 3 * i);
+            uint32_t c = b->cell_chunk[code >> (3 * (PREP_MORTON_BITS - b->cdepth))];
             rec *r = &buf[(size_t)c * PER + fill[c]++];
+            r->code = code;
             memcpy(r->pos, pos + 3 * i, 12);
             r->rgba = rgba[i];
             r->gidx = gidx++;
+            r->pad = 0;
             if (fill[c] == PER) {
                 if (lod__pwrite_all(b->chunks[c].fd_in, buf + (size_t)c * PER, PER * sizeof *buf, off[c]))
                     rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
@@ -289,7 +305,39 @@ static void region_free(region *r)
     memset(r, 0, sizeof *r);
 }
 
-/* Loads chunk ci with every point within h of its cube, in (code, file index) order. */
+/* The sorting pass for chunk ci: its file, written in file order, rewritten in (code, file
+ * index) order (a stable radix sort by code). */
+static int chunk_sort(void *ctx, size_t ci, int tid, sd_err *err)
+{
+    build *b = ctx;
+    (void)tid;
+    chunk *o = &b->chunks[ci];
+    size_t n = o->count;
+    rec *in = malloc((n ? n : 1) * sizeof *in), *out = malloc((n ? n : 1) * sizeof *out);
+    uint64_t *key = malloc((n ? n : 1) * sizeof *key);
+    uint32_t *perm = malloc((n ? n : 1) * sizeof *perm);
+    int rc = 0;
+    if (!in || !out || !key || !perm) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory sorting a chunk");
+    if (rc == 0 && lod__pread_all(o->fd_in, in, n * sizeof *in, 0))
+        rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
+    for (size_t i = 0; rc == 0 && i < n; i++) key[i] = in[i].code, perm[i] = (uint32_t)i;
+    if (rc == 0) rc = prep_radix_sort64(key, perm, n, err);
+    if (rc == 0) {
+        for (size_t i = 0; i < n; i++) out[i] = in[perm[i]];
+        if (lod__pwrite_all(o->fd_in, out, n * sizeof *out, 0))
+            rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
+    }
+    free(in);
+    free(out);
+    free(key);
+    free(perm);
+    return rc;
+}
+
+/* Loads chunk ci with every point within h of its cube, in (code, file index) order: the
+ * chunks are octree cells in Morton order and their files are sorted (chunk_sort), so each
+ * one's points are a run of that order and the region is their filtered concatenation, read
+ * a block at a time. */
 static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
 {
     memset(r, 0, sizeof *r);
@@ -300,97 +348,105 @@ static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
         r->edge[a] = r->lo[a] <= (float)b->f.origin[a];
         r->edge[3 + a] = r->hi[a] >= (float)(b->f.origin[a] + b->f.side);
     }
-    size_t cap = 0, m = 0;
-    rec *tmp = NULL;
+    size_t cap = 0;
+    for (size_t j = 0; j < b->nchunks; j++) {
+        const chunk *o = &b->chunks[j];
+        int hit = 1;
+        for (int a = 0; a < 3; a++)
+            if (o->lo[a] > r->hi[a] || o->hi[a] < r->lo[a]) hit = 0;
+        if (hit) cap += o->count;
+    }
     int rc = 0;
-    float *pos = NULL;
-    uint32_t *rgba = NULL, *gi = NULL;
-    uint8_t *own = NULL;
+    r->pos = malloc((cap ? cap : 1) * 12); /* at most; pages past the points stay untouched */
+    r->rgba = malloc((cap ? cap : 1) * 4);
+    r->gidx = malloc((cap ? cap : 1) * 4);
+    r->code = malloc((cap ? cap : 1) * 8);
+    r->own = malloc(cap ? cap : 1);
+    if (!r->pos || !r->rgba || !r->gidx || !r->code || !r->own)
+        rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+    enum { RBLOCK = 1 << 15 }; /* records read at a time */
+    rec *tmp = rc == 0 ? malloc(RBLOCK * sizeof *tmp) : NULL;
+    if (rc == 0 && !tmp) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+    size_t m = 0;
     for (size_t j = 0; j < b->nchunks && rc == 0; j++) {
         const chunk *o = &b->chunks[j];
         int hit = 1;
         for (int a = 0; a < 3; a++)
             if (o->lo[a] > r->hi[a] || o->hi[a] < r->lo[a]) hit = 0;
         if (!hit) continue;
-        rec *t2 = realloc(tmp, o->count * sizeof *tmp);
-        if (!t2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk"); break; }
-        tmp = t2;
-        if (lod__pread_all(o->fd_in, tmp, o->count * sizeof *tmp, 0)) {
-            rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
-            break;
-        }
-        if (m + o->count > cap) {
-            size_t nc = (m + o->count) * 2;
-            float *p2 = realloc(pos, nc * 12);
-            if (p2) pos = p2;
-            uint32_t *r2 = realloc(rgba, nc * 4);
-            if (r2) rgba = r2;
-            uint32_t *g2 = realloc(gi, nc * 4);
-            if (g2) gi = g2;
-            uint8_t *o2 = realloc(own, nc);
-            if (o2) own = o2;
-            if (!p2 || !r2 || !g2 || !o2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk"); break; }
-            cap = nc;
-        }
-        for (uint64_t i = 0; i < o->count; i++) {
-            const float *p = tmp[i].pos;
-            if (j != ci && (p[0] < r->lo[0] || p[0] > r->hi[0] || p[1] < r->lo[1] ||
-                            p[1] > r->hi[1] || p[2] < r->lo[2] || p[2] > r->hi[2]))
-                continue;
-            memcpy(pos + 3 * m, p, 12);
-            rgba[m] = tmp[i].rgba;
-            gi[m] = tmp[i].gidx;
-            own[m] = j == ci;
-            m++;
+        for (size_t i0 = 0; i0 < o->count && rc == 0; i0 += RBLOCK) {
+            size_t nb = o->count - i0 < RBLOCK ? o->count - i0 : RBLOCK;
+            if (lod__pread_all(o->fd_in, tmp, nb * sizeof *tmp, i0 * sizeof *tmp))
+                rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
+            for (size_t i = 0; rc == 0 && i < nb; i++) {
+                const float *p = tmp[i].pos;
+                if (j != ci && (p[0] < r->lo[0] || p[0] > r->hi[0] || p[1] < r->lo[1] ||
+                                p[1] > r->hi[1] || p[2] < r->lo[2] || p[2] > r->hi[2]))
+                    continue;
+                memcpy(r->pos + 3 * m, p, 12);
+                r->rgba[m] = tmp[i].rgba;
+                r->gidx[m] = tmp[i].gidx;
+                r->code[m] = tmp[i].code;
+                r->own[m] = j == ci;
+                m++;
+            }
         }
     }
     free(tmp);
-    uint64_t *codes = NULL;
-    uint32_t *perm = NULL;
-    if (rc == 0) {
-        codes = malloc((m ? m : 1) * sizeof *codes);
-        perm = malloc((m ? m : 1) * sizeof *perm);
-        r->pos = malloc((m ? m : 1) * 12);
-        r->rgba = malloc((m ? m : 1) * 4);
-        r->gidx = malloc((m ? m : 1) * 4);
-        r->code = malloc((m ? m : 1) * 8);
-        r->own = malloc(m ? m : 1);
-        if (!codes || !perm || !r->pos || !r->rgba || !r->gidx || !r->code || !r->own)
-            rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
-    }
-    /* (code, file index) order: the stable radix sort by code, then the (rare) runs of equal
-     * codes, which come from several chunk files, by file index */
-    if (rc == 0) rc = prep_morton_sort(pos, m, &b->f, codes, perm, err);
-    if (rc == 0) {
-        for (size_t i = 0; i < m;) {
-            size_t e = i + 1;
-            while (e < m && codes[e] == codes[i]) e++;
-            for (size_t x = i + 1; x < e; x++) /* insertion sort of the run by gidx */
-                for (size_t y = x; y > i && gi[perm[y]] < gi[perm[y - 1]]; y--) {
-                    uint32_t t = perm[y];
-                    perm[y] = perm[y - 1];
-                    perm[y - 1] = t;
-                }
-            i = e;
-        }
-        for (size_t i = 0; i < m; i++) {
-            uint32_t k = perm[i];
-            memcpy(r->pos + 3 * i, pos + 3 * k, 12);
-            r->rgba[i] = rgba[k];
-            r->gidx[i] = gi[k];
-            r->code[i] = codes[i];
-            r->own[i] = own[k];
-        }
-        r->m = m;
-    }
-    free(codes);
-    free(perm);
-    free(pos);
-    free(rgba);
-    free(gi);
-    free(own);
+    r->m = m;
     if (rc < 0) region_free(r);
     return rc;
+}
+
+/* The next chunk's region, loaded on a thread of its own while the current chunk's steps run
+ * on every core (a region load is serial: it would leave a core idle). */
+typedef struct prefetch {
+    pthread_t th;
+    int running;
+    build *b;
+    size_t ci;
+    float h;
+    region r;
+    int rc;
+    sd_err err;
+} prefetch;
+
+static void *prefetch_run(void *arg)
+{
+    prefetch *p = arg;
+    p->rc = load_region(p->b, p->ci, p->h, &p->r, &p->err);
+    return NULL;
+}
+
+/* Starts loading chunk ci's region with halo h (or loads it now when no thread starts). */
+static void prefetch_start(prefetch *p, build *b, size_t ci, float h)
+{
+    memset(&p->err, 0, sizeof p->err);
+    p->b = b, p->ci = ci, p->h = h, p->rc = 0;
+    memset(&p->r, 0, sizeof p->r);
+    p->running = pthread_create(&p->th, NULL, prefetch_run, p) == 0;
+    if (!p->running) prefetch_run(p);
+    else p->running = 2; /* started */
+}
+
+/* Waits for the load; 0 and the region (now the caller's) when it is chunk ci's with a halo
+ * of at least h, 1 when it is not what is wanted (dropped), or the load's error. */
+static int prefetch_take(prefetch *p, size_t ci, float h, region *r, sd_err *err)
+{
+    if (!p->running) return 1;
+    if (p->running == 2) pthread_join(p->th, NULL);
+    p->running = 0;
+    if (p->rc < 0) {
+        if (err) *err = p->err;
+        return p->rc;
+    }
+    if (p->ci != ci || p->h < h) {
+        region_free(&p->r);
+        return 1;
+    }
+    *r = p->r;
+    memset(&p->r, 0, sizeof p->r);
+    return 0;
 }
 
 /* The halo a chunk with cube [lo, hi] needs for the ball (p, sqrt(d2)): the farthest the ball
@@ -417,11 +473,7 @@ static int inside(const region *r, const float *p, float d2)
     return 1;
 }
 
-typedef struct tls {
-    uint64_t hist[3][65536];
-} tls;
-
-enum { QBLOCK = 16384 };
+enum { QBLOCK = 4096, QBLOCK_K = QBLOCK * PREP_MAX_K };
 
 static int cmp_u32(const void *a, const void *b)
 {
@@ -429,7 +481,16 @@ static int cmp_u32(const void *a, const void *b)
     return x < y ? -1 : x > y;
 }
 
-/* One chunk's normals pass, its steps run in parallel over blocks of QBLOCK points. */
+typedef struct tls {
+    uint64_t hist[3][65536];
+    float d2[QBLOCK_K];       /* one block's neighbour distances */
+    uint32_t idx[QBLOCK_K];   /* one block's neighbours, where they do not go in place */
+    arec out[QBLOCK];         /* one block's records, written from here */
+} tls;
+
+/* One chunk's normals pass, its steps run in parallel over blocks of QBLOCK points. The
+ * points S of the step: the chunk's own points (slots 0..nown), then their neighbours from the
+ * halo (slots nown..ns); region indices in list. */
 typedef struct njob {
     build *b;
     region *r;
@@ -437,20 +498,36 @@ typedef struct njob {
     prep_knn_scratch **ks;    /* per thread */
     tls **t;                  /* per thread */
     int K;
-    uint32_t *list, *nbr;     /* S = own points then their neighbours; K neighbours each */
-    int32_t *slot;
-    float *d2, *r20, *nrm, *svar;
-    size_t first, count;      /* the step's range of S */
-    arec *out;
+    uint32_t *list, *nbr;     /* S: region index of each slot; K neighbours (region indices) each */
+    int32_t *slot;            /* region index -> slot, or -1 */
+    float *kd2, *nn2;         /* squared distance to the K-th and to the nearest neighbour */
+    float *r20, *nrm, *svar;
+    const uint32_t *qslot;    /* nj_query: the slots to query (NULL: first..first+count) */
+    size_t first, count;      /* the step's range of S (or of qslot) */
+    int fd_out;               /* the chunk's records go here, each block by its thread */
     double vp[3];
 } njob;
 
 static int nj_query(void *ctx, size_t blk, int tid, sd_err *err)
 {
     njob *j = ctx;
-    size_t a = j->first + blk * QBLOCK, m = j->first + j->count - a < QBLOCK ? j->first + j->count - a : QBLOCK;
-    return prep_knn_query(j->kn, j->list + a, 0, m, j->K, j->nbr + a * j->K, j->d2 + a * j->K,
-                          j->ks[tid], err);
+    int K = j->K;
+    tls *t = j->t[tid];
+    size_t a = blk * QBLOCK, m = j->count - a < QBLOCK ? j->count - a : QBLOCK;
+    uint32_t q[QBLOCK];
+    for (size_t i = 0; i < m; i++)
+        q[i] = j->list[j->qslot ? j->qslot[a + i] : j->first + a + i];
+    /* contiguous slots get their lists in place; scattered ones through the thread's buffer */
+    uint32_t *idx = j->qslot ? t->idx : j->nbr + (j->first + a) * K;
+    int rc = prep_knn_query(j->kn, q, 0, m, K, idx, t->d2, j->ks[tid], err);
+    if (rc != 0) return rc;
+    for (size_t i = 0; i < m; i++) {
+        size_t s = j->qslot ? j->qslot[a + i] : j->first + a + i;
+        if (j->qslot) memcpy(j->nbr + s * K, idx + i * K, (size_t)K * sizeof *idx);
+        j->kd2[s] = t->d2[i * K + K - 1];
+        if (j->nn2) j->nn2[s] = t->d2[i * K];
+    }
+    return 0;
 }
 
 static int nj_pca(void *ctx, size_t blk, int tid, sd_err *err)
@@ -461,7 +538,7 @@ static int nj_pca(void *ctx, size_t blk, int tid, sd_err *err)
     size_t a = blk * QBLOCK, e = a + QBLOCK < j->count ? a + QBLOCK : j->count;
     float inv_sqrt_k = (float)(1.0 / sqrt((double)j->K));
     for (size_t i = a; i < e; i++) {
-        j->r20[i] = 2.0f * sqrtf(j->d2[i * j->K + j->K - 1]) * inv_sqrt_k;
+        j->r20[i] = 2.0f * sqrtf(j->kd2[i]) * inv_sqrt_k;
         prep_pca_normal(j->r->pos, j->list[i], j->nbr + i * j->K, j->K, j->nrm + 3 * i, j->svar + i);
         prep_orient_normal(j->nrm + 3 * i, j->r->pos + 3 * (size_t)j->list[i], j->b->info.centroid,
                j->b->info.has_viewpoint, j->vp);
@@ -472,7 +549,6 @@ static int nj_pca(void *ctx, size_t blk, int tid, sd_err *err)
 static int nj_own(void *ctx, size_t blk, int tid, sd_err *err)
 {
     njob *j = ctx;
-    (void)err;
     int K = j->K;
     tls *t = j->t[tid];
     size_t a = blk * QBLOCK, e = a + QBLOCK < j->count ? a + QBLOCK : j->count;
@@ -489,7 +565,7 @@ static int nj_own(void *ctx, size_t blk, int tid, sd_err *err)
             s += tt * tt;
             rn[q] = j->r20[sq];
         }
-        arec *o = &j->out[i];
+        arec *o = &t->out[i - a];
         uint32_t pi = j->list[i];
         o->code = j->r->code[pi];
         o->gidx = j->r->gidx[pi];
@@ -501,11 +577,13 @@ static int nj_own(void *ctx, size_t blk, int tid, sd_err *err)
         o->svar = j->svar[i];
         float f = j->r20[i] * s / (float)K;
         o->Fraw = f >= 0 && f <= FLT_MAX ? f : 0.0f;
-        o->nnd = sqrtf(j->d2[i * K]);
+        o->nnd = sqrtf(j->nn2[i]);
         t->hist[0][fbits(o->r20) >> 16]++;
         t->hist[1][fbits(o->Fraw) >> 16]++;
         t->hist[2][fbits(o->nnd) >> 16]++;
     }
+    if (lod__pwrite_all(j->fd_out, t->out, (e - a) * sizeof *t->out, a * sizeof *t->out))
+        return sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
     return 0;
 }
 
@@ -514,7 +592,115 @@ static size_t nblocks(size_t n)
     return (n + QBLOCK - 1) / QBLOCK;
 }
 
-/* The normals pass of chunk ci (the chunks run one after the other, each on every thread). */
+/* The slots s (of nq) whose ball (k-th distance) leaves the region: their count; the halo they
+ * need grows *need. */
+static size_t check_balls(const build *b, const chunk *c, const region *r, const njob *j,
+                          size_t first, size_t n, uint8_t *exact, float *need)
+{
+    size_t bad = 0;
+    for (size_t s = first; s < first + n; s++) {
+        if (exact && exact[s]) continue;
+        const float *pp = r->pos + 3 * (size_t)j->list[s];
+        if (inside(r, pp, j->kd2[s])) {
+            if (exact) exact[s] = 1;
+            continue;
+        }
+        bad++;
+        float nd = halo_need(c, pp, j->kd2[s]);
+        if (nd > *need) *need = nd;
+    }
+    (void)b;
+    return bad;
+}
+
+/* The checks after the chunk's own queries, in parallel over blocks of own slots: whose ball
+ * leaves the region (with the halo they need), and the neighbours that are not own points. */
+typedef struct cblock {
+    size_t bad, n, cap;
+    float need;
+    uint32_t *x;              /* halo neighbours met in the block (repeats included) */
+} cblock;
+
+typedef struct cjob {
+    build *b;
+    const chunk *c;
+    const region *r;
+    const njob *j;
+    uint8_t *exact;           /* NULL: the region is the whole cloud, every ball is inside */
+    cblock *blk;
+} cjob;
+
+static int nj_check(void *ctx, size_t blk, int tid, sd_err *err)
+{
+    cjob *cj = ctx;
+    (void)tid;
+    const njob *j = cj->j;
+    cblock *o = &cj->blk[blk];
+    size_t a = blk * QBLOCK, e = a + QBLOCK < j->count ? a + QBLOCK : j->count;
+    if (cj->exact) o->bad = check_balls(cj->b, cj->c, cj->r, j, a, e - a, cj->exact, &o->need);
+    if (o->bad) return 0;
+    for (size_t s = a; s < e; s++)
+        for (int q = 0; q < j->K; q++) {
+            uint32_t pq = j->nbr[s * (size_t)j->K + q];
+            if (cj->r->own[pq]) continue;
+            if (o->n == o->cap) {
+                size_t nc = o->cap ? 2 * o->cap : 256;
+                uint32_t *x = realloc(o->x, nc * sizeof *x);
+                if (!x) return sd_errf(err, SD_ENOMEM, "lod: out of memory");
+                o->x = x;
+                o->cap = nc;
+            }
+            o->x[o->n++] = pq;
+        }
+    return 0;
+}
+
+/* The chunk's own results across a halo that grew: the neighbours of the own points found
+ * exact in the smaller region old, renamed to the indices of the same points in r (a
+ * superset, both in (code, file index) order). */
+static void remap_own(const region *old, const region *r, njob *j, size_t nown,
+                      const uint8_t *exact)
+{
+    uint32_t *map = (uint32_t *)j->slot; /* free until the slots are assigned */
+    for (size_t i = 0, k = 0; i < old->m; i++) {
+        while (r->gidx[k] != old->gidx[i]) k++;
+        map[i] = (uint32_t)k++;
+    }
+    for (size_t s = 0; s < nown; s++)
+        if (exact[s])
+            for (int q = 0; q < j->K; q++) j->nbr[s * j->K + q] = map[j->nbr[s * j->K + q]];
+}
+
+enum { PH_LOAD, PH_INDEX, PH_QOWN, PH_CHECK, PH_QNBR, PH_PCA, PH_F, PH_N };
+enum { KB_NBR, KB_KD2, KB_NN2, KB_EXACT, KB_REDO, KB_SLOT, KB_LIST, KB_R20, KB_NRM, KB_SVAR };
+
+/* One of the normals pass's arrays, at least bytes long, its contents kept when it grows. The
+ * arrays live across chunks (grown, never shrunk): each chunk reuses the pages the previous
+ * ones faulted in instead of faulting in fresh ones (at 10M points that was a third of the
+ * build's system time). NULL when out of memory. */
+static void *keep_buf(build *b, int which, size_t bytes)
+{
+    if (bytes == 0) bytes = 1;
+    if (bytes > b->keepcap[which]) {
+        void *p = realloc(b->keep[which], bytes);
+        if (!p) return NULL;
+        b->keep[which] = p;
+        b->keepcap[which] = bytes;
+    }
+    return b->keep[which];
+}
+
+static void phase_end(build *b, int ph, double *t)
+{
+    double now = now_s();
+    b->tph[ph] += now - *t;
+    *t = now;
+}
+
+/* The normals pass of chunk ci (the chunks run one after the other, each on every thread).
+ * When a ball leaves the region, the halo grows to hold it and the region is loaded again; the
+ * own points already exact keep their neighbours (renamed to the new region), only the others
+ * are queried again. */
 static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
 {
     build *b = ctx;
@@ -533,98 +719,142 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         tl[t] = calloc(1, sizeof *tl[t]);
         if (!ks[t] || !tl[t]) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory");
     }
+    size_t nown = c->count;
+    njob j;
+    memset(&j, 0, sizeof j);
+    j.b = b, j.K = K, j.ks = ks, j.t = tl;
+    for (int a = 0; a < 3; a++) j.vp[a] = b->info.viewpoint[a] - b->info.offset[a];
+    j.nbr = keep_buf(b, KB_NBR, nown * (size_t)K * 4);
+    j.kd2 = keep_buf(b, KB_KD2, nown * 4);
+    j.nn2 = keep_buf(b, KB_NN2, nown * 4);
+    uint8_t *exact = keep_buf(b, KB_EXACT, nown);
+    uint32_t *redo = keep_buf(b, KB_REDO, nown * 4);
+    if (rc == 0 && (!j.nbr || !j.kd2 || !j.nn2 || !exact || !redo))
+        rc = sd_errf(err, SD_ENOMEM, "lod: out of memory");
+    if (rc == 0) memset(exact, 0, nown);
+    region r, old;
+    memset(&r, 0, sizeof r);
+    memset(&old, 0, sizeof old);
+    int attempt = 0;
     while (rc == 0) {
-        region r;
-        rc = load_region(b, ci, h, &r, err);
+        double t = now_s();
+        int got = attempt == 0 && b->pf ? prefetch_take(b->pf, ci, h, &r, err) : 1;
+        if (got < 0) {
+            rc = got;
+            break;
+        }
+        if (got > 0) rc = load_region(b, ci, h, &r, err);
         if (rc < 0) break;
+        /* the next chunk's region loads meanwhile, with the halo this one starts from */
+        if (attempt == 0 && b->pf && ci + 1 < b->nchunks) prefetch_start(b->pf, b, ci + 1, h);
+        phase_end(b, PH_LOAD, &t);
         size_t m = r.m;
         int full = r.edge[0] && r.edge[1] && r.edge[2] && r.edge[3] && r.edge[4] && r.edge[5];
-        njob j;
-        memset(&j, 0, sizeof j);
-        j.b = b, j.r = &r, j.K = K, j.ks = ks, j.t = tl;
-        for (int a = 0; a < 3; a++) j.vp[a] = b->info.viewpoint[a] - b->info.offset[a];
+        j.r = &r;
         prep_knn *kn = NULL;
-        int exact = 1;
+        int done = 0;
         float need = 0;
-        j.slot = malloc(m * sizeof *j.slot);
-        j.list = malloc(m * sizeof *j.list);
-        if (!j.slot || !j.list) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
-        size_t ns = 0, nown;
+        j.slot = keep_buf(b, KB_SLOT, m * sizeof *j.slot);
+        j.list = keep_buf(b, KB_LIST, m * sizeof *j.list);
+        if (!j.slot || !j.list) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
+        if (attempt > 0) remap_own(&old, &r, &j, nown, exact);
+        region_free(&old);
+        size_t ns = 0;
         for (size_t i = 0; i < m; i++) {
             j.slot[i] = -1;
             if (r.own[i]) j.slot[i] = (int32_t)ns, j.list[ns++] = (uint32_t)i;
         }
-        nown = ns;
-        if ((size_t)K >= m) { exact = full; if (!full) goto done; }
-        rc = prep_knn_build(r.pos, m, NULL, &kn, err);
-        if (rc < 0) goto done;
+        if ((size_t)K >= m) { /* too few points to query: the whole cloud, or a bigger halo */
+            if (full) rc = sd_errf(err, SD_EINVAL, "lod: %zu points for k = %d", m, K);
+            goto next;
+        }
+        /* in the cloud's frame the region is in Morton order already: no sort, and the
+         * queries (region order) run in the index's order */
+        prep_knn_opts ko = {.frame = &b->f, .codes = r.code};
+        rc = prep_knn_build(r.pos, m, &ko, &kn, err);
+        if (rc < 0) goto next;
+        phase_end(b, PH_INDEX, &t);
         j.kn = kn;
-        j.nbr = malloc(m * (size_t)K * 4);
-        j.d2 = malloc(m * (size_t)K * 4);
-        if (!j.nbr || !j.d2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
-        j.first = 0, j.count = nown;
-        rc = prep_par_for(T, nblocks(nown), nj_query, &j, NULL, err);
-        if (rc < 0) goto done;
+        size_t nq = 0;
+        for (size_t s = 0; s < nown; s++)
+            if (!exact[s]) redo[nq++] = (uint32_t)s;
+        j.qslot = nq < nown ? redo : NULL, j.first = 0, j.count = nq;
+        rc = prep_par_for(T, nblocks(nq), nj_query, &j, NULL, err);
+        if (rc < 0) goto next;
+        phase_end(b, PH_QOWN, &t);
         /* A result is exact when its ball lies in the region; else the region grows to the
          * farthest ball (the computed k-th distance bounds the true one from above). */
-        for (size_t i = 0; i < nown; i++) {
-            const float *pp = r.pos + 3 * (size_t)j.list[i];
-            if (!full && !inside(&r, pp, j.d2[i * K + K - 1])) {
-                exact = 0;
-                float nd = halo_need(c, pp, j.d2[i * K + K - 1]);
-                if (nd > need) need = nd;
-            }
-            if (!exact) continue;
-            for (int q = 0; q < K; q++) {
-                uint32_t pq = j.nbr[i * K + q];
-                if (j.slot[pq] < 0) j.slot[pq] = (int32_t)ns, j.list[ns++] = pq;
-            }
+        if (full) memset(exact, 1, nown);
+        cjob cj = {.b = b, .c = c, .r = &r, .j = &j, .exact = full ? NULL : exact};
+        j.first = 0, j.count = nown;
+        size_t nb = nblocks(nown);
+        cj.blk = calloc(nb ? nb : 1, sizeof *cj.blk);
+        if (!cj.blk) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
+        rc = prep_par_for(T, nb, nj_check, &cj, NULL, err);
+        size_t bad = 0, nx = 0;
+        for (size_t i = 0; i < nb; i++) {
+            bad += cj.blk[i].bad;
+            nx += cj.blk[i].n;
+            if (cj.blk[i].need > need) need = cj.blk[i].need;
         }
-        if (!exact) goto done;
-        /* the neighbours in region (Morton) order: the grid search is fast for queries in
-         * that order only (knn.h) */
-        qsort(j.list + nown, ns - nown, sizeof *j.list, cmp_u32);
-        for (size_t i = nown; i < ns; i++) j.slot[j.list[i]] = (int32_t)i;
-        j.first = nown, j.count = ns - nown;
+        /* the halo neighbours once each, in region (Morton) order: the grid search is fast
+         * for queries in that order only (knn.h) */
+        uint32_t *xs = rc == 0 && bad == 0 ? malloc((nx ? nx : 1) * sizeof *xs) : NULL;
+        if (rc == 0 && bad == 0 && !xs) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory");
+        for (size_t i = 0, o = 0; xs && i < nb; i++) {
+            if (!cj.blk[i].n) continue; /* x is NULL then */
+            memcpy(xs + o, cj.blk[i].x, cj.blk[i].n * sizeof *xs);
+            o += cj.blk[i].n;
+        }
+        for (size_t i = 0; i < nb; i++) free(cj.blk[i].x);
+        free(cj.blk);
+        if (xs) {
+            qsort(xs, nx, sizeof *xs, cmp_u32);
+            for (size_t i = 0; i < nx; i++)
+                if (i == 0 || xs[i] != xs[i - 1]) j.slot[xs[i]] = (int32_t)ns, j.list[ns++] = xs[i];
+            free(xs);
+        }
+        if (rc < 0 || bad > 0) goto next;
+        phase_end(b, PH_CHECK, &t);
+        uint32_t *nb2 = keep_buf(b, KB_NBR, ns * (size_t)K * 4);
+        float *kd2 = nb2 ? keep_buf(b, KB_KD2, ns * 4) : NULL;
+        if (!nb2 || !kd2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
+        j.nbr = nb2, j.kd2 = kd2;
+        float *nn2 = j.nn2;
+        j.nn2 = NULL, j.qslot = NULL, j.first = nown, j.count = ns - nown;
         if (ns > nown) rc = prep_par_for(T, nblocks(ns - nown), nj_query, &j, NULL, err);
-        if (rc < 0) goto done;
-        for (size_t i = nown; i < ns; i++) {
-            const float *pp = r.pos + 3 * (size_t)j.list[i];
-            if (!full && !inside(&r, pp, j.d2[i * K + K - 1])) {
-                exact = 0;
-                float nd = halo_need(c, pp, j.d2[i * K + K - 1]);
-                if (nd > need) need = nd;
-            }
-        }
-        if (!exact) goto done;
-        j.r20 = malloc(ns * 4);
-        j.nrm = malloc(ns * 12);
-        j.svar = malloc(ns * 4);
-        j.out = malloc(nown * sizeof *j.out);
-        if (!j.r20 || !j.nrm || !j.svar || !j.out) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto done; }
-        j.count = ns;
+        j.nn2 = nn2;
+        if (rc < 0) goto next;
+        if (!full && check_balls(b, c, &r, &j, nown, ns - nown, NULL, &need) > 0) goto next;
+        phase_end(b, PH_QNBR, &t);
+        j.r20 = keep_buf(b, KB_R20, ns * 4);
+        j.nrm = keep_buf(b, KB_NRM, ns * 12);
+        j.svar = keep_buf(b, KB_SVAR, ns * 4);
+        if (!j.r20 || !j.nrm || !j.svar) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
+        j.first = 0, j.count = ns;
         rc = prep_par_for(T, nblocks(ns), nj_pca, &j, NULL, err);
-        if (rc < 0) goto done;
-        j.count = nown;
+        if (rc < 0) goto next;
+        phase_end(b, PH_PCA, &t);
+        j.count = nown, j.fd_out = c->fd_a;
         rc = prep_par_for(T, nblocks(nown), nj_own, &j, NULL, err);
-        if (rc < 0) goto done;
-        if (lod__pwrite_all(c->fd_a, j.out, nown * sizeof *j.out, 0))
-            rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
-    done:
-        free(j.slot);
-        free(j.list);
-        free(j.nbr);
-        free(j.d2);
-        free(j.r20);
-        free(j.nrm);
-        free(j.svar);
-        free(j.out);
+        if (rc < 0) goto next;
+        phase_end(b, PH_F, &t);
+        done = 1;
+    next:
         prep_knn_free(kn);
-        region_free(&r);
-        if (rc < 0 || exact) break;
+        if (rc < 0 || done) break;
+        /* keep what is exact, grow the halo, load again */
+        attempt++;
         c->retried = 1;
         b->halo = 0;
         h = need * 1.05f > h * 1.5f ? need * 1.05f : h * 1.5f;
+        old = r;
+        memset(&r, 0, sizeof r);
+    }
+    if (rc < 0 && b->pf) { /* nothing more will take it */
+        region tmp;
+        memset(&tmp, 0, sizeof tmp);
+        if (prefetch_take(b->pf, b->pf->ci, 0, &tmp, NULL) == 0) region_free(&tmp);
     }
     if (rc == 0 && !b->halo) b->halo = h;
     if (rc == 0) { /* a status line per chunk: the normals pass is most of the build */
@@ -639,7 +869,9 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         prep_knn_scratch_free(ks[t]);
         free(tl[t]);
     }
-    return rc;
+    region_free(&r);
+    region_free(&old);
+    return rc; /* the arrays stay in b->keep for the next chunk */
 }
 
 /* ---- quantiles ---- */
@@ -675,16 +907,28 @@ static float pick_value(build *b, int q)
     return v;
 }
 
-static int read_arecs(build *b, size_t ci, arec **out, sd_err *err)
+enum { AREC_BLOCK = 1 << 16 }; /* records read at a time by the passes after the normals */
+
+/* Calls fn(ctx, records, count, first index) for chunk ci's records, AREC_BLOCK at a time
+ * through one buffer (the passes after the normals pass stream the records: no chunk-sized
+ * buffer and its fresh pages each pass). */
+static int each_arec_block(build *b, size_t ci, void (*fn)(void *, const arec *, size_t, size_t),
+                           void *ctx, sd_err *err)
 {
-    chunk *c = &b->chunks[ci];
-    *out = malloc((c->count ? c->count : 1) * sizeof **out);
-    if (!*out) return sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
-    if (lod__pread_all(c->fd_a, *out, c->count * sizeof **out, 0)) {
-        free(*out);
-        return sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
+    const chunk *c = &b->chunks[ci];
+    size_t blk = c->count < AREC_BLOCK ? c->count : AREC_BLOCK;
+    arec *a = malloc((blk ? blk : 1) * sizeof *a);
+    if (!a) return sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+    int rc = 0;
+    for (size_t i = 0; i < c->count && rc == 0; i += blk) {
+        size_t m = c->count - i < blk ? c->count - i : blk;
+        if (lod__pread_all(c->fd_a, a, m * sizeof *a, i * sizeof *a))
+            rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
+        else
+            fn(ctx, a, m, i);
     }
-    return 0;
+    free(a);
+    return rc;
 }
 
 static float final_radius(const build *b, const arec *a)
@@ -702,16 +946,12 @@ static float final_F(const build *b, float raw)
 
 /* A counting pass over the normals pass's records: with b->radius_pass 0 the bottom-16-bit
  * histograms of the NQ quantiles' buckets, with 1 the top-16-bit histogram of the final radii. */
-static int chunk_hist(void *ctx, size_t ci, int tid, sd_err *err)
+static void hist_block(void *ctx, const arec *a, size_t n, size_t first)
 {
     build *b = ctx;
-    (void)tid;
-    arec *a;
-    int rc = read_arecs(b, ci, &a, err);
-    if (rc < 0) return rc;
-    uint64_t n = b->chunks[ci].count;
-    pthread_mutex_lock(&b->mu);
-    for (uint64_t i = 0; i < n; i++) {
+    (void)first;
+    pthread_mutex_lock(&b->mu); /* the other thread reads its next block meanwhile */
+    for (size_t i = 0; i < n; i++) {
         if (b->radius_pass) {
             b->hist_hi[3][fbits(final_radius(b, &a[i])) >> 16]++;
             continue;
@@ -722,8 +962,12 @@ static int chunk_hist(void *ctx, size_t ci, int tid, sd_err *err)
         }
     }
     pthread_mutex_unlock(&b->mu);
-    free(a);
-    return 0;
+}
+
+static int chunk_hist(void *ctx, size_t ci, int tid, sd_err *err)
+{
+    (void)tid;
+    return each_arec_block(ctx, ci, hist_block, ctx, err);
 }
 
 /* ---- octree ---- */
@@ -763,17 +1007,6 @@ static int add_node(build *b, const lod_node *n, sd_err *err)
  * vegetation), each group in a fixed pseudo-random order (a hash of the file index). A frame
  * whose budget ends inside a node draws a prefix of it: so that prefix is a uniform sample
  * of the node, surfaces first, not one corner of it (the Morton order the points come in). */
-typedef struct okey {
-    uint64_t key;
-    uint32_t i;
-} okey;
-
-static int cmp_okey(const void *a, const void *b)
-{
-    const okey *x = a, *y = b;
-    return x->key < y->key ? -1 : x->key > y->key;
-}
-
 static uint32_t mix32(uint32_t v)
 {
     v ^= v >> 16;
@@ -789,22 +1022,26 @@ static int emit(build *b, const pt *p, const uint32_t *idx_in, size_t cnt, int l
 {
     size_t len = (size_t)lod_node_bytes((uint32_t)cnt);
     float *buf = malloc(len ? len : 1);
-    okey *ok = malloc((cnt ? cnt : 1) * sizeof *ok);
+    uint64_t *key = malloc((cnt ? cnt : 1) * sizeof *key);
     uint32_t *idx = malloc((cnt ? cnt : 1) * sizeof *idx);
-    if (!buf || !ok || !idx) {
+    if (!buf || !key || !idx) {
         free(buf);
-        free(ok);
+        free(key);
         free(idx);
         return sd_errf(err, SD_ENOMEM, "lod: out of memory for a node");
     }
     for (size_t i = 0; i < cnt; i++) {
         const pt *q = &p[idx_in[i]];
-        ok[i].key = (uint64_t)!q->surface << 63 | (uint64_t)mix32(q->gidx) << 31 | q->gidx;
-        ok[i].i = idx_in[i];
+        key[i] = (uint64_t)!q->surface << 63 | (uint64_t)mix32(q->gidx) << 31 | q->gidx;
+        idx[i] = idx_in[i];
     }
-    qsort(ok, cnt, sizeof *ok, cmp_okey);
-    for (size_t i = 0; i < cnt; i++) idx[i] = ok[i].i;
-    free(ok);
+    int rc = prep_radix_sort64(key, idx, cnt, err); /* the keys differ (file indices do) */
+    free(key);
+    if (rc < 0) {
+        free(buf);
+        free(idx);
+        return rc;
+    }
     float *pos = buf, *nrm = pos + 3 * cnt, *rad = nrm + 3 * cnt, *rl = rad + cnt, *F = rl + cnt;
     uint32_t *rgba = (uint32_t *)(F + cnt);
     float sp = spacing_of(b, level);
@@ -831,7 +1068,7 @@ static int emit(build *b, const pt *p, const uint32_t *idx_in, size_t cnt, int l
     n.code = code;
     n.spacing = sp;
     n.hash = sd_hash64(buf, len, 0);
-    int rc = lod__writer_append(&b->w, buf, len, &n.offset, err);
+    rc = lod__writer_append(&b->w, buf, len, &n.offset, err);
     free(buf);
     free(idx);
     return rc < 0 ? rc : add_node(b, &n, err);
@@ -934,40 +1171,53 @@ static int process(octx *o, uint32_t *idx, size_t cnt, int level, uint64_t code,
     return rc;
 }
 
+typedef struct final_job {
+    build *b;
+    pt *p;
+    uint32_t *idx, *lo;
+} final_job;
+
+/* A block of a chunk's records with their final values, into the octree pass's points. */
+static void final_block(void *ctx, const arec *a, size_t n, size_t first)
+{
+    final_job *f = ctx;
+    build *b = f->b;
+    for (size_t k = 0; k < n; k++) {
+        pt *q = &f->p[first + k];
+        q->code = a[k].code;
+        q->gidx = a[k].gidx;
+        q->rgba = a[k].rgba;
+        memcpy(q->pos, a[k].pos, 12);
+        memcpy(q->normal, a[k].normal, 12);
+        q->radius = final_radius(b, &a[k]);
+        q->F = final_F(b, a[k].Fraw);
+        /* a surface point: a planar neighbourhood, and not a stray point whose radius the
+         * neighbours' radii had to limit (prep.h step 4): noise above a plane has planar
+         * neighbours, but its own eq. 20 radius reaches down to them */
+        q->surface = !(a[k].svar > PREP_SURFACE_VAR_MAX) && !(a[k].r20 > a[k].capn);
+        f->idx[first + k] = (uint32_t)(first + k);
+        uint32_t u = fbits(q->radius);
+        if (u >> 16 == b->qs[NQ].hi) f->lo[u & 0xffff]++;
+    }
+}
+
 static int chunk_octree(void *ctx, size_t ci, int tid, sd_err *err)
 {
     build *b = ctx;
     (void)tid;
     chunk *c = &b->chunks[ci];
-    arec *a;
-    int rc = read_arecs(b, ci, &a, err);
-    if (rc < 0) return rc;
+    int rc = 0;
     uint64_t n = c->count;
     pt *p = malloc((n ? n : 1) * sizeof *p);
     uint32_t *idx = malloc((n ? n : 1) * 4), *scr = malloc((n ? n : 1) * 4);
     uint32_t *lo = calloc(65536, 4);
     if (!p || !idx || !scr || !lo) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
-    for (uint64_t i = 0; rc == 0 && i < n; i++) {
-        p[i].code = a[i].code;
-        p[i].gidx = a[i].gidx;
-        p[i].rgba = a[i].rgba;
-        memcpy(p[i].pos, a[i].pos, 12);
-        memcpy(p[i].normal, a[i].normal, 12);
-        p[i].radius = final_radius(b, &a[i]);
-        p[i].F = final_F(b, a[i].Fraw);
-        /* a surface point: a planar neighbourhood, and not a stray point whose radius the
-         * neighbours' radii had to limit (prep.h step 4): noise above a plane has planar
-         * neighbours, but its own eq. 20 radius reaches down to them */
-        p[i].surface = !(a[i].svar > PREP_SURFACE_VAR_MAX) && !(a[i].r20 > a[i].capn);
-        idx[i] = (uint32_t)i;
-        uint32_t u = fbits(p[i].radius);
-        if (u >> 16 == b->qs[NQ].hi) lo[u & 0xffff]++;
-    }
-    free(a);
+    final_job fj = {.b = b, .p = p, .idx = idx, .lo = lo};
+    if (rc == 0) rc = each_arec_block(b, ci, final_block, &fj, err);
     octx o = {.b = b, .p = p, .scratch = scr, .cdepth = (int)c->depth};
     if (rc == 0 && n) rc = process(&o, idx, n, 0, 0, err);
     pthread_mutex_lock(&b->mu);
-    for (int i = 0; i < 65536; i++) b->qs[NQ].lo[i] += lo[i];
+    for (int i = 0; lo && i < 65536; i++) b->qs[NQ].lo[i] += lo[i];
     if (rc == 0 && o.nup) {
         if (b->nup + o.nup > b->capup) {
             size_t nc = (b->nup + o.nup) * 2;
@@ -1113,13 +1363,30 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
         if (!b->hist_hi[q]) return sd_errf(err, SD_ENOMEM, "lod: out of memory");
     }
     int rc = count_and_distribute(b, s, err);
+    if (rc == 0) {
+        double ts = now_s();
+        rc = prep_par_for(b->threads, b->nchunks, chunk_sort, b, NULL, err);
+        if (rc == 0) status(b, "sort", 0.14, b->info.n, now_s() - ts);
+    }
     if (rc < 0) return rc;
     res->chunks = b->nchunks;
     prep_progress pr;
     double t = now_s();
     prep_progress_begin(&pr, d->progress, d->user, PROTO_PHASE_NORMALS);
     b->t_pass = t;
+    prefetch pf;
+    memset(&pf, 0, sizeof pf);
+    b->pf = b->threads > 1 ? &pf : NULL;
     rc = prep_par_for(1, b->nchunks, chunk_normals, b, &pr, err); /* each chunk on every thread */
+    b->pf = NULL;
+    for (int i = 0; i < 10; i++) { /* the normals pass's arrays: not needed after it */
+        free(b->keep[i]);
+        b->keep[i] = NULL;
+        b->keepcap[i] = 0;
+    }
+    region left;
+    memset(&left, 0, sizeof left);
+    if (prefetch_take(&pf, pf.ci, 0, &left, NULL) == 0) region_free(&left);
     if (rc < 0) return rc;
     prep_progress_end(&pr);
     size_t retried = 0;
@@ -1129,6 +1396,15 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
         b->chunks[i].fd_in = -1;
     }
     res->halo_retries = b->nchunks ? (double)retried / (double)b->nchunks : 0;
+    if (d->status) { /* where the normals pass went, wall seconds */
+        char line[256];
+        snprintf(line, sizeof line, "lod normals: region loads %.2f s, indexes %.2f, kNN of the "
+                 "chunks %.2f, ball checks %.2f, kNN of halo neighbours %.2f, normals %.2f, F "
+                 "%.2f (with the scratch writes)", b->tph[PH_LOAD], b->tph[PH_INDEX],
+                 b->tph[PH_QOWN], b->tph[PH_CHECK], b->tph[PH_QNBR], b->tph[PH_PCA],
+                 b->tph[PH_F]);
+        d->status(d->user, line);
+    }
     /* quantiles: r20 median, sigma, F p99 and the reported F percentiles */
     static const struct { int which; double q; } want[NQ] = {
         {0, 0.5}, {2, 0.5}, {1, 0.99}, {1, 0.01}, {1, 0.25}, {1, 0.5}, {1, 0.75}};
@@ -1257,6 +1533,7 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     for (int q = 0; q <= NQ; q++) free(b.qs[q].lo);
     free(b.nodes);
     free(b.up);
+    for (int i = 0; i < 10; i++) free(b.keep[i]);
     pthread_mutex_destroy(&b.mu);
     if (rc < 0) return rc;
     char why[256];

@@ -83,6 +83,11 @@ int prep_morton_sort(const float *pos, size_t n, const prep_morton_frame *f, uin
         codes[j] = prep_morton_code(f, pos + 3 * j);
         perm[j] = (uint32_t)j;
     }
+    return prep_radix_sort64(codes, perm, n, err);
+}
+
+int prep_radix_sort64(uint64_t *codes, uint32_t *perm, size_t n, sd_err *err)
+{
     size_t i = 1;
     while (i < n && codes[i - 1] <= codes[i]) i++;
     if (i >= n) return 0; /* already in Morton order (a prepared cloud): nothing to sort */
@@ -91,13 +96,13 @@ int prep_morton_sort(const float *pos, size_t n, const prep_morton_frame *f, uin
     size_t *hist = malloc(sizeof(size_t) << 11);
     if (!tk || !tp || !hist) {
         free(tk); free(tp); free(hist);
-        return sd_errf(err, SD_ENOMEM, "out of memory sorting %zu points into Morton order", n);
+        return sd_errf(err, SD_ENOMEM, "out of memory sorting %zu keys", n);
     }
-    /* Six passes of 11 bits cover the 63-bit codes; a pass whose digit is the same for every
-     * key (common for the top bits) is skipped. */
+    /* Six passes of 11 bits cover 64-bit keys; a pass whose digit is the same for every key
+     * (common for the top bits) is skipped. */
     uint64_t *src = codes, *dst = tk;
     uint32_t *psrc = perm, *pdst = tp;
-    for (int shift = 0; shift < 63; shift += 11) {
+    for (int shift = 0; shift < 64; shift += 11) {
         memset(hist, 0, sizeof(size_t) << 11);
         for (size_t j = 0; j < n; j++) hist[(src[j] >> shift) & 0x7ff]++;
         if (hist[(src[0] >> shift) & 0x7ff] == n) continue;

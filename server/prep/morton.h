@@ -39,3 +39,8 @@ uint64_t prep_morton_code(const prep_morton_frame *f, const float p[3]);
  * Returns 0 or SD_ENOMEM (the sort needs 12 n bytes of temporary memory). */
 int prep_morton_sort(const float *pos, size_t n, const prep_morton_frame *f, uint64_t *codes,
                      uint32_t *perm, sd_err *err);
+
+/* prep_radix_sort64: sorts the n keys codes ascending with a stable LSD radix sort (11-bit
+ * digits, skipping digits all keys share), moving perm[i] along with codes[i]. Returns 0 (also
+ * when already sorted: then nothing moves) or SD_ENOMEM (12 n bytes of temporary memory). */
+int prep_radix_sort64(uint64_t *codes, uint32_t *perm, size_t n, sd_err *err);

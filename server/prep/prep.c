@@ -10,6 +10,7 @@
 
 #include "morton.h"
 #include "pca.h"
+#include "simd.h"
 
 enum { CHUNK = 16384 }; /* queries per parallel work unit */
 
@@ -22,12 +23,47 @@ static double now_s(void)
 
 /* ---- selection ---- */
 
+enum { SMALL_MAX = 64 };
+
+/* The value of rank want among the n <= SMALL_MAX values v (a neighbourhood's radii: called
+ * once a point), by counting for 8 values at a time how many are smaller and how many equal:
+ * the value quickselect finds, without its data-dependent branches. 0 when v holds a NaN (the
+ * caller falls back to quickselect). */
+PREP_CLONES static int select_small(const float *v, size_t n, size_t want, float *out)
+{
+    prep_v8f a[SMALL_MAX / 8];
+    size_t nv = (n + 7) / 8;
+    float *f = (float *)a;
+    for (size_t j = 0; j < n; j++)
+        if (v[j] != v[j]) return 0;
+    memcpy(f, v, n * sizeof *v);
+    for (size_t j = n; j < nv * 8; j++) f[j] = NAN; /* neither smaller nor equal to anything */
+    const prep_v8i zero = {0, 0, 0, 0, 0, 0, 0, 0}, w = zero + (int)want;
+    for (size_t b = 0; b < nv; b++) {
+        prep_v8i lt = zero, eq = zero;
+        for (size_t j = 0; j < n; j++) {
+            const prep_v8f x = (prep_v8f){0, 0, 0, 0, 0, 0, 0, 0} + v[j];
+            lt -= x < a[b]; /* true lanes are -1 */
+            eq -= x == a[b];
+        }
+        prep_v8i hit = (lt <= w) & (w < lt + eq);
+        for (int l = 0; l < 8; l++)
+            if (hit[l]) {
+                *out = f[8 * b + (size_t)l];
+                return 1;
+            }
+    }
+    return 0;
+}
+
 float prep_percentile(float *v, size_t n, double q)
 {
     if (n == 0) return 0;
     if (!(q >= 0)) q = 0;
     if (q > 1) q = 1;
     ptrdiff_t want = (ptrdiff_t)floor(q * (double)(n - 1) + 0.5);
+    float r;
+    if (n <= SMALL_MAX && select_small(v, n, (size_t)want, &r)) return r;
     ptrdiff_t lo = 0, hi = (ptrdiff_t)n - 1;
     /* Quickselect with Hoare partitioning around a median of three; scans stop on elements
      * equal to the pivot, so runs of equal values (regular grids, clamped F) stay O(n). */
@@ -222,24 +258,69 @@ static int check_input(const pc_cloud *in, const prep_desc *desc, prep_desc *d, 
     return 0;
 }
 
-/* Step 1: Morton order, attribute permutation, batches, summary. Allocates out. */
-static int reorder(const pc_cloud *in, int K, pc_prepared *out, double centroid[3], sd_err *err)
+/* Step 1's parallel parts, over blocks of CHUNK points: the codes, then the permutation. */
+typedef struct order_job {
+    const pc_cloud *in;
+    pc_prepared *out;
+    const prep_morton_frame *f;
+    uint64_t *codes;
+    uint32_t *perm;
+} order_job;
+
+static int order_codes(void *ctx, size_t c, int tid, sd_err *err)
+{
+    order_job *o = ctx;
+    size_t a = c * CHUNK, e = a + CHUNK < o->in->n ? a + CHUNK : o->in->n;
+    for (size_t j = a; j < e; j++) {
+        o->codes[j] = prep_morton_code(o->f, o->in->pos + 3 * j);
+        o->perm[j] = (uint32_t)j;
+    }
+    return 0;
+}
+
+static int order_gather(void *ctx, size_t c, int tid, sd_err *err)
+{
+    order_job *o = ctx;
+    const pc_cloud *in = o->in;
+    pc_prepared *out = o->out;
+    size_t a = c * CHUNK, e = a + CHUNK < in->n ? a + CHUNK : in->n;
+    for (size_t i = a; i < e; i++) {
+        size_t s = o->perm[i];
+        memcpy(out->pos + 3 * i, in->pos + 3 * s, 3 * sizeof(float));
+        if (in->attrs & PC_ATTR_NORMAL) memcpy(out->normal + 3 * i, in->normal + 3 * s, 12);
+        if (in->attrs & PC_ATTR_RADIUS) out->radius[i] = in->radius[s];
+        if (in->attrs & PC_ATTR_RGB) memcpy(out->rgba + 4 * i, in->rgba + 4 * s, 4);
+        if (in->attrs & PC_ATTR_INTENSITY) out->intensity[i] = in->intensity[s];
+        if (in->attrs & PC_ATTR_CLASS) out->cls[i] = in->cls[s];
+        if (in->attrs & PC_ATTR_SCALAR) out->scalar[i] = in->scalar[s];
+    }
+    return 0;
+}
+
+/* Step 1: Morton order, attribute permutation, batches, summary. Allocates out. The codes and
+ * the permutation run on threads threads; the sort and the centroid (a sum in point order,
+ * the same bits at any thread count) on one. */
+static int reorder(const pc_cloud *in, int K, int threads, pc_prepared *out, double centroid[3],
+                   prep_morton_frame *f, uint64_t **codes_out, sd_err *err)
 {
     size_t n = in->n;
-    prep_morton_frame f;
-    prep_morton_frame_of(in->pos, n, &f);
+    prep_morton_frame_of(in->pos, n, f);
     uint64_t *codes = malloc(n * sizeof *codes);
     uint32_t *perm = malloc(n * sizeof *perm);
     if (!codes || !perm) {
         free(codes); free(perm);
         return sd_errf(err, SD_ENOMEM, "prep: out of memory ordering %zu points", n);
     }
-    int rc = prep_morton_sort(in->pos, n, &f, codes, perm, err);
-    free(codes);
+    order_job oj = {.in = in, .out = out, .f = f, .codes = codes, .perm = perm};
+    size_t nblk = (n + CHUNK - 1) / CHUNK;
+    int rc = prep_par_for(threads, nblk, order_codes, &oj, NULL, err);
+    if (rc == 0) rc = prep_radix_sort64(codes, perm, n, err);
     if (rc != 0) {
+        free(codes);
         free(perm);
         return rc;
     }
+    *codes_out = codes; /* the kNN index takes them: the points are in their order now */
     out->n = n;
     out->attrs = (in->attrs & (PC_ATTR_RGB | PC_ATTR_NORMAL | PC_ATTR_INTENSITY | PC_ATTR_CLASS |
                                PC_ATTR_RADIUS | PC_ATTR_SCALAR)) |
@@ -249,21 +330,20 @@ static int reorder(const pc_cloud *in, int K, pc_prepared *out, double centroid[
     rc = pc_prepared_alloc(out, err);
     if (rc != 0) {
         free(perm);
+        free(codes);
+        *codes_out = NULL;
         return rc;
     }
-    double c[3] = {0, 0, 0};
-    for (size_t i = 0; i < n; i++) {
-        size_t s = perm[i];
-        memcpy(out->pos + 3 * i, in->pos + 3 * s, 3 * sizeof(float));
-        for (int a = 0; a < 3; a++) c[a] += out->pos[3 * i + a];
-        if (in->attrs & PC_ATTR_NORMAL) memcpy(out->normal + 3 * i, in->normal + 3 * s, 12);
-        if (in->attrs & PC_ATTR_RADIUS) out->radius[i] = in->radius[s];
-        if (in->attrs & PC_ATTR_RGB) memcpy(out->rgba + 4 * i, in->rgba + 4 * s, 4);
-        if (in->attrs & PC_ATTR_INTENSITY) out->intensity[i] = in->intensity[s];
-        if (in->attrs & PC_ATTR_CLASS) out->cls[i] = in->cls[s];
-        if (in->attrs & PC_ATTR_SCALAR) out->scalar[i] = in->scalar[s];
-    }
+    rc = prep_par_for(threads, nblk, order_gather, &oj, NULL, err);
     free(perm);
+    if (rc != 0) {
+        free(codes);
+        *codes_out = NULL;
+        return rc; /* out is freed by the caller */
+    }
+    double c[3] = {0, 0, 0};
+    for (size_t i = 0; i < n; i++)
+        for (int a = 0; a < 3; a++) c[a] += out->pos[3 * i + a];
     for (int a = 0; a < 3; a++) centroid[a] = c[a] / (double)n;
     pc_prepared_make_batches(out, PC_BATCH_POINTS);
     memcpy(out->offset, in->offset, sizeof out->offset);
@@ -320,6 +400,8 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
     jb.need_normal = !(in->attrs & PC_ATTR_NORMAL);
     jb.need_radius = !(in->attrs & PC_ATTR_RADIUS);
     prep_knn *kn = NULL;
+    prep_morton_frame frame;
+    uint64_t *codes = NULL;
     worker *w = NULL;
     float *tmp = NULL;
     size_t nchunks = (n + CHUNK - 1) / CHUNK;
@@ -328,7 +410,7 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
 
     double t0 = now_s();
     prep_progress_begin(&pr, d.progress, d.user, PROTO_PHASE_REORDER);
-    rc = reorder(in, K, out, jb.centroid, err);
+    rc = reorder(in, K, d.threads, out, jb.centroid, &frame, &codes, err);
     if (in->has_viewpoint) { /* into the cloud's local coordinates, as the positions */
         jb.has_vp = 1;
         for (int a = 0; a < 3; a++) jb.vp[a] = in->viewpoint[a] - in->offset[a];
@@ -338,12 +420,14 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
     out->stats.t_reorder = now_s() - t0;
     if (n == 1) {
         single_point(out, !jb.need_normal, !jb.need_radius);
+        free(codes);
         return 0;
     }
 
     t0 = now_s();
     prep_progress_begin(&pr, d.progress, d.user, PROTO_PHASE_KNN);
-    prep_knn_opts ko = {.method = d.knn, .leaf_size = d.knn_leaf, .flann_cores = 1};
+    prep_knn_opts ko = {.method = d.knn, .leaf_size = d.knn_leaf, .flann_cores = 1,
+                        .frame = &frame, .codes = codes};
     rc = prep_knn_build(out->pos, n, &ko, &kn, err);
     if (rc != 0) goto fail;
     prep_progress_end(&pr);
@@ -424,5 +508,6 @@ done:
     free(jb.svar);
     free(jb.nbr);
     prep_knn_free(kn);
+    free(codes);
     return rc;
 }
