@@ -61,8 +61,8 @@ void pc__file_close(pc__file *f)
  * A file truncated by someone else while it is parsed leaves the pages past its new end
  * without backing: reading them raises SIGBUS, which would kill the daemon. The parse runs
  * under a guard (one per thread, in thread-local storage) naming the mapping; the process's
- * SIGBUS handler, installed once, jumps back to the guard when the faulting address lies in
- * the guarded mapping of the faulting thread, and otherwise puts the previous disposition
+ * SIGBUS handler (put back at every guarded parse if other code replaced it) jumps back to the
+ * guard when the faulting address lies in the guarded mapping of the faulting thread, and otherwise puts the previous disposition
  * back and returns, so the access faults again and the process dies as it would have.
  *
  * Why not read the file into memory instead: measured on a 150 MB PLY (10M points) and a
@@ -80,7 +80,7 @@ typedef struct pc__guard {
 } pc__guard;
 
 static _Thread_local pc__guard *volatile tl_guard;
-static pthread_once_t sigbus_once = PTHREAD_ONCE_INIT;
+static pthread_mutex_t sigbus_mu = PTHREAD_MUTEX_INITIALIZER;
 static struct sigaction sigbus_prev;
 
 static void on_sigbus(int sig, siginfo_t *si, void *uc)
@@ -97,21 +97,31 @@ static void on_sigbus(int sig, siginfo_t *si, void *uc)
     sigaction(SIGBUS, &sigbus_prev, NULL);
 }
 
+/* sigbus_install: makes on_sigbus the SIGBUS handler, keeping the one it replaces as the
+ * disposition to go back to. Checked at every guarded parse, not only once: other code may
+ * have replaced the handler since (a test harness that sets its own around each test did,
+ * and a guarded read then killed the process). */
 static void sigbus_install(void)
 {
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_sigaction = on_sigbus;
-    sa.sa_flags = SA_SIGINFO;
-    sigemptyset(&sa.sa_mask);
-    sigaction(SIGBUS, &sa, &sigbus_prev);
+    pthread_mutex_lock(&sigbus_mu);
+    struct sigaction cur;
+    if (sigaction(SIGBUS, NULL, &cur) != 0 || !(cur.sa_flags & SA_SIGINFO) ||
+        cur.sa_sigaction != on_sigbus) {
+        struct sigaction sa;
+        memset(&sa, 0, sizeof sa);
+        sa.sa_sigaction = on_sigbus;
+        sa.sa_flags = SA_SIGINFO;
+        sigemptyset(&sa.sa_mask);
+        sigaction(SIGBUS, &sa, &sigbus_prev);
+    }
+    pthread_mutex_unlock(&sigbus_mu);
 }
 
 int pc__guarded(const pc__file *f, const char *path, int (*parse)(void *arg), void *arg,
                 sd_err *err)
 {
     if (!f->map) return parse(arg); /* an empty file: nothing mapped, nothing to lose */
-    pthread_once(&sigbus_once, sigbus_install);
+    sigbus_install();
     pc__guard g;
     long page = sysconf(_SC_PAGESIZE);
     size_t span = (f->size + (size_t)page - 1) / (size_t)page * (size_t)page;

@@ -86,11 +86,6 @@ int pc_laz_stream_open(const char *path, int threads, pc_laz_stream **out, sd_er
         slot *sl = &s->slot[t];
         sl->s = s;
         sl->raw.attrs = PC_ATTR_INTENSITY | PC_ATTR_CLASS;
-        sl->cd = laz_chunk_dec_create(s->lf.items, s->lf.nitems);
-        if (!sl->cd) {
-            pc_laz_stream_close(s);
-            return sd_errf(err, SD_ENOMEM, "%s: no memory for a LAZ chunk decoder", path);
-        }
     }
     snprintf(s->format, sizeof s->format, "%s 1.%u format %u",
              s->lf.copc_info ? "COPC LAZ" : "LAZ", s->lf.h.minor, s->lf.h.format);
@@ -141,6 +136,13 @@ static void *slot_run(void *arg)
     slot *sl = arg;
     pc_laz_stream *s = sl->s;
     sl->npts = 0;
+    /* each slot's decoder is made by the first thread that decodes with it, so its models
+     * (updated at every symbol) come from that thread's heap, not beside another thread's
+     * (io_laz.c measured the difference: 1.67 against 1.86x on two threads) */
+    if (!sl->cd && !(sl->cd = laz_chunk_dec_create(s->lf.items, s->lf.nitems))) {
+        sl->rc = sd_errf(&sl->err, SD_ENOMEM, "%s: no memory for a LAZ chunk decoder", s->path);
+        return NULL;
+    }
     sl->rc = pc__guarded(&s->f, s->path, decode_guarded, sl, &sl->err);
     if (sl->rc) return NULL;
     size_t n = (size_t)(s->lf.chunk_first[sl->chunk + 1] - s->lf.chunk_first[sl->chunk]);
