@@ -62,8 +62,9 @@ void pc__file_close(pc__file *f)
  * without backing: reading them raises SIGBUS, which would kill the daemon. The parse runs
  * under a guard (one per thread, in thread-local storage) naming the mapping; the process's
  * SIGBUS handler (put back at every guarded parse if other code replaced it) jumps back to the
- * guard when the faulting address lies in the guarded mapping of the faulting thread, and otherwise puts the previous disposition
- * back and returns, so the access faults again and the process dies as it would have.
+ * guard when the faulting address lies in the guarded mapping of the faulting thread, and
+ * otherwise puts the previous disposition back and returns, so the access faults again and the
+ * process dies as it would have.
  *
  * Why not read the file into memory instead: measured on a 150 MB PLY (10M points) and a
  * 104 MB LAS (4M points), pread into a buffer adds about 100 ms per 150 MB (page faults on
