@@ -495,6 +495,20 @@ static void test_field_height(void **state)
     rnd_release(tu_ctx, sid);
 }
 
+/* A random plane whose soft points (F > 0.4) are lifted in front by 0.05 + 0.1 F: several soft
+ * layers per pixel (test_tile_matches_axis, test_cpu_bands). Returns the uploaded cloud. */
+static uint32_t upload_layered_plane(void)
+{
+    pc_prepared pc;
+    random_plane(&pc, 90, 90, 0.02f, 3);
+    for (uint64_t i = 0; i < pc.n; i++)
+        if (pc.F[i] > 0.4f) pc.pos[3 * i + 2] = 0.05f + 0.1f * pc.F[i];
+    tu_finish_cloud(&pc, OFF);
+    uint32_t id = tu_upload(tu_ctx, &pc);
+    pc_prepared_free(&pc);
+    return id;
+}
+
 /* order=tile composites the same discs in the same order as order=axis, in float with one
  * rounding to 8 bits where the sprites round after every blend. On a random plane (soft points
  * lifted in front by 0.05 + 0.1 F, lambda 0.5, l_m 0.6: several soft layers per pixel, seen
@@ -503,13 +517,7 @@ static void test_field_height(void **state)
 static void test_tile_matches_axis(void **state)
 {
     (void)state;
-    pc_prepared pc;
-    random_plane(&pc, 90, 90, 0.02f, 3);
-    for (uint64_t i = 0; i < pc.n; i++)
-        if (pc.F[i] > 0.4f) pc.pos[3 * i + 2] = 0.05f + 0.1f * pc.F[i];
-    tu_finish_cloud(&pc, OFF);
-    uint32_t id = tu_upload(tu_ctx, &pc);
-    pc_prepared_free(&pc);
+    uint32_t id = upload_layered_plane();
     rnd_camera cam = cam_z(3.0);
     cam.eye[0] += 1.0, cam.eye[1] += 0.5;
     sp_params p;
@@ -548,19 +556,13 @@ static void test_tile_matches_axis(void **state)
 }
 
 /* A frame whose float layer exceeds order=cpu's band (64 MiB: 2100 x 2100 x 16 bytes = 67 MiB,
- * two bands, and on llvmpipe several splat stripes): the bands meet without a seam. Against
- * order=tile (the GL's compositor, the same float blending) at most 1 level, as in
- * test_tile_matches_axis, and every covered pixel of the rows at the band's edge present. */
+ * so two bands): the bands meet without a seam. Against order=tile (the GL's compositor, the
+ * same float blending) at most 1 level over every pixel, as in test_tile_matches_axis; a band
+ * composited at the wrong rows or offset shows as differences of many levels. */
 static void test_cpu_bands(void **state)
 {
     (void)state;
-    pc_prepared pc;
-    random_plane(&pc, 90, 90, 0.02f, 3);
-    for (uint64_t i = 0; i < pc.n; i++)
-        if (pc.F[i] > 0.4f) pc.pos[3 * i + 2] = 0.05f + 0.1f * pc.F[i];
-    tu_finish_cloud(&pc, OFF);
-    uint32_t id = tu_upload(tu_ctx, &pc);
-    pc_prepared_free(&pc);
+    uint32_t id = upload_layered_plane();
     rnd_camera cam = cam_z(2.2);
     cam.width = 2100, cam.height = 2100;
     sp_params p;
