@@ -41,7 +41,8 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(AXIS_B,       "axis_b",       SP_T_VEC3,  axis_b,       -1e9, 1e9,      "0,0,1",  NULL)     \
     X(SOFT_FRAG_MIB, "soft_frag_mib", SP_T_INT, soft_frag_mib, 1,   65536,    "512",    NULL) \
     X(LOD_FIRST,    "lod_first",    SP_T_INT,   lod_first,    0,    1,        "0",      NULL) \
-    X(PROVISIONAL,  "provisional",  SP_T_INT,   provisional,  0,    1,        "0",      NULL)
+    X(PROVISIONAL,  "provisional",  SP_T_INT,   provisional,  0,    1,        "0",      NULL) \
+    X(KAWATA_RASTER, "kawata_raster", SP_T_ENUM, kawata_raster, 0,   0,        "auto",   "auto|gpu|cpu")
 
 enum {
 #define SP_ID_(id, name, type, field, lo, hi, def, vals) SP_##id,
@@ -93,6 +94,11 @@ enum {
  * software renderer (where the GL is the CPU: there it is the fastest on every cloud measured),
  * axis on a GPU. */
 enum { SP_ORDER_AXIS = 0, SP_ORDER_TILE, SP_ORDER_AUTO, SP_ORDER_CPU };
+/* kawata_raster: where kawata's passes 1 and 2 (the points into the image buffer) run: gpu = the
+ * compute shader kawata_raster.comp; cpu = the host, every core (kawata_cpu.h), the same arrays
+ * handed to the GL passes 3-5; auto = cpu on a software renderer (where the GL is the CPU), gpu
+ * on a GPU. */
+enum { SP_KAWATA_RASTER_AUTO = 0, SP_KAWATA_RASTER_GPU, SP_KAWATA_RASTER_CPU };
 
 typedef struct sp_params {
     int32_t pipeline;
@@ -127,6 +133,7 @@ typedef struct sp_params {
     int64_t provisional;    /* 1: an OPEN of a cloud being prepared answers INFO of a provisional
                                cloud (COPC: its top levels) first, then the full INFO
                                (PROTOCOL.md, OPEN); 0: INFO once the full cloud is ready */
+    int32_t kawata_raster;  /* kawata: SP_KAWATA_RASTER_*, where passes 1 and 2 run */
 } sp_params;
 
 typedef struct sp_param_info {

@@ -32,23 +32,53 @@
 enum { W = 256, H = 256 };
 static const double OFF[3] = {500000.0, 4100000.0, 120.0}; /* a UTM-like offset */
 
-static int setup(void **state)
+/* Each test runs twice, in a group of its own for each place kawata's passes 1 and 2 can run
+ * (params.h kawata_raster: the compute shader, or the host): the same bounds hold for both. */
+typedef struct kfix {
+    rnd_ctx *r;
+    int raster;                /* SP_KAWATA_RASTER_GPU or _CPU */
+} kfix;
+
+static int setup_with(void **state, int raster)
 {
     rnd_desc d = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS")};
     sd_err err = {0};
-    rnd_ctx *r = rnd_create(&d, &err);
-    if (!r) {
+    kfix *kf = calloc(1, sizeof *kf);
+    if (!kf) return -1;
+    kf->raster = raster;
+    kf->r = rnd_create(&d, &err);
+    if (!kf->r) {
         fprintf(stderr, "rnd_create: %s\n", err.msg);
+        free(kf);
         return -1;
     }
-    *state = r;
+    *state = kf;
     return 0;
+}
+
+static int setup_gpu(void **state)
+{
+    return setup_with(state, SP_KAWATA_RASTER_GPU);
+}
+
+static int setup_cpu(void **state)
+{
+    return setup_with(state, SP_KAWATA_RASTER_CPU);
 }
 
 static int teardown(void **state)
 {
-    rnd_destroy(*state);
+    kfix *kf = *state;
+    rnd_destroy(kf->r);
+    free(kf);
     return 0;
+}
+
+/* The defaults, with kawata's passes 1 and 2 where the group runs them. */
+static void params_of(const kfix *kf, sp_params *p)
+{
+    sp_params_defaults(p);
+    p->kawata_raster = kf->raster;
 }
 
 /* A camera at local (ex, ey, ez) looking at the local origin, up +y. */
@@ -94,7 +124,8 @@ static float poisson_sigma(double a, uint64_t n)
  * kawata 0. */
 static void test_outliers(void **state)
 {
-    rnd_ctx *r = *state;
+    const kfix *kf = *state;
+    rnd_ctx *r = kf->r;
     enum { N = 60000, NOUT = N / 20 };
     rng g;
     g.s = 11;
@@ -117,7 +148,7 @@ static void test_outliers(void **state)
     int red[2] = {0, 0}, covered[2] = {0, 0};
     for (int k = 0; k < 2; k++) {
         sp_params p;
-        sp_params_defaults(&p);
+        params_of(kf, &p);
         p.pipeline = k == 0 ? SP_PIPE_POINTS : SP_PIPE_KAWATA;
         rnd_frame f = {0};
         tu_render(r, id, &cam, &p, 0, &f);
@@ -155,7 +186,8 @@ static void test_outliers(void **state)
  * turned towards the eye, lands tens of degrees off. */
 static void test_tilted_normals(void **state)
 {
-    rnd_ctx *r = *state;
+    const kfix *kf = *state;
+    rnd_ctx *r = kf->r;
     enum { N = 40000, E = 4 };
     const double ax = 35 * M_PI / 180, ay = 20 * M_PI / 180;
     /* Rotation R = Ry(ay) Rx(ax) applied to the square's (u, v, 0) and to its normal (0, 0, 1). */
@@ -181,7 +213,7 @@ static void test_tilted_normals(void **state)
     uint32_t id = tu_upload(r, &pc);
     rnd_camera cam = cam_at(0, 0, 2.0, 40, W, H);
     sp_params p;
-    sp_params_defaults(&p);
+    params_of(kf, &p);
     p.pipeline = SP_PIPE_KAWATA;
     p.color = SP_COLOR_NORMAL;
     rnd_frame f = {0};
@@ -221,7 +253,8 @@ static void test_tilted_normals(void **state)
  * silhouette by up to 1.5 buffer pixels either way). */
 static void test_sparse_holes(void **state)
 {
-    rnd_ctx *r = *state;
+    const kfix *kf = *state;
+    rnd_ctx *r = kf->r;
     enum { N = 3000, M = 4 };
     rng g;
     g.s = 13;
@@ -242,7 +275,7 @@ static void test_sparse_holes(void **state)
     int empty[2] = {0, 0}, total = 0;
     for (int k = 0; k < 2; k++) {
         sp_params p;
-        sp_params_defaults(&p);
+        params_of(kf, &p);
         p.pipeline = k == 0 ? SP_PIPE_POINTS : SP_PIPE_KAWATA;
         rnd_frame f = {0};
         tu_render(r, id, &cam, &p, 0, &f);
@@ -273,7 +306,8 @@ static void test_sparse_holes(void **state)
  * set, under the camera of test_outliers and a closer, tilted one. */
 static void test_buffer_sets(void **state)
 {
-    rnd_ctx *r = *state;
+    const kfix *kf = *state;
+    rnd_ctx *r = kf->r;
     enum { N = 20000, NOUT = N / 20 };
     rnd_desc d = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS"),
                   .max_set_points = 6000};
@@ -297,7 +331,7 @@ static void test_buffer_sets(void **state)
     const rnd_camera cams[2] = {cam_at(0, 0, 2.0, 40, W, H), cam_at(0.4, -0.3, 1.2, 50, W, H)};
     for (int v = 0; v < 2; v++) {
         sp_params p;
-        sp_params_defaults(&p);
+        params_of(kf, &p);
         p.pipeline = SP_PIPE_KAWATA;
         rnd_frame f1 = {0}, f4 = {0};
         tu_render(r, id1, &cams[v], &p, 1, &f1);
@@ -335,7 +369,8 @@ static void test_buffer_sets(void **state)
  * back end, so this is a limit of tests, not of the renderer's use. */
 static void test_osmesa(void **state)
 {
-    rnd_ctx *r = *state;
+    const kfix *kf = *state;
+    rnd_ctx *r = kf->r;
     enum { N = 20000 };
     rng g;
     g.s = 15;
@@ -351,7 +386,7 @@ static void test_osmesa(void **state)
     tu_finish_cloud(&pc, OFF);
     rnd_camera cam = cam_at(0.3, 0.4, 1.6, 45, W, H);
     sp_params p;
-    sp_params_defaults(&p);
+    params_of(kf, &p);
     p.pipeline = SP_PIPE_KAWATA;
     p.shading = SP_SHADING_EDL;
     rnd_frame fe[2] = {{0}, {0}}, fo[2] = {{0}, {0}};
@@ -404,7 +439,8 @@ static void test_osmesa(void **state)
  * only: another renderer's rounding differs, and the comparison is skipped, never passed). */
 static void test_bunny(void **state)
 {
-    rnd_ctx *r = *state;
+    const kfix *kf = *state;
+    rnd_ctx *r = kf->r;
     enum { BW = 320, BH = 240 };
     pc_prepared pc;
     tu_prep_data("bunnyData.pts", &pc);
@@ -415,7 +451,7 @@ static void test_bunny(void **state)
     rnd_camera_frame(pc.bmin, pc.bmax, BW, BH, &cam);
     pc_prepared_free(&pc);
     sp_params p;
-    sp_params_defaults(&p);
+    params_of(kf, &p);
     p.pipeline = SP_PIPE_KAWATA;
     rnd_frame f[2] = {{0}, {0}};
     for (int k = 0; k < 2; k++) tu_render(r, id, &cam, &p, 0, &f[k]);
@@ -459,6 +495,95 @@ static void test_bunny(void **state)
         fail_msg("bunny: %.2f dB from the golden, under %.0f dB", db, GOLDEN_MIN_DB);
 }
 
+/* ---- the two places of passes 1 and 2 ---- */
+
+/* Renders cloud id with kawata's passes 1 and 2 in the compute shader and on the host, the
+ * arrays probed (rnd_set_kawata_probe), float frames; returns the number of array words, colour
+ * bytes (8-bit and half-float) and depths that differ, and *covered the buffer pixels with a
+ * nearest point (so that a comparison of empty arrays cannot pass unnoticed). */
+static size_t host_vs_gpu(rnd_ctx *r, uint32_t id, const rnd_camera *cam, float rho_scale,
+                          const char *what, size_t *covered)
+{
+    rnd_frame f[2] = {{0}, {0}};
+    rnd_set_kawata_probe(r, 1);
+    for (int k = 0; k < 2; k++) {
+        sp_params p;
+        sp_params_defaults(&p);
+        p.pipeline = SP_PIPE_KAWATA;
+        p.kawata_rho_scale = rho_scale;
+        p.kawata_raster = k ? SP_KAWATA_RASTER_CPU : SP_KAWATA_RASTER_GPU;
+        tu_render(r, id, cam, &p, 1, &f[k]);
+        assert_non_null(f[k].kawata_arrays);
+    }
+    rnd_set_kawata_probe(r, 0);
+    assert_int_equal(f[0].buffer_w, f[1].buffer_w);
+    assert_int_equal(f[0].buffer_h, f[1].buffer_h);
+    size_t nb = (size_t)f[0].buffer_w * f[0].buffer_h, npx = (size_t)f[0].width * f[0].height;
+    size_t words = 0, bytes = 0, halves = 0, depths = 0;
+    *covered = 0;
+    for (size_t i = 0; i < 3 * nb; i++) words += f[0].kawata_arrays[i] != f[1].kawata_arrays[i];
+    for (size_t i = 0; i < nb; i++) *covered += f[1].kawata_arrays[nb + i] != 0xFFFFFFFFu &&
+                                                f[1].kawata_arrays[i] != 0; /* rows in use */
+    for (size_t i = 0; i < 4 * npx; i++) {
+        bytes += f[0].rgba8[i] != f[1].rgba8[i];
+        halves += f[0].rgba16f[i] != f[1].rgba16f[i];
+    }
+    for (size_t i = 0; i < npx; i++)
+        depths += memcmp(&f[0].depth[i], &f[1].depth[i], sizeof(float)) != 0;
+    printf("host vs gpu, %s: buffer %dx%d, %zu covered, %llu / %llu splats; differ: %zu array "
+           "words, %zu rgba8, %zu rgba16f, %zu depths\n", what, f[0].buffer_w, f[0].buffer_h,
+           *covered, (unsigned long long)f[0].splats_drawn,
+           (unsigned long long)f[1].splats_drawn, words, bytes, halves, depths);
+    size_t diff = words + bytes + halves + depths + (f[0].splats_drawn != f[1].splats_drawn);
+    rnd_frame_free(&f[0]);
+    rnd_frame_free(&f[1]);
+    return diff;
+}
+
+/* The host's passes 1 and 2 (kawata_cpu.h) give the compute shader's arrays word for word
+ * (they project with the shader's float operations in its order), hence the same frames bit for
+ * bit, on real scans (Guanyin.ply, 640x360 at the default rho and at rho 1, the buffer then the
+ * frame, and a close-up that the frustum cuts; bunnyData.pts) and on a cloud split into buffer
+ * sets of 6000 points (bunnyData.pts: 6 sets, points keyed by their cloud-wide index). */
+static void test_host_equals_gpu(void **state)
+{
+    const kfix *kf = *state;
+    enum { FW = 640, FH = 360 };
+    pc_prepared g, b;
+    tu_prep_data("Guanyin.ply", &g);
+    tu_prep_data("bunnyData.pts", &b);
+    rnd_camera cg, cb;
+    rnd_camera_frame(g.bmin, g.bmax, FW, FH, &cg);
+    rnd_camera_frame(b.bmin, b.bmax, FW, FH, &cb);
+    rnd_camera close = cg;
+    for (int a = 0; a < 3; a++) close.eye[a] = cg.target[a] + 0.3 * (cg.eye[a] - cg.target[a]);
+    size_t cov;
+    uint32_t idg = tu_upload(kf->r, &g), idb = tu_upload(kf->r, &b);
+    assert_int_equal(host_vs_gpu(kf->r, idg, &cg, 3.5f, "Guanyin", &cov), 0);
+    assert_true(cov > 1000);
+    assert_int_equal(host_vs_gpu(kf->r, idg, &cg, 0.25f, "Guanyin rho 1", &cov), 0);
+    assert_true(cov > 10000);
+    assert_int_equal(host_vs_gpu(kf->r, idg, &close, 3.5f, "Guanyin close-up", &cov), 0);
+    assert_true(cov > 1000);
+    assert_int_equal(host_vs_gpu(kf->r, idb, &cb, 3.5f, "bunny", &cov), 0);
+    assert_true(cov > 500);
+    rnd_release(kf->r, idg);
+    rnd_release(kf->r, idb);
+    rnd_desc d = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS"),
+                  .max_set_points = 6000};
+    sd_err err = {0};
+    rnd_ctx *r6 = rnd_create(&d, &err);
+    if (!r6) fail_msg("rnd_create: %s", err.msg);
+    uint32_t id6 = tu_upload(r6, &b);
+    assert_int_equal(host_vs_gpu(r6, id6, &cb, 3.5f, "bunny in 6 buffer sets", &cov), 0);
+    assert_true(cov > 500);
+    assert_int_equal(host_vs_gpu(r6, id6, &cb, 0.25f, "bunny in 6 sets, rho 1", &cov), 0);
+    rnd_release(r6, id6);
+    rnd_destroy(r6);
+    pc_prepared_free(&g);
+    pc_prepared_free(&b);
+}
+
 /* ---- EDL ---- */
 
 /* A grid of nx x ny points, spacing h, at height z, x from x0, centred on y = 0, colour c. */
@@ -480,7 +605,8 @@ static void grid(pc_prepared *pc, uint64_t first, int nx, int ny, float h, float
  * change it (checked, so the comparison can fail). */
 static void test_edl_strength_zero(void **state)
 {
-    rnd_ctx *r = *state;
+    const kfix *kf = *state;
+    rnd_ctx *r = kf->r;
     enum { S = 120 };
     pc_prepared pc;
     tu_new_cloud(&pc, 2 * S * S, 0);
@@ -495,7 +621,7 @@ static void test_edl_strength_zero(void **state)
             rnd_frame f[3] = {{0}, {0}, {0}};
             for (int k = 0; k < 3; k++) {
                 sp_params p;
-                sp_params_defaults(&p);
+                params_of(kf, &p);
                 p.pipeline = pipe;
                 if (k > 0) p.shading = SP_SHADING_EDL;
                 p.edl_strength = k == 1 ? 0.0f : 1.0f;
@@ -528,7 +654,8 @@ static void test_edl_strength_zero(void **state)
  * max(0, .) = 0). */
 static void test_edl_step(void **state)
 {
-    rnd_ctx *r = *state;
+    const kfix *kf = *state;
+    rnd_ctx *r = kf->r;
     enum { S = 800 };
     const float strength = 0.05f;
     pc_prepared pc;
@@ -543,7 +670,7 @@ static void test_edl_step(void **state)
     rnd_camera cam = cam_at(0, 0, 5.0, 20, W, H);
     cam.znear = 1.0f, cam.zfar = 10.0f;
     sp_params p;
-    sp_params_defaults(&p);
+    params_of(kf, &p);
     p.pipeline = SP_PIPE_POINTS;
     rnd_frame base = {0}, ef = {0};
     tu_render(r, id, &cam, &p, 1, &base);
@@ -599,7 +726,8 @@ static void test_edl_step(void **state)
  * ray-disc depths that may differ in the last bits, whose shade rounds to 1 in 8 bits). */
 static void test_edl_flat(void **state)
 {
-    rnd_ctx *r = *state;
+    const kfix *kf = *state;
+    rnd_ctx *r = kf->r;
     enum { S = 300 };
     pc_prepared pc;
     tu_new_cloud(&pc, S * S, 0);
@@ -612,7 +740,7 @@ static void test_edl_flat(void **state)
         rnd_frame f[2] = {{0}, {0}};
         for (int k = 0; k < 2; k++) {
             sp_params p;
-            sp_params_defaults(&p);
+            params_of(kf, &p);
             p.pipeline = pipe;
             p.shading = k ? SP_SHADING_EDL : SP_SHADING_LAMBERT;
             tu_render(r, id, &cam, &p, 0, &f[k]);
@@ -645,5 +773,11 @@ int main(void)
         cmocka_unit_test(test_edl_step),
         cmocka_unit_test(test_edl_flat),
     };
-    return cmocka_run_group_tests(tests, setup, teardown);
+    const struct CMUnitTest host_tests[] = {
+        cmocka_unit_test(test_host_equals_gpu),
+    };
+    int failed = cmocka_run_group_tests_name("kawata_raster=gpu", tests, setup_gpu, teardown);
+    failed += cmocka_run_group_tests_name("kawata_raster=cpu", tests, setup_cpu, teardown);
+    failed += cmocka_run_group_tests_name("host vs gpu", host_tests, setup_cpu, teardown);
+    return failed;
 }

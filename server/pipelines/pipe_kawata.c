@@ -80,8 +80,11 @@
 #include <string.h>
 
 #include "camera.h"
+#include "kawata_cpu.h"
 #include "pipe.h"
+#include "progress.h"
 #include "shaders.h"
+#include "soft_cpu.h"
 
 enum { GROUP = 64, MAX_GROUPS_X = 65535 };
 enum { KAWATA_MIN_SUPPORT = 3 };     /* a plane needs three points; see the file comment */
@@ -119,6 +122,13 @@ typedef struct kawata_state {
     GLuint buf[NBUF];
     uint64_t bytes[NBUF];
     GLuint tex[NBUF];          /* buffer textures over buf[] (0 for the counter) */
+    /* kawata_raster=cpu (kawata_cpu.h): the view's runs of points, each set's mapped
+     * positions, the host's working memory and its thread count */
+    kawata_cpu_seg *segs;
+    const float **pos;
+    size_t segs_cap, pos_cap;
+    kawata_cpu_mem mem;
+    int threads;
 } kawata_state;
 
 static void kawata_destroy(rnd_kit *k, void *state)
@@ -131,6 +141,8 @@ static void kawata_destroy(rnd_kit *k, void *state)
     if (s->vao) gl->DeleteVertexArrays(1, &s->vao);
     gl->DeleteTextures(NBUF, s->tex);
     gl->DeleteBuffers(NBUF, s->buf);
+    free(s->segs), free(s->pos);
+    kawata_cpu_mem_free(&s->mem);
     memset(s, 0, sizeof *s);
     free(s);
 }
@@ -143,6 +155,7 @@ static int kawata_create(rnd_kit *k, void **state, sd_err *err)
     if (!s) return sd_errf(err, SD_ENOMEM, "out of memory for the kawata pipeline");
     /* llvmpipe pays ~50 ns per compute invocation (pipe_points.c): a run of points each. */
     s->per_invocation = k->software ? 32 : 1;
+    s->threads = prep_default_threads();
     static const struct {
         const char *files[2];
         int n;
@@ -253,6 +266,100 @@ static void raster_set(const gl_api *gl, const kawata_state *s, const rnd_gpu_cl
     gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
 }
 
+/* Passes 1 and 2 on the host (kawata_raster=cpu, kawata_cpu.h) into rows [y0, y1) of the
+ * depth, near and far buffers: every buffer set with a visible chunk has its positions mapped
+ * for reading and the three buffers' rows mapped for reading and writing (on a software
+ * renderer both are the GL's own memory: no copy either way), then all are unmapped for the GL
+ * passes that follow. job holds the frame's constants. Returns 0 or SD_E*. */
+static int host_raster(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c,
+                       const rnd_view *v, kawata_cpu_job *job, sd_err *err)
+{
+    if (soft_cpu_grow((void **)&s->segs, &s->segs_cap, v->nchunks ? v->nchunks : 1,
+                      sizeof *s->segs) ||
+        soft_cpu_grow((void **)&s->pos, &s->pos_cap, c->nsets ? c->nsets : 1, sizeof *s->pos))
+        return sd_errf(err, SD_ENOMEM, "out of memory for kawata's host passes");
+    memset(s->pos, 0, (c->nsets ? c->nsets : 1) * sizeof *s->pos);
+    int rc = 0;
+    uint32_t nsegs = 0;
+    for (uint32_t i = 0; i < v->nchunks && rc == 0; i++) {
+        const rnd_chunk *ch = &v->chunks[i];
+        if (ch->set >= c->nsets || !ch->count) continue;
+        const rnd_bufset *b = &c->sets[ch->set];
+        if ((uint64_t)ch->first + ch->count > b->n) {
+            rc = sd_errf(err, SD_EINVAL, "kawata: chunk %u (points %u + %u) is outside buffer "
+                         "set %u of %u points", i, ch->first, ch->count, ch->set, b->n);
+            break;
+        }
+        if (!s->pos[ch->set]) {
+            gl->BindBuffer(GL_COPY_READ_BUFFER, b->buf[RND_ATTR_POS]);
+            s->pos[ch->set] = gl->MapBufferRange(GL_COPY_READ_BUFFER, 0,
+                                                 (GLsizeiptr)((uint64_t)b->n * 12),
+                                                 GL_MAP_READ_BIT);
+            if (!s->pos[ch->set]) {
+                rc = gl_check(gl, "mapping a buffer set's positions for kawata", err);
+                if (rc == 0) rc = sd_errf(err, SD_EGL, "kawata: buffer set %u's positions "
+                                          "could not be mapped", ch->set);
+                break;
+            }
+        }
+        s->segs[nsegs++] = (kawata_cpu_seg){s->pos[ch->set], b->base, ch->first, ch->count};
+    }
+    static const int bufs[3] = {B_DEPTH, B_NEAR, B_FAR};
+    uint32_t *arr[3] = {NULL, NULL, NULL};
+    GLintptr at = (GLintptr)job->y0 * job->bw * 4;
+    GLsizeiptr bytes = (GLsizeiptr)(job->y1 - job->y0) * job->bw * 4;
+    for (int a = 0; a < 3 && rc == 0 && bytes > 0; a++) {
+        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->buf[bufs[a]]);
+        arr[a] = gl->MapBufferRange(GL_SHADER_STORAGE_BUFFER, at, bytes,
+                                    GL_MAP_READ_BIT | GL_MAP_WRITE_BIT);
+        if (!arr[a]) {
+            rc = gl_check(gl, "mapping kawata's image buffer", err);
+            if (rc == 0) rc = sd_errf(err, SD_EGL, "kawata: the image buffer could not be mapped");
+        }
+    }
+    if (rc == 0 && bytes > 0) {
+        job->segs = s->segs, job->nsegs = nsegs;
+        job->depth = arr[0], job->near = arr[1], job->far = arr[2];
+        job->threads = s->threads;
+        job->mem = &s->mem;
+        if (kawata_cpu_raster(job) != 0)
+            rc = sd_errf(err, SD_ENOMEM, "out of memory for kawata's host passes");
+    }
+    for (int a = 0; a < 3; a++) {
+        if (!arr[a]) continue;
+        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->buf[bufs[a]]);
+        gl->UnmapBuffer(GL_SHADER_STORAGE_BUFFER);
+    }
+    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+    for (uint32_t i = 0; i < c->nsets; i++) {
+        if (!s->pos[i]) continue;
+        gl->BindBuffer(GL_COPY_READ_BUFFER, c->sets[i].buf[RND_ATTR_POS]);
+        gl->UnmapBuffer(GL_COPY_READ_BUFFER);
+        s->pos[i] = NULL;
+    }
+    gl->BindBuffer(GL_COPY_READ_BUFFER, 0);
+    return rc;
+}
+
+/* rnd_frame.kawata_arrays (rnd_set_kawata_probe): rows [y0, y1) of depth, near and far read
+ * back, the other rows 0. NULL when out of memory (the frame then carries none). */
+static uint32_t *probe_arrays(const gl_api *gl, const kawata_state *s, int bw, int bh, int y0,
+                              int y1)
+{
+    size_t nb = (size_t)bw * (size_t)bh;
+    uint32_t *p = calloc(nb ? 3 * nb : 1, 4);
+    if (!p) return NULL;
+    gl->MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    static const int bufs[3] = {B_DEPTH, B_NEAR, B_FAR};
+    for (int a = 0; a < 3; a++) {
+        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->buf[bufs[a]]);
+        gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, (GLintptr)y0 * bw * 4,
+                             (GLsizeiptr)(y1 - y0) * bw * 4, p + a * nb + (size_t)y0 * bw);
+    }
+    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+    return p;
+}
+
 static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
 {
     kawata_state *s = state;
@@ -324,9 +431,14 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     buffer(gl, s, B_COUNTER, 8, RND_B_KAWATA_COUNT, 0, 0);
     GLintptr row0 = (GLintptr)brect[1] * bw * 4;
     GLsizeiptr rows = (GLsizeiptr)(brect[3] - brect[1]) * bw * 4;
-    fill(gl, s->buf[B_DEPTH], row0, rows, 0xFFFFFFFFu);
-    fill(gl, s->buf[B_NEAR], row0, rows, 0xFFFFFFFFu);
-    fill(gl, s->buf[B_FAR], row0, rows, 0);
+    /* passes 1-2 on the host (kawata_cpu.h) or in kawata_raster.comp: see params.h */
+    int host = p->kawata_raster == SP_KAWATA_RASTER_CPU ||
+               (p->kawata_raster == SP_KAWATA_RASTER_AUTO && k->software);
+    if (!host) {
+        fill(gl, s->buf[B_DEPTH], row0, rows, 0xFFFFFFFFu);
+        fill(gl, s->buf[B_NEAR], row0, rows, 0xFFFFFFFFu);
+        fill(gl, s->buf[B_FAR], row0, rows, 0);
+    }
     fill(gl, s->buf[B_SPLATS], (GLintptr)brect[1] * bw * SPLAT_BYTES,
          (GLsizeiptr)(brect[3] - brect[1]) * bw * SPLAT_BYTES, 0);
     /* the tiles within reach of the rectangle's splats (3 buffer pixels around it) */
@@ -364,19 +476,31 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
         if (l[U_BHI] >= 0) gl->Uniform2i(l[U_BHI], brect[2], brect[3]);
     }
 
-    /* Passes 1 and 2, each over every buffer set (one set: its range table is made once). */
+    /* Passes 1 and 2, on the host, or each over every buffer set (one set: its range table is
+     * made once, and the set stays bound for pass 3). */
     int rebind = c->nsets > 1;
     uint32_t nranges = 0, first = 0;
     int64_t total = 0;
-    for (int pass = 1; pass <= 2; pass++)
-        for (uint32_t set = 0; set < c->nsets; set++) {
-            if (pass == 1 || rebind) {
-                total = rnd_kit_set_ranges(k, v, set, &nranges, &first, err);
-                if (total < 0) return (int)total;
-                rnd_kit_bind_set(k, &c->sets[set], p->color);
+    if (host) {
+        kawata_cpu_job job = {.bw = bw, .bh = bh, .znear = v->znear, .zfar = v->zfar,
+                              .gamma = gamma, .qscale = qscale, .ibits = ibits, .qmax = qmax,
+                              .y0 = brect[1], .y1 = brect[3]};
+        memcpy(job.viewproj, v->viewproj, sizeof job.viewproj);
+        int rc = host_raster(gl, s, c, v, &job, err);
+        if (rc < 0) return rc;
+        if (!rebind && c->nsets) rnd_kit_bind_set(k, &c->sets[0], p->color);
+    } else {
+        for (int pass = 1; pass <= 2; pass++)
+            for (uint32_t set = 0; set < c->nsets; set++) {
+                if (pass == 1 || rebind) {
+                    total = rnd_kit_set_ranges(k, v, set, &nranges, &first, err);
+                    if (total < 0) return (int)total;
+                    rnd_kit_bind_set(k, &c->sets[set], p->color);
+                }
+                if (total > 0) raster_set(gl, s, c, set, (uint32_t)total, nranges, first, pass);
             }
-            if (total > 0) raster_set(gl, s, c, set, (uint32_t)total, nranges, first, pass);
-        }
+    }
+    if (k->kawata_probe) d->out->probe = probe_arrays(gl, s, bw, bh, brect[1], brect[3]);
 
     /* Passes 3-4 run over the list of the covered buffer pixels (those with a nearest point),
      * in the rectangle's row order: each invocation of the list pass takes LIST_PER pixels

@@ -131,6 +131,7 @@ typedef struct rnd_kit {
     GLint64 max_ssbo;          /* GL_MAX_SHADER_STORAGE_BLOCK_SIZE */
     GLint64 max_texels;        /* GL_MAX_TEXTURE_BUFFER_SIZE */
     const rnd_exchange *exchange; /* sort-last frames (render.h), or NULL */
+    int kawata_probe;          /* rnd_set_kawata_probe: kawata reads back its arrays */
     /* private to pipe_kit.c */
     GLuint cloud_tex[4];       /* buffer textures on RND_T_POS, NRM, RAD, SRC */
     GLuint range_buf, range_tex;
@@ -189,6 +190,8 @@ typedef struct rnd_draw_out {
     uint64_t splats;           /* kawata: splats drawn (valid image-buffer pixels) */
     int buffer_w, buffer_h;    /* kawata: the image buffer's size */
     uint32_t flags;            /* RND_FRAME_* (render.h): how the frame was degraded */
+    uint32_t *probe;           /* kawata under kit.kawata_probe: rnd_frame.kawata_arrays
+                                  (malloc'd; the renderer takes it) */
 } rnd_draw_out;
 
 /* What one frame asks of a pipeline. */

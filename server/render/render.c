@@ -931,6 +931,8 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     const rnd_draw draw = {.cloud = c, .cloud_data = slot->pdata[pi], .view = &v,
                            .params = params, .target = t, .out = &out};
     rc = pipelines[pi]->render(&r->kit, r->pstate[pi], &draw, err);
+    free(frame->kawata_arrays);
+    frame->kawata_arrays = out.probe;
     if (rc == 0 && edl)
         rnd__edl_apply(&r->edl, gl, t, edl_rect, params->edl_strength, params->edl_radius);
     if (edl && !t->is_float) {
@@ -997,9 +999,15 @@ void rnd_set_coverage(rnd_ctx *r, int on)
     r->coverage = on != 0;
 }
 
+void rnd_set_kawata_probe(rnd_ctx *r, int on)
+{
+    r->kit.kawata_probe = on != 0;
+}
+
 void rnd_frame_free(rnd_frame *f)
 {
     if (!f) return;
+    free(f->kawata_arrays);
     free(f->rgba8);
     free(f->rgba16f);
     free(f->depth);

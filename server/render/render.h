@@ -81,6 +81,11 @@ typedef struct rnd_frame {
     int complete;             /* 1: every node the view wants was drawn (always 1 for a flat
                                  cloud); 0: a later frame of the same view draws more */
     uint32_t lod_wanted, lod_drawn, lod_uploaded; /* LOD clouds: nodes this frame */
+    /* kawata with rnd_set_kawata_probe on: its image buffer's depth, near and far arrays after
+     * passes 1 and 2 (pipe_kawata.c), buffer_w x buffer_h words each, one after the other; the
+     * rows outside the cloud's buffer rectangle, which the frame neither clears nor uses, 0.
+     * NULL otherwise. */
+    uint32_t *kawata_arrays;
 } rnd_frame;
 
 /* rnd_frame.flags (the FRAME message's flags, PROTOCOL.md). */
@@ -194,6 +199,12 @@ void rnd_set_exchange(rnd_ctx *r, const rnd_exchange *x);
  * RGB is drawn exactly as without it. For compositing the ranks' images of soft and olt
  * (server/mpi). off (the default): opaque 8-bit frames. */
 void rnd_set_coverage(rnd_ctx *r, int on);
+
+/* rnd_set_kawata_probe: on: the following kawata frames also carry their image-buffer arrays
+ * (rnd_frame.kawata_arrays), read back after passes 1 and 2, so that the two places those passes
+ * can run (kawata_raster=gpu|cpu) can be compared array for array. For tests; costs a read-back.
+ * off (the default): none. */
+void rnd_set_kawata_probe(rnd_ctx *r, int on);
 
 /* rnd_render: renders cloud_id through params->pipeline into frame (buffers allocated or
  * resized by the renderer; free with rnd_frame_free). want_float also fills rgba16f and depth.

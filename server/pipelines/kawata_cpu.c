@@ -1,0 +1,284 @@
+/* kawata_cpu.c — kawata's passes 1 and 2 on the host (kawata_cpu.h). */
+#include "kawata_cpu.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#include "progress.h"
+#include "simd.h"
+#include "soft_cpu.h"
+
+enum { BLOCK = 1 << 14 };       /* points a task */
+
+typedef struct run {
+    const kawata_cpu_job *job;
+    uint64_t k0, k1;           /* this batch: visible points [k0, k1) */
+    int nt;                    /* threads */
+    uint32_t npix;             /* the rows' pixels: (y1 - y0) bw */
+    /* each thread's depth, near and far: npix words and a spare one that the points outside
+     * the rows go to; after pass 1 thread 0's depth is the merged one */
+    uint32_t *arr[KAWATA_CPU_MAX_THREADS][3];
+    int pass1;                 /* the projection also does pass 1 */
+} run;
+
+static inline float bits_float(uint32_t u)
+{
+    float f;
+    memcpy(&f, &u, sizeof f);
+    return f;
+}
+
+static inline uint32_t float_bits(float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, sizeof u);
+    return u;
+}
+
+/* The segment holding visible point k (segk ascending, segk[0] = 0). */
+static uint32_t seg_of(const kawata_cpu_job *job, uint64_t k)
+{
+    const uint64_t *segk = job->mem->segk;
+    uint32_t lo = 0, hi = job->nsegs - 1;
+    while (lo < hi) {
+        uint32_t mid = lo + (hi - lo + 1) / 2;
+        if (segk[mid] <= k) lo = mid;
+        else hi = mid - 1;
+    }
+    return lo;
+}
+
+/* Projects n points at pos into pix/key: the shader's
+ *   c = u_viewproj * vec4(p, 1.0); d = c.w; b = (c.xy / d * 0.5 + 0.5) * fb;
+ * as ((col0 x + col1 y) + col2 z) + col3 (col3 times 1.0 is col3), each product and sum
+ * rounded (precise), eight points at a time with the same operations in the same order. */
+PREP_CLONES
+static void project(const kawata_cpu_job *job, const float *pos, uint32_t n, uint32_t *pix,
+                    uint32_t *key)
+{
+    const float *m = job->viewproj;
+    const float fbx = (float)job->bw, fby = (float)job->bh, zn = job->znear, zf = job->zfar;
+    const int bw = job->bw, bh = job->bh;
+    const int row0 = job->y0 * bw;
+    uint32_t i = 0;
+    const prep_v8i lx = {0, 3, 6, 9, 12, 15, 0, 0}, hx = {0, 1, 2, 3, 4, 5, 10, 13};
+    const prep_v8i ly = {1, 4, 7, 10, 13, 0, 0, 0}, hy = {0, 1, 2, 3, 4, 8, 11, 14};
+    const prep_v8i lz = {2, 5, 8, 11, 14, 0, 0, 0}, hz = {0, 1, 2, 3, 4, 9, 12, 15};
+    for (; i + 8 <= n; i += 8) {
+        prep_v8f v0, v1, v2;
+        memcpy(&v0, pos + 3 * (size_t)i, 32);
+        memcpy(&v1, pos + 3 * (size_t)i + 8, 32);
+        memcpy(&v2, pos + 3 * (size_t)i + 16, 32);
+        prep_v8f x = __builtin_shuffle(__builtin_shuffle(v0, v1, lx), v2, hx);
+        prep_v8f y = __builtin_shuffle(__builtin_shuffle(v0, v1, ly), v2, hy);
+        prep_v8f z = __builtin_shuffle(__builtin_shuffle(v0, v1, lz), v2, hz);
+        prep_v8f cx = m[0] * x + m[4] * y + m[8] * z + m[12];
+        prep_v8f cy = m[1] * x + m[5] * y + m[9] * z + m[13];
+        prep_v8f d = m[3] * x + m[7] * y + m[11] * z + m[15];
+        prep_v8f bx = (cx / d * 0.5f + 0.5f) * fbx, by = (cy / d * 0.5f + 0.5f) * fby;
+        prep_v8i in = (d >= zn) & (d <= zf) & (bx >= 0.0f) & (by >= 0.0f) & (bx < fbx) &
+                      (by < fby);
+        prep_v8i qx = __builtin_convertvector(bx, prep_v8i);
+        prep_v8i qy = __builtin_convertvector(by, prep_v8i);
+        prep_v8i cxm = qx < bw - 1, cym = qy < bh - 1;
+        qx = (qx & cxm) | ((bw - 1) & ~cxm);
+        qy = (qy & cym) | ((bh - 1) & ~cym);
+        /* rows above y0 wrap to large values, outside every pixel of the rows */
+        prep_v8i q = ((qy * bw + qx - row0) & in) | ~in;
+        memcpy(pix + i, &q, 32);
+        memcpy(key + i, &d, 32);
+    }
+    for (; i < n; i++) {
+        const float *p = pos + 3 * (size_t)i;
+        float x = p[0], y = p[1], z = p[2];
+        float cx = m[0] * x + m[4] * y + m[8] * z + m[12];
+        float cy = m[1] * x + m[5] * y + m[9] * z + m[13];
+        float d = m[3] * x + m[7] * y + m[11] * z + m[15];
+        uint32_t out = ~0u;
+        if (d >= zn && d <= zf) {
+            float bx = (cx / d * 0.5f + 0.5f) * fbx, by = (cy / d * 0.5f + 0.5f) * fby;
+            if (bx >= 0.0f && by >= 0.0f && bx < fbx && by < fby) {
+                int qx = (int)bx, qy = (int)by;
+                qx = qx < bw - 1 ? qx : bw - 1;
+                qy = qy < bh - 1 ? qy : bh - 1;
+                out = (uint32_t)(qy * bw + qx - row0);
+            }
+        }
+        pix[i] = out;
+        key[i] = float_bits(d);
+    }
+}
+
+/* Task c: the batch's visible points [k0 + c BLOCK, ...): projected into the arrays, and with
+ * pass1, pass 1 (the least key a pixel) into thread tid's depth. pix values of ~0u and rows
+ * outside [y0, y1) are left out by the unsigned test against the rows' pixel count. */
+static int project_task(void *ctx, size_t c, int tid, sd_err *err)
+{
+    (void)err;
+    const run *r = ctx;
+    const kawata_cpu_job *job = r->job;
+    const uint32_t npix = r->npix;
+    uint64_t k = r->k0 + (uint64_t)c * BLOCK, end = k + BLOCK < r->k1 ? k + BLOCK : r->k1;
+    uint32_t s = seg_of(job, k);
+    uint32_t *pix = job->mem->pix + (k - r->k0), *key = job->mem->key + (k - r->k0);
+    uint32_t *depth = r->arr[tid][0];
+    while (k < end) {
+        const kawata_cpu_seg *g = &job->segs[s];
+        uint64_t off = k - job->mem->segk[s], left = g->count - off;
+        uint32_t n = (uint32_t)(end - k < left ? end - k : left);
+        project(job, g->pos + 3 * (size_t)(g->first + off), n, pix, key);
+        /* without branches (which the keys' order makes unpredictable): a point outside
+         * the rows goes to the spare word past them */
+        for (uint32_t i = 0; r->pass1 && i < n; i++) {
+            uint32_t q = pix[i] < npix ? pix[i] : npix, d = depth[q], kv = key[i];
+            depth[q] = kv < d ? kv : d;
+        }
+        pix += n, key += n, k += n, s++;
+    }
+    return 0;
+}
+
+/* Task c: pass 2 over the batch's visible points [k0 + c BLOCK, ...) into thread tid's near
+ * and far: near, the least index of those at the pixel's least key (the merged depth); far,
+ * the greatest step key of those behind it within gamma. */
+static int pass2_task(void *ctx, size_t c, int tid, sd_err *err)
+{
+    (void)err;
+    const run *r = ctx;
+    const kawata_cpu_job *job = r->job;
+    const uint32_t npix = r->npix;
+    const float gamma = job->gamma, qscale = job->qscale;
+    const uint32_t ibits = job->ibits, qtop = job->qmax - 1u;
+    uint64_t k = r->k0 + (uint64_t)c * BLOCK, end = k + BLOCK < r->k1 ? k + BLOCK : r->k1;
+    uint32_t s = seg_of(job, k);
+    const uint32_t *pix = job->mem->pix + (k - r->k0), *key = job->mem->key + (k - r->k0);
+    const uint32_t *depth = r->arr[0][0];
+    uint32_t *near = r->arr[tid][1], *far = r->arr[tid][2];
+    while (k < end) {
+        const kawata_cpu_seg *g = &job->segs[s];
+        uint64_t off = k - job->mem->segk[s], left = g->count - off;
+        uint32_t n = (uint32_t)(end - k < left ? end - k : left);
+        uint32_t idx = (uint32_t)(g->base + g->first + off); /* cloud-wide, < 2^28 */
+        /* without branches, as pass 1; a point not at the least key offers ~0u to near, one
+         * beyond gamma behind it 0 to far (the step is clamped below 2^32 before it is
+         * converted: past gamma it is not used) */
+        for (uint32_t i = 0; i < n; i++, idx++) {
+            uint32_t p = pix[i] < npix ? pix[i] : npix;
+            uint32_t d1 = depth[p], kv = key[i];
+            float step = bits_float(kv) - bits_float(d1);
+            float sq = step * qscale;
+            uint32_t st = (uint32_t)(sq < 4.0e9f ? sq : 4.0e9f);
+            uint32_t fk = ((1u + (st < qtop - 1u ? st : qtop - 1u)) << ibits) | idx;
+            uint32_t nk = kv == d1 ? idx : ~0u;
+            fk = kv != d1 && !(step > gamma) ? fk : 0u;
+            uint32_t n0 = near[p], f0 = far[p];
+            near[p] = nk < n0 ? nk : n0;
+            far[p] = fk > f0 ? fk : f0;
+        }
+        pix += n, key += n, k += n, s++;
+    }
+    return 0;
+}
+
+/* The band of rows' pixels [a, b) that task c of n takes. */
+static void band(const run *r, size_t c, uint32_t *a, uint32_t *b)
+{
+    *a = (uint32_t)((uint64_t)r->npix * c / (uint64_t)r->nt);
+    *b = (uint32_t)((uint64_t)r->npix * (c + 1) / (uint64_t)r->nt);
+}
+
+/* Task c: band c of every thread's arrays cleared (depth and near ~0u, far 0); the spare
+ * words with the last band. */
+static int clear_task(void *ctx, size_t c, int tid, sd_err *err)
+{
+    (void)tid, (void)err;
+    const run *r = ctx;
+    uint32_t a, b;
+    band(r, c, &a, &b);
+    if (b == r->npix) b++;
+    for (int t = 0; t < r->nt; t++) {
+        memset(r->arr[t][0] + a, 0xFF, (size_t)(b - a) * 4);
+        memset(r->arr[t][1] + a, 0xFF, (size_t)(b - a) * 4);
+        memset(r->arr[t][2] + a, 0, (size_t)(b - a) * 4);
+    }
+    return 0;
+}
+
+/* Task c: band c of the threads' arrays merged into the job's: after pass 1 the depth (least,
+ * also kept in thread 0's), after pass 2 near (least) and far (greatest). */
+static int merge_task(void *ctx, size_t c, int tid, sd_err *err)
+{
+    (void)tid, (void)err;
+    const run *r = ctx;
+    const kawata_cpu_job *job = r->job;
+    uint32_t a, b;
+    band(r, c, &a, &b);
+    if (r->pass1) {
+        uint32_t *d0 = r->arr[0][0];
+        for (int t = 1; t < r->nt; t++) {
+            const uint32_t *d = r->arr[t][0];
+            for (uint32_t p = a; p < b; p++) d0[p] = d[p] < d0[p] ? d[p] : d0[p];
+        }
+        memcpy(job->depth + a, d0 + a, (size_t)(b - a) * 4);
+        return 0;
+    }
+    memcpy(job->near + a, r->arr[0][1] + a, (size_t)(b - a) * 4);
+    memcpy(job->far + a, r->arr[0][2] + a, (size_t)(b - a) * 4);
+    for (int t = 1; t < r->nt; t++) {
+        const uint32_t *n = r->arr[t][1], *f = r->arr[t][2];
+        uint32_t *n0 = job->near, *f0 = job->far;
+        for (uint32_t p = a; p < b; p++) {
+            n0[p] = n[p] < n0[p] ? n[p] : n0[p];
+            f0[p] = f[p] > f0[p] ? f[p] : f0[p];
+        }
+    }
+    return 0;
+}
+
+void kawata_cpu_mem_free(kawata_cpu_mem *m)
+{
+    free(m->pix), free(m->key), free(m->segk), free(m->priv);
+    memset(m, 0, sizeof *m);
+}
+
+int kawata_cpu_raster(const kawata_cpu_job *job)
+{
+    kawata_cpu_mem *m = job->mem;
+    if (job->y1 <= job->y0) return 0;
+    if (soft_cpu_grow((void **)&m->segk, &m->segk_cap, (size_t)job->nsegs + 1, sizeof *m->segk))
+        return -1;
+    uint64_t total = 0;
+    for (uint32_t s = 0; s < job->nsegs; s++) m->segk[s] = total, total += job->segs[s].count;
+    m->segk[job->nsegs] = total;
+    size_t batch = total < KAWATA_CPU_BATCH ? (size_t)total : KAWATA_CPU_BATCH;
+    run r = {.job = job, .npix = (uint32_t)(job->y1 - job->y0) * (uint32_t)job->bw};
+    /* each thread has its own three arrays: as many threads as KAWATA_CPU_PRIV_BYTES allow
+     * (at least one) */
+    int nt = job->threads < 1 ? 1 : job->threads;
+    if (nt > KAWATA_CPU_MAX_THREADS) nt = KAWATA_CPU_MAX_THREADS;
+    size_t words = (size_t)r.npix + 1;
+    while (nt > 1 && (uint64_t)nt * 12 * words > KAWATA_CPU_PRIV_BYTES) nt--;
+    r.nt = nt;
+    if (soft_cpu_grow((void **)&m->pix, &m->pix_cap, batch ? batch : 1, 4) ||
+        soft_cpu_grow((void **)&m->key, &m->key_cap, batch ? batch : 1, 4) ||
+        soft_cpu_grow((void **)&m->priv, &m->priv_cap, (size_t)nt * 3 * words, 4))
+        return -1;
+    for (int t = 0; t < nt; t++)
+        for (int a = 0; a < 3; a++) r.arr[t][a] = m->priv + ((size_t)t * 3 + (size_t)a) * words;
+    prep_par_for(nt, (size_t)nt, clear_task, &r, NULL, NULL);
+    uint64_t nbatch = batch ? (total + batch - 1) / batch : 0;
+    /* pass 1 batch by batch; pass 2 on the last batch's projection when there is one batch,
+     * else batch by batch again, projected anew */
+    for (int pass = 1; pass <= 2; pass++) {
+        r.pass1 = pass == 1;
+        for (uint64_t b = 0; b < nbatch; b++) {
+            r.k0 = b * batch;
+            r.k1 = r.k0 + batch < total ? r.k0 + batch : total;
+            size_t nblocks = (size_t)((r.k1 - r.k0 + BLOCK - 1) / BLOCK);
+            if (pass == 1 || nbatch > 1) prep_par_for(nt, nblocks, project_task, &r, NULL, NULL);
+            if (pass == 2) prep_par_for(nt, nblocks, pass2_task, &r, NULL, NULL);
+        }
+        prep_par_for(nt, (size_t)nt, merge_task, &r, NULL, NULL);
+    }
+    return 0;
+}
