@@ -502,7 +502,7 @@ static void test_bunny(void **state)
  * bytes (8-bit and half-float) and depths that differ, and *covered the buffer pixels with a
  * nearest point (so that a comparison of empty arrays cannot pass unnoticed). */
 static size_t host_vs_gpu(rnd_ctx *r, uint32_t id, const rnd_camera *cam, float rho_scale,
-                          const char *what, size_t *covered)
+                          int color, const char *what, size_t *covered)
 {
     rnd_frame f[2] = {{0}, {0}};
     rnd_set_kawata_probe(r, 1);
@@ -511,6 +511,7 @@ static size_t host_vs_gpu(rnd_ctx *r, uint32_t id, const rnd_camera *cam, float 
         sp_params_defaults(&p);
         p.pipeline = SP_PIPE_KAWATA;
         p.kawata_rho_scale = rho_scale;
+        p.color = color;
         p.kawata_raster = k ? SP_KAWATA_RASTER_CPU : SP_KAWATA_RASTER_GPU;
         tu_render(r, id, cam, &p, 1, &f[k]);
         assert_non_null(f[k].kawata_arrays);
@@ -521,7 +522,9 @@ static size_t host_vs_gpu(rnd_ctx *r, uint32_t id, const rnd_camera *cam, float 
     size_t nb = (size_t)f[0].buffer_w * f[0].buffer_h, npx = (size_t)f[0].width * f[0].height;
     size_t words = 0, bytes = 0, halves = 0, depths = 0;
     *covered = 0;
+    size_t pts = 0;
     for (size_t i = 0; i < 3 * nb; i++) words += f[0].kawata_arrays[i] != f[1].kawata_arrays[i];
+    for (size_t i = 3 * nb; i < 19 * nb; i++) pts += f[0].kawata_arrays[i] != f[1].kawata_arrays[i];
     for (size_t i = 0; i < nb; i++) *covered += f[1].kawata_arrays[nb + i] != 0xFFFFFFFFu &&
                                                 f[1].kawata_arrays[i] != 0; /* rows in use */
     for (size_t i = 0; i < 4 * npx; i++) {
@@ -531,10 +534,10 @@ static size_t host_vs_gpu(rnd_ctx *r, uint32_t id, const rnd_camera *cam, float 
     for (size_t i = 0; i < npx; i++)
         depths += memcmp(&f[0].depth[i], &f[1].depth[i], sizeof(float)) != 0;
     printf("host vs gpu, %s: buffer %dx%d, %zu covered, %llu / %llu splats; differ: %zu array "
-           "words, %zu rgba8, %zu rgba16f, %zu depths\n", what, f[0].buffer_w, f[0].buffer_h,
-           *covered, (unsigned long long)f[0].splats_drawn,
-           (unsigned long long)f[1].splats_drawn, words, bytes, halves, depths);
-    size_t diff = words + bytes + halves + depths + (f[0].splats_drawn != f[1].splats_drawn);
+           "words, %zu pts words, %zu rgba8, %zu rgba16f, %zu depths\n", what, f[0].buffer_w,
+           f[0].buffer_h, *covered, (unsigned long long)f[0].splats_drawn,
+           (unsigned long long)f[1].splats_drawn, words, pts, bytes, halves, depths);
+    size_t diff = words + pts + bytes + halves + depths + (f[0].splats_drawn != f[1].splats_drawn);
     rnd_frame_free(&f[0]);
     rnd_frame_free(&f[1]);
     return diff;
@@ -543,8 +546,11 @@ static size_t host_vs_gpu(rnd_ctx *r, uint32_t id, const rnd_camera *cam, float 
 /* The host's passes 1 and 2 (kawata_cpu.h) give the compute shader's arrays word for word
  * (they project with the shader's float operations in its order), hence the same frames bit for
  * bit, on real scans (Guanyin.ply, 640x360 at the default rho and at rho 1, the buffer then the
- * frame, and a close-up that the frustum cuts; bunnyData.pts) and on a cloud split into buffer
- * sets of 6000 points (bunnyData.pts: 6 sets, points keyed by their cloud-wide index). */
+ * frame, a close-up that the frustum cuts, and every colour mode: rgb, intensity and the others
+ * on the host, field's colour map in the GL after the host's passes 1-2; bunnyData.pts) and on
+ * a cloud split into buffer sets of 6000 points (bunnyData.pts: 6 sets, points keyed by their
+ * cloud-wide index; with intensities 0-999 for color=intensity). The arrays compared include
+ * pass 3's first half (each listed pixel's two points in eye space and their colours). */
 static void test_host_equals_gpu(void **state)
 {
     const kfix *kf = *state;
@@ -559,13 +565,19 @@ static void test_host_equals_gpu(void **state)
     for (int a = 0; a < 3; a++) close.eye[a] = cg.target[a] + 0.3 * (cg.eye[a] - cg.target[a]);
     size_t cov;
     uint32_t idg = tu_upload(kf->r, &g), idb = tu_upload(kf->r, &b);
-    assert_int_equal(host_vs_gpu(kf->r, idg, &cg, 3.5f, "Guanyin", &cov), 0);
+    assert_int_equal(host_vs_gpu(kf->r, idg, &cg, 3.5f, SP_COLOR_RGB, "Guanyin", &cov), 0);
     assert_true(cov > 1000);
-    assert_int_equal(host_vs_gpu(kf->r, idg, &cg, 0.25f, "Guanyin rho 1", &cov), 0);
+    static const char *const cname[5] = {"rgb", "field", "normal", "depth", "intensity"};
+    for (int col = SP_COLOR_FIELD; col <= SP_COLOR_INTENSITY; col++) {
+        char what[64];
+        snprintf(what, sizeof what, "Guanyin color=%s", cname[col]);
+        assert_int_equal(host_vs_gpu(kf->r, idg, &cg, 3.5f, col, what, &cov), 0);
+    }
+    assert_int_equal(host_vs_gpu(kf->r, idg, &cg, 0.25f, SP_COLOR_RGB, "Guanyin rho 1", &cov), 0);
     assert_true(cov > 10000);
-    assert_int_equal(host_vs_gpu(kf->r, idg, &close, 3.5f, "Guanyin close-up", &cov), 0);
+    assert_int_equal(host_vs_gpu(kf->r, idg, &close, 3.5f, SP_COLOR_RGB, "Guanyin close-up", &cov), 0);
     assert_true(cov > 1000);
-    assert_int_equal(host_vs_gpu(kf->r, idb, &cb, 3.5f, "bunny", &cov), 0);
+    assert_int_equal(host_vs_gpu(kf->r, idb, &cb, 3.5f, SP_COLOR_RGB, "bunny", &cov), 0);
     assert_true(cov > 500);
     rnd_release(kf->r, idg);
     rnd_release(kf->r, idb);
@@ -574,10 +586,17 @@ static void test_host_equals_gpu(void **state)
     sd_err err = {0};
     rnd_ctx *r6 = rnd_create(&d, &err);
     if (!r6) fail_msg("rnd_create: %s", err.msg);
+    /* intensities, so that color=intensity has more than one value to show */
+    if (!b.intensity) b.intensity = malloc(b.n * sizeof *b.intensity);
+    assert_non_null(b.intensity);
+    b.attrs |= PC_ATTR_INTENSITY;
+    for (uint64_t i = 0; i < b.n; i++) b.intensity[i] = (float)(i % 1000);
     uint32_t id6 = tu_upload(r6, &b);
-    assert_int_equal(host_vs_gpu(r6, id6, &cb, 3.5f, "bunny in 6 buffer sets", &cov), 0);
+    assert_int_equal(host_vs_gpu(r6, id6, &cb, 3.5f, SP_COLOR_RGB, "bunny in 6 buffer sets", &cov), 0);
     assert_true(cov > 500);
-    assert_int_equal(host_vs_gpu(r6, id6, &cb, 0.25f, "bunny in 6 sets, rho 1", &cov), 0);
+    assert_int_equal(host_vs_gpu(r6, id6, &cb, 0.25f, SP_COLOR_RGB, "bunny in 6 sets, rho 1", &cov), 0);
+    assert_int_equal(host_vs_gpu(r6, id6, &cb, 3.5f, SP_COLOR_INTENSITY,
+                                 "bunny in 6 sets, color=intensity", &cov), 0);
     rnd_release(r6, id6);
     rnd_destroy(r6);
     pc_prepared_free(&g);

@@ -282,3 +282,83 @@ int kawata_cpu_raster(const kawata_cpu_job *job)
     }
     return 0;
 }
+
+/* ---- the list and the resolve ---- */
+
+enum { RESOLVE_BLOCK = 4096 }; /* listed pixels a task */
+
+typedef struct resolve_run {
+    const kawata_cpu_resolve_job *job;
+    uint32_t n;
+} resolve_run;
+
+/* Point i (cloud-wide; ~0u: none) into out[0..3] (eye position, 1) and out[8..11] (colour, 1),
+ * or zeros where it is no point of a mapped set (STAGE 1's put). */
+static void put(const kawata_cpu_resolve_job *job, uint32_t i, float *out)
+{
+    const kawata_cpu_set *sets = job->sets;
+    uint32_t lo = 0, hi = job->nsets;
+    while (hi - lo > 1) { /* the last set with base <= i */
+        uint32_t mid = lo + (hi - lo) / 2;
+        if (sets[mid].base <= i) lo = mid;
+        else hi = mid;
+    }
+    const kawata_cpu_set *g = job->nsets ? &sets[lo] : NULL;
+    uint64_t l = g ? (uint64_t)i - g->base : 0;
+    if (i == ~0u || !g || (uint64_t)i < g->base || l >= g->n || !g->pos || !g->src) {
+        memset(out, 0, 4 * sizeof *out);
+        memset(out + 8, 0, 4 * sizeof *out);
+        return;
+    }
+    const float *m = job->view, *p = g->pos + 3 * l;
+    float x = p[0], y = p[1], z = p[2];
+    out[0] = m[0] * x + m[4] * y + m[8] * z + m[12];
+    out[1] = m[1] * x + m[5] * y + m[9] * z + m[13];
+    out[2] = m[2] * x + m[6] * y + m[10] * z + m[14];
+    out[3] = 1.0f;
+    uint32_t v = g->src[l];
+    if (job->intensity) {
+        float f = bits_float(v);
+        f = f > 0.0f ? (f < 1.0f ? f : 1.0f) : 0.0f;
+        out[8] = out[9] = out[10] = f;
+    } else {
+        out[8] = (float)(v & 0xFFu) / 255.0f;
+        out[9] = (float)(v >> 8 & 0xFFu) / 255.0f;
+        out[10] = (float)(v >> 16 & 0xFFu) / 255.0f;
+    }
+    out[11] = 1.0f;
+}
+
+/* Task c: listed pixels [c RESOLVE_BLOCK, ...): pts[4b] = P1, [4b + 1] = P2, [4b + 2] and
+ * [4b + 3] their colours. */
+static int resolve_task(void *ctx, size_t c, int tid, sd_err *err)
+{
+    (void)tid, (void)err;
+    const resolve_run *r = ctx;
+    const kawata_cpu_resolve_job *job = r->job;
+    uint32_t a = (uint32_t)c * RESOLVE_BLOCK, b = a + RESOLVE_BLOCK < r->n ? a + RESOLVE_BLOCK : r->n;
+    const uint32_t mask = (1u << job->ibits) - 1u, row0 = (uint32_t)job->y0 * (uint32_t)job->bw;
+    for (uint32_t k = a; k < b; k++) {
+        uint32_t e = job->list[k];
+        uint32_t q = (e >> 16) * (uint32_t)job->bw + (e & 0xFFFFu) - row0;
+        float *out = job->pts + 16 * (size_t)q;
+        uint32_t fk = job->far[q];
+        put(job, job->near[q], out);
+        put(job, fk == 0u ? ~0u : fk & mask, out + 4);
+    }
+    return 0;
+}
+
+uint32_t kawata_cpu_resolve(const kawata_cpu_resolve_job *job)
+{
+    uint32_t n = 0;
+    for (int y = job->y0; y < job->y1; y++) {
+        const uint32_t *row = job->near + (size_t)(y - job->y0) * (size_t)job->bw;
+        for (int x = job->x0; x < job->x1; x++)
+            if (row[x] != ~0u) job->list[n++] = (uint32_t)x | (uint32_t)y << 16;
+    }
+    resolve_run r = {job, n};
+    int nt = job->threads < 1 ? 1 : job->threads;
+    prep_par_for(nt, (n + RESOLVE_BLOCK - 1) / RESOLVE_BLOCK, resolve_task, &r, NULL, NULL);
+    return n;
+}

@@ -68,3 +68,40 @@ typedef struct kawata_cpu_job {
  * (the arrays are then not written). */
 int kawata_cpu_raster(const kawata_cpu_job *job);
 void kawata_cpu_mem_free(kawata_cpu_mem *m);
+
+/* ---- the list and the first half of pass 3 (kawata_fit.comp STAGE 0 and 1) ----
+ * On the host too when the passes above are: the covered buffer pixels of the rectangle in row
+ * order, and for each its nearest point and the farthest within gamma to eye space with their
+ * colours, as STAGE 1 writes them (vec4(view * vec4(p, 1.0)).xyz, 1.0), the colour vec4(rgb,
+ * 1.0), zeros for "no point"). On llvmpipe that compute pass cost ~10 ms of CPU on the 1M scan
+ * for ~65k pixels, bound by its scattered reads; here it is a small part of that. The colour
+ * sources: RGBA8 (unpackUnorm4x8: each byte / 255.0) or the intensity's float clamped to
+ * [0, 1]; color=field (a polynomial colour map) stays with the GL (pipe_kawata.c). */
+
+/* A buffer set: its positions and colour source (NULL when none of its points is visible),
+ * cloud-wide index of its first point, points. */
+typedef struct kawata_cpu_set {
+    const float *pos;
+    const uint32_t *src;
+    uint64_t base;
+    uint32_t n;
+} kawata_cpu_set;
+
+typedef struct kawata_cpu_resolve_job {
+    const kawata_cpu_set *sets; /* by base, ascending */
+    uint32_t nsets;
+    float view[16];            /* local -> eye, column-major (u_view) */
+    int intensity;             /* 1: the sources are intensities; 0: RGBA8 */
+    int bw;
+    int x0, x1, y0, y1;        /* the rectangle listed: [x0, x1) x [y0, y1) */
+    uint32_t ibits;            /* far's index bits */
+    const uint32_t *near, *far; /* rows [y0, y1) as kawata_cpu_raster left them */
+    uint32_t *list;            /* out: x | y << 16 a covered pixel, row order (room for the
+                                  rectangle) */
+    float *pts;                /* out: rows [y0, y1), 16 floats a buffer pixel (P1, P2, their
+                                  colours), written for the listed ones */
+    int threads;
+} kawata_cpu_resolve_job;
+
+/* kawata_cpu_resolve: lists and resolves; returns the number of listed pixels. */
+uint32_t kawata_cpu_resolve(const kawata_cpu_resolve_job *job);

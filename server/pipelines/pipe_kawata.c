@@ -125,8 +125,8 @@ typedef struct kawata_state {
     /* kawata_raster=cpu (kawata_cpu.h): the view's runs of points, each set's mapped
      * positions, the host's working memory and its thread count */
     kawata_cpu_seg *segs;
-    const float **pos;
-    size_t segs_cap, pos_cap;
+    kawata_cpu_set *sets;
+    size_t segs_cap, sets_cap;
     kawata_cpu_mem mem;
     int threads;
 } kawata_state;
@@ -141,7 +141,7 @@ static void kawata_destroy(rnd_kit *k, void *state)
     if (s->vao) gl->DeleteVertexArrays(1, &s->vao);
     gl->DeleteTextures(NBUF, s->tex);
     gl->DeleteBuffers(NBUF, s->buf);
-    free(s->segs), free(s->pos);
+    free(s->segs), free(s->sets);
     kawata_cpu_mem_free(&s->mem);
     memset(s, 0, sizeof *s);
     free(s);
@@ -266,97 +266,141 @@ static void raster_set(const gl_api *gl, const kawata_state *s, const rnd_gpu_cl
     gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
 }
 
-/* Passes 1 and 2 on the host (kawata_raster=cpu, kawata_cpu.h) into rows [y0, y1) of the
- * depth, near and far buffers: every buffer set with a visible chunk has its positions mapped
- * for reading and the three buffers' rows mapped for reading and writing (on a software
- * renderer both are the GL's own memory: no copy either way), then all are unmapped for the GL
- * passes that follow. job holds the frame's constants. Returns 0 or SD_E*. */
-static int host_raster(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c,
-                       const rnd_view *v, kawata_cpu_job *job, sd_err *err)
+/* map: glMapBufferRange of bytes at `at` of buffer buf (through target), or NULL with err
+ * filled. */
+static void *map(const gl_api *gl, GLenum target, GLuint buf, GLintptr at, GLsizeiptr bytes,
+                 GLbitfield access, const char *what, sd_err *err)
 {
+    gl->BindBuffer(target, buf);
+    void *p = gl->MapBufferRange(target, at, bytes, access);
+    if (!p && gl_check(gl, what, err) == 0) sd_errf(err, SD_EGL, "kawata: %s failed", what);
+    return p;
+}
+
+static void unmap(const gl_api *gl, GLenum target, GLuint buf)
+{
+    gl->BindBuffer(target, buf);
+    gl->UnmapBuffer(target);
+}
+
+/* Passes 1 and 2 on the host (kawata_raster=cpu, kawata_cpu.h) into rows [y0, y1) of the
+ * depth, near and far buffers, and with rj (not NULL) the list and pass 3's first half too
+ * (*nlist: the listed pixels, also written to the counter). The positions of every buffer set
+ * with a visible chunk (and with rj its colour source) are mapped for reading, the buffers
+ * written mapped for writing (on a software renderer both are the GL's own memory: no copy
+ * either way), and all are unmapped for the GL passes that follow. job and rj hold the frame's
+ * constants. Returns 0 or SD_E*. */
+static int host_passes(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c,
+                       const rnd_view *v, kawata_cpu_job *job, kawata_cpu_resolve_job *rj,
+                       int color, uint32_t *nlist, sd_err *err)
+{
+    uint32_t ns = c->nsets ? c->nsets : 1;
     if (soft_cpu_grow((void **)&s->segs, &s->segs_cap, v->nchunks ? v->nchunks : 1,
                       sizeof *s->segs) ||
-        soft_cpu_grow((void **)&s->pos, &s->pos_cap, c->nsets ? c->nsets : 1, sizeof *s->pos))
+        soft_cpu_grow((void **)&s->sets, &s->sets_cap, ns, sizeof *s->sets))
         return sd_errf(err, SD_ENOMEM, "out of memory for kawata's host passes");
-    memset(s->pos, 0, (c->nsets ? c->nsets : 1) * sizeof *s->pos);
-    int rc = 0;
+    memset(s->sets, 0, ns * sizeof *s->sets);
+    for (uint32_t i = 0; i < c->nsets; i++) s->sets[i].base = c->sets[i].base, s->sets[i].n = c->sets[i].n;
+    int src = rnd_kit_color_source(color), rc = 0;
     uint32_t nsegs = 0;
     for (uint32_t i = 0; i < v->nchunks && rc == 0; i++) {
         const rnd_chunk *ch = &v->chunks[i];
         if (ch->set >= c->nsets || !ch->count) continue;
         const rnd_bufset *b = &c->sets[ch->set];
+        kawata_cpu_set *hs = &s->sets[ch->set];
         if ((uint64_t)ch->first + ch->count > b->n) {
             rc = sd_errf(err, SD_EINVAL, "kawata: chunk %u (points %u + %u) is outside buffer "
                          "set %u of %u points", i, ch->first, ch->count, ch->set, b->n);
             break;
         }
-        if (!s->pos[ch->set]) {
-            gl->BindBuffer(GL_COPY_READ_BUFFER, b->buf[RND_ATTR_POS]);
-            s->pos[ch->set] = gl->MapBufferRange(GL_COPY_READ_BUFFER, 0,
-                                                 (GLsizeiptr)((uint64_t)b->n * 12),
-                                                 GL_MAP_READ_BIT);
-            if (!s->pos[ch->set]) {
-                rc = gl_check(gl, "mapping a buffer set's positions for kawata", err);
-                if (rc == 0) rc = sd_errf(err, SD_EGL, "kawata: buffer set %u's positions "
-                                          "could not be mapped", ch->set);
-                break;
-            }
+        if (!hs->pos) {
+            hs->pos = map(gl, GL_COPY_READ_BUFFER, b->buf[RND_ATTR_POS], 0,
+                          (GLsizeiptr)((uint64_t)b->n * 12), GL_MAP_READ_BIT,
+                          "mapping a buffer set's positions", err);
+            if (!hs->pos) rc = err && err->code ? err->code : SD_EGL;
         }
-        s->segs[nsegs++] = (kawata_cpu_seg){s->pos[ch->set], b->base, ch->first, ch->count};
-    }
-    static const int bufs[3] = {B_DEPTH, B_NEAR, B_FAR};
-    uint32_t *arr[3] = {NULL, NULL, NULL};
-    GLintptr at = (GLintptr)job->y0 * job->bw * 4;
-    GLsizeiptr bytes = (GLsizeiptr)(job->y1 - job->y0) * job->bw * 4;
-    for (int a = 0; a < 3 && rc == 0 && bytes > 0; a++) {
-        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->buf[bufs[a]]);
-        arr[a] = gl->MapBufferRange(GL_SHADER_STORAGE_BUFFER, at, bytes,
-                                    GL_MAP_READ_BIT | GL_MAP_WRITE_BIT);
-        if (!arr[a]) {
-            rc = gl_check(gl, "mapping kawata's image buffer", err);
-            if (rc == 0) rc = sd_errf(err, SD_EGL, "kawata: the image buffer could not be mapped");
+        if (rc == 0 && rj && !hs->src) {
+            hs->src = map(gl, GL_COPY_READ_BUFFER, b->buf[src], 0,
+                          (GLsizeiptr)((uint64_t)b->n * 4), GL_MAP_READ_BIT,
+                          "mapping a buffer set's colours", err);
+            if (!hs->src) rc = err && err->code ? err->code : SD_EGL;
         }
+        s->segs[nsegs++] = (kawata_cpu_seg){hs->pos, b->base, ch->first, ch->count};
     }
-    if (rc == 0 && bytes > 0) {
+    /* depth, near, far, and with rj the list and pts */
+    static const int bufs[5] = {B_DEPTH, B_NEAR, B_FAR, B_LIST, B_PTS};
+    void *arr[5] = {NULL, NULL, NULL, NULL, NULL};
+    size_t rows = (size_t)(job->y1 - job->y0), bw = (size_t)job->bw;
+    const GLintptr at[5] = {(GLintptr)(job->y0 * bw * 4), (GLintptr)(job->y0 * bw * 4),
+                            (GLintptr)(job->y0 * bw * 4), 0, (GLintptr)(job->y0 * bw * 64)};
+    size_t area = rj ? (size_t)(rj->x1 - rj->x0) * rows : 0;
+    const GLsizeiptr bytes[5] = {(GLsizeiptr)(rows * bw * 4), (GLsizeiptr)(rows * bw * 4),
+                                 (GLsizeiptr)(rows * bw * 4), (GLsizeiptr)(area * 4),
+                                 (GLsizeiptr)(rows * bw * 64)};
+    int nmap = rj ? 5 : 3;
+    for (int a = 0; a < nmap && rc == 0 && rows > 0; a++) {
+        arr[a] = map(gl, GL_SHADER_STORAGE_BUFFER, s->buf[bufs[a]], at[a], bytes[a],
+                     a < 3 ? GL_MAP_READ_BIT | GL_MAP_WRITE_BIT : GL_MAP_WRITE_BIT,
+                     "mapping kawata's image buffer", err);
+        if (!arr[a]) rc = err && err->code ? err->code : SD_EGL;
+    }
+    uint32_t listed = 0;
+    if (rc == 0 && rows > 0) {
         job->segs = s->segs, job->nsegs = nsegs;
         job->depth = arr[0], job->near = arr[1], job->far = arr[2];
         job->threads = s->threads;
         job->mem = &s->mem;
         if (kawata_cpu_raster(job) != 0)
             rc = sd_errf(err, SD_ENOMEM, "out of memory for kawata's host passes");
+        if (rc == 0 && rj) {
+            rj->sets = s->sets, rj->nsets = c->nsets;
+            rj->near = arr[1], rj->far = arr[2], rj->list = arr[3], rj->pts = arr[4];
+            rj->threads = s->threads;
+            listed = kawata_cpu_resolve(rj);
+        }
     }
-    for (int a = 0; a < 3; a++) {
-        if (!arr[a]) continue;
-        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->buf[bufs[a]]);
-        gl->UnmapBuffer(GL_SHADER_STORAGE_BUFFER);
-    }
-    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+    for (int a = 0; a < 5; a++)
+        if (arr[a]) unmap(gl, GL_SHADER_STORAGE_BUFFER, s->buf[bufs[a]]);
     for (uint32_t i = 0; i < c->nsets; i++) {
-        if (!s->pos[i]) continue;
-        gl->BindBuffer(GL_COPY_READ_BUFFER, c->sets[i].buf[RND_ATTR_POS]);
-        gl->UnmapBuffer(GL_COPY_READ_BUFFER);
-        s->pos[i] = NULL;
+        if (s->sets[i].pos) unmap(gl, GL_COPY_READ_BUFFER, c->sets[i].buf[RND_ATTR_POS]);
+        if (s->sets[i].src) unmap(gl, GL_COPY_READ_BUFFER, c->sets[i].buf[src]);
     }
     gl->BindBuffer(GL_COPY_READ_BUFFER, 0);
+    if (rc == 0 && rj) { /* the counter: (splats 0, listed) */
+        const GLuint counter[2] = {0, listed};
+        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->buf[B_COUNTER]);
+        gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, sizeof counter, counter);
+        *nlist = listed;
+    }
+    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
     return rc;
 }
 
-/* rnd_frame.kawata_arrays (rnd_set_kawata_probe): rows [y0, y1) of depth, near and far read
- * back, the other rows 0. NULL when out of memory (the frame then carries none). */
-static uint32_t *probe_arrays(const gl_api *gl, const kawata_state *s, int bw, int bh, int y0,
-                              int y1)
+/* rnd_frame.kawata_arrays (rnd_set_kawata_probe) after pass 3's first half: rows [y0, y1) of
+ * depth, near and far read back, then pts (16 words a buffer pixel) for the pixels listed
+ * (columns [x0, x1) with a nearest point); everything else 0. NULL when out of memory (the
+ * frame then carries none). */
+static uint32_t *probe_arrays(const gl_api *gl, const kawata_state *s, int bw, int bh,
+                              const int brect[4])
 {
-    size_t nb = (size_t)bw * (size_t)bh;
-    uint32_t *p = calloc(nb ? 3 * nb : 1, 4);
+    size_t nb = (size_t)bw * (size_t)bh, y0 = (size_t)brect[1], rows = (size_t)(brect[3] - brect[1]);
+    uint32_t *p = calloc(nb ? 19 * nb : 1, 4);
     if (!p) return NULL;
     gl->MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    static const int bufs[3] = {B_DEPTH, B_NEAR, B_FAR};
-    for (int a = 0; a < 3; a++) {
+    static const int bufs[4] = {B_DEPTH, B_NEAR, B_FAR, B_PTS};
+    for (int a = 0; a < 4; a++) {
+        size_t w = a < 3 ? 1 : 16;
         gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->buf[bufs[a]]);
-        gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, (GLintptr)y0 * bw * 4,
-                             (GLsizeiptr)(y1 - y0) * bw * 4, p + a * nb + (size_t)y0 * bw);
+        gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, (GLintptr)(y0 * bw * w * 4),
+                             (GLsizeiptr)(rows * bw * w * 4), p + a * nb + y0 * bw * w);
     }
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+    for (size_t i = 0; i < nb; i++) {
+        int x = (int)(i % (size_t)bw);
+        if (p[nb + i] == 0xFFFFFFFFu || i < y0 * bw || i >= (y0 + rows) * bw || x < brect[0] ||
+            x >= brect[2])
+            memset(p + 3 * nb + 16 * i, 0, 64);
+    }
     return p;
 }
 
@@ -431,9 +475,12 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     buffer(gl, s, B_COUNTER, 8, RND_B_KAWATA_COUNT, 0, 0);
     GLintptr row0 = (GLintptr)brect[1] * bw * 4;
     GLsizeiptr rows = (GLsizeiptr)(brect[3] - brect[1]) * bw * 4;
-    /* passes 1-2 on the host (kawata_cpu.h) or in kawata_raster.comp: see params.h */
+    /* passes 1-2 on the host (kawata_cpu.h) or in kawata_raster.comp: see params.h; on the
+     * host the list and pass 3's first half too, but for color=field (its colour map is the
+     * GL's) */
     int host = p->kawata_raster == SP_KAWATA_RASTER_CPU ||
                (p->kawata_raster == SP_KAWATA_RASTER_AUTO && k->software);
+    int host_resolve = host && p->color != SP_COLOR_FIELD;
     if (!host) {
         fill(gl, s->buf[B_DEPTH], row0, rows, 0xFFFFFFFFu);
         fill(gl, s->buf[B_NEAR], row0, rows, 0xFFFFFFFFu);
@@ -481,12 +528,18 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     int rebind = c->nsets > 1;
     uint32_t nranges = 0, first = 0;
     int64_t total = 0;
+    uint32_t nlist = 0;
     if (host) {
         kawata_cpu_job job = {.bw = bw, .bh = bh, .znear = v->znear, .zfar = v->zfar,
                               .gamma = gamma, .qscale = qscale, .ibits = ibits, .qmax = qmax,
                               .y0 = brect[1], .y1 = brect[3]};
         memcpy(job.viewproj, v->viewproj, sizeof job.viewproj);
-        int rc = host_raster(gl, s, c, v, &job, err);
+        kawata_cpu_resolve_job rj = {.intensity = p->color == SP_COLOR_INTENSITY, .bw = bw,
+                                     .x0 = brect[0], .x1 = brect[2], .y0 = brect[1],
+                                     .y1 = brect[3], .ibits = ibits};
+        memcpy(rj.view, v->view, sizeof rj.view);
+        int rc = host_passes(gl, s, c, v, &job, host_resolve ? &rj : NULL, p->color, &nlist,
+                             err);
         if (rc < 0) return rc;
         if (!rebind && c->nsets) rnd_kit_bind_set(k, &c->sets[0], p->color);
     } else {
@@ -500,7 +553,6 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
                 if (total > 0) raster_set(gl, s, c, set, (uint32_t)total, nranges, first, pass);
             }
     }
-    if (k->kawata_probe) d->out->probe = probe_arrays(gl, s, bw, bh, brect[1], brect[3]);
 
     /* Passes 3-4 run over the list of the covered buffer pixels (those with a nearest point),
      * in the rectangle's row order: each invocation of the list pass takes LIST_PER pixels
@@ -510,28 +562,31 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     uint64_t lgroups = (area + (uint64_t)GROUP * LIST_PER - 1) / ((uint64_t)GROUP * LIST_PER);
     GLuint lg = lgroups < 1 ? 1 : lgroups > MAX_GROUPS_X ? MAX_GROUPS_X : (GLuint)lgroups;
     uint32_t lper = (uint32_t)((area + (uint64_t)lg * GROUP - 1) / ((uint64_t)lg * GROUP));
-    gl->UseProgram(s->prog[P_LIST]);
-    gl->Uniform1ui(s->loc[P_LIST][U_PER], lper);
-    gl->DispatchCompute(lg, 1, 1);
-    gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
-
-    /* Pass 3, first half: both points of every listed buffer pixel to eye space, in one pass
-     * for a cloud in one buffer set; else the rows are cleared to "no point" and each set
-     * writes the points it holds. */
-    if (rebind)
-        fill(gl, s->buf[B_PTS], (GLintptr)brect[1] * bw * PTS_BYTES,
-             (GLsizeiptr)(brect[3] - brect[1]) * bw * PTS_BYTES, 0);
-    gl->UseProgram(s->prog[P_RESOLVE]);
-    const GLint *lr = s->loc[P_RESOLVE];
-    gl->Uniform1i(lr[U_ALL], !rebind);
-    for (uint32_t set = 0; set < c->nsets; set++) {
-        if (rebind) rnd_kit_bind_set(k, &c->sets[set], p->color);
-        gl->Uniform1ui(lr[U_BASE], (GLuint)c->sets[set].base);
-        gl->Uniform1ui(lr[U_SETN], c->sets[set].n);
-        gl->Uniform1ui(lr[U_THREADS], lg * GROUP);
+    if (!host_resolve) {
+        gl->UseProgram(s->prog[P_LIST]);
+        gl->Uniform1ui(s->loc[P_LIST][U_PER], lper);
         gl->DispatchCompute(lg, 1, 1);
         gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
+
+        /* Pass 3, first half: both points of every listed buffer pixel to eye space, in one pass
+         * for a cloud in one buffer set; else the rows are cleared to "no point" and each set
+         * writes the points it holds. */
+        if (rebind)
+            fill(gl, s->buf[B_PTS], (GLintptr)brect[1] * bw * PTS_BYTES,
+                 (GLsizeiptr)(brect[3] - brect[1]) * bw * PTS_BYTES, 0);
+        gl->UseProgram(s->prog[P_RESOLVE]);
+        const GLint *lr = s->loc[P_RESOLVE];
+        gl->Uniform1i(lr[U_ALL], !rebind);
+        for (uint32_t set = 0; set < c->nsets; set++) {
+            if (rebind) rnd_kit_bind_set(k, &c->sets[set], p->color);
+            gl->Uniform1ui(lr[U_BASE], (GLuint)c->sets[set].base);
+            gl->Uniform1ui(lr[U_SETN], c->sets[set].n);
+            gl->Uniform1ui(lr[U_THREADS], lg * GROUP);
+            gl->DispatchCompute(lg, 1, 1);
+            gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
+        }
     }
+    if (k->kawata_probe) d->out->probe = probe_arrays(gl, s, bw, bh, brect);
     /* Passes 3 (average) and 4 (plane fit, shading): the splats. */
     gl->UseProgram(s->prog[P_FIT]);
     gl->Uniform1ui(s->loc[P_FIT][U_THREADS], lg * GROUP);

@@ -81,10 +81,12 @@ typedef struct rnd_frame {
     int complete;             /* 1: every node the view wants was drawn (always 1 for a flat
                                  cloud); 0: a later frame of the same view draws more */
     uint32_t lod_wanted, lod_drawn, lod_uploaded; /* LOD clouds: nodes this frame */
-    /* kawata with rnd_set_kawata_probe on: its image buffer's depth, near and far arrays after
-     * passes 1 and 2 (pipe_kawata.c), buffer_w x buffer_h words each, one after the other; the
-     * rows outside the cloud's buffer rectangle, which the frame neither clears nor uses, 0.
-     * NULL otherwise. */
+    /* kawata with rnd_set_kawata_probe on: its image buffer's arrays after passes 1 and 2 and
+     * pass 3's first half (pipe_kawata.c), each buffer_w x buffer_h entries, one after the
+     * other: depth, near and far (a word a pixel), then pts (16 words a pixel: the nearest and
+     * the farthest point in eye space, their colours, as float bits) for the pixels with a
+     * nearest point inside the cloud's buffer rectangle; everything else 0 (the rest of the
+     * buffer is neither cleared nor used by a frame). NULL otherwise. */
     uint32_t *kawata_arrays;
 } rnd_frame;
 
@@ -201,7 +203,7 @@ void rnd_set_exchange(rnd_ctx *r, const rnd_exchange *x);
 void rnd_set_coverage(rnd_ctx *r, int on);
 
 /* rnd_set_kawata_probe: on: the following kawata frames also carry their image-buffer arrays
- * (rnd_frame.kawata_arrays), read back after passes 1 and 2, so that the two places those passes
+ * (rnd_frame.kawata_arrays), read back before pass 3's fit, so that the two places passes 1-3
  * can run (kawata_raster=gpu|cpu) can be compared array for array. For tests; costs a read-back.
  * off (the default): none. */
 void rnd_set_kawata_probe(rnd_ctx *r, int on);
