@@ -573,9 +573,11 @@ static void test_host_equals_gpu(void **state)
         snprintf(what, sizeof what, "Guanyin color=%s", cname[col]);
         assert_int_equal(host_vs_gpu(kf->r, idg, &cg, 3.5f, col, what, &cov), 0);
     }
-    assert_int_equal(host_vs_gpu(kf->r, idg, &cg, 0.25f, SP_COLOR_RGB, "Guanyin rho 1", &cov), 0);
+    assert_int_equal(host_vs_gpu(kf->r, idg, &cg, 0.25f, SP_COLOR_RGB,
+                                 "Guanyin rho 1", &cov), 0);
     assert_true(cov > 10000);
-    assert_int_equal(host_vs_gpu(kf->r, idg, &close, 3.5f, SP_COLOR_RGB, "Guanyin close-up", &cov), 0);
+    assert_int_equal(host_vs_gpu(kf->r, idg, &close, 3.5f, SP_COLOR_RGB,
+                                 "Guanyin close-up", &cov), 0);
     assert_true(cov > 1000);
     assert_int_equal(host_vs_gpu(kf->r, idb, &cb, 3.5f, SP_COLOR_RGB, "bunny", &cov), 0);
     assert_true(cov > 500);
@@ -592,9 +594,11 @@ static void test_host_equals_gpu(void **state)
     b.attrs |= PC_ATTR_INTENSITY;
     for (uint64_t i = 0; i < b.n; i++) b.intensity[i] = (float)(i % 1000);
     uint32_t id6 = tu_upload(r6, &b);
-    assert_int_equal(host_vs_gpu(r6, id6, &cb, 3.5f, SP_COLOR_RGB, "bunny in 6 buffer sets", &cov), 0);
+    assert_int_equal(host_vs_gpu(r6, id6, &cb, 3.5f, SP_COLOR_RGB,
+                                 "bunny in 6 buffer sets", &cov), 0);
     assert_true(cov > 500);
-    assert_int_equal(host_vs_gpu(r6, id6, &cb, 0.25f, SP_COLOR_RGB, "bunny in 6 sets, rho 1", &cov), 0);
+    assert_int_equal(host_vs_gpu(r6, id6, &cb, 0.25f, SP_COLOR_RGB,
+                                 "bunny in 6 sets, rho 1", &cov), 0);
     assert_int_equal(host_vs_gpu(r6, id6, &cb, 3.5f, SP_COLOR_INTENSITY,
                                  "bunny in 6 sets, color=intensity", &cov), 0);
     rnd_release(r6, id6);

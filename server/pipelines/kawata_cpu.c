@@ -336,9 +336,24 @@ static int resolve_task(void *ctx, size_t c, int tid, sd_err *err)
     (void)tid, (void)err;
     const resolve_run *r = ctx;
     const kawata_cpu_resolve_job *job = r->job;
-    uint32_t a = (uint32_t)c * RESOLVE_BLOCK, b = a + RESOLVE_BLOCK < r->n ? a + RESOLVE_BLOCK : r->n;
+    uint32_t a = (uint32_t)c * RESOLVE_BLOCK;
+    uint32_t b = a + RESOLVE_BLOCK < r->n ? a + RESOLVE_BLOCK : r->n;
     const uint32_t mask = (1u << job->ibits) - 1u, row0 = (uint32_t)job->y0 * (uint32_t)job->bw;
+    /* the points' positions and colours are scattered: for a cloud in one set each pixel's
+     * are fetched PREFETCH pixels ahead, so that the misses overlap (on the 1M scan the resolve
+     * took 2.0 ms of CPU instead of 3.9) */
+    enum { PREFETCH = 8 };
     for (uint32_t k = a; k < b; k++) {
+        if (k + PREFETCH < b && job->nsets == 1 && job->sets[0].pos) {
+            uint32_t e = job->list[k + PREFETCH];
+            uint32_t q = (e >> 16) * (uint32_t)job->bw + (e & 0xFFFFu) - row0;
+            uint32_t i1 = job->near[q], i2 = job->far[q] & mask;
+            const kawata_cpu_set *g = &job->sets[0];
+            if (i1 < g->n)
+                __builtin_prefetch(g->pos + 3 * (size_t)i1), __builtin_prefetch(g->src + i1);
+            if (i2 < g->n)
+                __builtin_prefetch(g->pos + 3 * (size_t)i2), __builtin_prefetch(g->src + i2);
+        }
         uint32_t e = job->list[k];
         uint32_t q = (e >> 16) * (uint32_t)job->bw + (e & 0xFFFFu) - row0;
         float *out = job->pts + 16 * (size_t)q;

@@ -18,7 +18,10 @@
  * (without branches: the keys' order is unpredictable); the threads' arrays are merged by bands
  * of rows; pass 2 reads the kept projections with the merged depth into each thread's own near
  * and far, merged the same way into the job's. No atomics (with a compare-and-swap a point,
- * pass 1 cost 12 ms of CPU on the 1M scan instead of 4.3) and no two threads on one word. More visible points than KAWATA_CPU_BATCH are done a batch at a time, pass 2's batches
+ * pass 1 cost 12 ms of CPU on the 1M scan instead of 4.3) and no two threads on one word.
+ * Keeping a run of points on one pixel in registers was slower (7.9 ms instead of 4.3: the
+ * runs are short, the test mispredicted). More visible points than KAWATA_CPU_BATCH are done a
+ * batch at a time, pass 2's batches
  * projected again (the arrays stay bounded).
  */
 #pragma once

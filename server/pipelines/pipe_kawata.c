@@ -300,7 +300,8 @@ static int host_passes(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c
         soft_cpu_grow((void **)&s->sets, &s->sets_cap, ns, sizeof *s->sets))
         return sd_errf(err, SD_ENOMEM, "out of memory for kawata's host passes");
     memset(s->sets, 0, ns * sizeof *s->sets);
-    for (uint32_t i = 0; i < c->nsets; i++) s->sets[i].base = c->sets[i].base, s->sets[i].n = c->sets[i].n;
+    for (uint32_t i = 0; i < c->nsets; i++)
+        s->sets[i].base = c->sets[i].base, s->sets[i].n = c->sets[i].n;
     int src = rnd_kit_color_source(color), rc = 0;
     uint32_t nsegs = 0;
     for (uint32_t i = 0; i < v->nchunks && rc == 0; i++) {
@@ -383,7 +384,8 @@ static int host_passes(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c
 static uint32_t *probe_arrays(const gl_api *gl, const kawata_state *s, int bw, int bh,
                               const int brect[4])
 {
-    size_t nb = (size_t)bw * (size_t)bh, y0 = (size_t)brect[1], rows = (size_t)(brect[3] - brect[1]);
+    size_t nb = (size_t)bw * (size_t)bh, y0 = (size_t)brect[1];
+    size_t rows = (size_t)(brect[3] - brect[1]);
     uint32_t *p = calloc(nb ? 19 * nb : 1, 4);
     if (!p) return NULL;
     gl->MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
