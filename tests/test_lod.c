@@ -1183,6 +1183,56 @@ static void test_every_pipeline(void **state)
     rnd_frame_free(&a);
 }
 
+/* kawata's passes 1-3 on the host (kawata_raster=cpu, kawata_cpu.h) give the compute shaders'
+ * image-buffer arrays word for word, and so the same frame, on a LOD cloud too, whose points
+ * come as the resident nodes' chunks in the pool's buffer sets: with a budget of 20,000 points
+ * and with every point. The host frame is compared with a GL frame drawn right after it from
+ * the same (complete) pool. */
+static void test_kawata_host_equals_gpu(void **state)
+{
+    rfix *f = *state;
+    rnd_camera cam;
+    sp_params p;
+    cold_view(f, &cam, &p);
+    p.pipeline = SP_PIPE_KAWATA;
+    rnd_set_kawata_probe(f->r, 1);
+    for (int b = 0; b < 2; b++) {
+        p.point_budget = b ? 0 : 20000;
+        rnd_frame fr[2] = {{0}, {0}};
+        p.kawata_raster = SP_KAWATA_RASTER_GPU;
+        render_complete(f, &cam, &p, &fr[0]);
+        p.kawata_raster = SP_KAWATA_RASTER_CPU;
+        assert_int_equal(render_complete(f, &cam, &p, &fr[1]), 1);
+        p.kawata_raster = SP_KAWATA_RASTER_GPU;
+        assert_int_equal(render_complete(f, &cam, &p, &fr[0]), 1);
+        assert_non_null(fr[0].kawata_arrays);
+        assert_non_null(fr[1].kawata_arrays);
+        assert_int_equal(fr[0].buffer_w, fr[1].buffer_w);
+        assert_int_equal(fr[0].buffer_h, fr[1].buffer_h);
+        size_t nb = (size_t)fr[0].buffer_w * fr[0].buffer_h, words = 0, covered = 0, px = 0;
+        const uint32_t *g = fr[0].kawata_arrays, *h = fr[1].kawata_arrays;
+        for (size_t i = 0; i < 19 * nb; i++) words += g[i] != h[i];
+        for (size_t i = 0; i < nb; i++) covered += fr[1].kawata_arrays[nb + i] != 0xFFFFFFFFu &&
+                                                   fr[1].kawata_arrays[i] != 0;
+        size_t npx = (size_t)fr[0].width * fr[0].height;
+        for (size_t i = 0; i < 4 * npx; i++) px += fr[0].rgba8[i] != fr[1].rgba8[i];
+        print_message("kawata host vs gpu, budget %lld: %llu points in %u nodes, buffer %dx%d, "
+                      "%zu covered, %llu splats; differ: %zu array words, %zu rgba8\n",
+                      (long long)p.point_budget, (unsigned long long)fr[1].points_drawn,
+                      fr[1].lod_drawn, fr[1].buffer_w, fr[1].buffer_h, covered,
+                      (unsigned long long)fr[1].splats_drawn, words, px);
+        assert_int_equal(fr[0].points_drawn, fr[1].points_drawn);
+        assert_true(fr[1].lod_drawn > 1);
+        assert_true(covered > 1000);
+        assert_int_equal(fr[0].splats_drawn, fr[1].splats_drawn);
+        assert_int_equal(words, 0);
+        assert_int_equal(px, 0);
+        rnd_frame_free(&fr[0]);
+        rnd_frame_free(&fr[1]);
+    }
+    rnd_set_kawata_probe(f->r, 0);
+}
+
 int main(void)
 {
     const struct CMUnitTest prep_tests[] = {
@@ -1205,6 +1255,7 @@ int main(void)
         cmocka_unit_test(test_prefetch_across_frames),
         cmocka_unit_test(test_pool_smaller_than_root),
         cmocka_unit_test(test_every_pipeline),
+        cmocka_unit_test(test_kawata_host_equals_gpu),
     };
     const char *only = getenv("SPLATD_TEST_FILTER");
     if (only && *only) cmocka_set_test_filter(only);

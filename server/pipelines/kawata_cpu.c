@@ -250,7 +250,8 @@ int kawata_cpu_raster(const kawata_cpu_job *job)
     uint64_t total = 0;
     for (uint32_t s = 0; s < job->nsegs; s++) m->segk[s] = total, total += job->segs[s].count;
     m->segk[job->nsegs] = total;
-    size_t batch = total < KAWATA_CPU_BATCH ? (size_t)total : KAWATA_CPU_BATCH;
+    size_t batch = job->batch ? job->batch : KAWATA_CPU_BATCH;
+    if (total < batch) batch = (size_t)total;
     run r = {.job = job, .npix = (uint32_t)(job->y1 - job->y0) * (uint32_t)job->bw};
     /* each thread has its own three arrays: as many threads as KAWATA_CPU_PRIV_BYTES allow
      * (at least one) */
@@ -292,24 +293,39 @@ typedef struct resolve_run {
     uint32_t n;
 } resolve_run;
 
-/* Point i (cloud-wide; ~0u: none) into out[0..3] (eye position, 1) and out[8..11] (colour, 1),
- * or zeros where it is no point of a mapped set (STAGE 1's put). */
-static void put(const kawata_cpu_resolve_job *job, uint32_t i, float *out)
+/* The set holding cloud-wide point i with its positions mapped, or NULL: the last set whose
+ * base is at most i, else (sets sharing their buffers and first index, a LOD pool's two, of
+ * which only one need be mapped) any mapped one that holds it. */
+static const kawata_cpu_set *set_of(const kawata_cpu_resolve_job *job, uint32_t i)
 {
     const kawata_cpu_set *sets = job->sets;
     uint32_t lo = 0, hi = job->nsets;
-    while (hi - lo > 1) { /* the last set with base <= i */
+    if (!hi) return NULL;
+    while (hi - lo > 1) {
         uint32_t mid = lo + (hi - lo) / 2;
         if (sets[mid].base <= i) lo = mid;
         else hi = mid;
     }
-    const kawata_cpu_set *g = job->nsets ? &sets[lo] : NULL;
-    uint64_t l = g ? (uint64_t)i - g->base : 0;
-    if (i == ~0u || !g || (uint64_t)i < g->base || l >= g->n || !g->pos || !g->src) {
+    const kawata_cpu_set *g = &sets[lo];
+    if (g->pos && g->src && i >= g->base && i - g->base < g->n) return g;
+    for (uint32_t j = 0; j < job->nsets; j++) {
+        g = &sets[j];
+        if (g->pos && g->src && i >= g->base && i - g->base < g->n) return g;
+    }
+    return NULL;
+}
+
+/* Point i (cloud-wide; ~0u: none) into out[0..3] (eye position, 1) and out[8..11] (colour, 1),
+ * or zeros where it is no point of a mapped set (STAGE 1's put). */
+static void put(const kawata_cpu_resolve_job *job, uint32_t i, float *out)
+{
+    const kawata_cpu_set *g = i == ~0u ? NULL : set_of(job, i);
+    if (!g) {
         memset(out, 0, 4 * sizeof *out);
         memset(out + 8, 0, 4 * sizeof *out);
         return;
     }
+    uint64_t l = (uint64_t)i - g->base;
     const float *m = job->view, *p = g->pos + 3 * l;
     float x = p[0], y = p[1], z = p[2];
     out[0] = m[0] * x + m[4] * y + m[8] * z + m[12];

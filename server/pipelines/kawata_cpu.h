@@ -61,6 +61,7 @@ typedef struct kawata_cpu_job {
     /* rows [y0, y1) of the three arrays (bw words a row): depth, near and far of the shader */
     uint32_t *depth, *near, *far;
     int threads;
+    size_t batch;              /* points a batch; 0: KAWATA_CPU_BATCH (tests make it small) */
     kawata_cpu_mem *mem;
 } kawata_cpu_job;
 

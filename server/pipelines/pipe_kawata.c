@@ -126,7 +126,8 @@ typedef struct kawata_state {
      * positions, the host's working memory and its thread count */
     kawata_cpu_seg *segs;
     kawata_cpu_set *sets;
-    size_t segs_cap, sets_cap;
+    uint8_t *own;              /* per set: OWN_POS, OWN_SRC where this set's mapping is held */
+    size_t segs_cap, sets_cap, own_cap;
     kawata_cpu_mem mem;
     int threads;
 } kawata_state;
@@ -141,7 +142,7 @@ static void kawata_destroy(rnd_kit *k, void *state)
     if (s->vao) gl->DeleteVertexArrays(1, &s->vao);
     gl->DeleteTextures(NBUF, s->tex);
     gl->DeleteBuffers(NBUF, s->buf);
-    free(s->segs), free(s->sets);
+    free(s->segs), free(s->sets), free(s->own);
     kawata_cpu_mem_free(&s->mem);
     memset(s, 0, sizeof *s);
     free(s);
@@ -283,6 +284,27 @@ static void unmap(const gl_api *gl, GLenum target, GLuint buf)
     gl->UnmapBuffer(target);
 }
 
+enum { OWN_POS = 1, OWN_SRC = 2 };
+
+/* The mapping of buffer buf for reading (n words): that of an earlier set sharing it (a LOD
+ * pool's two sets share all but one buffer; a buffer is mapped once), else a new one, owned by
+ * set `set` (bit own). NULL with err filled when it cannot be mapped. */
+static const void *map_shared(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c,
+                              uint32_t set, int attr, uint64_t words, int own, sd_err *err)
+{
+    GLuint buf = c->sets[set].buf[attr];
+    for (uint32_t j = 0; j < c->nsets; j++) {
+        const kawata_cpu_set *h = &s->sets[j];
+        const void *p = own == OWN_POS ? (const void *)h->pos : (const void *)h->src;
+        if (j != set && p && c->sets[j].buf[attr] == buf) return p;
+    }
+    const void *p = map(gl, GL_COPY_READ_BUFFER, buf, 0, (GLsizeiptr)(words * 4),
+                        GL_MAP_READ_BIT, own == OWN_POS ? "mapping a buffer set's positions"
+                                                        : "mapping a buffer set's colours", err);
+    if (p) s->own[set] |= (uint8_t)own;
+    return p;
+}
+
 /* Passes 1 and 2 on the host (kawata_raster=cpu, kawata_cpu.h) into rows [y0, y1) of the
  * depth, near and far buffers, and with rj (not NULL) the list and pass 3's first half too
  * (*nlist: the listed pixels, also written to the counter). The positions of every buffer set
@@ -297,9 +319,11 @@ static int host_passes(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c
     uint32_t ns = c->nsets ? c->nsets : 1;
     if (soft_cpu_grow((void **)&s->segs, &s->segs_cap, v->nchunks ? v->nchunks : 1,
                       sizeof *s->segs) ||
-        soft_cpu_grow((void **)&s->sets, &s->sets_cap, ns, sizeof *s->sets))
+        soft_cpu_grow((void **)&s->sets, &s->sets_cap, ns, sizeof *s->sets) ||
+        soft_cpu_grow((void **)&s->own, &s->own_cap, ns, 1))
         return sd_errf(err, SD_ENOMEM, "out of memory for kawata's host passes");
     memset(s->sets, 0, ns * sizeof *s->sets);
+    memset(s->own, 0, ns);
     for (uint32_t i = 0; i < c->nsets; i++)
         s->sets[i].base = c->sets[i].base, s->sets[i].n = c->sets[i].n;
     int src = rnd_kit_color_source(color), rc = 0;
@@ -315,15 +339,12 @@ static int host_passes(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c
             break;
         }
         if (!hs->pos) {
-            hs->pos = map(gl, GL_COPY_READ_BUFFER, b->buf[RND_ATTR_POS], 0,
-                          (GLsizeiptr)((uint64_t)b->n * 12), GL_MAP_READ_BIT,
-                          "mapping a buffer set's positions", err);
+            hs->pos = map_shared(gl, s, c, ch->set, RND_ATTR_POS, (uint64_t)b->n * 3, OWN_POS,
+                                 err);
             if (!hs->pos) rc = err && err->code ? err->code : SD_EGL;
         }
         if (rc == 0 && rj && !hs->src) {
-            hs->src = map(gl, GL_COPY_READ_BUFFER, b->buf[src], 0,
-                          (GLsizeiptr)((uint64_t)b->n * 4), GL_MAP_READ_BIT,
-                          "mapping a buffer set's colours", err);
+            hs->src = map_shared(gl, s, c, ch->set, src, b->n, OWN_SRC, err);
             if (!hs->src) rc = err && err->code ? err->code : SD_EGL;
         }
         s->segs[nsegs++] = (kawata_cpu_seg){hs->pos, b->base, ch->first, ch->count};
@@ -363,8 +384,8 @@ static int host_passes(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c
     for (int a = 0; a < 5; a++)
         if (arr[a]) unmap(gl, GL_SHADER_STORAGE_BUFFER, s->buf[bufs[a]]);
     for (uint32_t i = 0; i < c->nsets; i++) {
-        if (s->sets[i].pos) unmap(gl, GL_COPY_READ_BUFFER, c->sets[i].buf[RND_ATTR_POS]);
-        if (s->sets[i].src) unmap(gl, GL_COPY_READ_BUFFER, c->sets[i].buf[src]);
+        if (s->own[i] & OWN_POS) unmap(gl, GL_COPY_READ_BUFFER, c->sets[i].buf[RND_ATTR_POS]);
+        if (s->own[i] & OWN_SRC) unmap(gl, GL_COPY_READ_BUFFER, c->sets[i].buf[src]);
     }
     gl->BindBuffer(GL_COPY_READ_BUFFER, 0);
     if (rc == 0 && rj) { /* the counter: (splats 0, listed) */
