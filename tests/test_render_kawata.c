@@ -588,12 +588,16 @@ static void test_host_equals_gpu(void **state)
     sd_err err = {0};
     rnd_ctx *r6 = rnd_create(&d, &err);
     if (!r6) fail_msg("rnd_create: %s", err.msg);
-    /* intensities, so that color=intensity has more than one value to show */
-    if (!b.intensity) b.intensity = malloc(b.n * sizeof *b.intensity);
-    assert_non_null(b.intensity);
-    b.attrs |= PC_ATTR_INTENSITY;
-    for (uint64_t i = 0; i < b.n; i++) b.intensity[i] = (float)(i % 1000);
+    /* intensities, so that color=intensity has more than one value to show (the prepared
+     * cloud's arrays live in one block: a separate array is put in for the upload and freed) */
+    float *inten = malloc(b.n * sizeof *inten), *had = b.intensity;
+    assert_non_null(inten);
+    uint32_t attrs = b.attrs;
+    for (uint64_t i = 0; i < b.n; i++) inten[i] = (float)(i % 1000);
+    b.intensity = inten, b.attrs |= PC_ATTR_INTENSITY;
     uint32_t id6 = tu_upload(r6, &b);
+    b.intensity = had, b.attrs = attrs;
+    free(inten);
     assert_int_equal(host_vs_gpu(r6, id6, &cb, 3.5f, SP_COLOR_RGB,
                                  "bunny in 6 buffer sets", &cov), 0);
     assert_true(cov > 500);
