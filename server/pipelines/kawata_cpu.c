@@ -159,20 +159,21 @@ static int pass2_task(void *ctx, size_t c, int tid, sd_err *err)
         uint64_t off = k - job->mem->segk[s], left = g->count - off;
         uint32_t n = (uint32_t)(end - k < left ? end - k : left);
         uint32_t idx = (uint32_t)(g->base + g->first + off); /* cloud-wide, < 2^28 */
-        /* without branches, as pass 1; a point not at the least key offers ~0u to near, one
-         * beyond gamma behind it 0 to far (the step is clamped below 2^32 before it is
-         * converted: past gamma it is not used) */
+        /* a point at the least key (about one a pixel) takes a branch to near; the others
+         * offer far their step key without one, 0 when beyond gamma (the step is clamped below
+         * 2^32 before it is converted: past gamma it is not used) */
         for (uint32_t i = 0; i < n; i++, idx++) {
             uint32_t p = pix[i] < npix ? pix[i] : npix;
             uint32_t d1 = depth[p], kv = key[i];
+            if (kv == d1) {
+                near[p] = idx < near[p] ? idx : near[p];
+                continue;
+            }
             float step = bits_float(kv) - bits_float(d1);
-            float sq = step * qscale;
-            uint32_t st = (uint32_t)(sq < 4.0e9f ? sq : 4.0e9f);
+            if (step > gamma) continue;
+            uint32_t st = (uint32_t)(step * qscale);
             uint32_t fk = ((1u + (st < qtop - 1u ? st : qtop - 1u)) << ibits) | idx;
-            uint32_t nk = kv == d1 ? idx : ~0u;
-            fk = kv != d1 && !(step > gamma) ? fk : 0u;
-            uint32_t n0 = near[p], f0 = far[p];
-            near[p] = nk < n0 ? nk : n0;
+            uint32_t f0 = far[p];
             far[p] = fk > f0 ? fk : f0;
         }
         pix += n, key += n, k += n, s++;
@@ -205,7 +206,8 @@ static int clear_task(void *ctx, size_t c, int tid, sd_err *err)
 }
 
 /* Task c: band c of the threads' arrays merged into the job's: after pass 1 the depth (least,
- * also kept in thread 0's), after pass 2 near (least) and far (greatest). */
+ * also kept in thread 0's for pass 2), after pass 2 near (least) and far (greatest). Threads 0
+ * and 1 are merged in the pass that writes the job's array, any further ones into it after. */
 static int merge_task(void *ctx, size_t c, int tid, sd_err *err)
 {
     (void)tid, (void)err;
@@ -213,23 +215,25 @@ static int merge_task(void *ctx, size_t c, int tid, sd_err *err)
     const kawata_cpu_job *job = r->job;
     uint32_t a, b;
     band(r, c, &a, &b);
+    const int t1 = r->nt > 1 ? 1 : 0;
     if (r->pass1) {
-        uint32_t *d0 = r->arr[0][0];
-        for (int t = 1; t < r->nt; t++) {
+        uint32_t *d0 = r->arr[0][0], *out = job->depth;
+        for (int t = t1; t < r->nt; t++) {
             const uint32_t *d = r->arr[t][0];
-            for (uint32_t p = a; p < b; p++) d0[p] = d[p] < d0[p] ? d[p] : d0[p];
+            for (uint32_t p = a; p < b; p++) {
+                uint32_t v = d[p] < d0[p] ? d[p] : d0[p];
+                d0[p] = v, out[p] = v;
+            }
         }
-        memcpy(job->depth + a, d0 + a, (size_t)(b - a) * 4);
         return 0;
     }
-    memcpy(job->near + a, r->arr[0][1] + a, (size_t)(b - a) * 4);
-    memcpy(job->far + a, r->arr[0][2] + a, (size_t)(b - a) * 4);
-    for (int t = 1; t < r->nt; t++) {
+    uint32_t *n0 = job->near, *f0 = job->far;
+    for (int t = t1; t < r->nt; t++) {
+        const uint32_t *na = t == t1 ? r->arr[0][1] : n0, *fa = t == t1 ? r->arr[0][2] : f0;
         const uint32_t *n = r->arr[t][1], *f = r->arr[t][2];
-        uint32_t *n0 = job->near, *f0 = job->far;
         for (uint32_t p = a; p < b; p++) {
-            n0[p] = n[p] < n0[p] ? n[p] : n0[p];
-            f0[p] = f[p] > f0[p] ? f[p] : f0[p];
+            n0[p] = n[p] < na[p] ? n[p] : na[p];
+            f0[p] = f[p] > fa[p] ? f[p] : fa[p];
         }
     }
     return 0;

@@ -17,7 +17,9 @@
  * two arrays, and each thread keeps pass 1's least key a pixel in a depth array of its own
  * (without branches: the keys' order is unpredictable); the threads' arrays are merged by bands
  * of rows; pass 2 reads the kept projections with the merged depth into each thread's own near
- * and far, merged the same way into the job's. No atomics (with a compare-and-swap a point,
+ * and far, merged the same way into the job's (a point at the least key, about one a pixel,
+ * takes a branch to near, the others go on to far: 3.9 ms of CPU on the 1M scan, against 5.3
+ * with no branch at all). No atomics (with a compare-and-swap a point,
  * pass 1 cost 12 ms of CPU on the 1M scan instead of 4.3) and no two threads on one word.
  * Keeping a run of points on one pixel in registers was slower (7.9 ms instead of 4.3: the
  * runs are short, the test mispredicted). More visible points than KAWATA_CPU_BATCH are done a

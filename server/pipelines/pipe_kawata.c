@@ -65,16 +65,28 @@
  * A cloud in several buffer sets (pipe.h) is drawn set by set: passes 1 and 2 key points by
  * their cloud-wide index, and STAGE 1 runs once per set, each resolving the points of its own.
  *
- * Cost (the 1M scan at 1280x720, CPU time of both llvmpipe threads, glFinish between passes,
- * a loaded 2-core machine): clears ~2.5 ms, pass 1 ~23, pass 2 ~24, the list ~1, pass 3's
- * resolve ~10, the fit ~11, the gather ~11: ~83 ms against `splat`'s ~85 (before: one raster
+ * On a software renderer (kawata_raster=auto; =cpu anywhere) passes 1 and 2, the list and
+ * STAGE 1 run on the host instead (kawata_cpu.h): every core, the shader's float operations in
+ * its order, so the arrays handed to the fit are the compute path's word for word (tests:
+ * test_render_kawata's test_host_equals_gpu, test_lod, test_kawata_cpu). The positions and
+ * colours are read where the GL keeps them, each buffer set's buffers mapped for reading (on
+ * llvmpipe its own memory: no copy; a LOD pool's two sets share their buffers, mapped once),
+ * and the arrays are written into the mapped storage buffers, which are unmapped before the
+ * fit. color=field keeps STAGE 0-1 in the GL (its colour map is a shader polynomial). Every
+ * cloud form the GL path draws (one set, several, LOD pools, ranges after culling and budgets)
+ * goes through the host path; there is no fallback to the GL for any of them.
+ *
+ * Cost (the 1M scan at 1280x720, CPU time of every thread, glFinish between passes, a loaded
+ * 2-core machine). The GL path: clears ~2.5 ms, pass 1 ~23, pass 2 ~24, the list ~1, pass 3's
+ * resolve ~10, the fit ~11, the gather ~11: ~83 ms against `splat`'s ~83 (before: one raster
  * program for both passes, 28 + 26, and fragment passes over the whole rectangle, the resolve
  * ~13, the fit ~22 and the gather ~18; the resolve's cost is its random reads of the two
- * points' positions and colours, not its pixel count). That cloud is denser
- * than the frame, so rho is 1 and the buffer is the frame; passes 1 and 2 over every point are
- * each as costly as the whole raster pass of `points`, and together already more than half of
- * `splat`. Where the buffer is smaller than the frame it wins: bunnyData.pts 32 ms against 72
- * (README "kawata and Eye-Dome Lighting"). */
+ * points' positions and colours, not its pixel count). That cloud is denser than the frame, so
+ * rho is 1 and the buffer is the frame; passes 1 and 2 over every point are each as costly as
+ * the whole raster pass of `points`. The host path: the per-thread arrays cleared ~1, pass 1
+ * (projection 2.6 and the minima) ~4.5, merged ~0.7, pass 2 ~5.3, merged ~1.1, the list ~0.3,
+ * the resolve ~2 (~15 in all, against ~58 for the same work in the GL), then the GL's clears
+ * ~1.5, fit ~11 and gather ~11: ~38 ms (README "kawata and Eye-Dome Lighting"). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
