@@ -7,8 +7,9 @@
  * steps within gamma and beyond) and random points in and out of the frustum (behind the eye,
  * past the far plane, off the sides), in three runs of two buffer sets with gaps between them
  * (points not drawn), duplicated points (equal keys: near's tie goes to the lowest index), and
- * only rows [Y0, Y1) of the buffer written. Run with 1, 2 and 3 threads and in batches of every
- * point, 1000 and 777 (pass 2 projecting again), which must all give the reference's arrays
+ * only rows [Y0, Y1) of the buffer written. Run with 1, 2 and 3 threads (at least 1000 points a
+ * thread, so that this small scene uses them) and in batches of every point, 1000 and 777 (pass
+ * 2 projecting again), which must all give the reference's arrays
  * word for word (checked to fail: pass 2 not projecting its batches again gave 6055 wrong
  * words). The GL comparison is test_render_kawata's test_host_equals_gpu. */
 #include <math.h>
@@ -131,7 +132,7 @@ static void test_against_reference(void **state)
                                   .zfar = zf, .gamma = gamma, .qscale = qscale, .ibits = ibits,
                                   .qmax = qmax, .y0 = Y0, .y1 = Y1, .depth = out,
                                   .near = out + rw, .far = out + 2 * rw, .threads = threads[t],
-                                  .batch = batches[b], .mem = &mem};
+                                  .batch = batches[b], .thread_points = 1000, .mem = &mem};
             memcpy(job.viewproj, m, sizeof m);
             assert_int_equal(kawata_cpu_raster(&job), 0);
             size_t differ = 0;

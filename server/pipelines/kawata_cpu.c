@@ -261,6 +261,8 @@ int kawata_cpu_raster(const kawata_cpu_job *job)
      * (at least one) */
     int nt = job->threads < 1 ? 1 : job->threads;
     if (nt > KAWATA_CPU_MAX_THREADS) nt = KAWATA_CPU_MAX_THREADS;
+    uint64_t tp = job->thread_points ? job->thread_points : KAWATA_CPU_THREAD_POINTS;
+    if ((uint64_t)nt > 1 + total / tp) nt = (int)(1 + total / tp);
     size_t words = (size_t)r.npix + 1;
     while (nt > 1 && (uint64_t)nt * 12 * words > KAWATA_CPU_PRIV_BYTES) nt--;
     r.nt = nt;
@@ -394,6 +396,8 @@ uint32_t kawata_cpu_resolve(const kawata_cpu_resolve_job *job)
     }
     resolve_run r = {job, n};
     int nt = job->threads < 1 ? 1 : job->threads;
+    if ((uint32_t)nt > 1 + n / KAWATA_CPU_THREAD_PIXELS)
+        nt = (int)(1 + n / KAWATA_CPU_THREAD_PIXELS);
     prep_par_for(nt, (n + RESOLVE_BLOCK - 1) / RESOLVE_BLOCK, resolve_task, &r, NULL, NULL);
     return n;
 }

@@ -30,8 +30,17 @@
 #include <stddef.h>
 #include <stdint.h>
 
-/* Points a batch; threads at most; bytes of per-thread arrays at most. */
-enum { KAWATA_CPU_BATCH = 1 << 23, KAWATA_CPU_MAX_THREADS = 16 };
+/* Points a batch; threads at most; visible points a thread at least (and listed pixels of the
+ * resolve): each parallel step waits for its threads to be scheduled, which on a loaded machine
+ * cost a small cloud more wall-clock time than its work (bunnyData.pts, 30k points, two
+ * threads: 30-36 ms a frame against the GL path's 18-23, for ~0.3 ms of work; one thread: 11.6
+ * against 12.3). Bytes of per-thread arrays at most. */
+enum {
+    KAWATA_CPU_BATCH = 1 << 23,
+    KAWATA_CPU_MAX_THREADS = 16,
+    KAWATA_CPU_THREAD_POINTS = 1 << 17,
+    KAWATA_CPU_THREAD_PIXELS = 1 << 13
+};
 #define KAWATA_CPU_PRIV_BYTES ((uint64_t)256 << 20)
 
 /* A run of visible points: points [first, first + count) of a buffer set whose positions are
@@ -64,6 +73,7 @@ typedef struct kawata_cpu_job {
     uint32_t *depth, *near, *far;
     int threads;
     size_t batch;              /* points a batch; 0: KAWATA_CPU_BATCH (tests make it small) */
+    size_t thread_points;      /* points a thread at least; 0: KAWATA_CPU_THREAD_POINTS (tests) */
     kawata_cpu_mem *mem;
 } kawata_cpu_job;
 
