@@ -9,9 +9,9 @@
  * (points not drawn), duplicated points (equal keys: near's tie goes to the lowest index), and
  * only rows [Y0, Y1) of the buffer written. Run with 1, 2 and 3 threads (at least 1000 points a
  * thread, so that this small scene uses them) and in batches of every point, 1000 and 777 (pass
- * 2 projecting again), which must all give the reference's arrays
- * word for word (checked to fail: pass 2 not projecting its batches again gave 6055 wrong
- * words). The GL comparison is test_render_kawata's test_host_equals_gpu. */
+ * 2 projecting again), which must all give the reference's arrays word for word (checked to
+ * fail: pass 2 not projecting its batches again gave 6055 wrong words). The GL comparison is
+ * test_render_kawata's test_host_equals_gpu. */
 #include <math.h>
 #include <setjmp.h>
 #include <stdarg.h>
