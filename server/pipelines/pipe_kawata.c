@@ -84,9 +84,11 @@
  * points' positions and colours, not its pixel count). That cloud is denser than the frame, so
  * rho is 1 and the buffer is the frame; passes 1 and 2 over every point are each as costly as
  * the whole raster pass of `points`. The host path: the per-thread arrays cleared ~1, pass 1
- * (projection 2.6 and the minima) ~4.5, merged ~0.7, pass 2 ~5.3, merged ~1.1, the list ~0.3,
- * the resolve ~2 (~15 in all, against ~58 for the same work in the GL), then the GL's clears
- * ~1.5, fit ~11 and gather ~11: ~38 ms (README "kawata and Eye-Dome Lighting"). */
+ * (the projection 2.6, memory-bound, and the minima) ~4.6, merged ~0.7, pass 2 ~4, merged
+ * ~0.8, the list ~0.3, the resolve ~2.2 (~14 in all, against ~55 for the same work in the GL),
+ * then the GL's clears ~1.2, fit ~10 and gather ~11: ~37-40 ms against `splat`'s ~83, 2.1-2.2x
+ * (README "kawata's passes 1-3 on the host"; there kawata's point passes run in C while
+ * splat's run in llvmpipe). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
