@@ -14,7 +14,7 @@ typedef struct run {
     const kawata_cpu_job *job;
     uint64_t k0, k1;           /* this batch: visible points [k0, k1) */
     int nt;                    /* threads */
-    uint32_t npix;             /* the rows' pixels: (y1 - y0) bw */
+    uint32_t npix;             /* the rectangle's pixels: (y1 - y0) (x1 - x0), row by row */
     /* each thread's depth, near and far: npix words and a spare one that the points outside
      * the rows go to; after pass 1 thread 0's depth is the merged one */
     uint32_t *arr[KAWATA_CPU_MAX_THREADS][3];
@@ -59,7 +59,7 @@ static void project(const kawata_cpu_job *job, const float *pos, uint32_t n, uin
     const float *m = job->viewproj;
     const float fbx = (float)job->bw, fby = (float)job->bh, zn = job->znear, zf = job->zfar;
     const int bw = job->bw, bh = job->bh;
-    const int row0 = job->y0 * bw;
+    const int x0 = job->x0, x1 = job->x1, y0 = job->y0, y1 = job->y1, rw = x1 - x0;
     uint32_t i = 0;
     const prep_v8i lx = {0, 3, 6, 9, 12, 15, 0, 0}, hx = {0, 1, 2, 3, 4, 5, 10, 13};
     const prep_v8i ly = {1, 4, 7, 10, 13, 0, 0, 0}, hy = {0, 1, 2, 3, 4, 8, 11, 14};
@@ -83,8 +83,8 @@ static void project(const kawata_cpu_job *job, const float *pos, uint32_t n, uin
         prep_v8i cxm = qx < bw - 1, cym = qy < bh - 1;
         qx = (qx & cxm) | ((bw - 1) & ~cxm);
         qy = (qy & cym) | ((bh - 1) & ~cym);
-        /* rows above y0 wrap to large values, outside every pixel of the rows */
-        prep_v8i q = ((qy * bw + qx - row0) & in) | ~in;
+        in &= (qx >= x0) & (qx < x1) & (qy >= y0) & (qy < y1);
+        prep_v8i q = (((qy - y0) * rw + qx - x0) & in) | ~in; /* ~0u: outside */
         memcpy(pix + i, &q, 32);
         memcpy(key + i, &d, 32);
     }
@@ -101,7 +101,8 @@ static void project(const kawata_cpu_job *job, const float *pos, uint32_t n, uin
                 int qx = (int)bx, qy = (int)by;
                 qx = qx < bw - 1 ? qx : bw - 1;
                 qy = qy < bh - 1 ? qy : bh - 1;
-                out = (uint32_t)(qy * bw + qx - row0);
+                if (qx >= x0 && qx < x1 && qy >= y0 && qy < y1)
+                    out = (uint32_t)((qy - y0) * rw + qx - x0);
             }
         }
         pix[i] = out;
@@ -181,11 +182,12 @@ static int pass2_task(void *ctx, size_t c, int tid, sd_err *err)
     return 0;
 }
 
-/* The band of rows' pixels [a, b) that task c of n takes. */
+/* The band of the rectangle's rows [a, b) (relative to y0) that task c of nt takes. */
 static void band(const run *r, size_t c, uint32_t *a, uint32_t *b)
 {
-    *a = (uint32_t)((uint64_t)r->npix * c / (uint64_t)r->nt);
-    *b = (uint32_t)((uint64_t)r->npix * (c + 1) / (uint64_t)r->nt);
+    uint64_t rows = (uint64_t)(r->job->y1 - r->job->y0);
+    *a = (uint32_t)(rows * c / (uint64_t)r->nt);
+    *b = (uint32_t)(rows * (c + 1) / (uint64_t)r->nt);
 }
 
 /* Task c: band c of every thread's arrays cleared (depth and near ~0u, far 0); the spare
@@ -194,8 +196,9 @@ static int clear_task(void *ctx, size_t c, int tid, sd_err *err)
 {
     (void)tid, (void)err;
     const run *r = ctx;
-    uint32_t a, b;
+    uint32_t a, b, rw = (uint32_t)(r->job->x1 - r->job->x0);
     band(r, c, &a, &b);
+    a *= rw, b *= rw;
     if (b == r->npix) b++;
     for (int t = 0; t < r->nt; t++) {
         memset(r->arr[t][0] + a, 0xFF, (size_t)(b - a) * 4);
@@ -205,35 +208,41 @@ static int clear_task(void *ctx, size_t c, int tid, sd_err *err)
     return 0;
 }
 
-/* Task c: band c of the threads' arrays merged into the job's: after pass 1 the depth (least,
- * also kept in thread 0's for pass 2), after pass 2 near (least) and far (greatest). Threads 0
- * and 1 are merged in the pass that writes the job's array, any further ones into it after. */
+/* Task c: band c of the threads' arrays merged into the job's (the rectangle's columns of its
+ * rows): after pass 1 the depth (least, also kept in thread 0's for pass 2), after pass 2 near
+ * (least) and far (greatest). Threads 0 and 1 are merged in the pass that writes the job's
+ * array, any further ones into it after. */
 static int merge_task(void *ctx, size_t c, int tid, sd_err *err)
 {
     (void)tid, (void)err;
     const run *r = ctx;
     const kawata_cpu_job *job = r->job;
-    uint32_t a, b;
-    band(r, c, &a, &b);
+    const uint32_t rw = (uint32_t)(job->x1 - job->x0), bw = (uint32_t)job->bw;
+    uint32_t ya, yb;
+    band(r, c, &ya, &yb);
     const int t1 = r->nt > 1 ? 1 : 0;
-    if (r->pass1) {
-        uint32_t *d0 = r->arr[0][0], *out = job->depth;
-        for (int t = t1; t < r->nt; t++) {
-            const uint32_t *d = r->arr[t][0];
-            for (uint32_t p = a; p < b; p++) {
-                uint32_t v = d[p] < d0[p] ? d[p] : d0[p];
-                d0[p] = v, out[p] = v;
+    for (uint32_t y = ya; y < yb; y++) {
+        const size_t at = (size_t)y * rw, ot = (size_t)y * bw + (size_t)job->x0;
+        if (r->pass1) {
+            uint32_t *d0 = r->arr[0][0] + at, *out = job->depth + ot;
+            for (int t = t1; t < r->nt; t++) {
+                const uint32_t *d = r->arr[t][0] + at;
+                for (uint32_t x = 0; x < rw; x++) {
+                    uint32_t v = d[x] < d0[x] ? d[x] : d0[x];
+                    d0[x] = v, out[x] = v;
+                }
             }
+            continue;
         }
-        return 0;
-    }
-    uint32_t *n0 = job->near, *f0 = job->far;
-    for (int t = t1; t < r->nt; t++) {
-        const uint32_t *na = t == t1 ? r->arr[0][1] : n0, *fa = t == t1 ? r->arr[0][2] : f0;
-        const uint32_t *n = r->arr[t][1], *f = r->arr[t][2];
-        for (uint32_t p = a; p < b; p++) {
-            n0[p] = n[p] < na[p] ? n[p] : na[p];
-            f0[p] = f[p] > fa[p] ? f[p] : fa[p];
+        uint32_t *n0 = job->near + ot, *f0 = job->far + ot;
+        for (int t = t1; t < r->nt; t++) {
+            const uint32_t *na = t == t1 ? r->arr[0][1] + at : n0;
+            const uint32_t *fa = t == t1 ? r->arr[0][2] + at : f0;
+            const uint32_t *n = r->arr[t][1] + at, *f = r->arr[t][2] + at;
+            for (uint32_t x = 0; x < rw; x++) {
+                n0[x] = n[x] < na[x] ? n[x] : na[x];
+                f0[x] = f[x] > fa[x] ? f[x] : fa[x];
+            }
         }
     }
     return 0;
@@ -248,7 +257,7 @@ void kawata_cpu_mem_free(kawata_cpu_mem *m)
 int kawata_cpu_raster(const kawata_cpu_job *job)
 {
     kawata_cpu_mem *m = job->mem;
-    if (job->y1 <= job->y0) return 0;
+    if (job->y1 <= job->y0 || job->x1 <= job->x0) return 0;
     if (soft_cpu_grow((void **)&m->segk, &m->segk_cap, (size_t)job->nsegs + 1, sizeof *m->segk))
         return -1;
     uint64_t total = 0;
@@ -256,7 +265,7 @@ int kawata_cpu_raster(const kawata_cpu_job *job)
     m->segk[job->nsegs] = total;
     size_t batch = job->batch ? job->batch : KAWATA_CPU_BATCH;
     if (total < batch) batch = (size_t)total;
-    run r = {.job = job, .npix = (uint32_t)(job->y1 - job->y0) * (uint32_t)job->bw};
+    run r = {.job = job, .npix = (uint32_t)(job->y1 - job->y0) * (uint32_t)(job->x1 - job->x0)};
     /* each thread has its own three arrays: as many threads as KAWATA_CPU_PRIV_BYTES allow
      * (at least one) */
     int nt = job->threads < 1 ? 1 : job->threads;

@@ -68,7 +68,7 @@ typedef struct kawata_cpu_job {
     float znear, zfar;
     float gamma, qscale;       /* as pipe_kawata.c's uniforms */
     uint32_t ibits, qmax;
-    int y0, y1;                /* the buffer rows cleared and written: [y0, y1) */
+    int x0, x1, y0, y1;        /* the rectangle written: [x0, x1) x [y0, y1) */
     /* rows [y0, y1) of the three arrays (bw words a row): depth, near and far of the shader */
     uint32_t *depth, *near, *far;
     int threads;
@@ -77,11 +77,12 @@ typedef struct kawata_cpu_job {
     kawata_cpu_mem *mem;
 } kawata_cpu_job;
 
-/* kawata_cpu_raster: writes rows [y0, y1) of depth, near and far as passes 1 and 2 leave them
- * after the GL path's clear (depth and near ~0u, far 0). Points landing outside those rows are
- * left out (the GL passes after it treat pixels outside the cloud's rectangle as empty; the GL
- * path writes them into rows nobody reads). Returns 0, or -1 when the working memory cannot grow
- * (the arrays are then not written). */
+/* kawata_cpu_raster: writes the rectangle [x0, x1) x [y0, y1) of depth, near and far as passes
+ * 1 and 2 leave them after the GL path's clear (depth and near ~0u, far 0), and nothing else.
+ * Points landing outside it are left out: the GL passes after it treat pixels outside the
+ * cloud's rectangle as empty (the GL path writes such points into pixels nobody reads; the
+ * rectangle, from the cloud's bounds grown by a pixel, holds every point). Returns 0, or -1 when
+ * the working memory cannot grow (the arrays are then not written). */
 int kawata_cpu_raster(const kawata_cpu_job *job);
 void kawata_cpu_mem_free(kawata_cpu_mem *m);
 

@@ -412,9 +412,9 @@ static int host_passes(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c
     return rc;
 }
 
-/* rnd_frame.kawata_arrays (rnd_set_kawata_probe) after pass 3's first half: rows [y0, y1) of
- * depth, near and far read back, then pts (16 words a buffer pixel) for the pixels listed
- * (columns [x0, x1) with a nearest point); everything else 0. NULL when out of memory (the
+/* rnd_frame.kawata_arrays (rnd_set_kawata_probe) after pass 3's first half: the rectangle brect
+ * of depth, near and far read back, then pts (16 words a buffer pixel) for its pixels with a
+ * nearest point (those listed); everything else 0. NULL when out of memory (the
  * frame then carries none). */
 static uint32_t *probe_arrays(const gl_api *gl, const kawata_state *s, int bw, int bh,
                               const int brect[4])
@@ -434,9 +434,9 @@ static uint32_t *probe_arrays(const gl_api *gl, const kawata_state *s, int bw, i
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
     for (size_t i = 0; i < nb; i++) {
         int x = (int)(i % (size_t)bw);
-        if (p[nb + i] == 0xFFFFFFFFu || i < y0 * bw || i >= (y0 + rows) * bw || x < brect[0] ||
-            x >= brect[2])
-            memset(p + 3 * nb + 16 * i, 0, 64);
+        int out = i < y0 * bw || i >= (y0 + rows) * bw || x < brect[0] || x >= brect[2];
+        if (out) p[i] = p[nb + i] = p[2 * nb + i] = 0;
+        if (out || p[nb + i] == 0xFFFFFFFFu) memset(p + 3 * nb + 16 * i, 0, 64);
     }
     return p;
 }
@@ -569,7 +569,7 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     if (host) {
         kawata_cpu_job job = {.bw = bw, .bh = bh, .znear = v->znear, .zfar = v->zfar,
                               .gamma = gamma, .qscale = qscale, .ibits = ibits, .qmax = qmax,
-                              .y0 = brect[1], .y1 = brect[3]};
+                              .x0 = brect[0], .x1 = brect[2], .y0 = brect[1], .y1 = brect[3]};
         memcpy(job.viewproj, v->viewproj, sizeof job.viewproj);
         kawata_cpu_resolve_job rj = {.intensity = p->color == SP_COLOR_INTENSITY, .bw = bw,
                                      .x0 = brect[0], .x1 = brect[2], .y0 = brect[1],

@@ -85,8 +85,8 @@ typedef struct rnd_frame {
      * pass 3's first half (pipe_kawata.c), each buffer_w x buffer_h entries, one after the
      * other: depth, near and far (a word a pixel), then pts (16 words a pixel: the nearest and
      * the farthest point in eye space, their colours, as float bits) for the pixels with a
-     * nearest point inside the cloud's buffer rectangle; everything else 0 (the rest of the
-     * buffer is neither cleared nor used by a frame). NULL otherwise. */
+     * nearest point, all inside the cloud's buffer rectangle; everything else 0 (the rest of
+     * the buffer is not used by a frame). NULL otherwise. */
     uint32_t *kawata_arrays;
 } rnd_frame;
 
