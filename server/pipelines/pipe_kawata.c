@@ -83,12 +83,12 @@
  * ~13, the fit ~22 and the gather ~18; the resolve's cost is its random reads of the two
  * points' positions and colours, not its pixel count). That cloud is denser than the frame, so
  * rho is 1 and the buffer is the frame; passes 1 and 2 over every point are each as costly as
- * the whole raster pass of `points`. The host path: the per-thread arrays cleared ~1, pass 1
- * (the projection 2.6, memory-bound, and the minima) ~4.6, merged ~0.7, pass 2 ~4, merged
- * ~0.8, the list ~0.3, the resolve ~2.2 (~14 in all, against ~55 for the same work in the GL),
- * then the GL's clears ~1.2, fit ~10 and gather ~11: ~37-40 ms against `splat`'s ~83, 2.1-2.2x
- * (README "kawata's passes 1-3 on the host"; there kawata's point passes run in C while
- * splat's run in llvmpipe). */
+ * the whole raster pass of `points`. The host path: the per-thread arrays cleared ~0.55,
+ * pass 1 (the projection 2.6, memory-bound, and the minima) ~4.4, merged ~0.45, pass 2 ~3.7,
+ * merged ~0.55, the list ~0.3, the resolve ~2.2 (~12 in all, against ~55 for the same work in
+ * the GL), then the GL's clears ~1.2, fit ~10 and gather ~11: ~36-38 ms against `splat`'s
+ * ~83, 2.1-2.2x (README "kawata's passes 1-3 on the host"; there kawata's point passes run in
+ * C while splat's run in llvmpipe). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
