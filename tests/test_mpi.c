@@ -35,6 +35,7 @@
 #include "common/testutil.h"
 #include "boxorder.h"
 #include "over.h"
+#include "sd_half.h"
 #include "partition.h"
 #include "cloud.h"
 #include "morton.h"
@@ -816,8 +817,8 @@ static void test_over(void **state)
     /* float: (0.5, 0, 0, 0.5) over (0, 1, 0, 1) = (0.5, 0.5, 0, 1); depth the nearer */
     uint8_t fl[OV_PXF], fh[OV_PXF], fo[OV_PXF];
     float zl = 2.0f, zh = 1.5f;
-    uint16_t cl[4] = {ov_float_to_half(0.5f), 0, 0, ov_float_to_half(0.5f)};
-    uint16_t ch[4] = {0, ov_float_to_half(1.0f), 0, ov_float_to_half(1.0f)};
+    uint16_t cl[4] = {sd_float_to_half(0.5f), 0, 0, sd_float_to_half(0.5f)};
+    uint16_t ch[4] = {0, sd_float_to_half(1.0f), 0, sd_float_to_half(1.0f)};
     memcpy(fl, &zl, 4), memcpy(fl + 4, cl, 8);
     memcpy(fh, &zh, 4), memcpy(fh + 4, ch, 8);
     ov_op(fl, fh, fo, 1, OV_PXF, NULL);
@@ -825,15 +826,15 @@ static void test_over(void **state)
     uint16_t co[4];
     memcpy(&z, fo, 4), memcpy(co, fo + 4, 8);
     assert_true(z == 1.5f);
-    assert_true(ov_half_to_float(co[0]) == 0.5f && ov_half_to_float(co[1]) == 0.5f);
-    assert_true(ov_half_to_float(co[2]) == 0.0f && ov_half_to_float(co[3]) == 1.0f);
+    assert_true(sd_half_to_float(co[0]) == 0.5f && sd_half_to_float(co[1]) == 0.5f);
+    assert_true(sd_half_to_float(co[2]) == 0.0f && sd_half_to_float(co[3]) == 1.0f);
     uint16_t rgbaf[4];
     uint8_t rgba8[4];
     cl[1] = 0;
     memcpy(fl + 4, cl, 8);
     ov_backgroundf(fl, 1, (float[3]){0, 0.5f, 0}, rgbaf, rgba8, &z);
-    assert_true(ov_half_to_float(rgbaf[0]) == 0.5f && ov_half_to_float(rgbaf[1]) == 0.25f);
-    assert_true(ov_half_to_float(rgbaf[3]) == 0.5f); /* coverage kept, as the float target */
+    assert_true(sd_half_to_float(rgbaf[0]) == 0.5f && sd_half_to_float(rgbaf[1]) == 0.25f);
+    assert_true(sd_half_to_float(rgbaf[3]) == 0.5f); /* coverage kept, as the float target */
     assert_int_equal(rgba8[0], 128);
     assert_int_equal(rgba8[1], 64);
     assert_int_equal(rgba8[3], 255);
@@ -842,16 +843,16 @@ static void test_over(void **state)
      * to even; past 65504 is infinity; below 2^-24 / 2 is zero */
     for (uint32_t h = 0; h < 65536; h++) {
         if (((h >> 10) & 31) == 31 && (h & 1023)) continue;
-        assert_int_equal(ov_float_to_half(ov_half_to_float((uint16_t)h)), h);
-        assert_true(ov_half_to_float((uint16_t)h) == tu_half((uint16_t)h) ||
+        assert_int_equal(sd_float_to_half(sd_half_to_float((uint16_t)h)), h);
+        assert_true(sd_half_to_float((uint16_t)h) == tu_half((uint16_t)h) ||
                     isnan(tu_half((uint16_t)h)));
     }
-    assert_int_equal(ov_float_to_half(1.0f + 1.0f / 2048), 0x3c00);          /* tie: even */
-    assert_int_equal(ov_float_to_half(1.0f + 3.0f / 2048), 0x3c02);          /* tie: even */
-    assert_int_equal(ov_float_to_half(65520.0f), 0x7c00);
-    assert_int_equal(ov_float_to_half(65519.0f), 0x7bff);
-    assert_int_equal(ov_float_to_half(ldexpf(1.0f, -26)), 0);
-    assert_int_equal(ov_float_to_half(ldexpf(3.0f, -25)), 2);                /* 1.5 -> 2 */
+    assert_int_equal(sd_float_to_half(1.0f + 1.0f / 2048), 0x3c00);          /* tie: even */
+    assert_int_equal(sd_float_to_half(1.0f + 3.0f / 2048), 0x3c02);          /* tie: even */
+    assert_int_equal(sd_float_to_half(65520.0f), 0x7c00);
+    assert_int_equal(sd_float_to_half(65519.0f), 0x7bff);
+    assert_int_equal(sd_float_to_half(ldexpf(1.0f, -26)), 0);
+    assert_int_equal(sd_float_to_half(ldexpf(3.0f, -25)), 2);                /* 1.5 -> 2 */
 }
 
 int main(void)

@@ -22,6 +22,7 @@
 
 #include "cloud.h"
 #include "edl.h"
+#include "half.h"
 #include "prep.h"
 #include "render.h"
 #include "rndtest.h"
@@ -643,6 +644,7 @@ static void test_edl_strength_zero(void **state)
     tu_finish_cloud(&pc, OFF);
     uint32_t id = tu_upload(r, &pc);
     rnd_camera cam = cam_at(0.1, 0.2, 2.0, 40, W, H);
+    for (int ep = SP_EDL_PASS_GL; ep <= SP_EDL_PASS_CPU; ep++)
     for (int pipe = 0; pipe < SP_PIPE_COUNT; pipe++)
         for (int fl = 0; fl < 2; fl++) {
             rnd_frame f[3] = {{0}, {0}, {0}};
@@ -650,6 +652,7 @@ static void test_edl_strength_zero(void **state)
                 sp_params p;
                 params_of(kf, &p);
                 p.pipeline = pipe;
+                p.edl_pass = ep;
                 if (k > 0) p.shading = SP_SHADING_EDL;
                 p.edl_strength = k == 1 ? 0.0f : 1.0f;
                 tu_render(r, id, &cam, &p, fl, &f[k]);
@@ -659,8 +662,9 @@ static void test_edl_strength_zero(void **state)
             if (fl) same &= memcmp(f[0].rgba16f, f[1].rgba16f, n * 2) == 0 &&
                             memcmp(f[0].depth, f[1].depth, n) == 0;
             int changed = memcmp(f[0].rgba8, f[2].rgba8, n) != 0;
-            printf("edl strength 0, pipeline %d, %s target: identical %d; strength 1 changes "
-                   "it %d\n", pipe, fl ? "float" : "8-bit", same, changed);
+            printf("edl strength 0, %s pass, pipeline %d, %s target: identical %d; strength 1 "
+                   "changes it %d\n", ep == SP_EDL_PASS_GL ? "gl" : "cpu", pipe,
+                   fl ? "float" : "8-bit", same, changed);
             assert_true(same);
             assert_true(changed);
             for (int k = 0; k < 3; k++) rnd_frame_free(&f[k]);
@@ -703,6 +707,8 @@ static void test_edl_step(void **state)
     tu_render(r, id, &cam, &p, 1, &base);
     p.shading = SP_SHADING_EDL;
     p.edl_strength = strength;
+    for (int ep = SP_EDL_PASS_GL; ep <= SP_EDL_PASS_CPU; ep++) {
+    p.edl_pass = ep;
     tu_render(r, id, &cam, &p, 0, &ef);
     const int off[4][2] = {{1, 0}, {0, 1}, {-1, 0}, {0, -1}};
     const double step = log2(5.0 / 4.5);
@@ -732,17 +738,18 @@ static void test_edl_step(void **state)
             worst = fmax(worst, rel);
             if (cnt < 3) checked[cnt]++;
         }
-    printf("edl step: far-plane pixels with 0/1/2 nearer neighbours %d/%d/%d, shade at the step "
-           "%.4f, worst relative error %.4f; near-plane pixels %d, changed %d\n", checked[0],
-           checked[1], checked[2], exp(-RND_EDL_SCALE * strength / 4.0 * step), worst, near_px,
-           near_changed);
+    printf("edl step, %s pass: far-plane pixels with 0/1/2 nearer neighbours %d/%d/%d, shade at "
+           "the step %.4f, worst relative error %.4f; near-plane pixels %d, changed %d\n",
+           ep == SP_EDL_PASS_GL ? "gl" : "cpu", checked[0], checked[1], checked[2],
+           exp(-RND_EDL_SCALE * strength / 4.0 * step), worst, near_px, near_changed);
     assert_true(checked[1] > 100); /* the step's column along most of the frame's height */
     assert_true(checked[0] > W * H / 4);
     assert_true(near_px > W * H / 4);
     assert_true(worst <= 0.01);
     assert_int_equal(near_changed, 0);
-    rnd_frame_free(&base);
     rnd_frame_free(&ef);
+    }
+    rnd_frame_free(&base);
     rnd_release(r, id);
     pc_prepared_free(&pc);
 }
@@ -763,12 +770,14 @@ static void test_edl_flat(void **state)
     tu_finish_cloud(&pc, OFF);
     uint32_t id = tu_upload(r, &pc);
     rnd_camera cam = cam_at(0, 0, 2.0, 40, W, H);
+    for (int ep = SP_EDL_PASS_GL; ep <= SP_EDL_PASS_CPU; ep++)
     for (int pipe = 0; pipe < SP_PIPE_COUNT; pipe++) {
         rnd_frame f[2] = {{0}, {0}};
         for (int k = 0; k < 2; k++) {
             sp_params p;
             params_of(kf, &p);
             p.pipeline = pipe;
+            p.edl_pass = ep;
             p.shading = k ? SP_SHADING_EDL : SP_SHADING_LAMBERT;
             tu_render(r, id, &cam, &p, 0, &f[k]);
         }
@@ -777,7 +786,8 @@ static void test_edl_flat(void **state)
             covered += !is_bg(f[0].rgba8 + 4 * i);
             darker += memcmp(f[0].rgba8 + 4 * i, f[1].rgba8 + 4 * i, 3) != 0;
         }
-        printf("edl flat plane, pipeline %d: %d covered, %d changed\n", pipe, covered, darker);
+        printf("edl flat plane, %s pass, pipeline %d: %d covered, %d changed\n",
+               ep == SP_EDL_PASS_GL ? "gl" : "cpu", pipe, covered, darker);
         assert_true(covered > W * H / 4);
         assert_int_equal(darker, 0);
         rnd_frame_free(&f[0]);
@@ -785,6 +795,136 @@ static void test_edl_flat(void **state)
     }
     rnd_release(r, id);
     pc_prepared_free(&pc);
+}
+
+/* edl_pass=gl and edl_pass=cpu give the same frame on a real scan (bunnyData.pts, positions
+ * only, so every shade comes from real depth steps) in points, splat and kawata, 8-bit and
+ * float targets, at radius 1 and 3: each 8-bit channel within 1 (the GL pass rounds the shade
+ * to 8 bits before its blend multiplies, the host multiplies by the float shade and rounds
+ * once: each rounding is at most half a step), each half channel within 2 units in the last
+ * place (llvmpipe's exp and log2 against edl_host.c's polynomials, both well under 1e-5
+ * relative), and at least 99 % of the pixels the GL pass darkens visibly are darkened by the
+ * host pass too (checked, so that a host pass doing nothing cannot pass). */
+static void test_edl_passes_agree(void **state)
+{
+    const kfix *kf = *state;
+    rnd_ctx *r = kf->r;
+    enum { BW = 320, BH = 240 };
+    pc_prepared pc;
+    tu_prep_data("bunnyData.pts", &pc);
+    uint32_t id = tu_upload(r, &pc);
+    rnd_camera cam;
+    rnd_camera_frame(pc.bmin, pc.bmax, BW, BH, &cam);
+    pc_prepared_free(&pc);
+    const int pipes[3] = {SP_PIPE_POINTS, SP_PIPE_SPLAT, SP_PIPE_KAWATA};
+    for (int pi = 0; pi < 3; pi++)
+        for (int rad = 1; rad <= 3; rad += 2)
+            for (int fl = 0; fl < 2; fl++) {
+                rnd_frame f[3] = {{0}, {0}, {0}};
+                for (int k = 0; k < 3; k++) {
+                    sp_params p;
+                    params_of(kf, &p);
+                    p.pipeline = pipes[pi];
+                    p.edl_radius = (float)rad;
+                    p.shading = k ? SP_SHADING_EDL : SP_SHADING_LAMBERT;
+                    p.edl_pass = k == 1 ? SP_EDL_PASS_GL : SP_EDL_PASS_CPU;
+                    tu_render(r, id, &cam, &p, fl, &f[k]);
+                }
+                int worst8 = 0, worst16 = 0;
+                size_t dark_gl = 0, dark_both = 0;
+                for (size_t i = 0; i < (size_t)BW * BH * 4; i++) {
+                    int d = abs((int)f[1].rgba8[i] - (int)f[2].rgba8[i]);
+                    worst8 = d > worst8 ? d : worst8;
+                    if (fl) {
+                        d = abs((int)f[1].rgba16f[i] - (int)f[2].rgba16f[i]);
+                        worst16 = d > worst16 ? d : worst16;
+                    }
+                    if (i % 4 == 0 && f[0].rgba8[i] >= 64 && f[1].rgba8[i] + 8 < f[0].rgba8[i]) {
+                        dark_gl++;
+                        dark_both += f[2].rgba8[i] + 8 < f[0].rgba8[i];
+                    }
+                }
+                printf("edl gl vs cpu, pipeline %d, radius %d, %s target: 8-bit channels within "
+                       "%d, half within %d ulp; %zu pixels darkened by gl, %zu by both\n",
+                       pipes[pi], rad, fl ? "float" : "8-bit", worst8, worst16, dark_gl,
+                       dark_both);
+                assert_true(worst8 <= 1);
+                assert_true(worst16 <= 2);
+                assert_true(dark_gl > 200);
+                assert_true(dark_both >= dark_gl * 99 / 100);
+                for (int k = 0; k < 3; k++) rnd_frame_free(&f[k]);
+            }
+    rnd_release(r, id);
+}
+
+/* edl_host.c's arithmetic on its own against the formula in double precision: random depths
+ * over 8 decades in a framed buffer (background +inf in the frame and in 10 % of the pixels;
+ * ratios past 2^15 are clamped there, as in edl.frag), widths that are not multiples of 8,
+ * radius 1 and 4, a strength at which a clamped neighbour still leaves a visible shade (~0.3):
+ * every 8-bit channel of a white frame equals round(255 shade) within 1, a half channel of 1.0
+ * equals the shade within 2^-10 relative (half's own rounding is 2^-11), alpha is untouched. */
+static void test_edl_host_formula(void **state)
+{
+    (void)state;
+    rng g;
+    g.s = 11;
+    for (int rad = 1; rad <= 4; rad += 3) {
+        const int w = 37, h = 13, pw = w + 2 * rad;
+        const size_t n = (size_t)pw * (size_t)(h + 2 * rad) + 8;
+        float *z = malloc(n * sizeof *z);
+        uint8_t *c8 = malloc((size_t)w * h * 4);
+        uint16_t *c16 = malloc((size_t)w * h * 4 * sizeof *c16);
+        assert_non_null(z);
+        assert_non_null(c8);
+        assert_non_null(c16);
+        for (size_t i = 0; i < n; i++) z[i] = INFINITY;
+        for (int y = 0; y < h; y++)
+            for (int x = 0; x < w; x++)
+                z[(size_t)(y + rad) * pw + x + rad] =
+                    uniform(&g) < 0.1 ? INFINITY : (float)pow(10.0, 8.0 * uniform(&g) - 3.0);
+        memset(c8, 255, (size_t)w * h * 4);
+        for (size_t i = 0; i < (size_t)w * h * 4; i++) c16[i] = half_from_float(1.0f);
+        const float k = RND_EDL_SCALE * 0.0004f / 4.0f;
+        rnd__edl_host_shade(z, pw, rad, w, h, k, c8, c16, w);
+        int worst8 = 0;
+        double worst16 = 0;
+        size_t clamped = 0, shaded = 0;
+        for (int y = 0; y < h; y++)
+            for (int x = 0; x < w; x++) {
+                const float *c = z + (size_t)(y + rad) * pw + x + rad;
+                double zc = c[0], sum = 0;
+                const float *nb[4] = {c + rad, c + (size_t)rad * pw, c - rad, c - (size_t)rad * pw};
+                for (int q = 0; q < 4 && isfinite(zc); q++) {
+                    double zn = *nb[q];
+                    if (zn >= zc) continue; /* farther or background: nothing */
+                    double ratio = zc / zn;
+                    if (ratio > 32768.0) ratio = 32768.0, clamped++;
+                    sum += log2(ratio);
+                }
+                double want = exp(-(double)k * sum);
+                shaded += want < 0.99;
+                size_t i = ((size_t)y * w + x) * 4;
+                for (int ch = 0; ch < 3; ch++) {
+                    int d = abs((int)c8[i + ch] - (int)lround(255.0 * want));
+                    worst8 = d > worst8 ? d : worst8;
+                    double got = half_to_float(c16[i + ch]);
+                    double rel = fabs(got - want) / want;
+                    worst16 = rel > worst16 ? rel : worst16;
+                }
+                assert_int_equal(c8[i + 3], 255); /* alpha untouched */
+                assert_int_equal(c16[i + 3], half_from_float(1.0f));
+            }
+        printf("edl host formula, radius %d: %zu of %d pixels shaded, %zu clamped ratios, 8-bit "
+               "within %d, half within %.2e relative\n", rad, shaded, w * h, clamped, worst8,
+               worst16);
+        assert_true(shaded > (size_t)w * h / 2);
+        assert_true(clamped > 20);
+        assert_true(worst8 <= 1);
+        assert_true(worst16 <= 1.0 / 1024);
+        free(z);
+        free(c8);
+        free(c16);
+    }
 }
 
 int main(void)
@@ -799,12 +939,15 @@ int main(void)
         cmocka_unit_test(test_edl_strength_zero),
         cmocka_unit_test(test_edl_step),
         cmocka_unit_test(test_edl_flat),
+        cmocka_unit_test(test_edl_passes_agree),
     };
+    /* once: the two raster paths compared, and EDL's host arithmetic (no renderer) */
     const struct CMUnitTest host_tests[] = {
         cmocka_unit_test(test_host_equals_gpu),
+        cmocka_unit_test(test_edl_host_formula),
     };
     int failed = cmocka_run_group_tests_name("kawata_raster=gpu", tests, setup_gpu, teardown);
     failed += cmocka_run_group_tests_name("kawata_raster=cpu", tests, setup_cpu, teardown);
-    failed += cmocka_run_group_tests_name("host vs gpu", host_tests, setup_cpu, teardown);
+    failed += cmocka_run_group_tests_name("once", host_tests, setup_cpu, teardown);
     return failed;
 }

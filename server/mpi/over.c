@@ -1,39 +1,10 @@
 /* over.c — premultiplied "over" of the ranks' images and the background (over.h). */
 #include "over.h"
 
+#include "sd_half.h"
+
 #include <math.h>
 #include <string.h>
-
-float ov_half_to_float(uint16_t h)
-{
-    uint32_t sign = (uint32_t)(h >> 15) << 31, e = (h >> 10) & 31u, m = h & 1023u;
-    float f;
-    if (e == 0) {
-        f = ldexpf((float)m, -24); /* zero and subnormals */
-        return sign ? -f : f;
-    }
-    uint32_t u = e == 31 ? sign | 0x7f800000u | m << 13 : sign | (e + 112u) << 23 | m << 13;
-    memcpy(&f, &u, 4);
-    return f;
-}
-
-uint16_t ov_float_to_half(float f)
-{
-    uint32_t u;
-    memcpy(&u, &f, 4);
-    uint16_t sign = (uint16_t)((u >> 16) & 0x8000u);
-    uint32_t a = u & 0x7fffffffu;
-    if (a >= 0x7f800000u) return sign | (a > 0x7f800000u ? 0x7e00u : 0x7c00u); /* NaN, inf */
-    if (a >= 0x477ff000u) return sign | 0x7c00u; /* rounds past 65504: inf */
-    if (a < 0x38800000u) { /* below the smallest normal half: a subnormal, rounded */
-        float v;
-        memcpy(&v, &a, 4);
-        return sign | (uint16_t)lrintf(v * 16777216.0f); /* units of 2^-24, nearest even */
-    }
-    /* normal: drop 13 mantissa bits, round to nearest even */
-    uint32_t r = a + 0xfffu + ((a >> 13) & 1u);
-    return sign | (uint16_t)((r - 0x38000000u) >> 13);
-}
 
 static uint8_t over8(uint8_t f, uint8_t fa, uint8_t b)
 {
@@ -73,10 +44,10 @@ void ov_op(const uint8_t *lo, const uint8_t *hi, uint8_t *dst, size_t npix, size
         memcpy(&zb, b, 4);
         memcpy(hf, f + 4, 8);
         memcpy(hb, b + 4, 8);
-        float fa = ov_half_to_float(hf[3]);
+        float fa = sd_half_to_float(hf[3]);
         for (int c = 0; c < 4; c++)
-            ho[c] = ov_float_to_half(ov_half_to_float(hf[c]) +
-                                     (1.0f - fa) * ov_half_to_float(hb[c]));
+            ho[c] = sd_float_to_half(sd_half_to_float(hf[c]) +
+                                     (1.0f - fa) * sd_half_to_float(hb[c]));
         float z = zb < zf ? zb : zf;
         memcpy(o, &z, 4);
         memcpy(o + 4, ho, 8);
@@ -102,11 +73,11 @@ void ov_backgroundf(const uint8_t *px, size_t npix, const float bg[3], uint16_t 
         uint16_t h[4];
         memcpy(&depth[i], p, 4);
         memcpy(h, p + 4, 8);
-        float a = ov_half_to_float(h[3]);
+        float a = sd_half_to_float(h[3]);
         for (int c = 0; c < 3; c++) {
-            float v = ov_half_to_float(h[c]) + (1.0f - a) * bg[c];
-            rgba16f[4 * i + (size_t)c] = ov_float_to_half(v);
-            float q = ov_half_to_float(rgba16f[4 * i + (size_t)c]);
+            float v = sd_half_to_float(h[c]) + (1.0f - a) * bg[c];
+            rgba16f[4 * i + (size_t)c] = sd_float_to_half(v);
+            float q = sd_half_to_float(rgba16f[4 * i + (size_t)c]);
             rgba8[4 * i + (size_t)c] = (uint8_t)lrintf(fminf(fmaxf(q, 0), 1) * 255);
         }
         rgba16f[4 * i + 3] = h[3];

@@ -36,6 +36,3 @@ void ov_background8(uint8_t *rgba8, size_t npix, const float bg[3]);
 void ov_backgroundf(const uint8_t *px, size_t npix, const float bg[3], uint16_t *rgba16f,
                     uint8_t *rgba8, float *depth);
 
-/* ov_half_to_float, ov_float_to_half: IEEE binary16 (round to nearest even). */
-float ov_half_to_float(uint16_t h);
-uint16_t ov_float_to_half(float f);

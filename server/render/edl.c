@@ -1,5 +1,7 @@
 /* edl.c — Eye-Dome Lighting as one fragment pass over the cloud's screen rectangle (edl.h,
- * shaders/edl.frag.glsl).
+ * shaders/edl.frag.glsl): edl_pass=gl, the default on a GPU. On a software renderer edl_pass=auto
+ * runs the same arithmetic on the host after the read-back instead (edl_host.c), at about half
+ * the CPU time of this pass.
  *
  * The shade only darkens, so it is applied by blending (dst = dst * src, glBlendFunc(GL_ZERO,
  * GL_SRC_COLOR)) instead of a copy of the colour: the pass never reads the colour it writes, so
@@ -21,6 +23,7 @@
 #include "edl.h"
 
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "shaders.h"
@@ -51,6 +54,7 @@ void rnd__edl_free(rnd_edl *e, const gl_api *gl)
     if (e->vao) gl->DeleteVertexArrays(1, &e->vao);
     if (e->copy_buf) gl->DeleteBuffers(1, &e->copy_buf);
     if (e->copy_tex) gl->DeleteTextures(1, &e->copy_tex);
+    free(e->host);
     memset(e, 0, sizeof *e);
 }
 

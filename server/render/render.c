@@ -848,7 +848,10 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     if (pi < 0 || pi >= NPIPES)
         return sd_errf(err, SD_EINVAL, "pipeline %d is not one of the %d pipelines", pi, NPIPES);
     int edl = params->shading == SP_SHADING_EDL;
-    if (edl && !r->edl.prog)
+    /* edl_pass (params.h): on the host after the read-back, or a GL pass before it. */
+    int edl_host = edl && (params->edl_pass == SP_EDL_PASS_CPU ||
+                           (params->edl_pass == SP_EDL_PASS_AUTO && r->kit.software));
+    if (edl && !edl_host && !r->edl.prog)
         return sd_errf(err, SD_EGL, "shading=edl is not available: %s", r->edl_err.msg);
     const rnd_gpu_cloud *c = &slot->c;
     rnd_view v;
@@ -933,7 +936,7 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     rc = pipelines[pi]->render(&r->kit, r->pstate[pi], &draw, err);
     free(frame->kawata_arrays);
     frame->kawata_arrays = out.probe;
-    if (rc == 0 && edl)
+    if (rc == 0 && edl && !edl_host)
         rnd__edl_apply(&r->edl, gl, t, edl_rect, params->edl_strength, params->edl_radius);
     if (edl && !t->is_float) {
         const GLenum one[2] = {GL_COLOR_ATTACHMENT0, GL_NONE};
@@ -973,9 +976,13 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
         gl->ReadBuffer(GL_COLOR_ATTACHMENT1);
         gl->ReadPixels(0, 0, cam->width, cam->height, GL_RED, GL_FLOAT, frame->depth);
     }
-    gl->BindFramebuffer(GL_FRAMEBUFFER, 0);
     uint64_t t2 = now_us();
-    frame->render_us = t1 - t0;
+    if (edl_host)
+        rc = rnd__edl_host(&r->edl, gl, t, edl_rect, params->edl_strength, params->edl_radius,
+                           frame->rgba8, want_float ? frame->rgba16f : NULL, cam->width, err);
+    gl->BindFramebuffer(GL_FRAMEBUFFER, 0);
+    if (rc < 0) return rc;
+    frame->render_us = t1 - t0 + (now_us() - t2); /* the host EDL pass is rendering too */
     frame->readback_us = t2 - t1;
     frame->points_drawn = v.points_visible;
     frame->splats_drawn = out.splats;

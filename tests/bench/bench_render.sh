@@ -58,7 +58,8 @@ run_cloud bunnyData "$data/bunnyData.pts"
 run_cloud synthetic-1M "$tmp/synthetic-1M.ply"
 # Eye-Dome Lighting's cost: frames with and without shading=edl in interleaved pairs
 # (render_bench --edl-cost: the pass over the frame's depth, and the 8-bit target's writing and
-# clearing of that depth), per pipeline.
+# clearing of that depth), per pipeline; at the default edl_pass (auto: cpu on a software
+# renderer), then with the GL pass for comparison.
 for c in Guanyin synthetic-1M; do
     f="$data/Guanyin.ply"
     [ "$c" = synthetic-1M ] && f="$tmp/synthetic-1M.ply"
@@ -66,6 +67,10 @@ for c in Guanyin synthetic-1M; do
         --pipelines points,splat,kawata --edl-cost --label "$c" \
         > "$tmp/$c-edl.out" 2> "$tmp/$c-edl.err" ||
         echo "bench_render: --edl-cost run failed on $c: $(tail -1 "$tmp/$c-edl.err")" >&2
+    "$bench/render_bench" "$f" --frames "$frames" --size "$size" --backend "$backend" \
+        --pipelines points,splat,kawata --edl-cost --label "$c, edl_pass=gl" --set edl_pass=gl \
+        > "$tmp/$c-edlgl.out" 2> "$tmp/$c-edlgl.err" ||
+        echo "bench_render: --edl-cost edl_pass=gl run failed on $c: $(tail -1 "$tmp/$c-edlgl.err")" >&2
 done
 # The textbook EWA filter (ewa=exact) on the same cloud, for comparison with the default.
 "$bench/render_bench" "$tmp/synthetic-1M.ply" --frames 3 --size "$size" --backend "$backend" \
@@ -201,7 +206,9 @@ echo "EDL (render_bench --edl-cost: $frames pairs of frames, lambert then edl, s
 echo
 echo "| cloud | pipeline | lambert ms | edl ms | EDL ms (median of pair differences) | EDL CPU ms |"
 echo "|---|---|---:|---:|---:|---:|"
-for c in Guanyin synthetic-1M; do sed -n 's/^edl: //p' "$tmp/$c-edl.out" 2>/dev/null; done
+for c in Guanyin synthetic-1M; do
+    sed -n 's/^edl: //p' "$tmp/$c-edl.out" "$tmp/$c-edlgl.out" 2>/dev/null
+done
 k1=$(ms synthetic-1M kawata)
 e1=$(awk -F'|' '$3 ~ "^ *points *$" { print $6 + 0 }' "$tmp/synthetic-1M-edl.out" 2>/dev/null)
 echo
