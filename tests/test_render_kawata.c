@@ -526,6 +526,15 @@ static size_t host_vs_gpu(rnd_ctx *r, uint32_t id, const rnd_camera *cam, float 
     size_t pts = 0;
     for (size_t i = 0; i < 3 * nb; i++) words += f[0].kawata_arrays[i] != f[1].kawata_arrays[i];
     for (size_t i = 3 * nb; i < 19 * nb; i++) pts += f[0].kawata_arrays[i] != f[1].kawata_arrays[i];
+    /* the fit's splats and tile marks (on the host too, but for color=field) */
+    size_t ntile = (size_t)((f[0].buffer_w + 7) / 8) * (size_t)((f[0].buffer_h + 7) / 8);
+    size_t spl = 0, marks = 0, nspl = 0, nmark = 0;
+    for (size_t i = 19 * nb; i < 27 * nb; i++) spl += f[0].kawata_arrays[i] != f[1].kawata_arrays[i];
+    for (size_t i = 27 * nb; i < 27 * nb + ntile; i++) {
+        marks += f[0].kawata_arrays[i] != f[1].kawata_arrays[i];
+        nmark += f[1].kawata_arrays[i] != 0;
+    }
+    for (size_t i = 0; i < nb; i++) nspl += f[1].kawata_arrays[19 * nb + 8 * i + 3] != 0;
     for (size_t i = 0; i < nb; i++) *covered += f[1].kawata_arrays[nb + i] != 0xFFFFFFFFu &&
                                                 f[1].kawata_arrays[i] != 0; /* rows in use */
     for (size_t i = 0; i < 4 * npx; i++) {
@@ -534,11 +543,17 @@ static size_t host_vs_gpu(rnd_ctx *r, uint32_t id, const rnd_camera *cam, float 
     }
     for (size_t i = 0; i < npx; i++)
         depths += memcmp(&f[0].depth[i], &f[1].depth[i], sizeof(float)) != 0;
-    printf("host vs gpu, %s: buffer %dx%d, %zu covered, %llu / %llu splats; differ: %zu array "
-           "words, %zu pts words, %zu rgba8, %zu rgba16f, %zu depths\n", what, f[0].buffer_w,
-           f[0].buffer_h, *covered, (unsigned long long)f[0].splats_drawn,
-           (unsigned long long)f[1].splats_drawn, words, pts, bytes, halves, depths);
-    size_t diff = words + pts + bytes + halves + depths + (f[0].splats_drawn != f[1].splats_drawn);
+    printf("host vs gpu, %s: buffer %dx%d, %zu covered, %llu / %llu splats (%zu in the array, "
+           "%zu tiles marked); differ: %zu array words, %zu pts words, %zu splat words, %zu "
+           "marks, %zu rgba8, %zu rgba16f, %zu depths\n", what, f[0].buffer_w, f[0].buffer_h,
+           *covered, (unsigned long long)f[0].splats_drawn,
+           (unsigned long long)f[1].splats_drawn, nspl, nmark, words, pts, spl, marks, bytes,
+           halves, depths);
+    /* the splats read back are those counted, and a frame with splats marks tiles */
+    assert_int_equal(nspl, f[1].splats_drawn);
+    assert_true(nspl == 0 || nmark > 0);
+    size_t diff = words + pts + spl + marks + bytes + halves + depths +
+                  (f[0].splats_drawn != f[1].splats_drawn);
     rnd_frame_free(&f[0]);
     rnd_frame_free(&f[1]);
     return diff;

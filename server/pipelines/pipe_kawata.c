@@ -95,6 +95,7 @@
 
 #include "camera.h"
 #include "kawata_cpu.h"
+#include "kawata_fit_cpu.h"
 #include "pipe.h"
 #include "progress.h"
 #include "shaders.h"
@@ -328,7 +329,8 @@ static const void *map_shared(const gl_api *gl, kawata_state *s, const rnd_gpu_c
  * constants. Returns 0 or SD_E*. */
 static int host_passes(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c,
                        const rnd_view *v, kawata_cpu_job *job, kawata_cpu_resolve_job *rj,
-                       int color, uint32_t *nlist, sd_err *err)
+                       kawata_fit_job *fj, const int trect[4], int color, uint32_t *nlist,
+                       sd_err *err)
 {
     uint32_t ns = c->nsets ? c->nsets : 1;
     if (soft_cpu_grow((void **)&s->segs, &s->segs_cap, v->nchunks ? v->nchunks : 1,
@@ -363,24 +365,29 @@ static int host_passes(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c
         }
         s->segs[nsegs++] = (kawata_cpu_seg){hs->pos, b->base, ch->first, ch->count};
     }
-    /* depth, near, far, and with rj the list and pts */
-    static const int bufs[5] = {B_DEPTH, B_NEAR, B_FAR, B_LIST, B_PTS};
-    void *arr[5] = {NULL, NULL, NULL, NULL, NULL};
+    /* depth, near, far, with rj the list and pts, with fj the splats and the tiles (the fit
+     * reads what the resolve wrote: all read-write then) */
+    static const int bufs[7] = {B_DEPTH, B_NEAR, B_FAR, B_LIST, B_PTS, B_SPLATS, B_TILES};
+    void *arr[7] = {NULL, NULL, NULL, NULL, NULL, NULL, NULL};
     size_t rows = (size_t)(job->y1 - job->y0), bw = (size_t)job->bw;
-    const GLintptr at[5] = {(GLintptr)(job->y0 * bw * 4), (GLintptr)(job->y0 * bw * 4),
-                            (GLintptr)(job->y0 * bw * 4), 0, (GLintptr)(job->y0 * bw * 64)};
+    size_t tw = (bw + 7) / 8;
+    const GLintptr at[7] = {(GLintptr)(job->y0 * bw * 4), (GLintptr)(job->y0 * bw * 4),
+                            (GLintptr)(job->y0 * bw * 4), 0, (GLintptr)(job->y0 * bw * 64),
+                            (GLintptr)(job->y0 * bw * 32), (GLintptr)((size_t)trect[1] * tw * 4)};
     size_t area = rj ? (size_t)(rj->x1 - rj->x0) * rows : 0;
-    const GLsizeiptr bytes[5] = {(GLsizeiptr)(rows * bw * 4), (GLsizeiptr)(rows * bw * 4),
+    size_t trows = (size_t)(trect[3] - trect[1]);
+    const GLsizeiptr bytes[7] = {(GLsizeiptr)(rows * bw * 4), (GLsizeiptr)(rows * bw * 4),
                                  (GLsizeiptr)(rows * bw * 4), (GLsizeiptr)(area * 4),
-                                 (GLsizeiptr)(rows * bw * 64)};
-    int nmap = rj ? 5 : 3;
+                                 (GLsizeiptr)(rows * bw * 64), (GLsizeiptr)(rows * bw * 32),
+                                 (GLsizeiptr)(trows * tw * 4)};
+    int nmap = rj ? (fj ? 7 : 5) : 3;
     for (int a = 0; a < nmap && rc == 0 && rows > 0; a++) {
         arr[a] = map(gl, GL_SHADER_STORAGE_BUFFER, s->buf[bufs[a]], at[a], bytes[a],
-                     a < 3 ? GL_MAP_READ_BIT | GL_MAP_WRITE_BIT : GL_MAP_WRITE_BIT,
+                     a < 3 || fj ? GL_MAP_READ_BIT | GL_MAP_WRITE_BIT : GL_MAP_WRITE_BIT,
                      "mapping kawata's image buffer", err);
         if (!arr[a]) rc = err && err->code ? err->code : SD_EGL;
     }
-    uint32_t listed = 0;
+    uint32_t listed = 0, splats = 0;
     if (rc == 0 && rows > 0) {
         job->segs = s->segs, job->nsegs = nsegs;
         job->depth = arr[0], job->near = arr[1], job->far = arr[2];
@@ -394,16 +401,24 @@ static int host_passes(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c
             rj->threads = s->threads;
             listed = kawata_cpu_resolve(rj);
         }
+        if (rc == 0 && fj) { /* the tiles within reach of the rectangle cleared, then the fit */
+            memset(arr[6], 0, trows * tw * 4);
+            fj->near = arr[1], fj->pts = arr[4], fj->list = arr[3], fj->n = listed;
+            fj->splats = arr[5];
+            fj->tiles = (uint32_t *)arr[6] - (size_t)trect[1] * tw;
+            fj->threads = s->threads;
+            splats = kawata_fit_cpu(fj);
+        }
     }
-    for (int a = 0; a < 5; a++)
+    for (int a = 0; a < 7; a++)
         if (arr[a]) unmap(gl, GL_SHADER_STORAGE_BUFFER, s->buf[bufs[a]]);
     for (uint32_t i = 0; i < c->nsets; i++) {
         if (s->own[i] & OWN_POS) unmap(gl, GL_COPY_READ_BUFFER, c->sets[i].buf[RND_ATTR_POS]);
         if (s->own[i] & OWN_SRC) unmap(gl, GL_COPY_READ_BUFFER, c->sets[i].buf[src]);
     }
     gl->BindBuffer(GL_COPY_READ_BUFFER, 0);
-    if (rc == 0 && rj) { /* the counter: (splats 0, listed) */
-        const GLuint counter[2] = {0, listed};
+    if (rc == 0 && rj) { /* the counter: (splats, listed) */
+        const GLuint counter[2] = {splats, listed};
         gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->buf[B_COUNTER]);
         gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, sizeof counter, counter);
         *nlist = listed;
@@ -412,24 +427,31 @@ static int host_passes(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c
     return rc;
 }
 
-/* rnd_frame.kawata_arrays (rnd_set_kawata_probe) after pass 3's first half: the rectangle brect
- * of depth, near and far read back, then pts (16 words a buffer pixel) for its pixels with a
- * nearest point (those listed); everything else 0. NULL when out of memory (the
+/* rnd_frame.kawata_arrays (rnd_set_kawata_probe) after pass 4: the rectangle brect of depth,
+ * near and far read back, then pts (16 words a buffer pixel) for its pixels with a nearest
+ * point (those listed), the splats (8 words a buffer pixel) of the rectangle, and the tile
+ * marks of the tile rows trect[1] .. trect[3]; everything else 0. NULL when out of memory (the
  * frame then carries none). */
 static uint32_t *probe_arrays(const gl_api *gl, const kawata_state *s, int bw, int bh,
-                              const int brect[4])
+                              const int brect[4], const int trect[4])
 {
     size_t nb = (size_t)bw * (size_t)bh, y0 = (size_t)brect[1];
-    size_t rows = (size_t)(brect[3] - brect[1]);
-    uint32_t *p = calloc(nb ? 19 * nb : 1, 4);
+    size_t rows = (size_t)(brect[3] - brect[1]), tw = ((size_t)bw + 7) / 8;
+    size_t nt = tw * (((size_t)bh + 7) / 8);
+    uint32_t *p = calloc(nb ? 27 * nb + nt : 1, 4);
     if (!p) return NULL;
     gl->MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    static const int bufs[4] = {B_DEPTH, B_NEAR, B_FAR, B_PTS};
-    for (int a = 0; a < 4; a++) {
-        size_t w = a < 3 ? 1 : 16;
+    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->buf[B_TILES]);
+    gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, (GLintptr)((size_t)trect[1] * tw * 4),
+                         (GLsizeiptr)((size_t)(trect[3] - trect[1]) * tw * 4),
+                         p + 27 * nb + (size_t)trect[1] * tw);
+    static const int bufs[5] = {B_DEPTH, B_NEAR, B_FAR, B_PTS, B_SPLATS};
+    static const size_t at[5] = {0, 1, 2, 3, 19};
+    for (int a = 0; a < 5; a++) {
+        size_t w = a < 3 ? 1 : a == 3 ? 16 : 8;
         gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->buf[bufs[a]]);
         gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, (GLintptr)(y0 * bw * w * 4),
-                             (GLsizeiptr)(rows * bw * w * 4), p + a * nb + y0 * bw * w);
+                             (GLsizeiptr)(rows * bw * w * 4), p + at[a] * nb + y0 * bw * w);
     }
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
     for (size_t i = 0; i < nb; i++) {
@@ -437,6 +459,7 @@ static uint32_t *probe_arrays(const gl_api *gl, const kawata_state *s, int bw, i
         int out = i < y0 * bw || i >= (y0 + rows) * bw || x < brect[0] || x >= brect[2];
         if (out) p[i] = p[nb + i] = p[2 * nb + i] = 0;
         if (out || p[nb + i] == 0xFFFFFFFFu) memset(p + 3 * nb + 16 * i, 0, 64);
+        if (out) memset(p + 19 * nb + 8 * i, 0, 32);
     }
     return p;
 }
@@ -523,15 +546,20 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
         fill(gl, s->buf[B_NEAR], row0, rows, 0xFFFFFFFFu);
         fill(gl, s->buf[B_FAR], row0, rows, 0);
     }
-    fill(gl, s->buf[B_SPLATS], (GLintptr)brect[1] * bw * SPLAT_BYTES,
-         (GLsizeiptr)(brect[3] - brect[1]) * bw * SPLAT_BYTES, 0);
+    /* on the host with the resolve also the fit (kawata_fit_cpu.h), which clears the splats
+     * and tiles itself */
+    int host_fit = host_resolve;
+    if (!host_fit)
+        fill(gl, s->buf[B_SPLATS], (GLintptr)brect[1] * bw * SPLAT_BYTES,
+             (GLsizeiptr)(brect[3] - brect[1]) * bw * SPLAT_BYTES, 0);
     /* the tiles within reach of the rectangle's splats (3 buffer pixels around it) */
     int trect[4] = {(brect[0] - 3 > 0 ? brect[0] - 3 : 0) / 8,
                     (brect[1] - 3 > 0 ? brect[1] - 3 : 0) / 8,
                     (brect[2] + 3 < bw ? brect[2] + 3 : bw - 1) / 8 + 1,
                     (brect[3] + 3 < bh ? brect[3] + 3 : bh - 1) / 8 + 1};
-    fill(gl, s->buf[B_TILES], (GLintptr)trect[1] * tw * 4,
-         (GLsizeiptr)(trect[3] - trect[1]) * tw * 4, 0);
+    if (!host_fit)
+        fill(gl, s->buf[B_TILES], (GLintptr)trect[1] * tw * 4,
+             (GLsizeiptr)(trect[3] - trect[1]) * tw * 4, 0);
     fill(gl, s->buf[B_COUNTER], 0, 8, 0);
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
 
@@ -575,8 +603,16 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
                                      .x0 = brect[0], .x1 = brect[2], .y0 = brect[1],
                                      .y1 = brect[3], .ibits = ibits};
         memcpy(rj.view, v->view, sizeof rj.view);
-        int rc = host_passes(gl, s, c, v, &job, host_resolve ? &rj : NULL, p->color, &nlist,
-                             err);
+        kawata_fit_job fj = {.bw = bw, .bh = bh, .fw = v->width, .fh = v->height,
+                             .x0 = brect[0], .x1 = brect[2], .y0 = brect[1], .y1 = brect[3],
+                             .gamma = gamma, .slope = slope, .znear = v->znear,
+                             .zfar = v->zfar, .min_support = KAWATA_MIN_SUPPORT,
+                             .color = p->color};
+        memcpy(fj.view, v->view, sizeof fj.view);
+        memcpy(fj.proj, v->proj, sizeof fj.proj);
+        memcpy(fj.light, light, sizeof fj.light);
+        int rc = host_passes(gl, s, c, v, &job, host_resolve ? &rj : NULL,
+                             host_fit ? &fj : NULL, trect, p->color, &nlist, err);
         if (rc < 0) return rc;
         if (!rebind && c->nsets) rnd_kit_bind_set(k, &c->sets[0], p->color);
     } else {
@@ -623,13 +659,15 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
             gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
         }
     }
-    if (k->kawata_probe) d->out->probe = probe_arrays(gl, s, bw, bh, brect);
-    /* Passes 3 (average) and 4 (plane fit, shading): the splats. */
-    gl->UseProgram(s->prog[P_FIT]);
-    gl->Uniform1ui(s->loc[P_FIT][U_THREADS], lg * GROUP);
-    gl->DispatchCompute(lg, 1, 1);
-    gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT |
-                      GL_BUFFER_UPDATE_BARRIER_BIT);
+    /* Passes 3 (average) and 4 (plane fit, shading): the splats (unless the host fitted). */
+    if (!host_fit) {
+        gl->UseProgram(s->prog[P_FIT]);
+        gl->Uniform1ui(s->loc[P_FIT][U_THREADS], lg * GROUP);
+        gl->DispatchCompute(lg, 1, 1);
+        gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT |
+                          GL_BUFFER_UPDATE_BARRIER_BIT);
+    }
+    if (k->kawata_probe) d->out->probe = probe_arrays(gl, s, bw, bh, brect, trect);
 
     /* Pass 5 into the target over the cloud's screen rectangle, grown by the cut-off. */
     rnd__screen_rect(v, c->bmin, c->bmax, (int)ceilf(cutoff) + 1, rect);

@@ -81,12 +81,14 @@ typedef struct rnd_frame {
     int complete;             /* 1: every node the view wants was drawn (always 1 for a flat
                                  cloud); 0: a later frame of the same view draws more */
     uint32_t lod_wanted, lod_drawn, lod_uploaded; /* LOD clouds: nodes this frame */
-    /* kawata with rnd_set_kawata_probe on: its image buffer's arrays after passes 1 and 2 and
-     * pass 3's first half (pipe_kawata.c), each buffer_w x buffer_h entries, one after the
-     * other: depth, near and far (a word a pixel), then pts (16 words a pixel: the nearest and
-     * the farthest point in eye space, their colours, as float bits) for the pixels with a
-     * nearest point, all inside the cloud's buffer rectangle; everything else 0 (the rest of
-     * the buffer is not used by a frame). NULL otherwise. */
+    /* kawata with rnd_set_kawata_probe on: its image buffer's arrays after passes 1-4
+     * (pipe_kawata.c), each buffer_w x buffer_h entries, one after the other: depth, near and
+     * far (a word a pixel), then pts (16 words a pixel: the nearest and the farthest point in
+     * eye space, their colours, as float bits) for the pixels with a nearest point, then the
+     * splats (8 words a pixel: frame x, y, depth, 1, colour, 1; 0 for none), all inside the
+     * cloud's buffer rectangle; then the 8x8 tiles' marks ((buffer_w + 7) / 8 x
+     * (buffer_h + 7) / 8 words, the tile rows within reach of the rectangle); everything else
+     * 0 (the rest of the buffer is not used by a frame). NULL otherwise. */
     uint32_t *kawata_arrays;
 } rnd_frame;
 
