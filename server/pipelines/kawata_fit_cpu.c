@@ -7,117 +7,167 @@
 
 #include "kawata_cpu.h"
 #include "progress.h"
+#include "simd.h"
 
 enum { BANDS_PER_THREAD = 4 };
 
-/* The normal-equation sums, the supporting points, the first round's plane (g[3]: the second
- * round's residual bound, 0 in the first). */
-typedef struct fit {
-    float sxx, sxy, syy, sx, sy, n, sxz, syz, sz, szz;
-    int support;
-    float g[4];
-} fit;
-
 static const float NONE[4] = {0.0f, 0.0f, 0.0f, 0.0f};
 
-static void fit_clear(fit *f)
+/* Eight listed pixels at a time, one a lane (AVX2 where the CPU has it, simd.h): each lane
+ * runs the shader's operations on its own pixel, and the shader's early returns become masks
+ * (a lane's sums are replaced, not added to, where its point is left out, so they stay those of
+ * the points taken). Vector float operations round as the scalar ones. */
+typedef struct lanes {
+    prep_v8f x[18], y[18], z[18], w[18]; /* neighbour k's nearest 2k, farthest 2k + 1; the
+                                            pixel itself is k = 4 */
+    prep_v8f pax, pay, paz, a1x, a1y, a1z, a1w, tol;
+} lanes;
+
+/* The normal-equation sums and the supporting points of a round. */
+typedef struct vfit {
+    prep_v8f sxx, sxy, syy, sx, sy, n, sxz, syz, sz, szz;
+    prep_v8i support;
+} vfit;
+
+/* Lane by lane m ? a : b; |a|. (Macros: vectors pass by value through no function here, whose
+ * ABI would differ between the AVX2 and the baseline clone, -Wpsabi.) */
+#define sel(m, a, b) ((prep_v8f)(((prep_v8i)(a) & (m)) | ((prep_v8i)(b) & ~(m))))
+#define vabs(a) ((prep_v8f)((prep_v8i)(a) & 0x7FFFFFFF))
+/* det3 of the shader: columns (a0 a1 a2), (b0 b1 b2), (c0 c1 c2). */
+#define det3(a0, a1, a2, b0, b1, b2, c0, c1, c2)                                              \
+    ((a0) * ((b1) * (c2) - (c1) * (b2)) - (b0) * ((a1) * (c2) - (c1) * (a2)) +                 \
+     (c0) * ((a1) * (b2) - (b1) * (a2)))
+
+/* add_point over the 18 points: a point is taken when it exists, lies within the tolerance of
+ * the nearest one and (g3 > 0, the second round) within g3 of the plane g. */
+static inline void round_of(const lanes *L, const prep_v8f *g, vfit *f)
 {
-    f->sxx = f->sxy = f->syy = f->sx = f->sy = f->n = f->sxz = f->syz = f->sz = f->szz = 0.0f;
-    f->support = 0;
+    const prep_v8f zero = {0}, one = zero + 1.0f;
+    f->sxx = f->sxy = f->syy = f->sx = f->sy = f->n = f->sxz = f->syz = f->sz = f->szz = zero;
+    f->support = (prep_v8i){0};
+    for (int i = 0; i < 18; i++) {
+        prep_v8i ok = (L->w[i] != 0.0f) & ~(vabs(L->z[i] - L->a1z) > L->tol);
+        prep_v8f ex = L->x[i] - L->pax, ey = L->y[i] - L->pay, ez = L->z[i] - L->paz;
+        prep_v8f r = ez - (g[0] * ex + g[1] * ey + g[2]);
+        ok &= ~((g[3] > 0.0f) & (vabs(r) > g[3]));
+        if (i != 8) f->support -= ok;
+        f->sxx = sel(ok, f->sxx + ex * ex, f->sxx), f->sxy = sel(ok, f->sxy + ex * ey, f->sxy);
+        f->syy = sel(ok, f->syy + ey * ey, f->syy);
+        f->sx = sel(ok, f->sx + ex, f->sx), f->sy = sel(ok, f->sy + ey, f->sy);
+        f->n = sel(ok, f->n + one, f->n);
+        f->sxz = sel(ok, f->sxz + ex * ez, f->sxz), f->syz = sel(ok, f->syz + ey * ez, f->syz);
+        f->sz = sel(ok, f->sz + ez, f->sz), f->szz = sel(ok, f->szz + ez * ez, f->szz);
+    }
 }
 
-static inline void add_point(const float *t, const float *pa, float z0, float tol, int self,
-                             fit *f)
+/* solve: Cramer's rule; *ok the lanes where the equations are not singular. */
+static inline void solve(const vfit *f, prep_v8f abc[3], prep_v8i *ok)
 {
-    if (t[3] == 0.0f || fabsf(t[2] - z0) > tol) return;
-    float ex = t[0] - pa[0], ey = t[1] - pa[1], ez = t[2] - pa[2];
-    float r = ez - (f->g[0] * ex + f->g[1] * ey + f->g[2]);
-    if (f->g[3] > 0.0f && fabsf(r) > f->g[3]) return;
-    if (!self) f->support++;
-    f->sxx += ex * ex, f->sxy += ex * ey, f->syy += ey * ey;
-    f->sx += ex, f->sy += ey, f->n += 1.0f;
-    f->sxz += ex * ez, f->syz += ey * ez, f->sz += ez, f->szz += ez * ez;
+    prep_v8f det = det3(f->sxx, f->sxy, f->sx, f->sxy, f->syy, f->sy, f->sx, f->sy, f->n);
+    prep_v8f lim = 1e-6f * f->sxx * f->syy * f->n;
+    abc[0] = det3(f->sxz, f->syz, f->sz, f->sxy, f->syy, f->sy, f->sx, f->sy, f->n) / det;
+    abc[1] = det3(f->sxx, f->sxy, f->sx, f->sxz, f->syz, f->sz, f->sx, f->sy, f->n) / det;
+    abc[2] = det3(f->sxx, f->sxy, f->sx, f->sxy, f->syy, f->sy, f->sxz, f->syz, f->sz) / det;
+    *ok = vabs(det) > lim;
 }
 
-/* det3 of the shader: columns a, b, c. */
-static inline float det3(const float *a, const float *b, const float *c)
+/* *a = sqrt(*a) lane by lane. */
+static inline void vsqrt(prep_v8f *a)
 {
-    return a[0] * (b[1] * c[2] - c[1] * b[2]) - b[0] * (a[1] * c[2] - c[1] * a[2]) +
-           c[0] * (a[1] * b[2] - b[1] * a[2]);
+    for (int l = 0; l < 8; l++) (*a)[l] = sqrtf((*a)[l]);
 }
 
-static int solve(const fit *f, float abc[3])
+/* The shader's pixel() up to the normal for the eight lanes: *keep the lanes that make a
+ * splat, nrm their normals. */
+PREP_CLONES
+static void fit8(const lanes *L, float slope, int min_support, prep_v8i *keep, prep_v8f *nrm)
 {
-    abc[0] = abc[1] = abc[2] = 0.0f;
-    const float cx[3] = {f->sxx, f->sxy, f->sx}, cy[3] = {f->sxy, f->syy, f->sy};
-    const float cn[3] = {f->sx, f->sy, f->n}, cz[3] = {f->sxz, f->syz, f->sz};
-    float det = det3(cx, cy, cn);
-    float lim = 1e-6f * f->sxx * f->syy * f->n;
-    if (!(fabsf(det) > lim)) return 0;
-    abc[0] = det3(cz, cy, cn) / det;
-    abc[1] = det3(cx, cz, cn) / det;
-    abc[2] = det3(cx, cy, cz) / det;
-    return 1;
+    const prep_v8f zero = {0};
+    prep_v8f g[4] = {zero, zero, zero, zero}, abc[3];
+    vfit f;
+    prep_v8i k = L->a1w != 0.0f;
+    round_of(L, g, &f);
+    k &= f.support >= min_support;
+    prep_v8i ok1;
+    solve(&f, abc, &ok1);
+    ok1 &= k;
+    prep_v8f rss = f.szz - 2.0f * (abc[0] * f.sxz + abc[1] * f.syz + abc[2] * f.sz) +
+                   abc[0] * abc[0] * f.sxx + 2.0f * abc[0] * abc[1] * f.sxy +
+                   abc[1] * abc[1] * f.syy + 2.0f * abc[0] * abc[2] * f.sx +
+                   2.0f * abc[1] * abc[2] * f.sy + abc[2] * abc[2] * f.n;
+    prep_v8f m = sel(rss > 0.0f, rss, zero);
+    prep_v8f b1 = sel(ok1, m / f.n, zero), b2 = 0.0625f * slope * (-L->a1z);
+    vsqrt(&b1);
+    b1 = 2.5f * b1;
+    prep_v8f bound = sel(b1 > b2, b1, b2);
+    prep_v8f e1x = L->a1x - L->pax, e1y = L->a1y - L->pay, e1z = L->a1z - L->paz;
+    prep_v8f r1 = e1z - (abc[0] * e1x + abc[1] * e1y + abc[2]);
+    k &= ~(ok1 & (vabs(r1) > bound));
+    ok1 &= k;
+    prep_v8f one = zero + 1.0f;
+    nrm[0] = zero, nrm[1] = zero, nrm[2] = one;
+    int any = 0;
+    for (int l = 0; l < 8; l++) any |= ok1[l];
+    if (!any) {
+        *keep = k;
+        return;
+    }
+    g[0] = sel(ok1, abc[0], zero), g[1] = sel(ok1, abc[1], zero);
+    g[2] = sel(ok1, abc[2], zero), g[3] = sel(ok1, bound, zero);
+    round_of(L, g, &f);
+    k &= ~(ok1 & (f.support < min_support));
+    prep_v8i ok2;
+    solve(&f, abc, &ok2);
+    ok2 &= ok1 & k;
+    prep_v8f len = sel(ok2, abc[0] * abc[0] + abc[1] * abc[1] + 1.0f, one);
+    vsqrt(&len);
+    nrm[0] = sel(ok2, -abc[0] / len, zero), nrm[1] = sel(ok2, -abc[1] / len, zero);
+    nrm[2] = sel(ok2, 1.0f / len, one);
+    *keep = k;
 }
 
-/* One round over the 18 points v[0..17] (neighbour k's nearest 2k, farthest 2k + 1; the pixel
- * itself is k = 4). */
-static void round_of(const float *const v[18], const float *pa, float z0, float tol, fit *f)
-{
-    fit_clear(f);
-    for (int i = 0; i < 18; i++) add_point(v[i], pa, z0, tol, i == 8, f);
-}
-
-/* Buffer pixel (qx, qy) of the list: its splat, its tiles marked; returns 1 for a splat. */
-static int pixel(const kawata_fit_job *job, int qx, int qy)
+/* Lane l of L: listed pixel (qx, qy), its points and its 3x3 neighbourhood's ("no point"
+ * outside the rectangle and where near[] has none). */
+static void load_lane(const kawata_fit_job *job, int qx, int qy, int l, lanes *L)
 {
     const int w = job->bw;
     const size_t row0 = (size_t)job->y0 * (size_t)w;
     const size_t b = (size_t)qy * (size_t)w + (size_t)qx - row0;
     const float *a1 = job->pts + 16 * b, *a2 = a1 + 4;
-    if (a1[3] == 0.0f) return 0;
-    float pa[3];
-    for (int i = 0; i < 3; i++) pa[i] = a2[3] > 0.0f ? 0.5f * (a1[i] + a2[i]) : a1[i];
-    float tol = job->gamma + job->slope * (-a1[2]);
-    const float *v[18];
     for (int k = 0, dy = -1; dy <= 1; dy++)
         for (int dx = -1; dx <= 1; dx++, k += 2) {
             int rx = qx + dx, ry = qy + dy;
-            if (rx < job->x0 || ry < job->y0 || rx >= job->x1 || ry >= job->y1) {
-                v[k] = v[k + 1] = NONE;
-                continue;
+            const float *p = NONE, *p2 = NONE;
+            if (rx >= job->x0 && ry >= job->y0 && rx < job->x1 && ry < job->y1) {
+                size_t r = (size_t)ry * (size_t)w + (size_t)rx - row0;
+                if (job->near[r] != 0xFFFFFFFFu) p = job->pts + 16 * r, p2 = p + 4;
             }
-            size_t r = (size_t)ry * (size_t)w + (size_t)rx - row0;
-            if (job->near[r] == 0xFFFFFFFFu) {
-                v[k] = v[k + 1] = NONE;
-                continue;
-            }
-            v[k] = job->pts + 16 * r, v[k + 1] = job->pts + 16 * r + 4;
+            L->x[k][l] = p[0], L->y[k][l] = p[1], L->z[k][l] = p[2], L->w[k][l] = p[3];
+            L->x[k + 1][l] = p2[0], L->y[k + 1][l] = p2[1];
+            L->z[k + 1][l] = p2[2], L->w[k + 1][l] = p2[3];
         }
-    fit f;
-    f.g[0] = f.g[1] = f.g[2] = f.g[3] = 0.0f;
-    round_of(v, pa, a1[2], tol, &f);
-    if (f.support < job->min_support) return 0;
-    float nrm[3] = {0.0f, 0.0f, 1.0f}, abc[3];
-    if (solve(&f, abc)) {
-        float rss = f.szz - 2.0f * (abc[0] * f.sxz + abc[1] * f.syz + abc[2] * f.sz) +
-                    abc[0] * abc[0] * f.sxx + 2.0f * abc[0] * abc[1] * f.sxy +
-                    abc[1] * abc[1] * f.syy + 2.0f * abc[0] * abc[2] * f.sx +
-                    2.0f * abc[1] * abc[2] * f.sy + abc[2] * abc[2] * f.n;
-        float m = rss > 0.0f ? rss : 0.0f;
-        float b1 = 2.5f * sqrtf(m / f.n), b2 = 0.0625f * job->slope * (-a1[2]);
-        float bound = b1 > b2 ? b1 : b2;
-        float e1x = a1[0] - pa[0], e1y = a1[1] - pa[1], e1z = a1[2] - pa[2];
-        float r1 = e1z - (abc[0] * e1x + abc[1] * e1y + abc[2]);
-        if (fabsf(r1) > bound) return 0;
-        f.g[0] = abc[0], f.g[1] = abc[1], f.g[2] = abc[2], f.g[3] = bound;
-        round_of(v, pa, a1[2], tol, &f);
-        if (f.support < job->min_support) return 0;
-        if (solve(&f, abc)) {
-            float len = sqrtf(abc[0] * abc[0] + abc[1] * abc[1] + 1.0f);
-            nrm[0] = -abc[0] / len, nrm[1] = -abc[1] / len, nrm[2] = 1.0f / len;
-        }
-    }
+    float pa[3];
+    for (int i = 0; i < 3; i++) pa[i] = a2[3] > 0.0f ? 0.5f * (a1[i] + a2[i]) : a1[i];
+    L->pax[l] = pa[0], L->pay[l] = pa[1], L->paz[l] = pa[2];
+    L->a1x[l] = a1[0], L->a1y[l] = a1[1], L->a1z[l] = a1[2], L->a1w[l] = a1[3];
+    L->tol[l] = job->gamma + job->slope * (-a1[2]);
+}
+
+/* An empty lane (past the list's end): no splat. */
+static void empty_lane(int l, lanes *L)
+{
+    L->a1w[l] = 0.0f, L->a1z[l] = 0.0f, L->tol[l] = 0.0f;
+    for (int k = 0; k < 18; k++) L->w[k][l] = 0.0f;
+}
+
+/* The rest of the shader's pixel() for a kept pixel: colour, shading, the splat, the tiles. */
+static void finish(const kawata_fit_job *job, int qx, int qy, const float nrm[3])
+{
+    const int w = job->bw;
+    const size_t b = (size_t)qy * (size_t)w + (size_t)qx - (size_t)job->y0 * (size_t)w;
+    const float *a1 = job->pts + 16 * b, *a2 = a1 + 4;
+    float pa[3];
+    for (int i = 0; i < 3; i++) pa[i] = a2[3] > 0.0f ? 0.5f * (a1[i] + a2[i]) : a1[i];
     const float *c1 = a1 + 8, *c2 = a1 + 12;
     float col[3];
     for (int i = 0; i < 3; i++) col[i] = a2[3] > 0.0f ? 0.5f * (c1[i] + c2[i]) : c1[i];
@@ -156,7 +206,6 @@ static int pixel(const kawata_fit_job *job, int qx, int qy)
     __atomic_store_n(&job->tiles[ty0 * tw + tx1], 1u, __ATOMIC_RELAXED);
     __atomic_store_n(&job->tiles[ty1 * tw + tx0], 1u, __ATOMIC_RELAXED);
     __atomic_store_n(&job->tiles[ty1 * tw + tx1], 1u, __ATOMIC_RELAXED);
-    return 1;
 }
 
 typedef struct fit_run {
@@ -192,9 +241,25 @@ static int fit_task(void *ctx, size_t c, int tid, sd_err *err)
         size_t at = ((size_t)(y - (uint32_t)job->y0) * (size_t)job->bw + (size_t)job->x0) * 8;
         memset(job->splats + at, 0, rw * 8 * sizeof(float));
     }
-    uint32_t count = 0;
-    for (uint32_t k = list_row(job, ya), e; k < job->n && (e = job->list[k]) >> 16 < yb; k++)
-        count += (uint32_t)pixel(job, (int)(e & 0xFFFFu), (int)(e >> 16));
+    uint32_t count = 0, k0 = list_row(job, ya), k1 = list_row(job, yb);
+    lanes L;
+    for (uint32_t k = k0; k < k1; k += 8) {
+        for (uint32_t l = 0; l < 8; l++) {
+            uint32_t e = k + l < k1 ? job->list[k + l] : 0;
+            if (k + l < k1) load_lane(job, (int)(e & 0xFFFFu), (int)(e >> 16), (int)l, &L);
+            else empty_lane((int)l, &L);
+        }
+        prep_v8i keep;
+        prep_v8f nrm[3];
+        fit8(&L, job->slope, job->min_support, &keep, nrm);
+        for (uint32_t l = 0; l < 8 && k + l < k1; l++) {
+            if (!keep[l]) continue;
+            uint32_t e = job->list[k + l];
+            const float nl[3] = {nrm[0][l], nrm[1][l], nrm[2][l]};
+            finish(job, (int)(e & 0xFFFFu), (int)(e >> 16), nl);
+            count++;
+        }
+    }
     __atomic_fetch_add(&r->count, count, __ATOMIC_RELAXED);
     return 0;
 }
