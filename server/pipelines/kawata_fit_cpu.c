@@ -51,12 +51,14 @@ static inline void round_of(const lanes *L, const prep_v8f *g, vfit *f)
         prep_v8f r = ez - (g[0] * ex + g[1] * ey + g[2]);
         ok &= ~((g[3] > 0.0f) & (vabs(r) > g[3]));
         if (i != 8) f->support -= ok;
-        f->sxx = sel(ok, f->sxx + ex * ex, f->sxx), f->sxy = sel(ok, f->sxy + ex * ey, f->sxy);
-        f->syy = sel(ok, f->syy + ey * ey, f->syy);
-        f->sx = sel(ok, f->sx + ex, f->sx), f->sy = sel(ok, f->sy + ey, f->sy);
-        f->n = sel(ok, f->n + one, f->n);
-        f->sxz = sel(ok, f->sxz + ex * ez, f->sxz), f->syz = sel(ok, f->syz + ey * ez, f->syz);
-        f->sz = sel(ok, f->sz + ez, f->sz), f->szz = sel(ok, f->szz + ez * ez, f->szz);
+        /* a point left out adds +0 to every sum: the sums start at +0 and a rounded sum is -0
+         * only when both terms are, so they never are -0, and adding +0 leaves them as they
+         * were, as the shader's early return does */
+        ex = (prep_v8f)((prep_v8i)ex & ok), ey = (prep_v8f)((prep_v8i)ey & ok);
+        ez = (prep_v8f)((prep_v8i)ez & ok);
+        f->sxx += ex * ex, f->sxy += ex * ey, f->syy += ey * ey;
+        f->sx += ex, f->sy += ey, f->n += (prep_v8f)((prep_v8i)one & ok);
+        f->sxz += ex * ez, f->syz += ey * ez, f->sz += ez, f->szz += ez * ez;
     }
 }
 
