@@ -24,7 +24,10 @@
 //           frame y, eye depth, 1), splats[2b + 1] = (colour, 1). The splats of the rectangle's
 //           rows were cleared to 0 ("none"), so a pixel with fewer than u_min_support supporters
 //           writes nothing. A neighbour is empty where near[] says so (its pts entries are an
-//           earlier frame's). Counts the splats in nsplats.
+//           earlier frame's). Counts the splats in nsplats. Its float operations are `precise`
+//           and the determinants and the normal's length written out (not determinant() and
+//           normalize(), whose expansion is the compiler's): kawata_fit_cpu.c repeats them on
+//           the host word for word (kawata_raster=cpu).
 
 layout(local_size_x = 64) in;
 

@@ -93,7 +93,8 @@ void kawata_cpu_mem_free(kawata_cpu_mem *m);
  * 1.0), zeros for "no point"). On llvmpipe that compute pass cost ~10 ms of CPU on the 1M scan
  * for ~65k pixels, bound by its scattered reads; here it is a small part of that. The colour
  * sources: RGBA8 (unpackUnorm4x8: each byte / 255.0) or the intensity's float clamped to
- * [0, 1]; color=field (a polynomial colour map) stays with the GL (pipe_kawata.c). */
+ * [0, 1]; color=field (a polynomial colour map) stays with the GL (pipe_kawata.c). The rest of
+ * pass 3 and pass 4 (STAGE 2, the fit) follow on the host too: kawata_fit_cpu.h. */
 
 /* A buffer set: its positions and colour source (NULL when none of its points is visible),
  * cloud-wide index of its first point, points. */

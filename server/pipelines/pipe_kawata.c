@@ -66,15 +66,20 @@
  * their cloud-wide index, and STAGE 1 runs once per set, each resolving the points of its own.
  *
  * On a software renderer (kawata_raster=auto; =cpu anywhere) passes 1 and 2, the list and
- * STAGE 1 run on the host instead (kawata_cpu.h): every core, the shader's float operations in
- * its order, so the arrays handed to the fit are the compute path's word for word (tests:
- * test_render_kawata's test_host_equals_gpu, test_lod, test_kawata_cpu). The positions and
- * colours are read where the GL keeps them, each buffer set's buffers mapped for reading (on
- * llvmpipe its own memory: no copy; a LOD pool's two sets share their buffers, mapped once),
- * and the arrays are written into the mapped storage buffers, which are unmapped before the
- * fit. color=field keeps STAGE 0-1 in the GL (its colour map is a shader polynomial). Every
- * cloud form the GL path draws (one set, several, LOD pools, ranges after culling and budgets)
- * goes through the host path; there is no fallback to the GL for any of them.
+ * STAGE 1 run on the host instead (kawata_cpu.h), and so does STAGE 2, the fit
+ * (kawata_fit_cpu.h): every core, the shader's float operations in its order, so the arrays,
+ * the splats and the tile marks handed to the gather are the compute path's word for word
+ * (tests: test_render_kawata's test_host_equals_gpu, test_lod, test_kawata_cpu). For that the
+ * fit's determinants and its normal's length are written out in the shader and `precise`
+ * (the built-ins' expansion is the compiler's: with determinant() and normalize() 15k of
+ * Guanyin's splat words differed; writing them out moved the GL path's bunny frame 89.6 dB from
+ * its golden). The positions and colours are read where the GL keeps them, each buffer set's
+ * buffers mapped for reading (on llvmpipe its own memory: no copy; a LOD pool's two sets share
+ * their buffers, mapped once), and the arrays, splats and marks are written into the mapped
+ * storage buffers, which are unmapped before the gather. color=field keeps STAGE 0-2 in the GL
+ * (its colour map is a shader polynomial). Every cloud form the GL path draws (one set,
+ * several, LOD pools, ranges after culling and budgets) goes through the host path; there is
+ * no fallback to the GL for any of them.
  *
  * Cost (the 1M scan at 1280x720, CPU time of every thread, glFinish between passes, a loaded
  * 2-core machine). The GL path: clears ~2.5 ms, pass 1 ~23, pass 2 ~24, the list ~1, pass 3's
@@ -86,9 +91,11 @@
  * the whole raster pass of `points`. The host path: the per-thread arrays cleared ~0.55,
  * pass 1 (the projection 2.6, memory-bound, and the minima) ~4.4, merged ~0.45, pass 2 ~3.7,
  * merged ~0.55, the list ~0.3, the resolve ~2.2 (~12 in all, against ~55 for the same work in
- * the GL), then the GL's clears ~1.2, fit ~10 and gather ~11: ~36-38 ms against `splat`'s
- * ~83, 2.1-2.2x (README "kawata's passes 1-3 on the host"; there kawata's point passes run in
- * C while splat's run in llvmpipe). */
+ * the GL), the fit ~8.2 (with its clears of the splats and tiles; the GL's STAGE 2 cost ~10.3
+ * and its clears ~1.2: the host's is bound by its reads of the 9 neighbours' points, eight
+ * pixels at a time), then the GL's gather ~11: ~33-34 ms against `splat`'s ~82, 2.4x (README
+ * "kawata's passes 1-3 on the host"; there kawata's point passes run in C while splat's run in
+ * llvmpipe). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
