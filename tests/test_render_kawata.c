@@ -530,7 +530,8 @@ static size_t host_vs_gpu(rnd_ctx *r, uint32_t id, const rnd_camera *cam, float 
     /* the fit's splats and tile marks (on the host too, but for color=field) */
     size_t ntile = (size_t)((f[0].buffer_w + 7) / 8) * (size_t)((f[0].buffer_h + 7) / 8);
     size_t spl = 0, marks = 0, nspl = 0, nmark = 0;
-    for (size_t i = 19 * nb; i < 27 * nb; i++) spl += f[0].kawata_arrays[i] != f[1].kawata_arrays[i];
+    for (size_t i = 19 * nb; i < 27 * nb; i++)
+        spl += f[0].kawata_arrays[i] != f[1].kawata_arrays[i];
     for (size_t i = 27 * nb; i < 27 * nb + ntile; i++) {
         marks += f[0].kawata_arrays[i] != f[1].kawata_arrays[i];
         nmark += f[1].kawata_arrays[i] != 0;
