@@ -32,9 +32,15 @@ static inline __m128 cos_pi4(__m128 d)
                                -1.3352627688545893f, 0.23533063035889312f,
                                -0.025806891390014051f, 0.0019295743094039221f,
                                -0.00010463810492484565f};
+    /* written out (not a loop: GCC kept the loop and reloaded each coefficient) */
     __m128 u = _mm_mul_ps(d, d), s = _mm_set1_ps(c[7]);
-    for (int i = 6; i >= 0; i--) s = _mm_add_ps(_mm_set1_ps(c[i]), _mm_mul_ps(u, s));
-    return s;
+    s = _mm_add_ps(_mm_set1_ps(c[6]), _mm_mul_ps(u, s));
+    s = _mm_add_ps(_mm_set1_ps(c[5]), _mm_mul_ps(u, s));
+    s = _mm_add_ps(_mm_set1_ps(c[4]), _mm_mul_ps(u, s));
+    s = _mm_add_ps(_mm_set1_ps(c[3]), _mm_mul_ps(u, s));
+    s = _mm_add_ps(_mm_set1_ps(c[2]), _mm_mul_ps(u, s));
+    s = _mm_add_ps(_mm_set1_ps(c[1]), _mm_mul_ps(u, s));
+    return _mm_add_ps(_mm_set1_ps(c[0]), _mm_mul_ps(u, s));
 }
 #endif
 
@@ -205,7 +211,7 @@ static void *blend_main(void *arg)
         if (tx1 >= job->width) tx1 = job->width - 1;
         if (ty1 >= y1) ty1 = y1 - 1;
         for (uint32_t e = m->first[tile]; e < m->first[tile + 1]; e++) {
-            const float *q = m->discs + 8 * (size_t)m->list[e];
+            const float *q = m->tiled + 8 * (size_t)e;
             int x0, x1, ya, yb;
             if (!disc_rect(q, job->width, y0, y1, &x0, &x1, &ya, &yb)) continue;
             x0 = x0 > tx0 ? x0 : tx0, x1 = x1 < tx1 ? x1 : tx1;
@@ -245,7 +251,7 @@ int soft_cpu_grow(void **p, size_t *cap, size_t n, size_t sz)
 }
 
 /* The binning: per tile the discs that reach it, in draw order (a counting sort: counts,
- * prefix sums, then a fill in draw order). */
+ * prefix sums, then a fill in draw order), copied into tiled. */
 static int bin(soft_cpu_job *job, uint64_t n, int ntx, int nty)
 {
     soft_cpu_mem *m = job->mem;
@@ -264,7 +270,7 @@ static int bin(soft_cpu_job *job, uint64_t n, int ntx, int nty)
             }
     }
     if (total > UINT32_MAX ||
-        soft_cpu_grow((void **)&m->list, &m->list_cap, total, sizeof *m->list))
+        soft_cpu_grow((void **)&m->tiled, &m->tiled_cap, 8 * total, sizeof *m->tiled))
         return -1;
     for (size_t i = 0; i < ntiles; i++) m->first[i + 1] += m->first[i];
     /* fill: first[t] walks tile t's range, and ends at the next tile's start */
@@ -273,7 +279,8 @@ static int bin(soft_cpu_job *job, uint64_t n, int ntx, int nty)
         if (!disc_rect(m->discs + 8 * k, job->width, y0, y1, &x0, &x1, &ya, &yb)) continue;
         for (int ty = (ya - y0) >> TILE_SHIFT; ty <= (yb - y0) >> TILE_SHIFT; ty++)
             for (int tx = x0 >> TILE_SHIFT; tx <= x1 >> TILE_SHIFT; tx++)
-                m->list[m->first[(size_t)ty * (size_t)ntx + (size_t)tx]++] = (uint32_t)k;
+                memcpy(m->tiled + 8 * (size_t)m->first[(size_t)ty * (size_t)ntx + (size_t)tx]++,
+                       m->discs + 8 * k, 8 * sizeof(float));
     }
     /* each first[t] now holds tile t's end: shift back to the starts */
     memmove(m->first + 1, m->first, ntiles * sizeof *m->first);
@@ -313,7 +320,7 @@ int soft_cpu_composite(soft_cpu_job *job)
 void soft_cpu_mem_free(soft_cpu_mem *m)
 {
     free(m->discs);
-    free(m->list);
+    free(m->tiled);
     free(m->first);
     memset(m, 0, sizeof *m);
 }

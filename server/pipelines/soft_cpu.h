@@ -13,7 +13,8 @@
  * The discs come in axis order, which jumps about the frame: blending them so would miss the
  * cache at nearly every row a disc touches. So they are first binned into 64x64-pixel tiles by
  * a counting sort that keeps the draw order within each tile (count, prefix sum, fill in
- * order), and the threads take whole tiles, whose layer and keys stay in cache. A pixel's
+ * order; each tile's discs copied after one another, so that the blend walks memory in
+ * sequence), and the threads take whole tiles, whose layer and keys stay in cache. A pixel's
  * discs are the same, in the same order, whatever the thread count. */
 #pragma once
 #include <stddef.h>
@@ -31,8 +32,10 @@ typedef struct soft_cpu_seg {
 /* The compositor's working memory, kept between frames (grown as needed). */
 typedef struct soft_cpu_mem {
     float *discs;              /* 8 floats per disc, in draw order */
-    uint32_t *list, *first;    /* the tiles' lists of discs, and where each tile's starts */
-    size_t discs_cap, list_cap, first_cap;
+    float *tiled;              /* the tiles' discs, each tile's copied contiguous (8 floats a
+                                * disc, in draw order): the blend reads them in sequence */
+    uint32_t *first;           /* where each tile's discs start in tiled (in discs) */
+    size_t discs_cap, tiled_cap, first_cap;
 } soft_cpu_mem;
 
 typedef struct soft_cpu_job {
