@@ -74,10 +74,13 @@ static inline int disc_rect(const float *q, int width, int ylo, int yhi, int *x0
     if (!(r > 0.0f)) return 0;
     float vy0 = cy - r - 0.5f, vy1 = cy + r - 0.5f, vx0 = cx - r - 0.5f, vx1 = cx + r - 0.5f;
     if (!(vy1 >= (float)ylo && vy0 < (float)yhi && vx1 >= 0.0f && vx0 < (float)width)) return 0;
-    *y0 = iceil(fmaxf(vy0, (float)ylo));
-    *y1 = ifloor(fminf(vy1, (float)(yhi - 1)));
-    *x0 = iceil(fmaxf(vx0, 0.0f));
-    *x1 = ifloor(fminf(vx1, (float)(width - 1)));
+    /* clamps by comparison (fmaxf and fminf are calls on the baseline x86-64); the values are
+     * not NaN here (the test above let none through) */
+    float fylo = (float)ylo, fyhi = (float)(yhi - 1), fxhi = (float)(width - 1);
+    *y0 = iceil(vy0 > fylo ? vy0 : fylo);
+    *y1 = ifloor(vy1 < fyhi ? vy1 : fyhi);
+    *x0 = iceil(vx0 > 0.0f ? vx0 : 0.0f);
+    *x1 = ifloor(vx1 < fxhi ? vx1 : fxhi);
     return *x0 <= *x1 && *y0 <= *y1;
 }
 
@@ -109,9 +112,10 @@ static void *gather_main(void *arg)
     return NULL;
 }
 
-/* One disc over the pixels of rectangle [x0, x1] x [y0, y1] (inside the disc's own). */
+/* One disc over the pixels of rectangle [x0, x1] x [y0, y1] (inside the disc's own, and inside
+ * this thread's tile, whose last column is xlim). */
 static void blend_disc(const soft_cpu_job *job, const float *q, int x0, int x1, int y0, int y1,
-                       int *lo, int *hi)
+                       int xlim, int *lo, int *hi)
 {
     const int width = job->width;
     float cx = q[0], cy = q[1], r = q[2], depth = q[3], cr = q[4], cg = q[5], cb = q[6];
@@ -159,15 +163,23 @@ static void blend_disc(const soft_cpu_job *job, const float *q, int x0, int x1, 
             __m128 phi = _mm_mul_ps(_mm_mul_ps(vlam, _mm_add_ps(cos_pi4(d), one)), half_);
             phi = _mm_add_ps(_mm_mul_ps(_mm_sub_ps(one, d), vomw), _mm_mul_ps(phi, vwm));
             phi = _mm_and_ps(phi, in);
-            float ph[4];
-            _mm_storeu_ps(ph, phi);
-            for (int i = 0; i < 4; i++) {
-                if (!(m >> i & 1)) continue;
-                float *L = row + 4 * (size_t)(x + i);
-                __m128 p = _mm_set1_ps(ph[i]);
-                __m128 l = _mm_loadu_ps(L);
-                _mm_storeu_ps(L, _mm_add_ps(_mm_mul_ps(col, p), _mm_mul_ps(_mm_sub_ps(one, p), l)));
-            }
+            /* the lanes are blended without a test per lane (whose branches, on where the
+             * disc's edge falls, the CPU mispredicts): a masked lane has phi 0, and
+             * col * 0 + 1 * l is l exactly (the layer holds finite values, never -0). Lanes
+             * past the tile's last column are another thread's: those only by count. */
+            int nl = x + 3 <= xlim ? 4 : xlim - x + 1;
+            float *L = row + 4 * (size_t)x;
+#define SOFT_CPU_LANE(i, sh)                                                                  \
+    do {                                                                                      \
+        __m128 p = _mm_shuffle_ps(phi, phi, sh), l = _mm_loadu_ps(L + 4 * (i));               \
+        l = _mm_add_ps(_mm_mul_ps(col, p), _mm_mul_ps(_mm_sub_ps(one, p), l));                \
+        _mm_storeu_ps(L + 4 * (i), l);                                                        \
+    } while (0)
+            SOFT_CPU_LANE(0, 0x00);
+            if (nl > 1) SOFT_CPU_LANE(1, 0x55);
+            if (nl > 2) SOFT_CPU_LANE(2, 0xaa);
+            if (nl > 3) SOFT_CPU_LANE(3, 0xff);
+#undef SOFT_CPU_LANE
         }
 #endif
         for (; x <= xb; x++) {
@@ -216,7 +228,7 @@ static void *blend_main(void *arg)
             if (!disc_rect(q, job->width, y0, y1, &x0, &x1, &ya, &yb)) continue;
             x0 = x0 > tx0 ? x0 : tx0, x1 = x1 < tx1 ? x1 : tx1;
             ya = ya > ty0 ? ya : ty0, yb = yb < ty1 ? yb : ty1;
-            if (x0 <= x1 && ya <= yb) blend_disc(job, q, x0, x1, ya, yb, &lo, &hi);
+            if (x0 <= x1 && ya <= yb) blend_disc(job, q, x0, x1, ya, yb, tx1, &lo, &hi);
         }
     }
     w->lo = lo;
