@@ -87,27 +87,63 @@ static inline int disc_rect(const float *q, int width, int ylo, int yhi, int *x0
 typedef struct worker {
     soft_cpu_job *job;
     int t, nt;
-    uint64_t ndiscs;
+    uint64_t a, b;             /* this thread's discs of the gather and fill: [a, b), draw order */
     int ntx, nty;
     int lo, hi;                /* touched rows, this thread's */
 } worker;
 
-/* The gather: the discs in draw order, for sequential walks; part t of nt of every segment. */
+/* The gather: discs [a, b) of the draw order copied in sequence, each's tiles noted in rect (in
+ * tiles, relative to the job's first row; none: first column past the last) and counted in
+ * this thread's row of cnt. */
 static void *gather_main(void *arg)
 {
     worker *w = arg;
     const soft_cpu_job *job = w->job;
-    float *out = job->mem->discs;
+    soft_cpu_mem *m = job->mem;
+    const int y0 = job->y0, y1 = job->y0 + job->rows, ntx = w->ntx;
+    size_t ntiles = (size_t)w->ntx * (size_t)w->nty;
+    uint32_t *cnt = m->cnt + (size_t)w->t * ntiles;
+    memset(cnt, 0, ntiles * sizeof *cnt);
+    uint64_t base = 0;
     for (int s = 0; s < job->nsegs; s++) {
         const soft_cpu_seg *g = &job->segs[s];
-        uint32_t n = g->n;
-        uint32_t a = (uint32_t)((uint64_t)n * (uint64_t)w->t / (uint64_t)w->nt);
-        uint32_t b = (uint32_t)((uint64_t)n * (uint64_t)(w->t + 1) / (uint64_t)w->nt);
-        for (uint32_t k = a; k < b; k++) {
-            uint32_t j = g->order[g->rev ? n - 1 - k : k];
-            memcpy(out + 8 * (size_t)k, g->proj + 8 * (size_t)j, 8 * sizeof(float));
+        uint64_t n = g->n, lo = w->a > base ? w->a : base, hi = w->b < base + n ? w->b : base + n;
+        for (uint64_t k = lo; k < hi; k++) {
+            uint64_t l = k - base;
+            uint32_t j = g->order[g->rev ? n - 1 - l : l];
+            float *q = m->discs + 8 * k;
+            memcpy(q, g->proj + 8 * (size_t)j, 8 * sizeof(float));
+            uint16_t *rc = m->rect + 4 * k;
+            int x0, x1, ya, yb;
+            if (!disc_rect(q, job->width, y0, y1, &x0, &x1, &ya, &yb)) {
+                rc[0] = 1, rc[1] = 0;
+                continue;
+            }
+            rc[0] = (uint16_t)(x0 >> TILE_SHIFT), rc[1] = (uint16_t)(x1 >> TILE_SHIFT);
+            rc[2] = (uint16_t)((ya - y0) >> TILE_SHIFT);
+            rc[3] = (uint16_t)((yb - y0) >> TILE_SHIFT);
+            for (int ty = rc[2]; ty <= rc[3]; ty++)
+                for (int tx = rc[0]; tx <= rc[1]; tx++) cnt[ty * ntx + tx]++;
         }
-        out += 8 * (size_t)n;
+        base += n;
+    }
+    return NULL;
+}
+
+/* The fill: discs [a, b) copied into their tiles' ranges of tiled, at this thread's offsets
+ * (its row of cnt, made offsets by bin). */
+static void *fill_main(void *arg)
+{
+    worker *w = arg;
+    soft_cpu_mem *m = w->job->mem;
+    const int ntx = w->ntx;
+    uint32_t *at = m->cnt + (size_t)w->t * (size_t)w->ntx * (size_t)w->nty;
+    for (uint64_t k = w->a; k < w->b; k++) {
+        const uint16_t *rc = m->rect + 4 * k;
+        for (int ty = rc[2]; ty <= rc[3] && rc[0] <= rc[1]; ty++)
+            for (int tx = rc[0]; tx <= rc[1]; tx++)
+                memcpy(m->tiled + 8 * (size_t)at[ty * ntx + tx]++, m->discs + 8 * k,
+                       8 * sizeof(float));
     }
     return NULL;
 }
@@ -262,41 +298,27 @@ int soft_cpu_grow(void **p, size_t *cap, size_t n, size_t sz)
     return 0;
 }
 
-/* The binning: per tile the discs that reach it, in draw order (a counting sort: counts,
- * prefix sums, then a fill in draw order), copied into tiled. */
-static int bin(soft_cpu_job *job, uint64_t n, int ntx, int nty)
+/* The binning, a counting sort that keeps the draw order in every tile: the threads' counts
+ * (gather_main) made offsets, tile by tile and within a tile thread by thread (thread t's discs
+ * precede thread t + 1's in the draw order), then each thread's discs copied to them
+ * (fill_main). Returns 0, or -1 when tiled cannot grow. */
+static int bin(soft_cpu_job *job, worker *w, int nt, int ntx, int nty)
 {
     soft_cpu_mem *m = job->mem;
     size_t ntiles = (size_t)ntx * (size_t)nty;
-    if (soft_cpu_grow((void **)&m->first, &m->first_cap, ntiles + 1, sizeof *m->first)) return -1;
-    memset(m->first, 0, (ntiles + 1) * sizeof *m->first);
-    const int y0 = job->y0, y1 = job->y0 + job->rows;
-    uint64_t total = 0;
-    for (uint64_t k = 0; k < n; k++) {
-        int x0, x1, ya, yb;
-        if (!disc_rect(m->discs + 8 * k, job->width, y0, y1, &x0, &x1, &ya, &yb)) continue;
-        for (int ty = (ya - y0) >> TILE_SHIFT; ty <= (yb - y0) >> TILE_SHIFT; ty++)
-            for (int tx = x0 >> TILE_SHIFT; tx <= x1 >> TILE_SHIFT; tx++) {
-                m->first[(size_t)ty * (size_t)ntx + (size_t)tx + 1]++;
-                total++;
-            }
+    uint64_t run = 0;
+    for (size_t i = 0; i < ntiles; i++) {
+        m->first[i] = (uint32_t)run;
+        for (int t = 0; t < nt; t++) {
+            uint32_t *c = m->cnt + (size_t)t * ntiles + i, here = *c;
+            *c = (uint32_t)run;
+            run += here;
+        }
+        if (run > UINT32_MAX) return -1;
     }
-    if (total > UINT32_MAX ||
-        soft_cpu_grow((void **)&m->tiled, &m->tiled_cap, 8 * total, sizeof *m->tiled))
-        return -1;
-    for (size_t i = 0; i < ntiles; i++) m->first[i + 1] += m->first[i];
-    /* fill: first[t] walks tile t's range, and ends at the next tile's start */
-    for (uint64_t k = 0; k < n; k++) {
-        int x0, x1, ya, yb;
-        if (!disc_rect(m->discs + 8 * k, job->width, y0, y1, &x0, &x1, &ya, &yb)) continue;
-        for (int ty = (ya - y0) >> TILE_SHIFT; ty <= (yb - y0) >> TILE_SHIFT; ty++)
-            for (int tx = x0 >> TILE_SHIFT; tx <= x1 >> TILE_SHIFT; tx++)
-                memcpy(m->tiled + 8 * (size_t)m->first[(size_t)ty * (size_t)ntx + (size_t)tx]++,
-                       m->discs + 8 * k, 8 * sizeof(float));
-    }
-    /* each first[t] now holds tile t's end: shift back to the starts */
-    memmove(m->first + 1, m->first, ntiles * sizeof *m->first);
-    m->first[0] = 0;
+    m->first[ntiles] = (uint32_t)run;
+    if (soft_cpu_grow((void **)&m->tiled, &m->tiled_cap, 8 * run, sizeof *m->tiled)) return -1;
+    run_all(w, nt, fill_main);
     return 0;
 }
 
@@ -307,16 +329,23 @@ int soft_cpu_composite(soft_cpu_job *job)
     uint64_t n = 0;
     for (int s = 0; s < job->nsegs; s++) n += job->segs[s].n;
     if (n == 0 || job->rows <= 0 || job->width <= 0) return 0;
-    if (n > UINT32_MAX || soft_cpu_grow((void **)&job->mem->discs, &job->mem->discs_cap, 8 * n,
-                               sizeof(float)))
-        return -1;
     int nt = job->threads < 1 ? 1 : job->threads > MAX_THREADS ? MAX_THREADS : job->threads;
     int ntx = (job->width + (1 << TILE_SHIFT) - 1) >> TILE_SHIFT;
     int nty = (job->rows + (1 << TILE_SHIFT) - 1) >> TILE_SHIFT;
+    size_t ntiles = (size_t)ntx * (size_t)nty;
+    soft_cpu_mem *m = job->mem;
+    if (n > UINT32_MAX || ntx > UINT16_MAX || nty > UINT16_MAX ||
+        soft_cpu_grow((void **)&m->discs, &m->discs_cap, 8 * n, sizeof *m->discs) ||
+        soft_cpu_grow((void **)&m->rect, &m->rect_cap, 4 * n, sizeof *m->rect) ||
+        soft_cpu_grow((void **)&m->cnt, &m->cnt_cap, (size_t)nt * ntiles, sizeof *m->cnt) ||
+        soft_cpu_grow((void **)&m->first, &m->first_cap, ntiles + 1, sizeof *m->first))
+        return -1;
     worker w[MAX_THREADS];
-    for (int t = 0; t < nt; t++) w[t] = (worker){job, t, nt, n, ntx, nty, 0, -1};
+    for (int t = 0; t < nt; t++)
+        w[t] = (worker){job, t, nt, n * (uint64_t)t / (uint64_t)nt,
+                        n * (uint64_t)(t + 1) / (uint64_t)nt, ntx, nty, 0, -1};
     run_all(w, nt, gather_main);
-    if (bin(job, n, ntx, nty) != 0) return -1;
+    if (bin(job, w, nt, ntx, nty) != 0) return -1;
     run_all(w, nt, blend_main);
     int lo = job->y0 + job->rows, hi = -1;
     for (int t = 0; t < nt; t++) {
@@ -333,6 +362,8 @@ void soft_cpu_mem_free(soft_cpu_mem *m)
 {
     free(m->discs);
     free(m->tiled);
+    free(m->rect);
+    free(m->cnt);
     free(m->first);
     memset(m, 0, sizeof *m);
 }

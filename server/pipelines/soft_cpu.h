@@ -14,7 +14,8 @@
  * cache at nearly every row a disc touches. So they are first binned into 64x64-pixel tiles by
  * a counting sort that keeps the draw order within each tile (count, prefix sum, fill in
  * order; each tile's discs copied after one another, so that the blend walks memory in
- * sequence), and the threads take whole tiles, whose layer and keys stay in cache. A pixel's
+ * sequence; the gather, the counts and the copies by every core, each a consecutive part of
+ * the draw order), and the threads take whole tiles, whose layer and keys stay in cache. A pixel's
  * discs are the same, in the same order, whatever the thread count. */
 #pragma once
 #include <stddef.h>
@@ -35,7 +36,9 @@ typedef struct soft_cpu_mem {
     float *tiled;              /* the tiles' discs, each tile's copied contiguous (8 floats a
                                 * disc, in draw order): the blend reads them in sequence */
     uint32_t *first;           /* where each tile's discs start in tiled (in discs) */
-    size_t discs_cap, tiled_cap, first_cap;
+    uint16_t *rect;            /* 4 per disc in draw order: its tiles' columns and rows */
+    uint32_t *cnt;             /* per thread and tile: discs counted, then where they go */
+    size_t discs_cap, tiled_cap, first_cap, rect_cap, cnt_cap;
 } soft_cpu_mem;
 
 typedef struct soft_cpu_job {
