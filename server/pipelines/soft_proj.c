@@ -22,7 +22,11 @@ static float shade(const float n[3], const float l[3])
         ndh = n[0] * (hv[0] * is) + n[1] * (hv[1] * is) + n[2] * (hv[2] * is);
         ndh = ndh > 0.0f ? ndh : 0.0f;
     }
-    return 0.2f + 0.7f * ndl + 0.1f * powf(ndh, 32.0f);
+    /* pow(ndh, 32) as five squarings (powf was a tenth of the projection's time; llvmpipe's
+     * pow is exp2(32 log2 ndh) with its own approximations, which neither repeats exactly: the
+     * squarings are within ~2e-6 of the true power, powf within 6e-8) */
+    float p2 = ndh * ndh, p4 = p2 * p2, p8 = p4 * p4, p16 = p8 * p8, p32 = p16 * p16;
+    return 0.2f + 0.7f * ndl + 0.1f * p32;
 }
 
 static float clamp01(float v)
