@@ -60,6 +60,9 @@
  *         Clouds of more than 64 buffer sets take the sprites. The projection itself runs on
  *         the host too (soft_proj.h; soft_proj=auto on a software renderer, not color=field),
  *         from the sets' buffers mapped for reading: no dispatch, no read-back of the discs.
+ *         With it and the compositor's later changes (discs copied per tile, no branch per
+ *         lane, the binning on every core) the Guanyin frame above took ~72 ms of CPU against
+ *         ~88 before (same run, 2 cores shared with other work).
  *
  * Transparency modulation (eq. 22). For t < F < l_m the opacity is interpolated between the
  * model's Phi and a near-solid disc, with W = (F - t) / (l_m - t): Phi_f = (1 - d/r)(1 - W) +
