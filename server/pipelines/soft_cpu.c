@@ -120,7 +120,10 @@ static void *gather_main(void *arg)
             memcpy(q, g->proj + 8 * (size_t)j, 8 * sizeof(float));
             uint16_t *rc = m->rect + 4 * k;
             int x0, x1, ya, yb;
-            if (!disc_rect(q, job->width, y0, y1, &x0, &x1, &ya, &yb)) {
+            /* a colour that is not finite (x - x is not 0) would reach the masked lanes too
+             * (col * 0): such a disc is left out */
+            int finite = q[4] - q[4] == 0.0f && q[5] - q[5] == 0.0f && q[6] - q[6] == 0.0f;
+            if (!finite || !disc_rect(q, job->width, y0, y1, &x0, &x1, &ya, &yb)) {
                 rc[0] = 1, rc[1] = 0;
                 continue;
             }
