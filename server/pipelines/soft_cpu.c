@@ -186,9 +186,10 @@ static void blend_disc(const soft_cpu_job *job, const float *q, int x0, int x1, 
         const __m128 col = _mm_set_ps(1.0f, cb, cg, cr);
         /* a chord is a few pixels: the last group is masked (lanes past xb), and taken so
          * while its four keys lie inside the row (else the loop below finishes it) */
-        const __m128 vxb = _mm_set1_ps((float)xb);
+        const __m128 vxb = _mm_set1_ps((float)xb), lane = _mm_set_ps(3.0f, 2.0f, 1.0f, 0.0f);
         for (; x <= xb && x + 3 < width; x += 4) {
-            __m128 xs = _mm_set_ps((float)(x + 3), (float)(x + 2), (float)(x + 1), (float)x);
+            /* x + i in float: exact (|x| < 2^24), as the four conversions were */
+            __m128 xs = _mm_add_ps(_mm_set1_ps((float)x), lane);
             __m128 dx = _mm_sub_ps(_mm_add_ps(xs, half_), vcx);
             __m128 d2 = _mm_add_ps(_mm_mul_ps(dx, dx), vdy2);
             __m128 in = _mm_and_ps(_mm_cmplt_ps(d2, vr2), _mm_cmple_ps(xs, vxb));
