@@ -43,7 +43,8 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(LOD_FIRST,    "lod_first",    SP_T_INT,   lod_first,    0,    1,        "0",      NULL) \
     X(PROVISIONAL,  "provisional",  SP_T_INT,   provisional,  0,    1,        "0",      NULL) \
     X(EDL_PASS,     "edl_pass",     SP_T_ENUM,  edl_pass,     0,    0,        "auto",   "auto|gl|cpu") \
-    X(KAWATA_RASTER, "kawata_raster", SP_T_ENUM, kawata_raster, 0,   0,        "auto",   "auto|gpu|cpu")
+    X(KAWATA_RASTER, "kawata_raster", SP_T_ENUM, kawata_raster, 0,   0,        "auto",   "auto|gpu|cpu") \
+    X(SOFT_PROJ,    "soft_proj",    SP_T_ENUM,  soft_proj,    0,    0,        "auto",   "auto|gpu|cpu")
 
 enum {
 #define SP_ID_(id, name, type, field, lo, hi, def, vals) SP_##id,
@@ -105,6 +106,10 @@ enum { SP_ORDER_AXIS = 0, SP_ORDER_TILE, SP_ORDER_AUTO, SP_ORDER_CPU };
  * handed to the GL passes 3-5; auto = cpu on a software renderer (where the GL is the CPU), gpu
  * on a GPU. */
 enum { SP_KAWATA_RASTER_AUTO = 0, SP_KAWATA_RASTER_GPU, SP_KAWATA_RASTER_CPU };
+/* soft_proj: with order=cpu, where the soft discs are projected: gpu = soft_bin.comp PASS 0,
+ * read back; cpu = the host, every core (soft_proj.h; color=field's colour map stays in the GL);
+ * auto = cpu on a software renderer, gpu on a GPU. */
+enum { SP_SOFT_PROJ_AUTO = 0, SP_SOFT_PROJ_GPU, SP_SOFT_PROJ_CPU };
 
 typedef struct sp_params {
     int32_t pipeline;
@@ -141,6 +146,7 @@ typedef struct sp_params {
                                (PROTOCOL.md, OPEN); 0: INFO once the full cloud is ready */
     int32_t edl_pass;       /* SP_EDL_PASS_*: where shading=edl's pass runs */
     int32_t kawata_raster;  /* kawata: SP_KAWATA_RASTER_*, where passes 1 and 2 run */
+    int32_t soft_proj;      /* soft order=cpu: SP_SOFT_PROJ_*, where the discs are projected */
 } sp_params;
 
 typedef struct sp_param_info {

@@ -577,16 +577,12 @@ static void test_host_equals_gpu(void **state)
 {
     const kfix *kf = *state;
     enum { FW = 640, FH = 360 };
-    pc_prepared g, b;
-    tu_prep_data("Guanyin.ply", &g);
-    tu_prep_data("bunnyData.pts", &b);
-    rnd_camera cg, cb;
-    rnd_camera_frame(g.bmin, g.bmax, FW, FH, &cg);
-    rnd_camera_frame(b.bmin, b.bmax, FW, FH, &cb);
-    rnd_camera close = cg;
-    for (int a = 0; a < 3; a++) close.eye[a] = cg.target[a] + 0.3 * (cg.eye[a] - cg.target[a]);
+    tu_scans sc;
+    tu_scans_load(&sc, FW, FH);
+    pc_prepared *g = &sc.g, *b = &sc.b;
+    const rnd_camera cg = sc.cg, cb = sc.cb, close = sc.close;
     size_t cov;
-    uint32_t idg = tu_upload(kf->r, &g), idb = tu_upload(kf->r, &b);
+    uint32_t idg = tu_upload(kf->r, g), idb = tu_upload(kf->r, b);
     assert_int_equal(host_vs_gpu(kf->r, idg, &cg, 3.5f, SP_COLOR_RGB, "Guanyin", &cov), 0);
     assert_true(cov > 1000);
     static const char *const cname[5] = {"rgb", "field", "normal", "depth", "intensity"};
@@ -610,16 +606,7 @@ static void test_host_equals_gpu(void **state)
     sd_err err = {0};
     rnd_ctx *r6 = rnd_create(&d, &err);
     if (!r6) fail_msg("rnd_create: %s", err.msg);
-    /* intensities, so that color=intensity has more than one value to show (the prepared
-     * cloud's arrays live in one block: a separate array is put in for the upload and freed) */
-    float *inten = malloc(b.n * sizeof *inten), *had = b.intensity;
-    assert_non_null(inten);
-    uint32_t attrs = b.attrs;
-    for (uint64_t i = 0; i < b.n; i++) inten[i] = (float)(i % 1000);
-    b.intensity = inten, b.attrs |= PC_ATTR_INTENSITY;
-    uint32_t id6 = tu_upload(r6, &b);
-    b.intensity = had, b.attrs = attrs;
-    free(inten);
+    uint32_t id6 = tu_upload_intensities(r6, b);
     assert_int_equal(host_vs_gpu(r6, id6, &cb, 3.5f, SP_COLOR_RGB,
                                  "bunny in 6 buffer sets", &cov), 0);
     assert_true(cov > 500);
@@ -629,8 +616,7 @@ static void test_host_equals_gpu(void **state)
                                  "bunny in 6 sets, color=intensity", &cov), 0);
     rnd_release(r6, id6);
     rnd_destroy(r6);
-    pc_prepared_free(&g);
-    pc_prepared_free(&b);
+    tu_scans_free(&sc);
 }
 
 /* ---- EDL ---- */

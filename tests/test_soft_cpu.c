@@ -159,15 +159,19 @@ static void test_matches_reference(void **state)
     }
 }
 
-/* Nothing to draw: no discs, or only discs without radius or off the rows: the layer comes back
+/* Nothing to draw: no discs, or only discs without radius, off the rows, or with a colour that
+ * is not finite (NaN, infinite: left out, not spread over the layer): the layer comes back
  * cleared and touched is -1. */
 static void test_nothing(void **state)
 {
     (void)state;
     static float layer[W * ROWS * 4];
-    float proj[16] = {10, 10, 0, 1, 1, 1, 1, 1, /* radius 0 */ 10, 500, 5, 1, 1, 1, 1, 1};
-    uint32_t order[2] = {0, 1};
-    soft_cpu_seg seg = {proj, order, 2, 0};
+    const float inf = INFINITY, nan = NAN;
+    const int y = Y0 + ROWS / 2;
+    float proj[32] = {10, 10, 0, 1, 1, 1, 1, 1, /* radius 0 */ 10, 500, 5, 1, 1, 1, 1, 1,
+                      20, y, 6, 1, nan, 1, 1, 1, /* NaN red */ 40, y, 6, 1, 1, 1, inf, 1};
+    uint32_t order[4] = {0, 1, 2, 3};
+    soft_cpu_seg seg = {proj, order, 4, 0};
     soft_cpu_mem mem = {0};
     memset(layer, 0xFF, sizeof layer);
     soft_cpu_job job = {.segs = &seg, .nsegs = 1, .lambda = 1, .width = W, .y0 = Y0,

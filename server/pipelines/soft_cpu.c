@@ -7,6 +7,7 @@
 #include <string.h>
 
 enum { MAX_THREADS = 16, TILE_SHIFT = 6 }; /* tiles of 64 x 64 pixels */
+enum { PREFETCH = 16 };                     /* discs the gather asks for ahead */
 
 /* cos(pi d) for d in [0, 1] as a polynomial in d^2: its Taylor series to d^14, within 4.2e-6
  * of the cosine there (the next term bounds the error), far below an 8-bit step. */
@@ -32,9 +33,15 @@ static inline __m128 cos_pi4(__m128 d)
                                -1.3352627688545893f, 0.23533063035889312f,
                                -0.025806891390014051f, 0.0019295743094039221f,
                                -0.00010463810492484565f};
+    /* written out (not a loop: GCC kept the loop and reloaded each coefficient) */
     __m128 u = _mm_mul_ps(d, d), s = _mm_set1_ps(c[7]);
-    for (int i = 6; i >= 0; i--) s = _mm_add_ps(_mm_set1_ps(c[i]), _mm_mul_ps(u, s));
-    return s;
+    s = _mm_add_ps(_mm_set1_ps(c[6]), _mm_mul_ps(u, s));
+    s = _mm_add_ps(_mm_set1_ps(c[5]), _mm_mul_ps(u, s));
+    s = _mm_add_ps(_mm_set1_ps(c[4]), _mm_mul_ps(u, s));
+    s = _mm_add_ps(_mm_set1_ps(c[3]), _mm_mul_ps(u, s));
+    s = _mm_add_ps(_mm_set1_ps(c[2]), _mm_mul_ps(u, s));
+    s = _mm_add_ps(_mm_set1_ps(c[1]), _mm_mul_ps(u, s));
+    return _mm_add_ps(_mm_set1_ps(c[0]), _mm_mul_ps(u, s));
 }
 #endif
 
@@ -68,44 +75,91 @@ static inline int disc_rect(const float *q, int width, int ylo, int yhi, int *x0
     if (!(r > 0.0f)) return 0;
     float vy0 = cy - r - 0.5f, vy1 = cy + r - 0.5f, vx0 = cx - r - 0.5f, vx1 = cx + r - 0.5f;
     if (!(vy1 >= (float)ylo && vy0 < (float)yhi && vx1 >= 0.0f && vx0 < (float)width)) return 0;
-    *y0 = iceil(fmaxf(vy0, (float)ylo));
-    *y1 = ifloor(fminf(vy1, (float)(yhi - 1)));
-    *x0 = iceil(fmaxf(vx0, 0.0f));
-    *x1 = ifloor(fminf(vx1, (float)(width - 1)));
+    /* clamps by comparison (fmaxf and fminf are calls on the baseline x86-64); the values are
+     * not NaN here (the test above let none through) */
+    float fylo = (float)ylo, fyhi = (float)(yhi - 1), fxhi = (float)(width - 1);
+    *y0 = iceil(vy0 > fylo ? vy0 : fylo);
+    *y1 = ifloor(vy1 < fyhi ? vy1 : fyhi);
+    *x0 = iceil(vx0 > 0.0f ? vx0 : 0.0f);
+    *x1 = ifloor(vx1 < fxhi ? vx1 : fxhi);
     return *x0 <= *x1 && *y0 <= *y1;
 }
 
 typedef struct worker {
     soft_cpu_job *job;
     int t, nt;
-    uint64_t ndiscs;
+    uint64_t a, b;             /* this thread's discs of the gather and fill: [a, b), draw order */
     int ntx, nty;
     int lo, hi;                /* touched rows, this thread's */
 } worker;
 
-/* The gather: the discs in draw order, for sequential walks; part t of nt of every segment. */
+/* The gather: discs [a, b) of the draw order copied in sequence, each's tiles noted in rect (in
+ * tiles, relative to the job's first row; none: first column past the last) and counted in
+ * this thread's row of cnt. */
 static void *gather_main(void *arg)
 {
     worker *w = arg;
     const soft_cpu_job *job = w->job;
-    float *out = job->mem->discs;
+    soft_cpu_mem *m = job->mem;
+    const int y0 = job->y0, y1 = job->y0 + job->rows, ntx = w->ntx;
+    size_t ntiles = (size_t)w->ntx * (size_t)w->nty;
+    uint32_t *cnt = m->cnt + (size_t)w->t * ntiles;
+    memset(cnt, 0, ntiles * sizeof *cnt);
+    uint64_t base = 0;
     for (int s = 0; s < job->nsegs; s++) {
         const soft_cpu_seg *g = &job->segs[s];
-        uint32_t n = g->n;
-        uint32_t a = (uint32_t)((uint64_t)n * (uint64_t)w->t / (uint64_t)w->nt);
-        uint32_t b = (uint32_t)((uint64_t)n * (uint64_t)(w->t + 1) / (uint64_t)w->nt);
-        for (uint32_t k = a; k < b; k++) {
-            uint32_t j = g->order[g->rev ? n - 1 - k : k];
-            memcpy(out + 8 * (size_t)k, g->proj + 8 * (size_t)j, 8 * sizeof(float));
+        uint64_t n = g->n, lo = w->a > base ? w->a : base, hi = w->b < base + n ? w->b : base + n;
+        for (uint64_t k = lo; k < hi; k++) {
+            uint64_t l = k - base;
+            uint32_t j = g->order[g->rev ? n - 1 - l : l];
+            /* the discs are read in an order that jumps about proj: ask for one ahead */
+            if (k + PREFETCH < hi)
+                __builtin_prefetch(g->proj + 8 * (size_t)g->order[g->rev ? n - 1 - l - PREFETCH
+                                                                         : l + PREFETCH]);
+            float *q = m->discs + 8 * k;
+            memcpy(q, g->proj + 8 * (size_t)j, 8 * sizeof(float));
+            uint16_t *rc = m->rect + 4 * k;
+            int x0, x1, ya, yb;
+            /* a colour that is not finite (x - x is not 0) would reach the masked lanes too
+             * (col * 0): such a disc is left out */
+            int finite = q[4] - q[4] == 0.0f && q[5] - q[5] == 0.0f && q[6] - q[6] == 0.0f;
+            if (!finite || !disc_rect(q, job->width, y0, y1, &x0, &x1, &ya, &yb)) {
+                rc[0] = 1, rc[1] = 0;
+                continue;
+            }
+            rc[0] = (uint16_t)(x0 >> TILE_SHIFT), rc[1] = (uint16_t)(x1 >> TILE_SHIFT);
+            rc[2] = (uint16_t)((ya - y0) >> TILE_SHIFT);
+            rc[3] = (uint16_t)((yb - y0) >> TILE_SHIFT);
+            for (int ty = rc[2]; ty <= rc[3]; ty++)
+                for (int tx = rc[0]; tx <= rc[1]; tx++) cnt[ty * ntx + tx]++;
         }
-        out += 8 * (size_t)n;
+        base += n;
     }
     return NULL;
 }
 
-/* One disc over the pixels of rectangle [x0, x1] x [y0, y1] (inside the disc's own). */
+/* The fill: discs [a, b) copied into their tiles' ranges of tiled, at this thread's offsets
+ * (its row of cnt, made offsets by bin). */
+static void *fill_main(void *arg)
+{
+    worker *w = arg;
+    soft_cpu_mem *m = w->job->mem;
+    const int ntx = w->ntx;
+    uint32_t *at = m->cnt + (size_t)w->t * (size_t)w->ntx * (size_t)w->nty;
+    for (uint64_t k = w->a; k < w->b; k++) {
+        const uint16_t *rc = m->rect + 4 * k;
+        for (int ty = rc[2]; ty <= rc[3] && rc[0] <= rc[1]; ty++)
+            for (int tx = rc[0]; tx <= rc[1]; tx++)
+                memcpy(m->tiled + 8 * (size_t)at[ty * ntx + tx]++, m->discs + 8 * k,
+                       8 * sizeof(float));
+    }
+    return NULL;
+}
+
+/* One disc over the pixels of rectangle [x0, x1] x [y0, y1] (inside the disc's own, and inside
+ * this thread's tile, whose last column is xlim). */
 static void blend_disc(const soft_cpu_job *job, const float *q, int x0, int x1, int y0, int y1,
-                       int *lo, int *hi)
+                       int xlim, int *lo, int *hi)
 {
     const int width = job->width;
     float cx = q[0], cy = q[1], r = q[2], depth = q[3], cr = q[4], cg = q[5], cb = q[6];
@@ -132,9 +186,10 @@ static void blend_disc(const soft_cpu_job *job, const float *q, int x0, int x1, 
         const __m128 col = _mm_set_ps(1.0f, cb, cg, cr);
         /* a chord is a few pixels: the last group is masked (lanes past xb), and taken so
          * while its four keys lie inside the row (else the loop below finishes it) */
-        const __m128 vxb = _mm_set1_ps((float)xb);
+        const __m128 vxb = _mm_set1_ps((float)xb), lane = _mm_set_ps(3.0f, 2.0f, 1.0f, 0.0f);
         for (; x <= xb && x + 3 < width; x += 4) {
-            __m128 xs = _mm_set_ps((float)(x + 3), (float)(x + 2), (float)(x + 1), (float)x);
+            /* x + i in float: exact (|x| < 2^24), as the four conversions were */
+            __m128 xs = _mm_add_ps(_mm_set1_ps((float)x), lane);
             __m128 dx = _mm_sub_ps(_mm_add_ps(xs, half_), vcx);
             __m128 d2 = _mm_add_ps(_mm_mul_ps(dx, dx), vdy2);
             __m128 in = _mm_and_ps(_mm_cmplt_ps(d2, vr2), _mm_cmple_ps(xs, vxb));
@@ -153,15 +208,23 @@ static void blend_disc(const soft_cpu_job *job, const float *q, int x0, int x1, 
             __m128 phi = _mm_mul_ps(_mm_mul_ps(vlam, _mm_add_ps(cos_pi4(d), one)), half_);
             phi = _mm_add_ps(_mm_mul_ps(_mm_sub_ps(one, d), vomw), _mm_mul_ps(phi, vwm));
             phi = _mm_and_ps(phi, in);
-            float ph[4];
-            _mm_storeu_ps(ph, phi);
-            for (int i = 0; i < 4; i++) {
-                if (!(m >> i & 1)) continue;
-                float *L = row + 4 * (size_t)(x + i);
-                __m128 p = _mm_set1_ps(ph[i]);
-                __m128 l = _mm_loadu_ps(L);
-                _mm_storeu_ps(L, _mm_add_ps(_mm_mul_ps(col, p), _mm_mul_ps(_mm_sub_ps(one, p), l)));
-            }
+            /* the lanes are blended without a test per lane (whose branches, on where the
+             * disc's edge falls, the CPU mispredicts): a masked lane has phi 0, and
+             * col * 0 + 1 * l is l exactly (the layer holds finite values, never -0). Lanes
+             * past the tile's last column are another thread's: those only by count. */
+            int nl = x + 3 <= xlim ? 4 : xlim - x + 1;
+            float *L = row + 4 * (size_t)x;
+#define SOFT_CPU_LANE(i, sh)                                                                  \
+    do {                                                                                      \
+        __m128 p = _mm_shuffle_ps(phi, phi, sh), l = _mm_loadu_ps(L + 4 * (i));               \
+        l = _mm_add_ps(_mm_mul_ps(col, p), _mm_mul_ps(_mm_sub_ps(one, p), l));                \
+        _mm_storeu_ps(L + 4 * (i), l);                                                        \
+    } while (0)
+            SOFT_CPU_LANE(0, 0x00);
+            if (nl > 1) SOFT_CPU_LANE(1, 0x55);
+            if (nl > 2) SOFT_CPU_LANE(2, 0xaa);
+            if (nl > 3) SOFT_CPU_LANE(3, 0xff);
+#undef SOFT_CPU_LANE
         }
 #endif
         for (; x <= xb; x++) {
@@ -205,12 +268,12 @@ static void *blend_main(void *arg)
         if (tx1 >= job->width) tx1 = job->width - 1;
         if (ty1 >= y1) ty1 = y1 - 1;
         for (uint32_t e = m->first[tile]; e < m->first[tile + 1]; e++) {
-            const float *q = m->discs + 8 * (size_t)m->list[e];
+            const float *q = m->tiled + 8 * (size_t)e;
             int x0, x1, ya, yb;
             if (!disc_rect(q, job->width, y0, y1, &x0, &x1, &ya, &yb)) continue;
             x0 = x0 > tx0 ? x0 : tx0, x1 = x1 < tx1 ? x1 : tx1;
             ya = ya > ty0 ? ya : ty0, yb = yb < ty1 ? yb : ty1;
-            if (x0 <= x1 && ya <= yb) blend_disc(job, q, x0, x1, ya, yb, &lo, &hi);
+            if (x0 <= x1 && ya <= yb) blend_disc(job, q, x0, x1, ya, yb, tx1, &lo, &hi);
         }
     }
     w->lo = lo;
@@ -244,40 +307,27 @@ int soft_cpu_grow(void **p, size_t *cap, size_t n, size_t sz)
     return 0;
 }
 
-/* The binning: per tile the discs that reach it, in draw order (a counting sort: counts,
- * prefix sums, then a fill in draw order). */
-static int bin(soft_cpu_job *job, uint64_t n, int ntx, int nty)
+/* The binning, a counting sort that keeps the draw order in every tile: the threads' counts
+ * (gather_main) made offsets, tile by tile and within a tile thread by thread (thread t's discs
+ * precede thread t + 1's in the draw order), then each thread's discs copied to them
+ * (fill_main). Returns 0, or -1 when tiled cannot grow. */
+static int bin(soft_cpu_job *job, worker *w, int nt, int ntx, int nty)
 {
     soft_cpu_mem *m = job->mem;
     size_t ntiles = (size_t)ntx * (size_t)nty;
-    if (soft_cpu_grow((void **)&m->first, &m->first_cap, ntiles + 1, sizeof *m->first)) return -1;
-    memset(m->first, 0, (ntiles + 1) * sizeof *m->first);
-    const int y0 = job->y0, y1 = job->y0 + job->rows;
-    uint64_t total = 0;
-    for (uint64_t k = 0; k < n; k++) {
-        int x0, x1, ya, yb;
-        if (!disc_rect(m->discs + 8 * k, job->width, y0, y1, &x0, &x1, &ya, &yb)) continue;
-        for (int ty = (ya - y0) >> TILE_SHIFT; ty <= (yb - y0) >> TILE_SHIFT; ty++)
-            for (int tx = x0 >> TILE_SHIFT; tx <= x1 >> TILE_SHIFT; tx++) {
-                m->first[(size_t)ty * (size_t)ntx + (size_t)tx + 1]++;
-                total++;
-            }
+    uint64_t run = 0;
+    for (size_t i = 0; i < ntiles; i++) {
+        m->first[i] = (uint32_t)run;
+        for (int t = 0; t < nt; t++) {
+            uint32_t *c = m->cnt + (size_t)t * ntiles + i, here = *c;
+            *c = (uint32_t)run;
+            run += here;
+        }
+        if (run > UINT32_MAX) return -1;
     }
-    if (total > UINT32_MAX ||
-        soft_cpu_grow((void **)&m->list, &m->list_cap, total, sizeof *m->list))
-        return -1;
-    for (size_t i = 0; i < ntiles; i++) m->first[i + 1] += m->first[i];
-    /* fill: first[t] walks tile t's range, and ends at the next tile's start */
-    for (uint64_t k = 0; k < n; k++) {
-        int x0, x1, ya, yb;
-        if (!disc_rect(m->discs + 8 * k, job->width, y0, y1, &x0, &x1, &ya, &yb)) continue;
-        for (int ty = (ya - y0) >> TILE_SHIFT; ty <= (yb - y0) >> TILE_SHIFT; ty++)
-            for (int tx = x0 >> TILE_SHIFT; tx <= x1 >> TILE_SHIFT; tx++)
-                m->list[m->first[(size_t)ty * (size_t)ntx + (size_t)tx]++] = (uint32_t)k;
-    }
-    /* each first[t] now holds tile t's end: shift back to the starts */
-    memmove(m->first + 1, m->first, ntiles * sizeof *m->first);
-    m->first[0] = 0;
+    m->first[ntiles] = (uint32_t)run;
+    if (soft_cpu_grow((void **)&m->tiled, &m->tiled_cap, 8 * run, sizeof *m->tiled)) return -1;
+    run_all(w, nt, fill_main);
     return 0;
 }
 
@@ -288,16 +338,23 @@ int soft_cpu_composite(soft_cpu_job *job)
     uint64_t n = 0;
     for (int s = 0; s < job->nsegs; s++) n += job->segs[s].n;
     if (n == 0 || job->rows <= 0 || job->width <= 0) return 0;
-    if (n > UINT32_MAX || soft_cpu_grow((void **)&job->mem->discs, &job->mem->discs_cap, 8 * n,
-                               sizeof(float)))
-        return -1;
     int nt = job->threads < 1 ? 1 : job->threads > MAX_THREADS ? MAX_THREADS : job->threads;
     int ntx = (job->width + (1 << TILE_SHIFT) - 1) >> TILE_SHIFT;
     int nty = (job->rows + (1 << TILE_SHIFT) - 1) >> TILE_SHIFT;
+    size_t ntiles = (size_t)ntx * (size_t)nty;
+    soft_cpu_mem *m = job->mem;
+    if (n > UINT32_MAX || ntx > UINT16_MAX || nty > UINT16_MAX ||
+        soft_cpu_grow((void **)&m->discs, &m->discs_cap, 8 * n, sizeof *m->discs) ||
+        soft_cpu_grow((void **)&m->rect, &m->rect_cap, 4 * n, sizeof *m->rect) ||
+        soft_cpu_grow((void **)&m->cnt, &m->cnt_cap, (size_t)nt * ntiles, sizeof *m->cnt) ||
+        soft_cpu_grow((void **)&m->first, &m->first_cap, ntiles + 1, sizeof *m->first))
+        return -1;
     worker w[MAX_THREADS];
-    for (int t = 0; t < nt; t++) w[t] = (worker){job, t, nt, n, ntx, nty, 0, -1};
+    for (int t = 0; t < nt; t++)
+        w[t] = (worker){job, t, nt, n * (uint64_t)t / (uint64_t)nt,
+                        n * (uint64_t)(t + 1) / (uint64_t)nt, ntx, nty, 0, -1};
     run_all(w, nt, gather_main);
-    if (bin(job, n, ntx, nty) != 0) return -1;
+    if (bin(job, w, nt, ntx, nty) != 0) return -1;
     run_all(w, nt, blend_main);
     int lo = job->y0 + job->rows, hi = -1;
     for (int t = 0; t < nt; t++) {
@@ -313,7 +370,9 @@ int soft_cpu_composite(soft_cpu_job *job)
 void soft_cpu_mem_free(soft_cpu_mem *m)
 {
     free(m->discs);
-    free(m->list);
+    free(m->tiled);
+    free(m->rect);
+    free(m->cnt);
     free(m->first);
     memset(m, 0, sizeof *m);
 }

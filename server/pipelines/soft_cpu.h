@@ -3,9 +3,10 @@
  * On a software renderer the GL is the CPU, and what costs there is not the blending but the
  * GL's way to it: ~1 us of set-up per point sprite on llvmpipe's one front-end thread
  * (order=axis), or a compute compositor whose per-pixel loop over every disc of its tile does
- * three times the work the discs cover (order=tile). This compositor takes the discs as the GL
- * projected them (soft_bin.comp PASS 0: centre and radius in window pixels, eye depth, shaded
- * colour, W of eq. 22), in the same back-to-front order (the axis-sorted arrays), and for each
+ * three times the work the discs cover (order=tile). This compositor takes the discs as
+ * soft_bin.comp PASS 0 projects them (in the GL and read back, or on the host, soft_proj.h:
+ * centre and radius in window pixels, eye depth, shaded colour, W of eq. 22), in the same
+ * back-to-front order (the axis-sorted arrays), and for each
  * disc visits only the pixels whose centres lie inside it: the fragments soft.frag would get,
  * with soft.frag's opacity (eq. 19, modulated by eq. 22) and its test against the solid
  * surface's visibility keys, blended with the premultiplied "over" in float.
@@ -13,7 +14,9 @@
  * The discs come in axis order, which jumps about the frame: blending them so would miss the
  * cache at nearly every row a disc touches. So they are first binned into 64x64-pixel tiles by
  * a counting sort that keeps the draw order within each tile (count, prefix sum, fill in
- * order), and the threads take whole tiles, whose layer and keys stay in cache. A pixel's
+ * order; each tile's discs copied after one another, so that the blend walks memory in
+ * sequence; the gather, the counts and the copies by every core, each a consecutive part of
+ * the draw order), and the threads take whole tiles, whose layer and keys stay in cache. A pixel's
  * discs are the same, in the same order, whatever the thread count. */
 #pragma once
 #include <stddef.h>
@@ -31,8 +34,12 @@ typedef struct soft_cpu_seg {
 /* The compositor's working memory, kept between frames (grown as needed). */
 typedef struct soft_cpu_mem {
     float *discs;              /* 8 floats per disc, in draw order */
-    uint32_t *list, *first;    /* the tiles' lists of discs, and where each tile's starts */
-    size_t discs_cap, list_cap, first_cap;
+    float *tiled;              /* the tiles' discs, each tile's copied contiguous (8 floats a
+                                * disc, in draw order): the blend reads them in sequence */
+    uint32_t *first;           /* where each tile's discs start in tiled (in discs) */
+    uint16_t *rect;            /* 4 per disc in draw order: its tiles' columns and rows */
+    uint32_t *cnt;             /* per thread and tile: discs counted, then where they go */
+    size_t discs_cap, tiled_cap, first_cap, rect_cap, cnt_cap;
 } soft_cpu_mem;
 
 typedef struct soft_cpu_job {

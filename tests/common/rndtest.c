@@ -43,6 +43,36 @@ uint32_t tu_upload(rnd_ctx *r, const pc_prepared *pc)
     return (uint32_t)id;
 }
 
+void tu_scans_load(tu_scans *s, int w, int h)
+{
+    tu_prep_data("Guanyin.ply", &s->g);
+    tu_prep_data("bunnyData.pts", &s->b);
+    rnd_camera_frame(s->g.bmin, s->g.bmax, w, h, &s->cg);
+    rnd_camera_frame(s->b.bmin, s->b.bmax, w, h, &s->cb);
+    s->close = s->cg;
+    for (int a = 0; a < 3; a++)
+        s->close.eye[a] = s->cg.target[a] + 0.3 * (s->cg.eye[a] - s->cg.target[a]);
+}
+
+void tu_scans_free(tu_scans *s)
+{
+    pc_prepared_free(&s->g);
+    pc_prepared_free(&s->b);
+}
+
+uint32_t tu_upload_intensities(rnd_ctx *r, pc_prepared *pc)
+{
+    float *inten = malloc(pc->n * sizeof *inten), *had = pc->intensity;
+    assert_non_null(inten);
+    uint32_t attrs = pc->attrs;
+    for (uint64_t i = 0; i < pc->n; i++) inten[i] = (float)(i % 1000);
+    pc->intensity = inten, pc->attrs |= PC_ATTR_INTENSITY;
+    uint32_t id = tu_upload(r, pc);
+    pc->intensity = had, pc->attrs = attrs;
+    free(inten);
+    return id;
+}
+
 void tu_render(rnd_ctx *r, uint32_t id, const rnd_camera *cam, const sp_params *p,
                int want_float, rnd_frame *f)
 {

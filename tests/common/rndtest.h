@@ -19,6 +19,21 @@ void tu_prep_data(const char *name, pc_prepared *pc);
 /* tu_upload: rnd_upload of pc; fails the test when it returns no id. */
 uint32_t tu_upload(rnd_ctx *r, const pc_prepared *pc);
 
+/* Two real scans prepared with prep's defaults (Guanyin.ply and bunnyData.pts), each framed by
+ * rnd_camera_frame at w x h, and a close-up of Guanyin (the eye at 0.3 of its distance, so
+ * that the frustum cuts the scan): the fixture of the host-against-GL tests. */
+typedef struct tu_scans {
+    pc_prepared g, b;
+    rnd_camera cg, cb, close;
+} tu_scans;
+void tu_scans_load(tu_scans *s, int w, int h);
+void tu_scans_free(tu_scans *s);
+
+/* tu_upload_intensities: tu_upload of pc with intensities i % 1000 put in for point i (so that
+ * color=intensity has more than one value to show); pc itself is left as it was (its arrays
+ * live in one block: a separate array is put in for the upload and freed). */
+uint32_t tu_upload_intensities(rnd_ctx *r, pc_prepared *pc);
+
 /* tu_render: rnd_render of cloud id; fails the test on an error. */
 void tu_render(rnd_ctx *r, uint32_t id, const rnd_camera *cam, const sp_params *p,
                int want_float, rnd_frame *f);
