@@ -42,7 +42,7 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(SOFT_FRAG_MIB, "soft_frag_mib", SP_T_INT, soft_frag_mib, 1,   65536,    "512",    NULL) \
     X(LOD_FIRST,    "lod_first",    SP_T_INT,   lod_first,    0,    1,        "0",      NULL) \
     X(PROVISIONAL,  "provisional",  SP_T_INT,   provisional,  0,    1,        "0",      NULL) \
-    X(EDL_PASS,     "edl_pass",     SP_T_ENUM,  edl_pass,     0,    0,        "auto",   "auto|gl|cpu") \
+    X(EDL_PASS,     "edl_pass",     SP_T_ENUM,  edl_pass,     0,    0,        "auto",   "auto|gpu|cpu") \
     X(KAWATA_RASTER, "kawata_raster", SP_T_ENUM, kawata_raster, 0,   0,        "auto",   "auto|gpu|cpu") \
     X(SOFT_PROJ,    "soft_proj",    SP_T_ENUM,  soft_proj,    0,    0,        "auto",   "auto|gpu|cpu")
 
@@ -67,11 +67,11 @@ enum { SP_SUB_444 = 0, SP_SUB_422, SP_SUB_420, SP_SUB_GRAY };
  * edl = that, times Eye-Dome Lighting over the frame's eye depth (render.c, edl.c), for every
  * pipeline: the depth cue that needs no normals at all. */
 enum { SP_SHADING_LAMBERT = 0, SP_SHADING_EDL };
-/* edl_pass: where shading=edl's pass runs (the same shade either way, edl.h): gl = a fragment
- * pass over the frame's eye depth before the read-back; cpu = on the host, over the read-back
- * frame and its eye depth (edl_host.c), where plain C with 8-wide vectors costs a fraction of
- * llvmpipe's fragment pass; auto = cpu on a software renderer, gl on a GPU. */
-enum { SP_EDL_PASS_AUTO = 0, SP_EDL_PASS_GL, SP_EDL_PASS_CPU };
+/* edl_pass: where shading=edl's pass runs (the same shade either way, edl.h): gpu = a GL
+ * fragment pass over the frame's eye depth before the read-back (edl.c); cpu = on the host,
+ * over the read-back frame and its eye depth (edl_host.c), where plain C with 8-wide vectors
+ * costs a fraction of llvmpipe's fragment pass; auto = cpu on a software renderer, gpu on a GPU. */
+enum { SP_EDL_PASS_AUTO = 0, SP_EDL_PASS_GPU, SP_EDL_PASS_CPU };
 /* model: the Soft Transparency density model: express = view-facing discs with eq. 19 (the
  * default, pipe_soft.c); base = spheres with the exact density integral (eq. 4-12); concentric =
  * N concentric spheres of constant density (eq. 13-18); the last two through per-pixel fragment

@@ -651,7 +651,7 @@ static void test_edl_strength_zero(void **state)
     tu_finish_cloud(&pc, OFF);
     uint32_t id = tu_upload(r, &pc);
     rnd_camera cam = cam_at(0.1, 0.2, 2.0, 40, W, H);
-    for (int ep = SP_EDL_PASS_GL; ep <= SP_EDL_PASS_CPU; ep++)
+    for (int ep = SP_EDL_PASS_GPU; ep <= SP_EDL_PASS_CPU; ep++)
     for (int pipe = 0; pipe < SP_PIPE_COUNT; pipe++)
         for (int fl = 0; fl < 2; fl++) {
             rnd_frame f[3] = {{0}, {0}, {0}};
@@ -670,7 +670,7 @@ static void test_edl_strength_zero(void **state)
                             memcmp(f[0].depth, f[1].depth, n) == 0;
             int changed = memcmp(f[0].rgba8, f[2].rgba8, n) != 0;
             printf("edl strength 0, %s pass, pipeline %d, %s target: identical %d; strength 1 "
-                   "changes it %d\n", ep == SP_EDL_PASS_GL ? "gl" : "cpu", pipe,
+                   "changes it %d\n", ep == SP_EDL_PASS_GPU ? "gpu" : "cpu", pipe,
                    fl ? "float" : "8-bit", same, changed);
             assert_true(same);
             assert_true(changed);
@@ -714,7 +714,7 @@ static void test_edl_step(void **state)
     tu_render(r, id, &cam, &p, 1, &base);
     p.shading = SP_SHADING_EDL;
     p.edl_strength = strength;
-    for (int ep = SP_EDL_PASS_GL; ep <= SP_EDL_PASS_CPU; ep++) {
+    for (int ep = SP_EDL_PASS_GPU; ep <= SP_EDL_PASS_CPU; ep++) {
     p.edl_pass = ep;
     tu_render(r, id, &cam, &p, 0, &ef);
     const int off[4][2] = {{1, 0}, {0, 1}, {-1, 0}, {0, -1}};
@@ -747,7 +747,7 @@ static void test_edl_step(void **state)
         }
     printf("edl step, %s pass: far-plane pixels with 0/1/2 nearer neighbours %d/%d/%d, shade at "
            "the step %.4f, worst relative error %.4f; near-plane pixels %d, changed %d\n",
-           ep == SP_EDL_PASS_GL ? "gl" : "cpu", checked[0], checked[1], checked[2],
+           ep == SP_EDL_PASS_GPU ? "gpu" : "cpu", checked[0], checked[1], checked[2],
            exp(-RND_EDL_SCALE * strength / 4.0 * step), worst, near_px, near_changed);
     assert_true(checked[1] > 100); /* the step's column along most of the frame's height */
     assert_true(checked[0] > W * H / 4);
@@ -777,7 +777,7 @@ static void test_edl_flat(void **state)
     tu_finish_cloud(&pc, OFF);
     uint32_t id = tu_upload(r, &pc);
     rnd_camera cam = cam_at(0, 0, 2.0, 40, W, H);
-    for (int ep = SP_EDL_PASS_GL; ep <= SP_EDL_PASS_CPU; ep++)
+    for (int ep = SP_EDL_PASS_GPU; ep <= SP_EDL_PASS_CPU; ep++)
     for (int pipe = 0; pipe < SP_PIPE_COUNT; pipe++) {
         rnd_frame f[2] = {{0}, {0}};
         for (int k = 0; k < 2; k++) {
@@ -794,7 +794,7 @@ static void test_edl_flat(void **state)
             darker += memcmp(f[0].rgba8 + 4 * i, f[1].rgba8 + 4 * i, 3) != 0;
         }
         printf("edl flat plane, %s pass, pipeline %d: %d covered, %d changed\n",
-               ep == SP_EDL_PASS_GL ? "gl" : "cpu", pipe, covered, darker);
+               ep == SP_EDL_PASS_GPU ? "gpu" : "cpu", pipe, covered, darker);
         assert_true(covered > W * H / 4);
         assert_int_equal(darker, 0);
         rnd_frame_free(&f[0]);
@@ -804,7 +804,7 @@ static void test_edl_flat(void **state)
     pc_prepared_free(&pc);
 }
 
-/* edl_pass=gl and edl_pass=cpu give the same frame on a real scan (bunnyData.pts, positions
+/* edl_pass=gpu and edl_pass=cpu give the same frame on a real scan (bunnyData.pts, positions
  * only, so every shade comes from real depth steps) in points, splat and kawata, 8-bit and
  * float targets, at radius 1 and 3: each 8-bit channel within 1 (the GL pass rounds the shade
  * to 8 bits before its blend multiplies, the host multiplies by the float shade and rounds
@@ -834,7 +834,7 @@ static void test_edl_passes_agree(void **state)
                     p.pipeline = pipes[pi];
                     p.edl_radius = (float)rad;
                     p.shading = k ? SP_SHADING_EDL : SP_SHADING_LAMBERT;
-                    p.edl_pass = k == 1 ? SP_EDL_PASS_GL : SP_EDL_PASS_CPU;
+                    p.edl_pass = k == 1 ? SP_EDL_PASS_GPU : SP_EDL_PASS_CPU;
                     tu_render(r, id, &cam, &p, fl, &f[k]);
                 }
                 int worst8 = 0, worst16 = 0;
@@ -851,7 +851,7 @@ static void test_edl_passes_agree(void **state)
                         dark_both += f[2].rgba8[i] + 8 < f[0].rgba8[i];
                     }
                 }
-                printf("edl gl vs cpu, pipeline %d, radius %d, %s target: 8-bit channels within "
+                printf("edl gpu vs cpu, pipeline %d, radius %d, %s target: 8-bit channels within "
                        "%d, half within %d ulp; %zu pixels darkened by gl, %zu by both\n",
                        pipes[pi], rad, fl ? "float" : "8-bit", worst8, worst16, dark_gl,
                        dark_both);

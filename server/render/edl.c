@@ -1,5 +1,5 @@
 /* edl.c — Eye-Dome Lighting as one fragment pass over the cloud's screen rectangle (edl.h,
- * shaders/edl.frag.glsl): edl_pass=gl, the default on a GPU. On a software renderer edl_pass=auto
+ * shaders/edl.frag.glsl): edl_pass=gpu, the default on a GPU. On a software renderer edl_pass=auto
  * runs the same arithmetic on the host after the read-back instead (edl_host.c), at about half
  * the CPU time of this pass.
  *

@@ -68,9 +68,9 @@ for c in Guanyin synthetic-1M; do
         > "$tmp/$c-edl.out" 2> "$tmp/$c-edl.err" ||
         echo "bench_render: --edl-cost run failed on $c: $(tail -1 "$tmp/$c-edl.err")" >&2
     "$bench/render_bench" "$f" --frames "$frames" --size "$size" --backend "$backend" \
-        --pipelines points,splat,kawata --edl-cost --label "$c, edl_pass=gl" --set edl_pass=gl \
+        --pipelines points,splat,kawata --edl-cost --label "$c, edl_pass=gpu" --set edl_pass=gpu \
         > "$tmp/$c-edlgl.out" 2> "$tmp/$c-edlgl.err" ||
-        echo "bench_render: --edl-cost edl_pass=gl run failed on $c: $(tail -1 "$tmp/$c-edlgl.err")" >&2
+        echo "bench_render: --edl-cost edl_pass=gpu run failed on $c: $(tail -1 "$tmp/$c-edlgl.err")" >&2
 done
 # The textbook EWA filter (ewa=exact) on the same cloud, for comparison with the default.
 "$bench/render_bench" "$tmp/synthetic-1M.ply" --frames 3 --size "$size" --backend "$backend" \
