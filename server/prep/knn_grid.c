@@ -41,6 +41,8 @@
 
 enum {
     GRID_CAP = 4096, /* candidates above which a leaf's queries search individually */
+    RANK_MAX = 96,   /* selections from more candidates sort keys instead of ranking */
+    KD_PAD = 32,     /* room past the packed candidates (vector stores, ranking blocks) */
     NSLOTS = 4,      /* cached candidate blocks per scratch */
     MAXLEVEL = PREP_MORTON_BITS,
 };
@@ -61,7 +63,7 @@ struct prep__grid {
     float *spos_own;
     uint64_t *codes;         /* sorted Morton codes */
     int codes_borrowed;      /* codes are the caller's (prep_knn_opts.codes) */
-    int avx2;                /* the CPU has AVX2: select_k's vector paths */
+    int simd;                /* PREP_KNN_SIMD_* in use (never BEST) */
     uint32_t *order;         /* sorted position -> index in pos; NULL: identity */
     uint32_t *rank;          /* index in pos -> sorted position; NULL: identity */
     uint32_t *leaf_first;    /* nleaves + 1 entries; the last is n */
@@ -76,7 +78,7 @@ typedef struct cand_set {
     int valid, level, h, too_big;  /* the block is cell +- h at level */
     uint64_t cell;           /* the centre cell's code at level */
     uint64_t stamp;          /* last use, for replacement */
-    size_t m, cap;           /* candidates; arrays are padded to a multiple of 8 */
+    size_t m, cap;           /* candidates; arrays are padded to a multiple of 16 */
     float *x, *y, *z;
     uint32_t *id;
     double lo[3], hi[3];     /* block faces; -inf / +inf where the block reaches the grid edge */
@@ -88,7 +90,8 @@ struct prep__grid_scratch {
     float *d2;               /* candidate distances */
     uint64_t *key;           /* (distance, index) keys, for selections from many candidates */
     uint32_t *kd, *kid;      /* the candidates that pass the filter: distance bits, index */
-    size_t d2cap;            /* entries in d2 and key; kd and kid hold 8 more */
+    size_t d2cap;            /* entries in d2 and key; kd and kid hold KD_PAD more */
+    uint32_t rank[RANK_MAX + KD_PAD]; /* rank_select's ranks */
     uint8_t pack[256][8];    /* for each 8-bit mask, its set lanes in order (left-packing) */
     uint8_t popc[256];
     float hd[256 + 2];       /* the selected pairs */
@@ -170,7 +173,7 @@ static int split(prep__grid *g, size_t lo, size_t hi, int level, size_t m)
 }
 
 int prep__grid_build(const float *pos, size_t n, int leaf_size, const prep_morton_frame *frame,
-                     const uint64_t *codes, prep__grid **out, sd_err *err)
+                     const uint64_t *codes, int simd, prep__grid **out, sd_err *err)
 {
     prep__grid *g = calloc(1, sizeof *g);
     if (!g) return sd_errf(err, SD_ENOMEM, "out of memory for a kNN grid");
@@ -181,9 +184,14 @@ int prep__grid_build(const float *pos, size_t n, int leaf_size, const prep_morto
     else prep_morton_frame_of(pos, n, &g->f);
     for (int l = 0; l <= MAXLEVEL; l++) g->cell[l] = g->f.side / (double)(1u << l);
     g->eps = 1e-6 * g->f.side;
+    int best = PREP_KNN_SIMD_PORTABLE;
 #ifdef PREP_X86_AVX2
-    g->avx2 = __builtin_cpu_supports("avx2") != 0;
+    if (__builtin_cpu_supports("avx2")) best = PREP_KNN_SIMD_AVX2;
+    if (best == PREP_KNN_SIMD_AVX2 && __builtin_cpu_supports("avx512f") &&
+        __builtin_cpu_supports("popcnt"))
+        best = PREP_KNN_SIMD_AVX512;
 #endif
+    g->simd = simd > PREP_KNN_SIMD_BEST && simd < best ? simd : best;
     size_t sorted = 1;
     if (codes)
         while (sorted < n && codes[sorted - 1] <= codes[sorted]) sorted++;
@@ -337,10 +345,10 @@ static void block_of(const prep__grid *g, uint64_t cell, int level, int h, size_
     }
 }
 
-/* Grows a candidate set's arrays to hold cap points (rounded up to a multiple of 8). */
+/* Grows a candidate set's arrays to hold cap points (rounded up to a multiple of 16). */
 static int reserve(cand_set *cs, size_t cap)
 {
-    cap = (cap + 7) & ~(size_t)7;
+    cap = (cap + 15) & ~(size_t)15;
     if (cap <= cs->cap) return 0;
     size_t nc = cs->cap ? cs->cap : 256;
     while (nc < cap) nc *= 2;
@@ -376,6 +384,7 @@ static cand_set *get_set(const prep__grid *g, prep__grid_scratch *s, uint64_t ce
     }
     block b;
     block_of(g, cell, level, h, hint, &b);
+    s->cnt.gathers++;
     cs->valid = 0;
     cs->cell = cell;
     cs->level = level;
@@ -404,7 +413,7 @@ static cand_set *get_set(const prep__grid *g, prep__grid_scratch *s, uint64_t ce
             m += pb - pa;
         }
         cs->m = m;
-        for (; m & 7; m++) { cs->x[m] = cs->y[m] = cs->z[m] = 0; cs->id[m] = 0; }
+        for (; m & 15; m++) { cs->x[m] = cs->y[m] = cs->z[m] = 0; cs->id[m] = 0; }
     }
     cs->valid = 1;
     return cs;
@@ -537,11 +546,46 @@ __attribute__((target("avx2"))) static size_t pack_avx2(const prep__grid_scratch
 }
 #endif
 
+#ifdef PREP_X86_AVX2
+/* pack_scalar 16 candidates at a time (arrays padded to a multiple of 16; kd, kid 16 more):
+ * one compare into a mask and two compresses, no table. */
+__attribute__((target("avx512f,popcnt"))) static size_t pack_avx512(const cand_set *cs,
+                                                                  const float q[3], float t,
+                                                                  int fresh, float *d2,
+                                                                  uint32_t *kd, uint32_t *kid)
+{
+    const __m512 qx = _mm512_set1_ps(q[0]), qy = _mm512_set1_ps(q[1]), qz = _mm512_set1_ps(q[2]);
+    const __m512 tv = _mm512_set1_ps(t);
+    const float *restrict x = cs->x, *restrict y = cs->y, *restrict z = cs->z;
+    const uint32_t *restrict id = cs->id;
+    size_t m = cs->m, c = 0;
+    (void)fresh; /* distances are recomputed (cheaper than storing them for a rare retry) */
+    (void)d2;
+    for (size_t j = 0; j < m; j += 16) {
+        __m512 dx = _mm512_sub_ps(_mm512_loadu_ps(x + j), qx);
+        __m512 dy = _mm512_sub_ps(_mm512_loadu_ps(y + j), qy);
+        __m512 dz = _mm512_sub_ps(_mm512_loadu_ps(z + j), qz);
+        /* no fused multiply-add: the same bits as the other paths */
+        __m512 d = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(dx, dx), _mm512_mul_ps(dy, dy)),
+                                 _mm512_mul_ps(dz, dz));
+        __mmask16 k = _mm512_cmp_ps_mask(d, tv, _CMP_LE_OQ);
+        if (m - j < 16) k &= (__mmask16)((1u << (m - j)) - 1); /* padding lanes */
+        if (!k) continue; /* most blocks: nothing passes, nothing stored */
+        _mm512_storeu_si512(kd + c, _mm512_maskz_compress_epi32(k, _mm512_castps_si512(d)));
+        _mm512_storeu_si512(kid + c,
+                            _mm512_maskz_compress_epi32(k, _mm512_loadu_si512(id + j)));
+        c += (size_t)__builtin_popcount(k);
+    }
+    return c;
+}
+#endif
+
 static size_t pack(const prep__grid *g, const prep__grid_scratch *s, const cand_set *cs,
                    const float q[3], float t, int fresh, float *d2, uint32_t *kd, uint32_t *kid)
 {
 #ifdef PREP_X86_AVX2
-    if (g->avx2) return pack_avx2(s, cs, q, t, fresh, d2, kd, kid);
+    if (g->simd >= PREP_KNN_SIMD_AVX512) return pack_avx512(cs, q, t, fresh, d2, kd, kid);
+    if (g->simd >= PREP_KNN_SIMD_AVX2) return pack_avx2(s, cs, q, t, fresh, d2, kd, kid);
 #endif
     (void)g;
     (void)s;
@@ -584,26 +628,101 @@ PREP_CLONES static void rank_pairs(uint32_t *kd, uint32_t *kid, size_t c, int fo
     }
 }
 
-/* Grows the scratch's per-candidate buffers to hold m8 entries. */
-static int reserve_scratch(prep__grid_scratch *s, size_t m8)
+/* r[j] = how many of the c distance bits kd are below kd[j] (kd padded to a multiple of 16):
+ * each block of pairs is compared with every pair broadcast, so a rank builds up in its lane,
+ * with no horizontal sum. Two blocks at a time (independent chains). */
+PREP_CLONES static void ranks_below(const uint32_t *kd, size_t c, uint32_t *r)
 {
-    if (m8 <= s->d2cap) return 0;
+    for (size_t j = 0; j < c; j += 16) {
+        v8i d0, d1, a0 = {0, 0, 0, 0, 0, 0, 0, 0}, a1 = a0;
+        memcpy(&d0, kd + j, sizeof d0);
+        memcpy(&d1, kd + j + 8, sizeof d1);
+        for (size_t i = 0; i < c; i++) {
+            int di = (int)kd[i];
+            a0 += d0 > di; /* true lanes are -1 */
+            a1 += d1 > di;
+        }
+        a0 = -a0;
+        a1 = -a1;
+        memcpy(r + j, &a0, sizeof a0);
+        memcpy(r + j + 8, &a1, sizeof a1);
+    }
+}
+
+#ifdef PREP_X86_AVX2
+/* ranks_below 16 lanes wide, two blocks at a time (kd padded to a multiple of 32). */
+__attribute__((target("avx512f"))) static void ranks_below_avx512(const uint32_t *kd, size_t c,
+                                                                  uint32_t *r)
+{
+    const __m512i one = _mm512_set1_epi32(1);
+    size_t j = 0;
+    for (; j + 16 < c; j += 32) {
+        __m512i d0 = _mm512_loadu_si512(kd + j), d1 = _mm512_loadu_si512(kd + j + 16);
+        __m512i a0 = _mm512_setzero_si512(), a1 = a0;
+        for (size_t i = 0; i < c; i++) {
+            __m512i di = _mm512_set1_epi32((int)kd[i]);
+            a0 = _mm512_mask_add_epi32(a0, _mm512_cmplt_epi32_mask(di, d0), a0, one);
+            a1 = _mm512_mask_add_epi32(a1, _mm512_cmplt_epi32_mask(di, d1), a1, one);
+        }
+        _mm512_storeu_si512(r + j, a0);
+        _mm512_storeu_si512(r + j + 16, a1);
+    }
+    if (j < c) {
+        __m512i d0 = _mm512_loadu_si512(kd + j), a0 = _mm512_setzero_si512();
+        for (size_t i = 0; i < c; i++)
+            a0 = _mm512_mask_add_epi32(
+                a0, _mm512_cmplt_epi32_mask(_mm512_set1_epi32((int)kd[i]), d0), a0, one);
+        _mm512_storeu_si512(r + j, a0);
+    }
+}
+#endif
+
+/* The found smallest of the c packed pairs (c <= RANK_MAX) into s->hd / s->hid, ascending.
+ * Ranks by distance alone (ranks_below); when no two distances are equal these are the ranks
+ * 0..c-1, each once, which their sum tells: each pair goes straight to its place. Otherwise
+ * (duplicate points, regular grids) rank_pairs settles the ties by index. */
+static void rank_select(const prep__grid *g, prep__grid_scratch *s, size_t c, int found)
+{
+    uint32_t *kd = s->kd, *kid = s->kid, *r = s->rank;
+    for (size_t j = c; j < ((c + KD_PAD - 1) & ~(size_t)(KD_PAD - 1)); j++) kd[j] = 0x7fffffffu;
+#ifdef PREP_X86_AVX2
+    if (g->simd >= PREP_KNN_SIMD_AVX512) ranks_below_avx512(kd, c, r);
+    else ranks_below(kd, c, r);
+#else
+    (void)g;
+    ranks_below(kd, c, r);
+#endif
+    size_t sum = 0;
+    for (size_t j = 0; j < c; j++) sum += r[j];
+    if (sum != c * (c - 1) / 2) {
+        rank_pairs(kd, kid, c, found, s->hd, s->hid);
+        return;
+    }
+    for (size_t j = 0; j < c; j++) { /* every rank < c <= RANK_MAX: inside hd, hid */
+        memcpy(&s->hd[r[j]], &kd[j], sizeof kd[j]);
+        s->hid[r[j]] = kid[j];
+    }
+}
+
+/* Grows the scratch's per-candidate buffers to hold m16 entries. */
+static int reserve_scratch(prep__grid_scratch *s, size_t m16)
+{
+    if (m16 <= s->d2cap) return 0;
     size_t nc = s->d2cap ? s->d2cap : 256;
-    while (nc < m8) nc *= 2;
+    while (nc < m16) nc *= 2;
     float *d = realloc(s->d2, nc * sizeof *d);
     if (d) s->d2 = d;
     uint64_t *ky = realloc(s->key, nc * sizeof *ky);
     if (ky) s->key = ky;
-    uint32_t *kd = realloc(s->kd, (nc + 8) * sizeof *kd);
+    uint32_t *kd = realloc(s->kd, (nc + KD_PAD) * sizeof *kd);
     if (kd) s->kd = kd;
-    uint32_t *ki = realloc(s->kid, (nc + 8) * sizeof *ki);
+    uint32_t *ki = realloc(s->kid, (nc + KD_PAD) * sizeof *ki);
     if (ki) s->kid = ki;
     if (!d || !ky || !kd || !ki) return -1;
     s->d2cap = nc;
     return 0;
 }
 
-enum { RANK_MAX = 96 }; /* selections from more candidates sort keys instead of ranking */
 
 /* The k nearest candidates of q other than self (by index), ascending, into s->hd / s->hid;
  * returns how many (k, or fewer when the set is small), or -1 when out of memory.
@@ -619,8 +738,8 @@ enum { RANK_MAX = 96 }; /* selections from more candidates sort keys instead of 
 static int select_k(const prep__grid *g, prep__grid_scratch *s, const cand_set *cs,
                     const float q[3], uint32_t self, int k)
 {
-    size_t m = cs->m, m8 = (m + 7) & ~(size_t)7;
-    if (reserve_scratch(s, m8) != 0) return -1;
+    size_t m = cs->m, m16 = (m + 15) & ~(size_t)15;
+    if (reserve_scratch(s, m16) != 0) return -1;
     float *d2 = s->d2;
     uint32_t *kd = s->kd, *kid = s->kid;
     int k1 = k + 1, found;
@@ -635,7 +754,7 @@ static int select_k(const prep__grid *g, prep__grid_scratch *s, const cand_set *
     s->cnt.filtered += c;
     found = c < (size_t)k1 ? (int)c : k1;
     if (c <= RANK_MAX) {
-        rank_pairs(kd, kid, c, found, s->hd, s->hid);
+        rank_select(g, s, c, found);
     } else {
         uint64_t *key = s->key;
         for (size_t j = 0; j < c; j++) key[j] = (uint64_t)kd[j] << 32 | kid[j];

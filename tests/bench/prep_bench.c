@@ -131,6 +131,7 @@ static int knn_time(const pc_cloud *c, prep_knn_method m, int leaf, int t, int f
         cnt->dense += x.dense;
         cnt->candidates += x.candidates;
         cnt->filtered += x.filtered;
+        cnt->gathers += x.gathers;
         prep_knn_scratch_free(j.s[i]);
     }
     free(j.s);
@@ -209,7 +210,9 @@ int main(int argc, char **argv)
                    cnt.queries ? 100.0 * cnt.dense / cnt.queries : 0.0,
                    cnt.queries ? (double)cnt.candidates / cnt.queries : 0.0);
         if (getenv("PREP_BENCH_DEBUG"))
-            fprintf(stderr, "selected from %.1f per query\n", (double)cnt.filtered / (cnt.queries ? cnt.queries : 1));
+            fprintf(stderr, "selected from %.1f per query, %.3f gathers per query\n",
+                    (double)cnt.filtered / (cnt.queries ? cnt.queries : 1),
+                    (double)cnt.gathers / (cnt.queries ? cnt.queries : 1));
         }
         pc_cloud_free(&c);
         return 0;
