@@ -704,6 +704,52 @@ static void rank_select(const prep__grid *g, prep__grid_scratch *s, size_t c, in
     }
 }
 
+/* How many of the c distance bits kd are <= v (kd padded to a multiple of 8 with values above
+ * any distance). */
+PREP_CLONES static size_t count_le(const uint32_t *kd, size_t c, int v)
+{
+    v8i acc = {0, 0, 0, 0, 0, 0, 0, 0};
+    for (size_t j = 0; j < c; j += 8) {
+        v8i d;
+        memcpy(&d, kd + j, sizeof d);
+        acc += d <= v; /* true lanes are -1 */
+    }
+    int sum = 0;
+    for (int l = 0; l < 8; l++) sum -= acc[l];
+    return (size_t)sum;
+}
+
+/* When more than RANK_MAX candidates passed the filter (a bad guess: the first query of a
+ * call, a jump in density), keeps only those within a smaller distance that still holds at
+ * least k1 of them, found by bisection on the distance bits (which order like the distances),
+ * so the ranking applies. Returns the new count (unchanged when ties at one distance hold
+ * more than RANK_MAX: the caller sorts keys then). The k1 smallest are among those kept. */
+static size_t narrow(uint32_t *kd, uint32_t *kid, size_t c, size_t k1)
+{
+    for (size_t j = c; j < ((c + 7) & ~(size_t)7); j++) kd[j] = 0x7fffffffu;
+    uint32_t lo = 0, hi = 0;
+    for (size_t j = 0; j < c; j++) hi = kd[j] > hi ? kd[j] : hi;
+    /* invariant: count(<= hi) > RANK_MAX and, when lo > 0, count(<= lo - 1) < k1 */
+    while (lo < hi) {
+        uint32_t mid = lo + (hi - lo) / 2;
+        size_t n = count_le(kd, c, (int)mid);
+        if (n < k1) {
+            lo = mid + 1;
+        } else if (n > RANK_MAX) {
+            hi = mid;
+        } else {
+            size_t w = 0;
+            for (size_t j = 0; j < c; j++) { /* left-pack those <= mid, no branch */
+                kd[w] = kd[j];
+                kid[w] = kid[j];
+                w += kd[j] <= mid;
+            }
+            return w;
+        }
+    }
+    return c;
+}
+
 /* Grows the scratch's per-candidate buffers to hold m16 entries. */
 static int reserve_scratch(prep__grid_scratch *s, size_t m16)
 {
@@ -751,6 +797,7 @@ static int select_k(const prep__grid *g, prep__grid_scratch *s, const cand_set *
         for (int i = 0; i < 3 && c < (size_t)k1; i++)
             c = pack(g, s, cs, q, i < 2 ? tp * wider[i] : INFINITY, 0, d2, kd, kid);
     }
+    if (c > RANK_MAX) c = narrow(kd, kid, c, (size_t)k1);
     s->cnt.filtered += c;
     found = c < (size_t)k1 ? (int)c : k1;
     if (c <= RANK_MAX) {
