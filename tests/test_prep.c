@@ -351,9 +351,11 @@ static void brute_knn_exact(const float *pos, size_t n, size_t q, int k, float *
 
 /* Every vector path of the grid (portable, AVX2, AVX-512: those the CPU has) answers every
  * query of pos exactly as the float brute force does: the same indices in the same order and
- * the same distance bits. Queries in index order and in a random order. */
-static void check_knn_paths_exact(const float *pos, size_t n, int k, uint64_t seed,
-                                  const char *what)
+ * the same distance bits. Queries in index order and in a random order; with codes (pos in
+ * Morton order, frame f) the grid indexes the points as they are (no copy, no order). */
+static void check_knn_paths_in(const float *pos, size_t n, int k, uint64_t seed,
+                               const prep_morton_frame *f, const uint64_t *codes,
+                               const char *what)
 {
     uint32_t *q = malloc(n * sizeof *q), *idx = malloc(n * (size_t)k * sizeof *idx);
     float *d2 = malloc(n * (size_t)k * sizeof *d2), *wd = malloc(n * (size_t)k * sizeof *wd);
@@ -365,7 +367,7 @@ static void check_knn_paths_exact(const float *pos, size_t n, int k, uint64_t se
     for (int path = PREP_KNN_SIMD_PORTABLE; path <= PREP_KNN_SIMD_AVX512; path++) {
         prep_knn *kn = NULL;
         sd_err err = {0};
-        prep_knn_opts o = {.method = PREP_KNN_GRID, .simd = path};
+        prep_knn_opts o = {.method = PREP_KNN_GRID, .simd = path, .frame = f, .codes = codes};
         assert_int_equal(prep_knn_build(pos, n, &o, &kn, &err), 0);
         prep_knn_scratch *s = prep_knn_scratch_new();
         assert_non_null(s);
@@ -392,6 +394,26 @@ static void check_knn_paths_exact(const float *pos, size_t n, int k, uint64_t se
         prep_knn_free(kn);
     }
     free(q); free(idx); free(d2); free(wd); free(wi);
+}
+
+/* check_knn_paths_in on pos as given, then on a copy in Morton order with its codes. */
+static void check_knn_paths_exact(const float *pos, size_t n, int k, uint64_t seed,
+                                  const char *what)
+{
+    check_knn_paths_in(pos, n, k, seed, NULL, NULL, what);
+    prep_morton_frame f;
+    prep_morton_frame_of(pos, n, &f);
+    uint64_t *codes = malloc(n * sizeof *codes);
+    uint32_t *perm = malloc(n * sizeof *perm);
+    float *sorted = malloc(3 * n * sizeof *sorted);
+    assert_non_null(codes); assert_non_null(perm); assert_non_null(sorted);
+    sd_err err = {0};
+    assert_int_equal(prep_morton_sort(pos, n, &f, codes, perm, &err), 0);
+    for (size_t i = 0; i < n; i++) memcpy(sorted + 3 * i, pos + 3 * (size_t)perm[i], 12);
+    char w[96];
+    snprintf(w, sizeof w, "%s, in Morton order", what);
+    check_knn_paths_in(sorted, n, k, seed + 100, &f, codes, w);
+    free(codes); free(perm); free(sorted);
 }
 
 /* The grid's vector paths against the exact float brute force on random and degenerate

@@ -365,6 +365,38 @@ static int reserve(cand_set *cs, size_t cap)
     return 0;
 }
 
+#ifdef PREP_X86_AVX2
+/* Copies the points pa, pa + 1, ... of sp (x, y, z interleaved) into x, y, z, 16 at a time
+ * while 16 remain before pb (three loads, six permutes), and with id their positions; returns
+ * the first point not copied. */
+__attribute__((target("avx512f"))) static size_t copy_run_avx512(const float *sp, size_t pa,
+                                                                size_t pb, float *x, float *y,
+                                                                float *z, uint32_t *id)
+{
+    /* from a|b (indices 0-31) the first lanes, then the rest from c (16 + its index) */
+    const __m512i xa = _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 30, 0, 0, 0, 0, 0);
+    const __m512i xc = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 17, 20, 23, 26, 29);
+    const __m512i ya = _mm512_setr_epi32(1, 4, 7, 10, 13, 16, 19, 22, 25, 28, 31, 0, 0, 0, 0, 0);
+    const __m512i yc = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 18, 21, 24, 27, 30);
+    const __m512i za = _mm512_setr_epi32(2, 5, 8, 11, 14, 17, 20, 23, 26, 29, 0, 0, 0, 0, 0, 0);
+    const __m512i zc = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 16, 19, 22, 25, 28, 31);
+    const __m512i step = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    size_t p = pa;
+    for (; p + 16 <= pb; p += 16) {
+        const float *src = sp + 3 * p;
+        __m512 a = _mm512_loadu_ps(src), b = _mm512_loadu_ps(src + 16);
+        __m512 c = _mm512_loadu_ps(src + 32);
+        size_t o = p - pa;
+        _mm512_storeu_ps(x + o, _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, xa, b), xc, c));
+        _mm512_storeu_ps(y + o, _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ya, b), yc, c));
+        _mm512_storeu_ps(z + o, _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, za, b), zc, c));
+        if (id)
+            _mm512_storeu_si512(id + o, _mm512_add_epi32(_mm512_set1_epi32((int)p), step));
+    }
+    return p;
+}
+#endif
+
 /* The candidate set for (cell, level, h), from the scratch's cache or gathered now. With
  * allow_big, a block of more than GRID_CAP points is not gathered but marked too_big. hint is
  * the query's sorted position (where the block's runs are searched from).
@@ -401,15 +433,18 @@ static cand_set *get_set(const prep__grid *g, prep__grid_scratch *s, uint64_t ce
         uint32_t *restrict id = cs->id;
         const float *restrict sp = g->spos;
         for (size_t r = 0; r < b.nr; r++) {
-            size_t pa = b.ra[r], pb = b.rb[r];
-            for (size_t p = pa; p < pb; p++) {
+            size_t pa = b.ra[r], pb = b.rb[r], p = pa;
+#ifdef PREP_X86_AVX2
+            if (g->simd >= PREP_KNN_SIMD_AVX512) p = copy_run_avx512(sp, pa, pb, x + m, y + m,
+                                                                   z + m, g->order ? NULL : id + m);
+#endif
+            for (; p < pb; p++) {
                 x[m + p - pa] = sp[3 * p];
                 y[m + p - pa] = sp[3 * p + 1];
                 z[m + p - pa] = sp[3 * p + 2];
+                if (!g->order) id[m + p - pa] = (uint32_t)p;
             }
             if (g->order) memcpy(id + m, g->order + pa, (pb - pa) * sizeof *id);
-            else
-                for (size_t p = pa; p < pb; p++) id[m + p - pa] = (uint32_t)p;
             m += pb - pa;
         }
         cs->m = m;
