@@ -86,6 +86,59 @@ int prep_morton_sort(const float *pos, size_t n, const prep_morton_frame *f, uin
     return prep_radix_sort64(codes, perm, n, err);
 }
 
+/* Stable LSD radix sort of the n keys k (and their perm p) on bits [0, bits), 8 bits a pass,
+ * with tk / tp (n entries) as the other buffer; the result ends in k / p. The histograms are
+ * counted in one read; a pass whose digit is the same for every key is skipped. Small runs
+ * (the MSD buckets of prep_radix_sort64 are mostly a few thousand keys: in cache) take an
+ * insertion sort. */
+static void lsd_sort(uint64_t *k, uint32_t *p, uint64_t *tk, uint32_t *tp, size_t n, int bits)
+{
+    if (n < 2) return;
+    if (n <= 32) { /* stable: a key moves left only past greater keys */
+        for (size_t i = 1; i < n; i++) {
+            uint64_t v = k[i];
+            uint32_t q = p[i];
+            size_t j = i;
+            while (j > 0 && k[j - 1] > v) { k[j] = k[j - 1]; p[j] = p[j - 1]; j--; }
+            k[j] = v;
+            p[j] = q;
+        }
+        return;
+    }
+    enum { PASSES = 8 };
+    size_t hist[PASSES][256];
+    int np = (bits + 7) / 8;
+    memset(hist, 0, sizeof hist);
+    for (size_t j = 0; j < n; j++) {
+        uint64_t c = k[j];
+        for (int d = 0; d < np; d++) hist[d][(c >> (8 * d)) & 0xff]++;
+    }
+    uint64_t *src = k, *dst = tk;
+    uint32_t *psrc = p, *pdst = tp;
+    for (int d = 0; d < np; d++) {
+        int shift = 8 * d;
+        size_t *h = hist[d];
+        if (h[(src[0] >> shift) & 0xff] == n) continue;
+        size_t sum = 0;
+        for (int v = 0; v < 256; v++) {
+            size_t c = h[v];
+            h[v] = sum;
+            sum += c;
+        }
+        for (size_t j = 0; j < n; j++) {
+            size_t o = h[(src[j] >> shift) & 0xff]++;
+            dst[o] = src[j];
+            pdst[o] = psrc[j];
+        }
+        uint64_t *t = src; src = dst; dst = t;
+        uint32_t *u = psrc; psrc = pdst; pdst = u;
+    }
+    if (src != k) {
+        memcpy(k, src, n * sizeof *k);
+        memcpy(p, psrc, n * sizeof *p);
+    }
+}
+
 int prep_radix_sort64(uint64_t *codes, uint32_t *perm, size_t n, sd_err *err)
 {
     size_t i = 1;
@@ -93,36 +146,38 @@ int prep_radix_sort64(uint64_t *codes, uint32_t *perm, size_t n, sd_err *err)
     if (i >= n) return 0; /* already in Morton order (a prepared cloud): nothing to sort */
     uint64_t *tk = malloc(n * sizeof *tk);
     uint32_t *tp = malloc(n * sizeof *tp);
-    size_t *hist = malloc(sizeof(size_t) << 11);
+    size_t *hist = calloc((size_t)1 << 11, sizeof(size_t));
     if (!tk || !tp || !hist) {
         free(tk); free(tp); free(hist);
         return sd_errf(err, SD_ENOMEM, "out of memory sorting %zu keys", n);
     }
-    /* Six passes of 11 bits cover 64-bit keys; a pass whose digit is the same for every key
-     * (common for the top bits) is skipped. */
-    uint64_t *src = codes, *dst = tk;
-    uint32_t *psrc = perm, *pdst = tp;
-    for (int shift = 0; shift < 64; shift += 11) {
-        memset(hist, 0, sizeof(size_t) << 11);
-        for (size_t j = 0; j < n; j++) hist[(src[j] >> shift) & 0x7ff]++;
-        if (hist[(src[0] >> shift) & 0x7ff] == n) continue;
-        size_t sum = 0;
-        for (int d = 0; d < 2048; d++) {
-            size_t c = hist[d];
-            hist[d] = sum;
-            sum += c;
-        }
-        for (size_t j = 0; j < n; j++) {
-            size_t o = hist[(src[j] >> shift) & 0x7ff]++;
-            dst[o] = src[j];
-            pdst[o] = psrc[j];
-        }
-        uint64_t *t = src; src = dst; dst = t;
-        uint32_t *u = psrc; psrc = pdst; pdst = u;
+    /* One stable counting pass on the 11 highest bits that differ among the keys (MSD) into
+     * tk / tp, then each bucket sorted on the bits below by LSD passes, back into codes /
+     * perm: buckets are small enough to stay in cache, where a full-array LSD sort would
+     * scatter the whole array six times. Stable throughout: the same order as any stable
+     * sort by key. */
+    uint64_t diff = 0;
+    for (size_t j = 1; j < n; j++) diff |= codes[j] ^ codes[0];
+    int hb = 63 - __builtin_clzll(diff); /* diff != 0: the keys are not all in order */
+    int lo = hb + 1 > 11 ? hb + 1 - 11 : 0;
+    for (size_t j = 0; j < n; j++) hist[(codes[j] >> lo) & 0x7ff]++;
+    size_t sum = 0;
+    for (int d = 0; d < 2048; d++) {
+        size_t c = hist[d];
+        hist[d] = sum;
+        sum += c;
     }
-    if (src != codes) {
-        memcpy(codes, src, n * sizeof *codes);
-        memcpy(perm, psrc, n * sizeof *perm);
+    for (size_t j = 0; j < n; j++) {
+        size_t o = hist[(codes[j] >> lo) & 0x7ff]++;
+        tk[o] = codes[j];
+        tp[o] = perm[j];
+    }
+    memcpy(codes, tk, n * sizeof *codes); /* the bucket order, sorted below in place */
+    memcpy(perm, tp, n * sizeof *perm);
+    for (size_t a = 0, d = 0; d < 2048; d++) { /* hist[d] is now the end of bucket d */
+        size_t b = hist[d];
+        lsd_sort(codes + a, perm + a, tk + a, tp + a, b - a, lo);
+        a = b;
     }
     free(tk); free(tp); free(hist);
     return 0;
