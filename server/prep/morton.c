@@ -86,6 +86,24 @@ int prep_morton_sort(const float *pos, size_t n, const prep_morton_frame *f, uin
     return prep_radix_sort64(codes, perm, n, err);
 }
 
+/* One stable counting-sort pass of src / psrc into dst / pdst by the digit (key >> shift) & mask,
+ * h its histogram (mask + 1 counts), turned into the buckets' ends. */
+static void scatter_digit(const uint64_t *src, const uint32_t *psrc, uint64_t *dst,
+                          uint32_t *pdst, size_t n, size_t *h, int shift, uint64_t mask)
+{
+    size_t sum = 0;
+    for (uint64_t v = 0; v <= mask; v++) {
+        size_t c = h[v];
+        h[v] = sum;
+        sum += c;
+    }
+    for (size_t j = 0; j < n; j++) {
+        size_t o = h[(src[j] >> shift) & mask]++;
+        dst[o] = src[j];
+        pdst[o] = psrc[j];
+    }
+}
+
 /* Stable LSD radix sort of the n keys k (and their perm p) on bits [0, bits), 8 bits a pass,
  * with tk / tp (n entries) as the other buffer; the result ends in k / p. The histograms are
  * counted in one read; a pass whose digit is the same for every key is skipped. Small runs
@@ -119,17 +137,7 @@ static void lsd_sort(uint64_t *k, uint32_t *p, uint64_t *tk, uint32_t *tp, size_
         int shift = 8 * d;
         size_t *h = hist[d];
         if (h[(src[0] >> shift) & 0xff] == n) continue;
-        size_t sum = 0;
-        for (int v = 0; v < 256; v++) {
-            size_t c = h[v];
-            h[v] = sum;
-            sum += c;
-        }
-        for (size_t j = 0; j < n; j++) {
-            size_t o = h[(src[j] >> shift) & 0xff]++;
-            dst[o] = src[j];
-            pdst[o] = psrc[j];
-        }
+        scatter_digit(src, psrc, dst, pdst, n, h, shift, 0xff);
         uint64_t *t = src; src = dst; dst = t;
         uint32_t *u = psrc; psrc = pdst; pdst = u;
     }
@@ -161,17 +169,7 @@ int prep_radix_sort64(uint64_t *codes, uint32_t *perm, size_t n, sd_err *err)
     int hb = 63 - __builtin_clzll(diff); /* diff != 0: the keys are not all in order */
     int lo = hb + 1 > 11 ? hb + 1 - 11 : 0;
     for (size_t j = 0; j < n; j++) hist[(codes[j] >> lo) & 0x7ff]++;
-    size_t sum = 0;
-    for (int d = 0; d < 2048; d++) {
-        size_t c = hist[d];
-        hist[d] = sum;
-        sum += c;
-    }
-    for (size_t j = 0; j < n; j++) {
-        size_t o = hist[(codes[j] >> lo) & 0x7ff]++;
-        tk[o] = codes[j];
-        tp[o] = perm[j];
-    }
+    scatter_digit(codes, perm, tk, tp, n, hist, lo, 0x7ff);
     memcpy(codes, tk, n * sizeof *codes); /* the bucket order, sorted below in place */
     memcpy(perm, tp, n * sizeof *perm);
     for (size_t a = 0, d = 0; d < 2048; d++) { /* hist[d] is now the end of bucket d */
