@@ -762,9 +762,12 @@ PREP_CLONES static size_t count_le(const uint32_t *kd, size_t c, int v)
 static size_t narrow(uint32_t *kd, uint32_t *kid, size_t c, size_t k1)
 {
     for (size_t j = c; j < ((c + 7) & ~(size_t)7); j++) kd[j] = 0x7fffffffu;
-    uint32_t lo = 0, hi = 0;
-    for (size_t j = 0; j < c; j++) hi = kd[j] > hi ? kd[j] : hi;
-    /* invariant: count(<= hi) > RANK_MAX and, when lo > 0, count(<= lo - 1) < k1 */
+    uint32_t lo = 0x7fffffffu, hi = 0;
+    for (size_t j = 0; j < c; j++) {
+        hi = kd[j] > hi ? kd[j] : hi;
+        lo = kd[j] < lo ? kd[j] : lo;
+    }
+    /* invariant: count(<= hi) > RANK_MAX and count(< lo) < k1 (at first: none below the least) */
     while (lo < hi) {
         uint32_t mid = lo + (hi - lo) / 2;
         size_t n = count_le(kd, c, (int)mid);
