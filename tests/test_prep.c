@@ -103,47 +103,59 @@ static void test_morton_roundtrip_and_sort(void **state)
  * is in the last cell on all three axes, so its code has all 63 bits set, one far below the low
  * corner (or NaN) in cell 0. Proves the clamp returns the last cell, not one past it (which the
  * 21-bit spreading would wrap to cell 0). */
-/* prep_radix_sort64 against an insertion sort by (key, original position) on key sets that
- * take each of its paths: random 64-bit keys (the MSD digit at the top bit), keys that differ
- * only in their low bits (one MSD pass, no LSD), few distinct keys (ties: stability), one
- * bucket holding most keys (a large LSD sort beside tiny ones), short arrays. */
+/* prep_radix_sort64 against qsort by (key, original position) on key sets that take each of
+ * its paths: arrays below and above RADIX_MSD_MIN (2^18: LSD passes over the whole array, or an
+ * MSD split first), random 64-bit keys (the MSD digit at the top bit), keys that differ only in
+ * their low bits (one MSD pass, no LSD), few distinct keys (ties: stability), one bucket
+ * holding most keys (a large LSD sort beside tiny ones), short arrays (the insertion sort,
+ * with ties). */
+typedef struct keypos {
+    uint64_t k;
+    uint32_t p;
+} keypos;
+
+static int cmp_keypos(const void *a, const void *b)
+{
+    const keypos *x = a, *y = b;
+    if (x->k != y->k) return x->k < y->k ? -1 : 1;
+    return x->p < y->p ? -1 : x->p > y->p;
+}
+
 static void test_radix_sort(void **state)
 {
     (void)state;
-    enum { N = 8000 };
-    uint64_t *k = malloc(N * sizeof *k), *want = malloc(N * sizeof *want);
-    uint32_t *p = malloc(N * sizeof *p), *wp = malloc(N * sizeof *wp);
-    assert_non_null(k); assert_non_null(want); assert_non_null(p); assert_non_null(wp);
+    enum { N = 300000 };
+    uint64_t *k = malloc(N * sizeof *k);
+    uint32_t *p = malloc(N * sizeof *p);
+    keypos *want = malloc(N * sizeof *want);
+    assert_non_null(k); assert_non_null(p); assert_non_null(want);
     rng r = {9};
-    for (int set = 0; set < 6; set++) {
-        size_t n = set == 5 ? 40 : N;
+    for (int set = 0; set < 13; set++) {
+        size_t n = set == 12 ? 30 : set == 11 ? 40 : set < 6 ? N : 5000;
         for (size_t i = 0; i < n; i++) {
             uint64_t v = next64(&r);
-            switch (set) {
+            switch (set == 12 ? 5 : set % 6) {
             case 0: k[i] = v; break;
             case 1: k[i] = 0x1234000000000000ull | (v & 0x3ff); break;
             case 2: k[i] = (v % 7) << 40 | (v >> 60); break;
             case 3: k[i] = i % 10 ? (0x5ull << 58 | (v & 0xffffffff)) : v >> 1; break;
             case 4: k[i] = v & 0x7fffffffffffull; break;
-            default: k[i] = v % 5; break;
+            default: k[i] = v % (set == 12 ? 3 : 5); break;
             }
             p[i] = (uint32_t)i;
+            want[i].k = k[i];
+            want[i].p = (uint32_t)i;
         }
-        /* the expected order: stable insertion of (key, position) */
-        for (size_t i = 0; i < n; i++) {
-            size_t j = i;
-            while (j > 0 && want[j - 1] > k[i]) { want[j] = want[j - 1]; wp[j] = wp[j - 1]; j--; }
-            want[j] = k[i];
-            wp[j] = (uint32_t)i;
-        }
+        qsort(want, n, sizeof *want, cmp_keypos);
         sd_err err = {0};
         assert_int_equal(prep_radix_sort64(k, p, n, &err), 0);
         for (size_t i = 0; i < n; i++)
-            if (k[i] != want[i] || p[i] != wp[i])
-                fail_msg("key set %d, position %zu: key %llx from %u, want %llx from %u", set,
-                         i, (unsigned long long)k[i], p[i], (unsigned long long)want[i], wp[i]);
+            if (k[i] != want[i].k || p[i] != want[i].p)
+                fail_msg("key set %d (n %zu), position %zu: key %llx from %u, want %llx from %u",
+                         set, n, i, (unsigned long long)k[i], p[i],
+                         (unsigned long long)want[i].k, want[i].p);
     }
-    free(k); free(want); free(p); free(wp);
+    free(k); free(p); free(want);
 }
 
 static void test_morton_clamps_outside_points(void **state)

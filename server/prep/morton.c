@@ -104,12 +104,13 @@ static void scatter_digit(const uint64_t *src, const uint32_t *psrc, uint64_t *d
     }
 }
 
-/* Stable LSD radix sort of the n keys k (and their perm p) on bits [0, bits), 8 bits a pass,
- * with tk / tp (n entries) as the other buffer; the result ends in k / p. The histograms are
- * counted in one read; a pass whose digit is the same for every key is skipped. Small runs
- * (the MSD buckets of prep_radix_sort64 are mostly a few thousand keys: in cache) take an
+/* Stable LSD radix sort of the n keys k (and their perm p) on bits [0, bits), w bits a pass
+ * (w <= 11, bits <= 64), with tk / tp (n entries) as the other buffer and hist (one row of
+ * 1 << w counts a pass) as scratch; the result ends in k / p. The histograms are counted in one
+ * read; a pass whose digit is the same for every key is skipped; up to 32 keys take an
  * insertion sort. */
-static void lsd_sort(uint64_t *k, uint32_t *p, uint64_t *tk, uint32_t *tp, size_t n, int bits)
+static void lsd_sort(uint64_t *k, uint32_t *p, uint64_t *tk, uint32_t *tp, size_t n, int bits,
+                     int w, size_t *hist)
 {
     if (n < 2) return;
     if (n <= 32) { /* stable: a key moves left only past greater keys */
@@ -123,21 +124,21 @@ static void lsd_sort(uint64_t *k, uint32_t *p, uint64_t *tk, uint32_t *tp, size_
         }
         return;
     }
-    enum { PASSES = 8 };
-    size_t hist[PASSES][256];
-    int np = (bits + 7) / 8;
-    memset(hist, 0, sizeof hist);
+    size_t nb = (size_t)1 << w;
+    uint64_t mask = nb - 1;
+    int np = (bits + w - 1) / w;
+    memset(hist, 0, (size_t)np * nb * sizeof *hist);
     for (size_t j = 0; j < n; j++) {
         uint64_t c = k[j];
-        for (int d = 0; d < np; d++) hist[d][(c >> (8 * d)) & 0xff]++;
+        for (int d = 0; d < np; d++) hist[(size_t)d * nb + ((c >> (w * d)) & mask)]++;
     }
     uint64_t *src = k, *dst = tk;
     uint32_t *psrc = p, *pdst = tp;
     for (int d = 0; d < np; d++) {
-        int shift = 8 * d;
-        size_t *h = hist[d];
-        if (h[(src[0] >> shift) & 0xff] == n) continue;
-        scatter_digit(src, psrc, dst, pdst, n, h, shift, 0xff);
+        int shift = w * d;
+        size_t *h = hist + (size_t)d * nb;
+        if (h[(src[0] >> shift) & mask] == n) continue;
+        scatter_digit(src, psrc, dst, pdst, n, h, shift, mask);
         uint64_t *t = src; src = dst; dst = t;
         uint32_t *u = psrc; psrc = pdst; pdst = u;
     }
@@ -147,6 +148,10 @@ static void lsd_sort(uint64_t *k, uint32_t *p, uint64_t *tk, uint32_t *tp, size_
     }
 }
 
+/* Arrays of at least this many keys (3 MiB of keys and indices: past a core's L2) are split by
+ * a most-significant digit first. */
+enum { RADIX_MSD_MIN = 1 << 18 };
+
 int prep_radix_sort64(uint64_t *codes, uint32_t *perm, size_t n, sd_err *err)
 {
     size_t i = 1;
@@ -154,27 +159,34 @@ int prep_radix_sort64(uint64_t *codes, uint32_t *perm, size_t n, sd_err *err)
     if (i >= n) return 0; /* already in Morton order (a prepared cloud): nothing to sort */
     uint64_t *tk = malloc(n * sizeof *tk);
     uint32_t *tp = malloc(n * sizeof *tp);
-    size_t *hist = calloc((size_t)1 << 11, sizeof(size_t));
+    /* small: six rows of 11-bit counts; large: the MSD's row, then eight of 8-bit counts */
+    size_t *hist = malloc((n < RADIX_MSD_MIN ? (size_t)6 << 11 : (size_t)4096) * sizeof(size_t));
     if (!tk || !tp || !hist) {
         free(tk); free(tp); free(hist);
         return sd_errf(err, SD_ENOMEM, "out of memory sorting %zu keys", n);
     }
+    if (n < RADIX_MSD_MIN) { /* in cache: LSD passes of 11 bits over the whole array */
+        lsd_sort(codes, perm, tk, tp, n, 64, 11, hist);
+        free(tk); free(tp); free(hist);
+        return 0;
+    }
     /* One stable counting pass on the 11 highest bits that differ among the keys (MSD) into
-     * tk / tp, then each bucket sorted on the bits below by LSD passes, back into codes /
-     * perm: buckets are small enough to stay in cache, where a full-array LSD sort would
-     * scatter the whole array six times. Stable throughout: the same order as any stable
-     * sort by key. */
+     * tk / tp, then each bucket sorted on the bits below by LSD passes of 8 bits, back into
+     * codes / perm: buckets are small enough to stay in cache, where LSD passes over the
+     * whole array would scatter it six times. Stable throughout: the same order as any
+     * stable sort by key. */
     uint64_t diff = 0;
     for (size_t j = 1; j < n; j++) diff |= codes[j] ^ codes[0];
     int hb = 63 - __builtin_clzll(diff); /* diff != 0: the keys are not all in order */
     int lo = hb + 1 > 11 ? hb + 1 - 11 : 0;
+    memset(hist, 0, ((size_t)1 << 11) * sizeof *hist);
     for (size_t j = 0; j < n; j++) hist[(codes[j] >> lo) & 0x7ff]++;
     scatter_digit(codes, perm, tk, tp, n, hist, lo, 0x7ff);
     memcpy(codes, tk, n * sizeof *codes); /* the bucket order, sorted below in place */
     memcpy(perm, tp, n * sizeof *perm);
     for (size_t a = 0, d = 0; d < 2048; d++) { /* hist[d] is now the end of bucket d */
         size_t b = hist[d];
-        lsd_sort(codes + a, perm + a, tk + a, tp + a, b - a, lo);
+        lsd_sort(codes + a, perm + a, tk + a, tp + a, b - a, lo, 8, hist + 2048);
         a = b;
     }
     free(tk); free(tp); free(hist);
