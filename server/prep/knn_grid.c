@@ -569,6 +569,7 @@ __attribute__((target("avx2"))) static size_t pack_avx2(const prep__grid_scratch
         }
         unsigned mask = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(d, tv, _CMP_LE_OQ));
         if (m - j < 8) mask &= (1u << (m - j)) - 1; /* padding lanes */
+        if (!mask) continue; /* most blocks: nothing passes, nothing stored */
         __m256i perm = _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)lut[mask]));
         __m256i vd = _mm256_permutevar8x32_epi32(_mm256_castps_si256(d), perm);
         __m256i vi = _mm256_permutevar8x32_epi32(_mm256_loadu_si256((const __m256i *)(id + j)),
