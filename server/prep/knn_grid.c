@@ -16,16 +16,23 @@
  *  4. otherwise the k-th distance found bounds the true one, and the block of cells that wide
  *     settles it in one more step (with too few candidates: the finest coarser level whose
  *     block holds k + 1 points). Level 0 is the whole cloud, so every search ends exact.
- * Selection computes all candidate distances eight at a time and, in the same pass, left-packs
- * those within the previous k-th distance (times a little) into a short list (AVX2 where the
- * CPU has it: one compare, one table lookup and two permutes per 8 candidates, no branch per
- * candidate); when that holds fewer than k + 1, wider radii, then all. The k + 1 smallest
- * (distance, index) pairs of the list are placed by counting, for each, the pairs that precede
- * it (8 at a time): no sort. A leaf whose block holds more than GRID_CAP points (a
- * sparse cell next to a dense one: outliers near a surface) starts from the finest level
- * whose block still holds k + 1 points. Measured against FLANN's exact kd-tree on the same
- * Morton-ordered points (tests/bench/bench_prep.sh): about 2x less CPU time (before the packed
- * selection, which took the 2M synthetic scene's queries from 1.66 to 1.15 us each here). */
+ * Selection computes all candidate distances eight (AVX-512: sixteen) at a time and, in the
+ * same pass, left-packs those within the previous k-th distance (times a little) into a short
+ * list (AVX2: one compare, one table lookup and two permutes per 8 candidates; AVX-512: one
+ * compare into a mask and two compresses per 16; no branch per candidate, no store where none
+ * passes); when that holds fewer than k + 1, wider radii, then all; when it holds more than
+ * RANK_MAX, a bisection on the distance bits narrows it. The k + 1 smallest (distance, index)
+ * pairs of the list are placed by rank: each pair's count of smaller distances builds up in
+ * its own vector lane as every pair is broadcast against the list (no sort, no horizontal
+ * sum); ties on a distance (ranks not all distinct) take a slower ranking by index. Every
+ * path computes each distance as (dx * dx + dy * dy) + dz * dz in float without fused
+ * multiply-adds: the same bits, the same neighbours (test_prep pins each path against a brute
+ * force). A leaf whose block holds more than GRID_CAP points (a sparse cell next to a dense
+ * one: outliers near a surface) starts from the finest level whose block still holds k + 1
+ * points. Measured against FLANN's exact kd-tree on the same Morton-ordered points
+ * (tests/bench/bench_prep.sh): about 2x less CPU time before the packed selection, which took
+ * the 2M synthetic scene's queries from 1.66 to 1.15 us each here, and the AVX-512 path and
+ * lane ranks to ~0.8 us (prep_bench --knn-only --threads 1). */
 #include "knn_grid.h"
 
 #include <math.h>
