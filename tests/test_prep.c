@@ -103,6 +103,61 @@ static void test_morton_roundtrip_and_sort(void **state)
  * is in the last cell on all three axes, so its code has all 63 bits set, one far below the low
  * corner (or NaN) in cell 0. Proves the clamp returns the last cell, not one past it (which the
  * 21-bit spreading would wrap to cell 0). */
+/* prep_radix_sort64 against qsort by (key, original position) on key sets that take each of
+ * its paths: arrays below and above RADIX_MSD_MIN (2^18: LSD passes over the whole array, or an
+ * MSD split first), random 64-bit keys (the MSD digit at the top bit), keys that differ only in
+ * their low bits (one MSD pass, no LSD), few distinct keys (ties: stability), one bucket
+ * holding most keys (a large LSD sort beside tiny ones), short arrays (the insertion sort,
+ * with ties). */
+typedef struct keypos {
+    uint64_t k;
+    uint32_t p;
+} keypos;
+
+static int cmp_keypos(const void *a, const void *b)
+{
+    const keypos *x = a, *y = b;
+    if (x->k != y->k) return x->k < y->k ? -1 : 1;
+    return x->p < y->p ? -1 : x->p > y->p;
+}
+
+static void test_radix_sort(void **state)
+{
+    (void)state;
+    enum { N = 300000 };
+    uint64_t *k = malloc(N * sizeof *k);
+    uint32_t *p = malloc(N * sizeof *p);
+    keypos *want = malloc(N * sizeof *want);
+    assert_non_null(k); assert_non_null(p); assert_non_null(want);
+    rng r = {9};
+    for (int set = 0; set < 13; set++) {
+        size_t n = set == 12 ? 30 : set == 11 ? 40 : set < 6 ? N : 5000;
+        for (size_t i = 0; i < n; i++) {
+            uint64_t v = next64(&r);
+            switch (set == 12 ? 5 : set % 6) {
+            case 0: k[i] = v; break;
+            case 1: k[i] = 0x1234000000000000ull | (v & 0x3ff); break;
+            case 2: k[i] = (v % 7) << 40 | (v >> 60); break;
+            case 3: k[i] = i % 10 ? (0x5ull << 58 | (v & 0xffffffff)) : v >> 1; break;
+            case 4: k[i] = v & 0x7fffffffffffull; break;
+            default: k[i] = v % (set == 12 ? 3 : 5); break;
+            }
+            p[i] = (uint32_t)i;
+            want[i].k = k[i];
+            want[i].p = (uint32_t)i;
+        }
+        qsort(want, n, sizeof *want, cmp_keypos);
+        sd_err err = {0};
+        assert_int_equal(prep_radix_sort64(k, p, n, &err), 0);
+        for (size_t i = 0; i < n; i++)
+            if (k[i] != want[i].k || p[i] != want[i].p)
+                fail_msg("key set %d (n %zu), position %zu: key %llx from %u, want %llx from %u",
+                         set, n, i, (unsigned long long)k[i], p[i],
+                         (unsigned long long)want[i].k, want[i].p);
+    }
+    free(k); free(p); free(want);
+}
+
 static void test_morton_clamps_outside_points(void **state)
 {
     (void)state;
@@ -322,6 +377,144 @@ static void test_knn_hard_cases(void **state)
     for (int m = 0; m < 2; m++) check_knn(c.pos, n, m ? PREP_KNN_FLANN : PREP_KNN_GRID, 1, 500, 22);
     /* k = n - 1: everything is a neighbour. */
     check_knn(c.pos, 200, PREP_KNN_GRID, 199, 50, 23);
+    pc_cloud_free(&c);
+}
+
+/* Brute force in float, the way the grid computes a distance ((dx * dx + dy * dy) + dz * dz,
+ * no fused multiply-add): the k smallest (distance, index) pairs of point q among the others,
+ * ascending by distance, then index: the grid's exact answer, ties included. */
+static void brute_knn_exact(const float *pos, size_t n, size_t q, int k, float *od, uint32_t *oi)
+{
+    int m = 0;
+    const float *a = pos + 3 * q;
+    for (size_t j = 0; j < n; j++) {
+        if (j == q) continue;
+        float dx = pos[3 * j] - a[0], dy = pos[3 * j + 1] - a[1], dz = pos[3 * j + 2] - a[2];
+        float d = dx * dx + dy * dy + dz * dz;
+        uint32_t id = (uint32_t)j;
+        if (m == k && (d > od[k - 1] || (d == od[k - 1] && id > oi[k - 1]))) continue;
+        int i = m < k ? m++ : k - 1;
+        while (i > 0 && (od[i - 1] > d || (od[i - 1] == d && oi[i - 1] > id))) {
+            od[i] = od[i - 1];
+            oi[i] = oi[i - 1];
+            i--;
+        }
+        od[i] = d;
+        oi[i] = id;
+    }
+}
+
+/* Every vector path of the grid (portable, AVX2, AVX-512: those the CPU has) answers every
+ * query of pos exactly as the float brute force does: the same indices in the same order and
+ * the same distance bits. Queries in index order and in a random order; with codes (pos in
+ * Morton order, frame f) the grid indexes the points as they are (no copy, no order). */
+static void check_knn_paths_in(const float *pos, size_t n, int k, uint64_t seed,
+                               const prep_morton_frame *f, const uint64_t *codes,
+                               const char *what)
+{
+    uint32_t *q = malloc(n * sizeof *q), *idx = malloc(n * (size_t)k * sizeof *idx);
+    float *d2 = malloc(n * (size_t)k * sizeof *d2), *wd = malloc(n * (size_t)k * sizeof *wd);
+    uint32_t *wi = malloc(n * (size_t)k * sizeof *wi);
+    assert_non_null(q); assert_non_null(idx); assert_non_null(d2);
+    assert_non_null(wd); assert_non_null(wi);
+    for (size_t i = 0; i < n; i++) brute_knn_exact(pos, n, i, k, wd + i * k, wi + i * k);
+    rng r = {seed};
+    for (int path = PREP_KNN_SIMD_PORTABLE; path <= PREP_KNN_SIMD_AVX512; path++) {
+        prep_knn *kn = NULL;
+        sd_err err = {0};
+        prep_knn_opts o = {.method = PREP_KNN_GRID, .simd = path, .frame = f, .codes = codes};
+        assert_int_equal(prep_knn_build(pos, n, &o, &kn, &err), 0);
+        prep_knn_scratch *s = prep_knn_scratch_new();
+        assert_non_null(s);
+        for (int shuffled = 0; shuffled < 2; shuffled++) {
+            for (size_t i = 0; i < n; i++) q[i] = (uint32_t)i;
+            for (size_t i = n - 1; shuffled && i > 0; i--) {
+                size_t j = (size_t)(next64(&r) % (i + 1));
+                uint32_t t = q[i]; q[i] = q[j]; q[j] = t;
+            }
+            if (prep_knn_query(kn, q, 0, n, k, idx, d2, s, &err) != 0)
+                fail_msg("%s: query: %s", what, err.msg);
+            for (size_t i = 0; i < n; i++) {
+                const uint32_t *gi = idx + i * k, *bi = wi + (size_t)q[i] * k;
+                const float *gd = d2 + i * k, *bd = wd + (size_t)q[i] * k;
+                for (int j = 0; j < k; j++)
+                    if (gi[j] != bi[j] || memcmp(&gd[j], &bd[j], sizeof gd[j]) != 0)
+                        fail_msg("%s, path %d, %s order: query %u neighbour %d: %u at %.9g, "
+                                 "brute force %u at %.9g", what, path,
+                                 shuffled ? "random" : "index", q[i], j, gi[j], gd[j], bi[j],
+                                 bd[j]);
+            }
+        }
+        prep_knn_scratch_free(s);
+        prep_knn_free(kn);
+    }
+    free(q); free(idx); free(d2); free(wd); free(wi);
+}
+
+/* check_knn_paths_in on pos as given, then on a copy in Morton order with its codes. */
+static void check_knn_paths_exact(const float *pos, size_t n, int k, uint64_t seed,
+                                  const char *what)
+{
+    check_knn_paths_in(pos, n, k, seed, NULL, NULL, what);
+    prep_morton_frame f;
+    prep_morton_frame_of(pos, n, &f);
+    uint64_t *codes = malloc(n * sizeof *codes);
+    uint32_t *perm = malloc(n * sizeof *perm);
+    float *sorted = malloc(3 * n * sizeof *sorted);
+    assert_non_null(codes); assert_non_null(perm); assert_non_null(sorted);
+    sd_err err = {0};
+    assert_int_equal(prep_morton_sort(pos, n, &f, codes, perm, &err), 0);
+    for (size_t i = 0; i < n; i++) memcpy(sorted + 3 * i, pos + 3 * (size_t)perm[i], 12);
+    char w[96];
+    snprintf(w, sizeof w, "%s, in Morton order", what);
+    check_knn_paths_in(sorted, n, k, seed + 100, &f, codes, w);
+    free(codes); free(perm); free(sorted);
+}
+
+/* The grid's vector paths against the exact float brute force on random and degenerate
+ * clouds: uniform, exact duplicates (every distance tied), a plane, collinear points, a
+ * regular lattice (many tied distances), clusters of very different density (wide blocks,
+ * retried filters, selections of more than RANK_MAX candidates), and clouds of k + 1 and
+ * k + 2 points (every other point a neighbour). */
+static void test_knn_paths_exact(void **state)
+{
+    (void)state;
+    enum { N = 2000 };
+    pc_cloud c = make_cloud(N);
+    rng r = {77};
+    float *p = c.pos;
+    for (size_t i = 0; i < N; i++)
+        for (int a = 0; a < 3; a++) p[3 * i + a] = (float)uni(&r);
+    check_knn_paths_exact(p, N, 24, 1, "uniform");
+    check_knn_paths_exact(p, N, 7, 2, "uniform, k 7");
+    for (size_t i = 0; i < N; i++) { /* 40 points at each of 50 places */
+        size_t g = i % 50;
+        p[3 * i] = (float)g * 0.1f; p[3 * i + 1] = 1; p[3 * i + 2] = (float)(g % 7);
+    }
+    check_knn_paths_exact(p, N, 24, 3, "duplicates");
+    for (size_t i = 0; i < N; i++) {
+        p[3 * i] = (float)uni(&r) * 10; p[3 * i + 1] = (float)uni(&r) * 10; p[3 * i + 2] = 2;
+    }
+    check_knn_paths_exact(p, N, 24, 4, "plane");
+    for (size_t i = 0; i < N; i++) {
+        float t = (float)uni(&r);
+        p[3 * i] = 1 + t; p[3 * i + 1] = 2 * t; p[3 * i + 2] = -3 * t;
+    }
+    check_knn_paths_exact(p, N, 24, 5, "collinear");
+    for (size_t i = 0; i < N; i++) { /* a 20 x 10 x 10 lattice of step 0.5 */
+        p[3 * i] = (float)(i % 20) * 0.5f;
+        p[3 * i + 1] = (float)(i / 20 % 10) * 0.5f;
+        p[3 * i + 2] = (float)(i / 200) * 0.5f;
+    }
+    check_knn_paths_exact(p, N, 24, 6, "lattice");
+    check_knn_paths_exact(p, N, 64, 7, "lattice, k 64");
+    for (size_t i = 0; i < N; i++) {
+        double sc = i < 1500 ? 0.01 : i < 1900 ? 1 : 100; /* dense, medium, sparse */
+        for (int a = 0; a < 3; a++) p[3 * i + a] = (float)(uni(&r) * sc);
+    }
+    check_knn_paths_exact(p, N, 24, 8, "clusters");
+    check_knn_paths_exact(p, 25, 24, 9, "k + 1 points");
+    check_knn_paths_exact(p + 3 * 1500, 26, 24, 10, "k + 2 points");
     pc_cloud_free(&c);
 }
 
@@ -1199,11 +1392,13 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_morton_roundtrip_and_sort),
         cmocka_unit_test(test_morton_clamps_outside_points),
+        cmocka_unit_test(test_radix_sort),
         cmocka_unit_test(test_eigen_solver),
         cmocka_unit_test(test_pca_counts_the_point_itself),
         cmocka_unit_test(test_percentile),
         cmocka_unit_test(test_knn_bad_args),
         cmocka_unit_test(test_knn_hard_cases),
+        cmocka_unit_test(test_knn_paths_exact),
         cmocka_unit_test(test_knn_real_scan),
         cmocka_unit_test(test_knn_real_scan_guanyin),
         cmocka_unit_test(test_normals_plane),

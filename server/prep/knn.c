@@ -62,7 +62,8 @@ int prep_knn_build(const float *pos, size_t n, const prep_knn_opts *opts, prep_k
     kn->n = n;
     kn->pos = pos;
     if (o.method == PREP_KNN_GRID) {
-        int rc = prep__grid_build(pos, n, o.leaf_size, o.frame, o.codes, &kn->grid, err);
+        int rc = prep__grid_build(pos, n, o.leaf_size, o.frame, o.codes, o.simd, &kn->grid,
+                                  err);
         if (rc != 0) {
             free(kn);
             return rc;

@@ -39,7 +39,17 @@ typedef struct prep_knn_opts {
      * not depend on either. */
     const prep_morton_frame *frame;
     const uint64_t *codes;
+    /* Grid only: the widest vector path the search may use (PREP_KNN_SIMD_*; 0 = the best the
+     * CPU has). Every path gives the same bits; tests pin each one to compare them. */
+    int simd;
 } prep_knn_opts;
+
+enum {
+    PREP_KNN_SIMD_BEST = 0,
+    PREP_KNN_SIMD_PORTABLE = 1, /* GCC vector extensions (target clones), scalar packing */
+    PREP_KNN_SIMD_AVX2 = 2,     /* + AVX2 packing */
+    PREP_KNN_SIMD_AVX512 = 3,   /* + AVX-512 distances, packing (vcompress) and ranking */
+};
 
 typedef struct prep_knn prep_knn;                 /* an index over one point set */
 typedef struct prep_knn_scratch prep_knn_scratch; /* query memory, one per thread */
@@ -75,5 +85,6 @@ typedef struct prep_knn_counters {
     uint64_t dense;      /* queries that started below a too-big leaf block */
     uint64_t candidates; /* points whose distance was computed, summed */
     uint64_t filtered;   /* keys sorted after the radius filter, summed */
+    uint64_t gathers;    /* candidate blocks gathered (not found in the scratch's cache) */
 } prep_knn_counters;
 void prep_knn_scratch_counters(const prep_knn_scratch *s, prep_knn_counters *c);

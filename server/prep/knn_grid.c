@@ -16,16 +16,23 @@
  *  4. otherwise the k-th distance found bounds the true one, and the block of cells that wide
  *     settles it in one more step (with too few candidates: the finest coarser level whose
  *     block holds k + 1 points). Level 0 is the whole cloud, so every search ends exact.
- * Selection computes all candidate distances eight at a time and, in the same pass, left-packs
- * those within the previous k-th distance (times a little) into a short list (AVX2 where the
- * CPU has it: one compare, one table lookup and two permutes per 8 candidates, no branch per
- * candidate); when that holds fewer than k + 1, wider radii, then all. The k + 1 smallest
- * (distance, index) pairs of the list are placed by counting, for each, the pairs that precede
- * it (8 at a time): no sort. A leaf whose block holds more than GRID_CAP points (a
- * sparse cell next to a dense one: outliers near a surface) starts from the finest level
- * whose block still holds k + 1 points. Measured against FLANN's exact kd-tree on the same
- * Morton-ordered points (tests/bench/bench_prep.sh): about 2x less CPU time (before the packed
- * selection, which took the 2M synthetic scene's queries from 1.66 to 1.15 us each here). */
+ * Selection computes all candidate distances eight (AVX-512: sixteen) at a time and, in the
+ * same pass, left-packs those within the previous k-th distance (times a little) into a short
+ * list (AVX2: one compare, one table lookup and two permutes per 8 candidates; AVX-512: one
+ * compare into a mask and two compresses per 16; no branch per candidate, no store where none
+ * passes); when that holds fewer than k + 1, wider radii, then all; when it holds more than
+ * RANK_MAX, a bisection on the distance bits narrows it. The k + 1 smallest (distance, index)
+ * pairs of the list are placed by rank: each pair's count of smaller distances builds up in
+ * its own vector lane as every pair is broadcast against the list (no sort, no horizontal
+ * sum); ties on a distance (ranks not all distinct) take a slower ranking by index. Every
+ * path computes each distance as (dx * dx + dy * dy) + dz * dz in float without fused
+ * multiply-adds: the same bits, the same neighbours (test_prep pins each path against a brute
+ * force). A leaf whose block holds more than GRID_CAP points (a sparse cell next to a dense
+ * one: outliers near a surface) starts from the finest level whose block still holds k + 1
+ * points. Measured against FLANN's exact kd-tree on the same Morton-ordered points
+ * (tests/bench/bench_prep.sh): about 2x less CPU time before the packed selection, which took
+ * the 2M synthetic scene's queries from 1.66 to 1.15 us each here, and the AVX-512 path and
+ * lane ranks to ~0.8 us (prep_bench --knn-only --threads 1). */
 #include "knn_grid.h"
 
 #include <math.h>
@@ -41,6 +48,8 @@
 
 enum {
     GRID_CAP = 4096, /* candidates above which a leaf's queries search individually */
+    RANK_MAX = 96,   /* selections from more candidates sort keys instead of ranking */
+    KD_PAD = 32,     /* room past the packed candidates (vector stores, ranking blocks) */
     NSLOTS = 4,      /* cached candidate blocks per scratch */
     MAXLEVEL = PREP_MORTON_BITS,
 };
@@ -61,7 +70,7 @@ struct prep__grid {
     float *spos_own;
     uint64_t *codes;         /* sorted Morton codes */
     int codes_borrowed;      /* codes are the caller's (prep_knn_opts.codes) */
-    int avx2;                /* the CPU has AVX2: select_k's vector paths */
+    int simd;                /* PREP_KNN_SIMD_* in use (never BEST) */
     uint32_t *order;         /* sorted position -> index in pos; NULL: identity */
     uint32_t *rank;          /* index in pos -> sorted position; NULL: identity */
     uint32_t *leaf_first;    /* nleaves + 1 entries; the last is n */
@@ -76,7 +85,7 @@ typedef struct cand_set {
     int valid, level, h, too_big;  /* the block is cell +- h at level */
     uint64_t cell;           /* the centre cell's code at level */
     uint64_t stamp;          /* last use, for replacement */
-    size_t m, cap;           /* candidates; arrays are padded to a multiple of 8 */
+    size_t m, cap;           /* candidates; arrays are padded to a multiple of 16 */
     float *x, *y, *z;
     uint32_t *id;
     double lo[3], hi[3];     /* block faces; -inf / +inf where the block reaches the grid edge */
@@ -88,7 +97,8 @@ struct prep__grid_scratch {
     float *d2;               /* candidate distances */
     uint64_t *key;           /* (distance, index) keys, for selections from many candidates */
     uint32_t *kd, *kid;      /* the candidates that pass the filter: distance bits, index */
-    size_t d2cap;            /* entries in d2 and key; kd and kid hold 8 more */
+    size_t d2cap;            /* entries in d2 and key; kd and kid hold KD_PAD more */
+    uint32_t rank[RANK_MAX + KD_PAD]; /* rank_select's ranks */
     uint8_t pack[256][8];    /* for each 8-bit mask, its set lanes in order (left-packing) */
     uint8_t popc[256];
     float hd[256 + 2];       /* the selected pairs */
@@ -170,7 +180,7 @@ static int split(prep__grid *g, size_t lo, size_t hi, int level, size_t m)
 }
 
 int prep__grid_build(const float *pos, size_t n, int leaf_size, const prep_morton_frame *frame,
-                     const uint64_t *codes, prep__grid **out, sd_err *err)
+                     const uint64_t *codes, int simd, prep__grid **out, sd_err *err)
 {
     prep__grid *g = calloc(1, sizeof *g);
     if (!g) return sd_errf(err, SD_ENOMEM, "out of memory for a kNN grid");
@@ -181,9 +191,14 @@ int prep__grid_build(const float *pos, size_t n, int leaf_size, const prep_morto
     else prep_morton_frame_of(pos, n, &g->f);
     for (int l = 0; l <= MAXLEVEL; l++) g->cell[l] = g->f.side / (double)(1u << l);
     g->eps = 1e-6 * g->f.side;
+    int best = PREP_KNN_SIMD_PORTABLE;
 #ifdef PREP_X86_AVX2
-    g->avx2 = __builtin_cpu_supports("avx2") != 0;
+    if (__builtin_cpu_supports("avx2")) best = PREP_KNN_SIMD_AVX2;
+    if (best == PREP_KNN_SIMD_AVX2 && __builtin_cpu_supports("avx512f") &&
+        __builtin_cpu_supports("popcnt"))
+        best = PREP_KNN_SIMD_AVX512;
 #endif
+    g->simd = simd > PREP_KNN_SIMD_BEST && simd < best ? simd : best;
     size_t sorted = 1;
     if (codes)
         while (sorted < n && codes[sorted - 1] <= codes[sorted]) sorted++;
@@ -337,10 +352,10 @@ static void block_of(const prep__grid *g, uint64_t cell, int level, int h, size_
     }
 }
 
-/* Grows a candidate set's arrays to hold cap points (rounded up to a multiple of 8). */
+/* Grows a candidate set's arrays to hold cap points (rounded up to a multiple of 16). */
 static int reserve(cand_set *cs, size_t cap)
 {
-    cap = (cap + 7) & ~(size_t)7;
+    cap = (cap + 15) & ~(size_t)15;
     if (cap <= cs->cap) return 0;
     size_t nc = cs->cap ? cs->cap : 256;
     while (nc < cap) nc *= 2;
@@ -356,6 +371,38 @@ static int reserve(cand_set *cs, size_t cap)
     cs->cap = nc;
     return 0;
 }
+
+#ifdef PREP_X86_AVX2
+/* Copies the points pa, pa + 1, ... of sp (x, y, z interleaved) into x, y, z, 16 at a time
+ * while 16 remain before pb (three loads, six permutes), and with id their positions; returns
+ * the first point not copied. */
+__attribute__((target("avx512f"))) static size_t copy_run_avx512(const float *sp, size_t pa,
+                                                                size_t pb, float *x, float *y,
+                                                                float *z, uint32_t *id)
+{
+    /* from a|b (indices 0-31) the first lanes, then the rest from c (16 + its index) */
+    const __m512i xa = _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 30, 0, 0, 0, 0, 0);
+    const __m512i xc = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 17, 20, 23, 26, 29);
+    const __m512i ya = _mm512_setr_epi32(1, 4, 7, 10, 13, 16, 19, 22, 25, 28, 31, 0, 0, 0, 0, 0);
+    const __m512i yc = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 18, 21, 24, 27, 30);
+    const __m512i za = _mm512_setr_epi32(2, 5, 8, 11, 14, 17, 20, 23, 26, 29, 0, 0, 0, 0, 0, 0);
+    const __m512i zc = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 16, 19, 22, 25, 28, 31);
+    const __m512i step = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    size_t p = pa;
+    for (; p + 16 <= pb; p += 16) {
+        const float *src = sp + 3 * p;
+        __m512 a = _mm512_loadu_ps(src), b = _mm512_loadu_ps(src + 16);
+        __m512 c = _mm512_loadu_ps(src + 32);
+        size_t o = p - pa;
+        _mm512_storeu_ps(x + o, _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, xa, b), xc, c));
+        _mm512_storeu_ps(y + o, _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ya, b), yc, c));
+        _mm512_storeu_ps(z + o, _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, za, b), zc, c));
+        if (id)
+            _mm512_storeu_si512(id + o, _mm512_add_epi32(_mm512_set1_epi32((int)p), step));
+    }
+    return p;
+}
+#endif
 
 /* The candidate set for (cell, level, h), from the scratch's cache or gathered now. With
  * allow_big, a block of more than GRID_CAP points is not gathered but marked too_big. hint is
@@ -376,6 +423,7 @@ static cand_set *get_set(const prep__grid *g, prep__grid_scratch *s, uint64_t ce
     }
     block b;
     block_of(g, cell, level, h, hint, &b);
+    s->cnt.gathers++;
     cs->valid = 0;
     cs->cell = cell;
     cs->level = level;
@@ -392,19 +440,22 @@ static cand_set *get_set(const prep__grid *g, prep__grid_scratch *s, uint64_t ce
         uint32_t *restrict id = cs->id;
         const float *restrict sp = g->spos;
         for (size_t r = 0; r < b.nr; r++) {
-            size_t pa = b.ra[r], pb = b.rb[r];
-            for (size_t p = pa; p < pb; p++) {
+            size_t pa = b.ra[r], pb = b.rb[r], p = pa;
+#ifdef PREP_X86_AVX2
+            if (g->simd >= PREP_KNN_SIMD_AVX512) p = copy_run_avx512(sp, pa, pb, x + m, y + m,
+                                                                   z + m, g->order ? NULL : id + m);
+#endif
+            for (; p < pb; p++) {
                 x[m + p - pa] = sp[3 * p];
                 y[m + p - pa] = sp[3 * p + 1];
                 z[m + p - pa] = sp[3 * p + 2];
+                if (!g->order) id[m + p - pa] = (uint32_t)p;
             }
             if (g->order) memcpy(id + m, g->order + pa, (pb - pa) * sizeof *id);
-            else
-                for (size_t p = pa; p < pb; p++) id[m + p - pa] = (uint32_t)p;
             m += pb - pa;
         }
         cs->m = m;
-        for (; m & 7; m++) { cs->x[m] = cs->y[m] = cs->z[m] = 0; cs->id[m] = 0; }
+        for (; m & 15; m++) { cs->x[m] = cs->y[m] = cs->z[m] = 0; cs->id[m] = 0; }
     }
     cs->valid = 1;
     return cs;
@@ -525,6 +576,7 @@ __attribute__((target("avx2"))) static size_t pack_avx2(const prep__grid_scratch
         }
         unsigned mask = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(d, tv, _CMP_LE_OQ));
         if (m - j < 8) mask &= (1u << (m - j)) - 1; /* padding lanes */
+        if (!mask) continue; /* most blocks: nothing passes, nothing stored */
         __m256i perm = _mm256_cvtepu8_epi32(_mm_loadl_epi64((const __m128i *)lut[mask]));
         __m256i vd = _mm256_permutevar8x32_epi32(_mm256_castps_si256(d), perm);
         __m256i vi = _mm256_permutevar8x32_epi32(_mm256_loadu_si256((const __m256i *)(id + j)),
@@ -537,11 +589,46 @@ __attribute__((target("avx2"))) static size_t pack_avx2(const prep__grid_scratch
 }
 #endif
 
+#ifdef PREP_X86_AVX2
+/* pack_scalar 16 candidates at a time (arrays padded to a multiple of 16; kd, kid 16 more):
+ * one compare into a mask and two compresses, no table. */
+__attribute__((target("avx512f,popcnt"))) static size_t pack_avx512(const cand_set *cs,
+                                                                  const float q[3], float t,
+                                                                  int fresh, float *d2,
+                                                                  uint32_t *kd, uint32_t *kid)
+{
+    const __m512 qx = _mm512_set1_ps(q[0]), qy = _mm512_set1_ps(q[1]), qz = _mm512_set1_ps(q[2]);
+    const __m512 tv = _mm512_set1_ps(t);
+    const float *restrict x = cs->x, *restrict y = cs->y, *restrict z = cs->z;
+    const uint32_t *restrict id = cs->id;
+    size_t m = cs->m, c = 0;
+    (void)fresh; /* distances are recomputed (cheaper than storing them for a rare retry) */
+    (void)d2;
+    for (size_t j = 0; j < m; j += 16) {
+        __m512 dx = _mm512_sub_ps(_mm512_loadu_ps(x + j), qx);
+        __m512 dy = _mm512_sub_ps(_mm512_loadu_ps(y + j), qy);
+        __m512 dz = _mm512_sub_ps(_mm512_loadu_ps(z + j), qz);
+        /* no fused multiply-add: the same bits as the other paths */
+        __m512 d = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(dx, dx), _mm512_mul_ps(dy, dy)),
+                                 _mm512_mul_ps(dz, dz));
+        __mmask16 k = _mm512_cmp_ps_mask(d, tv, _CMP_LE_OQ);
+        if (m - j < 16) k &= (__mmask16)((1u << (m - j)) - 1); /* padding lanes */
+        if (!k) continue; /* most blocks: nothing passes, nothing stored */
+        _mm512_storeu_si512(kd + c, _mm512_maskz_compress_epi32(k, _mm512_castps_si512(d)));
+        _mm512_storeu_si512(kid + c,
+                            _mm512_maskz_compress_epi32(k, _mm512_loadu_si512(id + j)));
+        c += (size_t)__builtin_popcount(k);
+    }
+    return c;
+}
+#endif
+
 static size_t pack(const prep__grid *g, const prep__grid_scratch *s, const cand_set *cs,
                    const float q[3], float t, int fresh, float *d2, uint32_t *kd, uint32_t *kid)
 {
 #ifdef PREP_X86_AVX2
-    if (g->avx2) return pack_avx2(s, cs, q, t, fresh, d2, kd, kid);
+    if (g->simd >= PREP_KNN_SIMD_AVX512) return pack_avx512(cs, q, t, fresh, d2, kd, kid);
+    if (g->simd >= PREP_KNN_SIMD_AVX2) return pack_avx2(s, cs, q, t, fresh, d2, kd, kid);
 #endif
     (void)g;
     (void)s;
@@ -584,26 +671,150 @@ PREP_CLONES static void rank_pairs(uint32_t *kd, uint32_t *kid, size_t c, int fo
     }
 }
 
-/* Grows the scratch's per-candidate buffers to hold m8 entries. */
-static int reserve_scratch(prep__grid_scratch *s, size_t m8)
+/* r[j] = how many of the c distance bits kd are below kd[j] (kd padded to a multiple of 16):
+ * each block of pairs is compared with every pair broadcast, so a rank builds up in its lane,
+ * with no horizontal sum. Two blocks at a time (independent chains). */
+PREP_CLONES static void ranks_below(const uint32_t *kd, size_t c, uint32_t *r)
 {
-    if (m8 <= s->d2cap) return 0;
+    for (size_t j = 0; j < c; j += 16) {
+        v8i d0, d1, a0 = {0, 0, 0, 0, 0, 0, 0, 0}, a1 = a0;
+        memcpy(&d0, kd + j, sizeof d0);
+        memcpy(&d1, kd + j + 8, sizeof d1);
+        for (size_t i = 0; i < c; i++) {
+            int di = (int)kd[i];
+            a0 += d0 > di; /* true lanes are -1 */
+            a1 += d1 > di;
+        }
+        a0 = -a0;
+        a1 = -a1;
+        memcpy(r + j, &a0, sizeof a0);
+        memcpy(r + j + 8, &a1, sizeof a1);
+    }
+}
+
+#ifdef PREP_X86_AVX2
+/* ranks_below 16 lanes wide, two blocks at a time (kd padded to a multiple of 32). */
+__attribute__((target("avx512f"))) static void ranks_below_avx512(const uint32_t *kd, size_t c,
+                                                                  uint32_t *r)
+{
+    const __m512i one = _mm512_set1_epi32(1);
+    size_t j = 0;
+    for (; j + 16 < c; j += 32) {
+        __m512i d0 = _mm512_loadu_si512(kd + j), d1 = _mm512_loadu_si512(kd + j + 16);
+        __m512i a0 = _mm512_setzero_si512(), a1 = a0;
+        for (size_t i = 0; i < c; i++) {
+            __m512i di = _mm512_set1_epi32((int)kd[i]);
+            a0 = _mm512_mask_add_epi32(a0, _mm512_cmplt_epi32_mask(di, d0), a0, one);
+            a1 = _mm512_mask_add_epi32(a1, _mm512_cmplt_epi32_mask(di, d1), a1, one);
+        }
+        _mm512_storeu_si512(r + j, a0);
+        _mm512_storeu_si512(r + j + 16, a1);
+    }
+    if (j < c) {
+        __m512i d0 = _mm512_loadu_si512(kd + j), a0 = _mm512_setzero_si512();
+        for (size_t i = 0; i < c; i++)
+            a0 = _mm512_mask_add_epi32(
+                a0, _mm512_cmplt_epi32_mask(_mm512_set1_epi32((int)kd[i]), d0), a0, one);
+        _mm512_storeu_si512(r + j, a0);
+    }
+}
+#endif
+
+/* The found smallest of the c packed pairs (c <= RANK_MAX) into s->hd / s->hid, ascending.
+ * Ranks by distance alone (ranks_below); when no two distances are equal these are the ranks
+ * 0..c-1, each once, which their sum tells: each pair goes straight to its place. Otherwise
+ * (duplicate points, regular grids) rank_pairs settles the ties by index. */
+static void rank_select(const prep__grid *g, prep__grid_scratch *s, size_t c, int found)
+{
+    uint32_t *kd = s->kd, *kid = s->kid, *r = s->rank;
+    for (size_t j = c; j < ((c + KD_PAD - 1) & ~(size_t)(KD_PAD - 1)); j++) kd[j] = 0x7fffffffu;
+#ifdef PREP_X86_AVX2
+    if (g->simd >= PREP_KNN_SIMD_AVX512) ranks_below_avx512(kd, c, r);
+    else ranks_below(kd, c, r);
+#else
+    (void)g;
+    ranks_below(kd, c, r);
+#endif
+    size_t sum = 0;
+    for (size_t j = 0; j < c; j++) sum += r[j];
+    if (sum != c * (c - 1) / 2) {
+        rank_pairs(kd, kid, c, found, s->hd, s->hid);
+        return;
+    }
+    for (size_t j = 0; j < c; j++) { /* every rank < c <= RANK_MAX: inside hd, hid */
+        memcpy(&s->hd[r[j]], &kd[j], sizeof kd[j]);
+        s->hid[r[j]] = kid[j];
+    }
+}
+
+/* How many of the c distance bits kd are <= v (kd padded to a multiple of 8 with values above
+ * any distance). */
+PREP_CLONES static size_t count_le(const uint32_t *kd, size_t c, int v)
+{
+    v8i acc = {0, 0, 0, 0, 0, 0, 0, 0};
+    for (size_t j = 0; j < c; j += 8) {
+        v8i d;
+        memcpy(&d, kd + j, sizeof d);
+        acc += d <= v; /* true lanes are -1 */
+    }
+    int sum = 0;
+    for (int l = 0; l < 8; l++) sum -= acc[l];
+    return (size_t)sum;
+}
+
+/* When more than RANK_MAX candidates passed the filter (a bad guess: the first query of a
+ * call, a jump in density), keeps only those within a smaller distance that still holds at
+ * least k1 of them, found by bisection on the distance bits (which order like the distances),
+ * so the ranking applies. Returns the new count (unchanged when ties at one distance hold
+ * more than RANK_MAX: the caller sorts keys then). The k1 smallest are among those kept. */
+static size_t narrow(uint32_t *kd, uint32_t *kid, size_t c, size_t k1)
+{
+    for (size_t j = c; j < ((c + 7) & ~(size_t)7); j++) kd[j] = 0x7fffffffu;
+    uint32_t lo = 0x7fffffffu, hi = 0;
+    for (size_t j = 0; j < c; j++) {
+        hi = kd[j] > hi ? kd[j] : hi;
+        lo = kd[j] < lo ? kd[j] : lo;
+    }
+    /* invariant: count(<= hi) > RANK_MAX and count(< lo) < k1 (at first: none below the least) */
+    while (lo < hi) {
+        uint32_t mid = lo + (hi - lo) / 2;
+        size_t n = count_le(kd, c, (int)mid);
+        if (n < k1) {
+            lo = mid + 1;
+        } else if (n > RANK_MAX) {
+            hi = mid;
+        } else {
+            size_t w = 0;
+            for (size_t j = 0; j < c; j++) { /* left-pack those <= mid, no branch */
+                kd[w] = kd[j];
+                kid[w] = kid[j];
+                w += kd[j] <= mid;
+            }
+            return w;
+        }
+    }
+    return c;
+}
+
+/* Grows the scratch's per-candidate buffers to hold m16 entries. */
+static int reserve_scratch(prep__grid_scratch *s, size_t m16)
+{
+    if (m16 <= s->d2cap) return 0;
     size_t nc = s->d2cap ? s->d2cap : 256;
-    while (nc < m8) nc *= 2;
+    while (nc < m16) nc *= 2;
     float *d = realloc(s->d2, nc * sizeof *d);
     if (d) s->d2 = d;
     uint64_t *ky = realloc(s->key, nc * sizeof *ky);
     if (ky) s->key = ky;
-    uint32_t *kd = realloc(s->kd, (nc + 8) * sizeof *kd);
+    uint32_t *kd = realloc(s->kd, (nc + KD_PAD) * sizeof *kd);
     if (kd) s->kd = kd;
-    uint32_t *ki = realloc(s->kid, (nc + 8) * sizeof *ki);
+    uint32_t *ki = realloc(s->kid, (nc + KD_PAD) * sizeof *ki);
     if (ki) s->kid = ki;
     if (!d || !ky || !kd || !ki) return -1;
     s->d2cap = nc;
     return 0;
 }
 
-enum { RANK_MAX = 96 }; /* selections from more candidates sort keys instead of ranking */
 
 /* The k nearest candidates of q other than self (by index), ascending, into s->hd / s->hid;
  * returns how many (k, or fewer when the set is small), or -1 when out of memory.
@@ -619,8 +830,8 @@ enum { RANK_MAX = 96 }; /* selections from more candidates sort keys instead of 
 static int select_k(const prep__grid *g, prep__grid_scratch *s, const cand_set *cs,
                     const float q[3], uint32_t self, int k)
 {
-    size_t m = cs->m, m8 = (m + 7) & ~(size_t)7;
-    if (reserve_scratch(s, m8) != 0) return -1;
+    size_t m = cs->m, m16 = (m + 15) & ~(size_t)15;
+    if (reserve_scratch(s, m16) != 0) return -1;
     float *d2 = s->d2;
     uint32_t *kd = s->kd, *kid = s->kid;
     int k1 = k + 1, found;
@@ -632,10 +843,11 @@ static int select_k(const prep__grid *g, prep__grid_scratch *s, const cand_set *
         for (int i = 0; i < 3 && c < (size_t)k1; i++)
             c = pack(g, s, cs, q, i < 2 ? tp * wider[i] : INFINITY, 0, d2, kd, kid);
     }
+    if (c > RANK_MAX) c = narrow(kd, kid, c, (size_t)k1);
     s->cnt.filtered += c;
     found = c < (size_t)k1 ? (int)c : k1;
     if (c <= RANK_MAX) {
-        rank_pairs(kd, kid, c, found, s->hd, s->hid);
+        rank_select(g, s, c, found);
     } else {
         uint64_t *key = s->key;
         for (size_t j = 0; j < c; j++) key[j] = (uint64_t)kd[j] << 32 | kid[j];

@@ -10,9 +10,10 @@ typedef struct prep__grid_scratch prep__grid_scratch;
 
 /* prep__grid_build: sorts (a copy of the order of) the n points by Morton code and splits the
  * octree into leaves of at most leaf_size points. frame and codes: see prep_knn_opts (NULL:
- * the points' bounding cube; codes computed here). Returns 0 or SD_ENOMEM. */
+ * the points' bounding cube; codes computed here). simd: prep_knn_opts.simd. Returns 0 or
+ * SD_ENOMEM. */
 int prep__grid_build(const float *pos, size_t n, int leaf_size, const prep_morton_frame *frame,
-                     const uint64_t *codes, prep__grid **out, sd_err *err);
+                     const uint64_t *codes, int simd, prep__grid **out, sd_err *err);
 void prep__grid_free(prep__grid *g);
 
 prep__grid_scratch *prep__grid_scratch_new(void);

@@ -1,7 +1,8 @@
 /* lod_build.c — the out-of-core LOD build (lod.h).
  *
- * Passes over the input (lod_src: bounds and centroid come from its opening passes):
- *   count     points per Morton cell of depth D = min(grid_bits, 7) (8 MiB of counters); the
+ * Passes over the input (lod_src: the bounds come from its opening pass):
+ *   count     the centroid (prep.c's sum: doubles of the float positions, in file order) and
+ *             points per Morton cell of depth D = min(grid_bits, 7) (8 MiB of counters); the
  *             chunks are the shallowest cells holding at most chunk_max points (down to
  *             depth D), chunk_max from the memory cap: memory / 400 bytes, the bytes a point
  *             of a chunk costs in the normals pass with its halo (chunks are processed one at a
@@ -95,6 +96,7 @@ typedef struct build {
     const lod_desc *d;
     lod_writer w;
     lod_src_info info;
+    double centroid[3];       /* mean of the local float positions (the count pass) */
     prep_morton_frame f;
     int K, threads, g, cdepth;
     chunk *chunks;
@@ -237,9 +239,14 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
     int rc = cnt && pos && rgba ? lod_src_rewind(s, err) : sd_errf(err, SD_ENOMEM, "lod: out of memory");
     int64_t m = 0;
     double t = now_s();
+    double csum[3] = {0, 0, 0};
     while (rc == 0 && (m = lod_src_next(s, pos, rgba, BLOCK, err)) > 0)
-        for (int64_t i = 0; i < m; i++) cnt[count_cell(b, pos + 3 * i)]++;
+        for (int64_t i = 0; i < m; i++) {
+            cnt[count_cell(b, pos + 3 * i)]++;
+            for (int a = 0; a < 3; a++) csum[a] += pos[3 * i + a];
+        }
     if (rc == 0 && m < 0) rc = (int)m;
+    for (int a = 0; a < 3; a++) b->centroid[a] = csum[a] / (double)b->info.n;
     if (rc == 0) rc = make_chunks(b, cnt, err);
     free(cnt);
     status(b, "count", 0.05, b->info.n, now_s() - t);
@@ -540,7 +547,7 @@ static int nj_pca(void *ctx, size_t blk, int tid, sd_err *err)
     for (size_t i = a; i < e; i++) {
         j->r20[i] = 2.0f * sqrtf(j->kd2[i]) * inv_sqrt_k;
         prep_pca_normal(j->r->pos, j->list[i], j->nbr + i * j->K, j->K, j->nrm + 3 * i, j->svar + i);
-        prep_orient_normal(j->nrm + 3 * i, j->r->pos + 3 * (size_t)j->list[i], j->b->info.centroid,
+        prep_orient_normal(j->nrm + 3 * i, j->r->pos + 3 * (size_t)j->list[i], j->b->centroid,
                j->b->info.has_viewpoint, j->vp);
     }
     return 0;
@@ -1450,7 +1457,7 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     memcpy(c.bmax, b->info.bmax, sizeof c.bmax);
     memcpy(c.origin, b->f.origin, sizeof c.origin);
     c.side = b->f.side;
-    memcpy(c.centroid, b->info.centroid, sizeof c.centroid);
+    memcpy(c.centroid, b->centroid, sizeof c.centroid);
     c.sigma = b->qs[1].value;
     c.F_raw_p99 = b->p99;
     for (int i = 0; i < 5; i++) {

@@ -414,23 +414,6 @@ int lod_src_open(const char *path, lod_src **out, sd_err *err)
         lod_src_close(s);
         return rc;
     }
-    /* the centroid, as prep.c sums it (doubles of the float positions) */
-    double c[3] = {0, 0, 0};
-    float *pos = malloc((size_t)BLOCK * 12);
-    uint32_t *rgba = malloc((size_t)BLOCK * 4);
-    rc = pos && rgba ? lod_src_rewind(s, err) : sd_errf(err, SD_ENOMEM, "out of memory");
-    int64_t m;
-    while (rc == 0 && (m = lod_src_next(s, pos, rgba, BLOCK, err)) > 0)
-        for (int64_t i = 0; i < m; i++)
-            for (int a = 0; a < 3; a++) c[a] += pos[3 * i + a];
-    if (rc == 0 && m < 0) rc = (int)m;
-    free(pos);
-    free(rgba);
-    if (rc < 0) {
-        lod_src_close(s);
-        return rc;
-    }
-    for (int a = 0; a < 3; a++) s->info.centroid[a] = c[a] / (double)s->info.n;
     *out = s;
     return 0;
 }

@@ -33,7 +33,6 @@ typedef struct lod_src_info {
     uint32_t attrs;             /* PC_ATTR_RGB when the file has colours */
     int has_viewpoint;
     double viewpoint[3];        /* file coordinates */
-    double centroid[3];         /* mean of the local float positions (double sums, file order) */
     char format[64];
     int streamed;               /* 1: read in blocks; 0: read whole (another format) */
 } lod_src_info;

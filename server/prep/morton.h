@@ -33,14 +33,15 @@ void prep_morton_decode(uint64_t code, uint32_t *x, uint32_t *y, uint32_t *z);
 /* prep_morton_code: the code of one point in frame f. */
 uint64_t prep_morton_code(const prep_morton_frame *f, const float p[3]);
 
-/* prep_morton_sort: computes the codes of the n points and sorts them with a stable LSD radix
- * sort. On return codes[i] is the i-th smallest code and perm[i] the index of its point in pos
+/* prep_morton_sort: computes the codes of the n points and sorts them with a stable radix sort
+ * (prep_radix_sort64). On return codes[i] is the i-th smallest code and perm[i] the index of its point in pos
  * (ties keep input order, so the result is deterministic). codes and perm hold n entries each.
  * Returns 0 or SD_ENOMEM (the sort needs 12 n bytes of temporary memory). */
 int prep_morton_sort(const float *pos, size_t n, const prep_morton_frame *f, uint64_t *codes,
                      uint32_t *perm, sd_err *err);
 
-/* prep_radix_sort64: sorts the n keys codes ascending with a stable LSD radix sort (11-bit
- * digits, skipping digits all keys share), moving perm[i] along with codes[i]. Returns 0 (also
- * when already sorted: then nothing moves) or SD_ENOMEM (12 n bytes of temporary memory). */
+/* prep_radix_sort64: sorts the n keys codes ascending with a stable radix sort (one MSD pass on
+ * the 11 highest bits the keys differ in, then LSD passes of 8 bits inside each bucket,
+ * skipping digits all keys share), moving perm[i] along with codes[i]. Returns 0 (also when
+ * already sorted: then nothing moves) or SD_ENOMEM (12 n bytes of temporary memory). */
 int prep_radix_sort64(uint64_t *codes, uint32_t *perm, size_t n, sd_err *err);

@@ -366,14 +366,30 @@ static void single_point(pc_prepared *p, int had_normal, int had_radius)
     p->radius_median = p->radius[0];
 }
 
-/* Step 6 and F's normalisation: percentiles over the whole cloud. tmp holds n floats. */
-static void summarise(pc_prepared *p, const float *nnd, float *tmp)
+/* Step 6 and F's normalisation: percentiles over the whole cloud, in two independent tasks
+ * (one a thread): 0, F's 99th percentile, the normalisation and F's percentiles, in tmp (n
+ * floats); 1, sigma (selected in nnd itself, which is not needed after) and the radius median
+ * (in nnd again). Each selection starts from the same array as when they ran one after
+ * another, so the results are the same bits. */
+typedef struct summary_job {
+    pc_prepared *p;
+    float *nnd, *tmp;
+} summary_job;
+
+static int summarise_task(void *ctx, size_t task, int tid, sd_err *err)
 {
+    summary_job *j = ctx;
+    pc_prepared *p = j->p;
     size_t n = p->n;
-    memcpy(tmp, nnd, n * sizeof *tmp);
-    p->sigma = prep_percentile(tmp, n, 0.5);
-    memcpy(tmp, p->radius, n * sizeof *tmp);
-    p->radius_median = prep_percentile(tmp, n, 0.5);
+    (void)tid;
+    (void)err;
+    if (task == 1) {
+        p->sigma = prep_percentile(j->nnd, n, 0.5);
+        memcpy(j->nnd, p->radius, n * sizeof *j->nnd);
+        p->radius_median = prep_percentile(j->nnd, n, 0.5);
+        return 0;
+    }
+    float *tmp = j->tmp;
     memcpy(tmp, p->F, n * sizeof *tmp);
     float p99 = prep_percentile(tmp, n, 0.99);
     p->F_raw_p99 = p99;
@@ -384,6 +400,13 @@ static void summarise(pc_prepared *p, const float *nnd, float *tmp)
     static const double q[5] = {0.01, 0.25, 0.5, 0.75, 0.99};
     memcpy(tmp, p->F, n * sizeof *tmp);
     for (int i = 0; i < 5; i++) p->F_pct[i] = prep_percentile(tmp, n, q[i]);
+    return 0;
+}
+
+static int summarise(pc_prepared *p, float *nnd, float *tmp, int threads, sd_err *err)
+{
+    summary_job j = {p, nnd, tmp};
+    return prep_par_for(threads < 2 ? 1 : 2, 2, summarise_task, &j, NULL, err);
 }
 
 int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err *err)
@@ -480,7 +503,8 @@ int prep_run(const pc_cloud *in, const prep_desc *desc, pc_prepared *out, sd_err
         for (size_t i = 0; i < n; i++)
             if (out->radius[i] > jb.rcap[i]) out->radius[i] = jb.rcap[i];
     }
-    summarise(out, jb.nnd, tmp);
+    rc = summarise(out, jb.nnd, tmp, threads, err);
+    if (rc != 0) goto fail;
     wall = now_s() - t0;
     tf = tq = 0;
     for (int t = 0; t < threads; t++) { tq += w[t].t_query; tf += w[t].t_field; }

@@ -1,17 +1,21 @@
 /* prep_bench — times pc_load and prep_run's phases on one file; prints Markdown table rows.
  *
  *   prep_bench FILE [--runs R] [--knn grid|flann|both] [--threads T] [--k K] [--leaf L]
- *              [--header] [--knn-only [--file-order]]
+ *              [--header] [--knn-only [--file-order] [--hash] [--simd S]]
  *
  * Each figure is the median of R runs (default 3). --knn-only times the kNN alone for every
  * point, comparing FLANN's own OpenMP threads (cores = T, one calling thread) with T pthreads
  * each querying a slice (cores = 1), and the grid with T pthreads, on the points in Morton
- * order (as prep_run queries them) or, with --file-order, in the file's order. */
+ * order (as prep_run queries them) or, with --file-order, in the file's order. --hash prints
+ * (to stderr) an XXH64 of every query's neighbour indices and squared distances, per run: two
+ * builds of the kNN must print the same for the same file, k and order. --simd pins the grid's
+ * vector path (prep_knn_opts.simd: 1 portable, 2 AVX2, 3 AVX-512; 0 the best). */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/resource.h>
 #include <time.h>
+#include <xxhash.h>
 
 #include "knn.h"
 #include "morton.h"
@@ -94,11 +98,12 @@ static int slice_fn(void *ctx, size_t c, int tid, sd_err *err)
 /* Seconds to build and to query every point, method m, threads t; flann_cores > 1 runs one
  * thread with FLANN's OpenMP threads instead of pthreads. */
 static int knn_time(const pc_cloud *c, prep_knn_method m, int leaf, int t, int flann_cores,
-                    int k, double *tb, double *tq, double *tc, prep_knn_counters *cnt)
+                    int k, int hash, int simd, double *tb, double *tq, double *tc,
+                    prep_knn_counters *cnt)
 {
     sd_err err = {0};
     prep_knn *kn = NULL;
-    prep_knn_opts o = {.method = m, .leaf_size = leaf, .flann_cores = flann_cores};
+    prep_knn_opts o = {.method = m, .leaf_size = leaf, .flann_cores = flann_cores, .simd = simd};
     double t0 = now_s();
     if (prep_knn_build(c->pos, c->n, &o, &kn, &err) != 0) {
         fprintf(stderr, "prep_bench: %s\n", err.msg);
@@ -114,6 +119,10 @@ static int knn_time(const pc_cloud *c, prep_knn_method m, int leaf, int t, int f
                           &err);
     *tq = now_s() - t0;
     *tc = cpu_s() - c0;
+    if (rc == 0 && hash)
+        fprintf(stderr, "knn hash (n %zu, k %d): idx %016llx d2 %016llx\n", c->n, k,
+                (unsigned long long)XXH64(j.idx, c->n * k * sizeof(uint32_t), 0),
+                (unsigned long long)XXH64(j.d2, c->n * k * sizeof(float), 0));
     memset(cnt, 0, sizeof *cnt);
     for (int i = 0; i < 8; i++) {
         prep_knn_counters x;
@@ -123,6 +132,7 @@ static int knn_time(const pc_cloud *c, prep_knn_method m, int leaf, int t, int f
         cnt->dense += x.dense;
         cnt->candidates += x.candidates;
         cnt->filtered += x.filtered;
+        cnt->gathers += x.gathers;
         prep_knn_scratch_free(j.s[i]);
     }
     free(j.s);
@@ -137,6 +147,7 @@ int main(int argc, char **argv)
 {
     const char *file = NULL, *knn = "grid";
     int runs = 3, threads = 2, k = 24, leaf = 0, header = 0, knn_only = 0, file_order = 0;
+    int hash = 0, simd = 0;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--runs") && i + 1 < argc) runs = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--knn") && i + 1 < argc) knn = argv[++i];
@@ -146,6 +157,8 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--header")) header = 1;
         else if (!strcmp(argv[i], "--knn-only")) knn_only = 1;
         else if (!strcmp(argv[i], "--file-order")) file_order = 1;
+        else if (!strcmp(argv[i], "--hash")) hash = 1;
+        else if (!strcmp(argv[i], "--simd") && i + 1 < argc) simd = atoi(argv[++i]);
         else if (!file) file = argv[i];
         else {
             fprintf(stderr, "prep_bench: unexpected '%s'\n", argv[i]);
@@ -154,7 +167,7 @@ int main(int argc, char **argv)
     }
     if (!file || runs < 1 || runs > 99 || threads < 1 || threads > 8) {
         fprintf(stderr, "usage: prep_bench FILE [--runs R] [--knn grid|flann|both] [--threads T<=8] "
-                        "[--k K] [--leaf L] [--header] [--knn-only]\n");
+                        "[--k K] [--leaf L] [--header] [--knn-only [--file-order] [--hash] [--simd S]]\n");
         return 2;
     }
     double tl[99];
@@ -189,7 +202,7 @@ int main(int argc, char **argv)
             double b[99], q[99], qc[99];
             prep_knn_counters cnt = {0};
             for (int r = 0; r < runs; r++)
-                if (knn_time(&c, v[i].m, leaf, threads, v[i].fc, k, &b[r], &q[r], &qc[r], &cnt) != 0)
+                if (knn_time(&c, v[i].m, leaf, threads, v[i].fc, k, hash, simd, &b[r], &q[r], &qc[r], &cnt) != 0)
                     return 1;
             double mb = median(b, runs), mq = median(q, runs);
             printf("| %s | %zu | %s | %s | %d | %.3f | %.3f | %.2fM | %.3f | %.1f%% | %.2f%% | %.0f |\n",
@@ -199,7 +212,9 @@ int main(int argc, char **argv)
                    cnt.queries ? 100.0 * cnt.dense / cnt.queries : 0.0,
                    cnt.queries ? (double)cnt.candidates / cnt.queries : 0.0);
         if (getenv("PREP_BENCH_DEBUG"))
-            fprintf(stderr, "selected from %.1f per query\n", (double)cnt.filtered / (cnt.queries ? cnt.queries : 1));
+            fprintf(stderr, "selected from %.1f per query, %.3f gathers per query\n",
+                    (double)cnt.filtered / (cnt.queries ? cnt.queries : 1),
+                    (double)cnt.gathers / (cnt.queries ? cnt.queries : 1));
         }
         pc_cloud_free(&c);
         return 0;
