@@ -107,6 +107,10 @@ void rnd__edl_host_shade(const float *z, int pw, int r, int w, int h, float k, u
             const v8f one = (v8f){0} + 1.0f;
             v8f zc, n0, n1, n2, n3;
             vload(&zc, c);
+            v8i fin = zc < 3.0e38f;
+            uint64_t any[4];
+            memcpy(any, &fin, sizeof any);
+            if (!(any[0] | any[1] | any[2] | any[3])) continue; /* 8 background pixels */
             vload(&n0, c + r);
             vload(&n1, c + up);
             vload(&n2, c - r);
@@ -119,7 +123,7 @@ void rnd__edl_host_shade(const float *z, int pw, int r, int w, int h, float k, u
             n0 = VSEL(n0 < zc, n0 * rz, one), n1 = VSEL(n1 < zc, n1 * rz, one);
             n2 = VSEL(n2 < zc, n2 * rz, one), n3 = VSEL(n3 < zc, n3 * rz, one);
             v8f q = (n0 * n1) * (n2 * n3);
-            v8i bg = ~(zc < 3.0e38f); /* +inf (and a NaN, never written) */
+            v8i bg = ~fin; /* +inf (and a NaN, never written) */
             q = VSEL(bg, one, q);
             v8i flat = q == 1.0f;
             v8f s = q;
