@@ -101,10 +101,12 @@ enum {
  * software renderer (where the GL is the CPU: there it is the fastest on every cloud measured),
  * axis on a GPU. */
 enum { SP_ORDER_AXIS = 0, SP_ORDER_TILE, SP_ORDER_AUTO, SP_ORDER_CPU };
-/* kawata_raster: where kawata's passes 1 and 2 (the points into the image buffer) run: gpu = the
- * compute shader kawata_raster.comp; cpu = the host, every core (kawata_cpu.h), the same arrays
- * handed to the GL passes 3-5; auto = cpu on a software renderer (where the GL is the CPU), gpu
- * on a GPU. */
+/* kawata_raster: where kawata's passes 1 and 2 (the points into the image buffer), the list of
+ * covered buffer pixels, pass 3's resolve and the plane fit run: gpu = the compute shaders
+ * kawata_raster.comp and kawata_fit.comp; cpu = the host, every core (kawata_cpu.h,
+ * kawata_fit_cpu.h), the same arrays and splats word for word, handed to the GL's gather
+ * (color=field: passes 1 and 2 only); auto = cpu on a software renderer (where the GL is the
+ * CPU), gpu on a GPU. */
 enum { SP_KAWATA_RASTER_AUTO = 0, SP_KAWATA_RASTER_GPU, SP_KAWATA_RASTER_CPU };
 /* soft_proj: with order=cpu, where the soft discs are projected: gpu = soft_bin.comp PASS 0,
  * read back; cpu = the host, every core (soft_proj.h; color=field's colour map stays in the GL);
