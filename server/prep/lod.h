@@ -108,6 +108,8 @@ typedef struct lod_desc {
     int grid_bits;            /* default LOD_DEFAULT_GRID_BITS (tests use fewer) */
     uint32_t leaf_max;        /* default LOD_DEFAULT_LEAF_MAX */
     uint32_t chunk_max;       /* default 0: from memory; tests force small chunks */
+    float halo_first;         /* default 0: the first chunk's halo from the count grid; else
+                                 this fraction of its cube's side (tests: halos that grow) */
     int force;                /* rebuild even when a valid cache exists */
     prep_progress_fn progress;/* phases PROTO_PHASE_READ, REORDER, KNN, NORMALS, FIELD */
     void (*status)(void *user, const char *line); /* default none: one line per pass with

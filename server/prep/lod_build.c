@@ -19,7 +19,8 @@
  *             of the chunk's points and of their neighbours; a result is exact when its k-th
  *             neighbour is closer than the halo's edge, else H grows to the farthest ball and
  *             the region is loaded again, the exact results kept (renamed into the bigger
- *             region) and only the others queried again. The next chunk's region loads on a
+ *             region) and only the others queried again. The first H: the previous chunk's,
+ *             or the bound the count grid gives (halo_bounds) when smaller or first. The next chunk's region loads on a
  *             thread of its own meanwhile. Then prep.c's per-point values: eq. 20 radius, PCA
  *             normal and surface variation, oriented as prep.c does, raw F, the neighbours'
  *             median radius, the nearest distance, written block by block by the threads to
@@ -85,6 +86,7 @@ typedef struct chunk {
     uint64_t count;
     int fd_in, fd_a;          /* scratch files: recs, arecs */
     float lo[3], hi[3];       /* its cube */
+    float hb;                 /* a halo that holds every ball it needs (halo_bounds) */
     int retried;
 } chunk;
 
@@ -225,6 +227,90 @@ static int make_chunks(build *b, const uint64_t *cnt, sd_err *err)
     return 0;
 }
 
+/* An upper bound on the halo each chunk needs, from the count grid (G = 2^D cells a side, cell
+ * side cs): a box of (2r + 1)^3 cells around a point's cell that holds K + 1 points or more
+ * holds its K nearest neighbours, so their distance is at most sqrt(3) (r + 1) cs. A chunk
+ * needs the balls of its points and of their neighbours (within the first bound of its cube)
+ * inside the halo. The bound only picks the first halo: the normals pass still checks every
+ * ball and grows the halo when one leaves (a loose bound costs a bigger region, a low one a
+ * second load). */
+static int halo_bounds(build *b, const uint64_t *cnt, sd_err *err)
+{
+    int D = b->cdepth;
+    size_t G = (size_t)1 << D, G1 = G + 1;
+    uint32_t *sat = calloc(G1 * G1 * G1, sizeof *sat); /* sat[x][y][z]: cells below (x, y, z) */
+    float *rad = malloc(G * G * G * sizeof *rad);      /* per cell, in cells; 0: empty */
+    if (!sat || !rad) {
+        free(sat);
+        free(rad);
+        return sd_errf(err, SD_ENOMEM, "lod: out of memory for the halo bounds");
+    }
+#define SAT(x, y, z) sat[((size_t)(x) * G1 + (size_t)(y)) * G1 + (size_t)(z)]
+    for (size_t x = 0; x < G; x++)
+        for (size_t y = 0; y < G; y++)
+            for (size_t z = 0; z < G; z++) {
+                uint64_t code = prep_morton_encode((uint32_t)x, (uint32_t)y, (uint32_t)z);
+                SAT(x + 1, y + 1, z + 1) = (uint32_t)cnt[code] + SAT(x, y + 1, z + 1) +
+                    SAT(x + 1, y, z + 1) + SAT(x + 1, y + 1, z) - SAT(x, y, z + 1) -
+                    SAT(x, y + 1, z) - SAT(x + 1, y, z) + SAT(x, y, z);
+            }
+    uint64_t want = (uint64_t)b->K + 1;
+    for (size_t x = 0; x < G; x++)
+        for (size_t y = 0; y < G; y++)
+            for (size_t z = 0; z < G; z++) {
+                size_t i = (x * G + y) * G + z;
+                rad[i] = 0;
+                if (!cnt[prep_morton_encode((uint32_t)x, (uint32_t)y, (uint32_t)z)]) continue;
+                size_t r = 0;
+                for (;; r++) {
+                    size_t x0 = x > r ? x - r : 0, y0 = y > r ? y - r : 0, z0 = z > r ? z - r : 0;
+                    size_t x1 = x + r + 1 < G ? x + r + 1 : G, y1 = y + r + 1 < G ? y + r + 1 : G,
+                           z1 = z + r + 1 < G ? z + r + 1 : G;
+                    uint64_t in = (uint64_t)SAT(x1, y1, z1) - SAT(x0, y1, z1) - SAT(x1, y0, z1) -
+                        SAT(x1, y1, z0) + SAT(x0, y0, z1) + SAT(x0, y1, z0) + SAT(x1, y0, z0) -
+                        SAT(x0, y0, z0);
+                    if (in >= want || (x0 == 0 && y0 == 0 && z0 == 0 && x1 == G && y1 == G && z1 == G))
+                        break;
+                }
+                rad[i] = 1.7320508f * (float)(r + 1);
+            }
+#undef SAT
+    float cs = (float)(b->f.side / (double)G);
+    for (size_t ci = 0; ci < b->nchunks; ci++) {
+        chunk *c = &b->chunks[ci];
+        uint32_t xyz[3];
+        prep_morton_decode(c->code, &xyz[0], &xyz[1], &xyz[2]);
+        int sh = D - (int)c->depth;
+        int64_t lo[3], hi[3]; /* the chunk's cells, [lo, hi) */
+        for (int a = 0; a < 3; a++) lo[a] = (int64_t)xyz[a] << sh, hi[a] = ((int64_t)xyz[a] + 1) << sh;
+        float need = 0;
+        for (int pass = 0; pass < 2; pass++) {
+            int64_t m = pass == 0 ? 0 : (int64_t)ceilf(need); /* pass 1: the neighbours too */
+            int64_t b0[3], b1[3];
+            for (int a = 0; a < 3; a++) {
+                b0[a] = lo[a] - m > 0 ? lo[a] - m : 0;
+                b1[a] = hi[a] + m < (int64_t)G ? hi[a] + m : (int64_t)G;
+            }
+            for (int64_t x = b0[0]; x < b1[0]; x++)
+                for (int64_t y = b0[1]; y < b1[1]; y++)
+                    for (int64_t z = b0[2]; z < b1[2]; z++) {
+                        float R = rad[((size_t)x * G + (size_t)y) * G + (size_t)z];
+                        if (R == 0) continue;
+                        int64_t p[3] = {x, y, z};
+                        for (int a = 0; a < 3; a++) {
+                            float o1 = (float)(p[a] + 1 - hi[a]) + R, o2 = (float)(lo[a] - p[a]) + R;
+                            if (o1 > need) need = o1;
+                            if (o2 > need) need = o2;
+                        }
+                    }
+        }
+        c->hb = need * cs;
+    }
+    free(sat);
+    free(rad);
+    return 0;
+}
+
 static uint64_t count_cell(const build *b, const float *p)
 {
     return prep_morton_code(&b->f, p) >> (3 * (PREP_MORTON_BITS - b->cdepth));
@@ -248,6 +334,7 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
     if (rc == 0 && m < 0) rc = (int)m;
     for (int a = 0; a < 3; a++) b->centroid[a] = csum[a] / (double)b->info.n;
     if (rc == 0) rc = make_chunks(b, cnt, err);
+    if (rc == 0) rc = halo_bounds(b, cnt, err);
     free(cnt);
     status(b, "count", 0.05, b->info.n, now_s() - t);
     /* distribute, through one buffer per chunk */
@@ -704,6 +791,16 @@ static void phase_end(build *b, int ph, double *t)
     *t = now;
 }
 
+/* The halo chunk ci starts from: the one the previous chunk ended with (a good guess for the
+ * next one) or the count grid's bound when that is smaller or there is no previous chunk
+ * (lod_desc.halo_first replaces the bound). */
+static float first_halo(const build *b, size_t ci)
+{
+    const chunk *c = &b->chunks[ci];
+    float hb = b->d->halo_first > 0 ? b->d->halo_first * (c->hi[0] - c->lo[0]) : c->hb;
+    return b->halo > 0 && b->halo < hb ? b->halo : hb;
+}
+
 /* The normals pass of chunk ci (the chunks run one after the other, each on every thread).
  * When a ball leaves the region, the halo grows to hold it and the region is loaded again; the
  * own points already exact keep their neighbours (renamed to the new region), only the others
@@ -715,8 +812,7 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
     chunk *c = &b->chunks[ci];
     if (!c->count) return 0;
     int K = b->K, T = b->threads;
-    /* the halo the previous chunk ended with, a good first guess for this one */
-    float h = b->halo > 0 ? b->halo : (c->hi[0] - c->lo[0]) / 16;
+    float h = first_halo(b, ci);
     prep_knn_scratch *ks[64] = {0};
     tls *tl[64] = {0};
     if (T > 64) T = 64;
