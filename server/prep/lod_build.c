@@ -35,6 +35,7 @@
  *             down over the chunk's Morton-ordered points; nodes inside the chunk are written
  *             at once, points of the levels above the chunk are kept and grouped into their
  *             nodes at the end (they are few: one per sampling cell of those levels).
+ * The passes that run in parallel over the chunks hand them out largest first (by_size).
  * Then the node table (breadth first), the header, fsync and rename. */
 #include "lod.h"
 
@@ -113,6 +114,8 @@ typedef struct build {
     double t_pass;            /* when the normals pass began */
     double tph[7];            /* the normals pass's phases, wall seconds (PH_*) */
     struct prefetch *pf;      /* the next chunk's region, loaded while this one computes */
+    size_t *order;            /* the chunks, largest first (by_size) */
+    prep_par_fn order_fn;
     void *keep[10];           /* the normals pass's per-chunk arrays, kept across chunks (KB_*) */
     size_t keepcap[10];
     pthread_mutex_t mu;
@@ -1443,6 +1446,35 @@ static int link_table(build *b, lod_cloud *c, sd_err *err)
     return 0;
 }
 
+static int cmp_size(const void *x, const void *y, void *ctx)
+{
+    const chunk *c = ctx;
+    size_t i = *(const size_t *)x, j = *(const size_t *)y;
+    if (c[i].count != c[j].count) return c[i].count > c[j].count ? -1 : 1;
+    return i < j ? -1 : i > j;
+}
+
+static int by_size_fn(void *ctx, size_t i, int tid, sd_err *err)
+{
+    build *b = ctx;
+    return b->order_fn(b, b->order[i], tid, err);
+}
+
+/* prep_par_for over the chunks, the largest handed out first: chunks of unequal sizes in
+ * file (Morton) order can leave a thread alone on a big last one; largest first bounds the
+ * pass by max(largest, mean + largest / threads) or so. fn gets the chunk's index. */
+static int by_size(build *b, prep_par_fn fn, prep_progress *pr, sd_err *err)
+{
+    if (!b->order) {
+        b->order = malloc((b->nchunks ? b->nchunks : 1) * sizeof *b->order);
+        if (!b->order) return sd_errf(err, SD_ENOMEM, "lod: out of memory");
+        for (size_t i = 0; i < b->nchunks; i++) b->order[i] = i;
+        qsort_r(b->order, b->nchunks, sizeof *b->order, cmp_size, b->chunks);
+    }
+    b->order_fn = fn;
+    return prep_par_for(b->threads, b->nchunks, by_size_fn, b, pr, err);
+}
+
 static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_err *err)
 {
     const lod_desc *d = b->d;
@@ -1468,7 +1500,7 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     int rc = count_and_distribute(b, s, err);
     if (rc == 0) {
         double ts = now_s();
-        rc = prep_par_for(b->threads, b->nchunks, chunk_sort, b, NULL, err);
+        rc = by_size(b, chunk_sort, NULL, err);
         if (rc == 0) status(b, "sort", 0.14, b->info.n, now_s() - ts);
     }
     if (rc < 0) return rc;
@@ -1520,20 +1552,20 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     }
     t = now_s();
     prep_progress_begin(&pr, d->progress, d->user, PROTO_PHASE_FIELD);
-    rc = prep_par_for(b->threads, b->nchunks, chunk_hist, b, NULL, err);
+    rc = by_size(b, chunk_hist, NULL, err);
     if (rc < 0) return rc;
     for (int q = 0; q < NQ; q++) b->qs[q].value = pick_value(b, q);
     b->scatter_cap = PREP_SCATTER_CAP * b->qs[0].value;
     b->p99 = b->qs[2].value;
     b->radius_pass = 1;
-    rc = prep_par_for(b->threads, b->nchunks, chunk_hist, b, NULL, err);
+    rc = by_size(b, chunk_hist, NULL, err);
     if (rc < 0) return rc;
     pick_bucket(b, NQ, b->hist_hi[3], n);
     prep_progress_end(&pr);
     status(b, "quantiles", 0.82, n, now_s() - t);
     t = now_s();
     prep_progress_begin(&pr, d->progress, d->user, PROTO_PHASE_REORDER);
-    rc = prep_par_for(b->threads, b->nchunks, chunk_octree, b, &pr, err);
+    rc = by_size(b, chunk_octree, &pr, err);
     if (rc == 0) rc = emit_upper(b, err);
     if (rc < 0) return rc;
     prep_progress_end(&pr);
@@ -1632,6 +1664,7 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     }
     free(b.chunks);
     free(b.cell_chunk);
+    free(b.order);
     for (int q = 0; q < 4; q++) free(b.hist_hi[q]);
     for (int q = 0; q <= NQ; q++) free(b.qs[q].lo);
     free(b.nodes);
