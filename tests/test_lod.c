@@ -27,6 +27,7 @@
 #include "daemonproc.h"
 #include "imgtest.h"
 #include "lod.h"
+#include "lod_ahead.h"
 #include "laz_stream.h"
 #include "las_stream.h"
 #include "lod_src.h"
@@ -271,6 +272,27 @@ static uint64_t stream_equals_load(const char *path)
     assert_true(m == 0);
     assert_int_equal(k, in.n);
     assert_int_equal(bad, 0);
+    /* read ahead on a thread (lod_ahead, the build's count and distribution passes): the same
+     * points in the same order, in blocks of 777; twice, the first pass stopped halfway */
+    for (int pass = 0; pass < 2; pass++) {
+        lod_ahead ah;
+        if (lod_ahead_start(&ah, src, 777, &err) != 0) fail_msg("%s", err.msg);
+        const float *ap;
+        const uint32_t *ac;
+        k = 0;
+        while ((pass == 1 || k < in.n / 2) && (m = lod_ahead_next(&ah, &ap, &ac, &err)) > 0)
+            for (int64_t i = 0; i < m; i++, k++) {
+                uint32_t want = 0xFFFFFFFFu;
+                if (in.attrs & PC_ATTR_RGB) memcpy(&want, in.rgba + 4 * k, 4);
+                if (memcmp(ap + 3 * i, in.pos + 3 * k, 12) != 0 || ac[i] != want) bad++;
+            }
+        lod_ahead_stop(&ah);
+        assert_int_equal(bad, 0);
+        if (pass == 1) {
+            assert_true(m == 0);
+            assert_int_equal(k, in.n);
+        }
+    }
     pc_cloud_free(&in);
     lod_src_close(src);
     return k;

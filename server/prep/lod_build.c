@@ -51,6 +51,7 @@
 #include "cache.h"
 #include "cloud.h"
 #include "knn.h"
+#include "lod_ahead.h"
 #include "lod_file.h"
 #include "lod_src.h"
 #include "morton.h"
@@ -323,17 +324,19 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
 {
     uint64_t ncell = (uint64_t)1 << (3 * b->cdepth);
     uint64_t *cnt = calloc(ncell, sizeof *cnt);
-    float *pos = malloc((size_t)BLOCK * 12);
-    uint32_t *rgba = malloc((size_t)BLOCK * 4);
-    int rc = cnt && pos && rgba ? lod_src_rewind(s, err) : sd_errf(err, SD_ENOMEM, "lod: out of memory");
+    lod_ahead ah; /* each pass's next block is read while this one's are worked on */
+    int rc = cnt ? lod_ahead_start(&ah, s, BLOCK, err) : sd_errf(err, SD_ENOMEM, "lod: out of memory");
     int64_t m = 0;
     double t = now_s();
     double csum[3] = {0, 0, 0};
-    while (rc == 0 && (m = lod_src_next(s, pos, rgba, BLOCK, err)) > 0)
+    const float *pos = NULL;
+    const uint32_t *rgba = NULL;
+    while (rc == 0 && (m = lod_ahead_next(&ah, &pos, &rgba, err)) > 0)
         for (int64_t i = 0; i < m; i++) {
             cnt[count_cell(b, pos + 3 * i)]++;
             for (int a = 0; a < 3; a++) csum[a] += pos[3 * i + a];
         }
+    if (rc == 0) lod_ahead_stop(&ah);
     if (rc == 0 && m < 0) rc = (int)m;
     for (int a = 0; a < 3; a++) b->centroid[a] = csum[a] / (double)b->info.n;
     if (rc == 0) rc = make_chunks(b, cnt, err);
@@ -346,10 +349,10 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
     uint32_t *fill = rc == 0 ? calloc(b->nchunks, sizeof *fill) : NULL;
     uint64_t *off = rc == 0 ? calloc(b->nchunks, sizeof *off) : NULL;
     if (rc == 0 && (!buf || !fill || !off)) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory");
-    if (rc == 0) rc = lod_src_rewind(s, err);
+    int ahead = rc == 0 && (rc = lod_ahead_start(&ah, s, BLOCK, err)) == 0;
     t = now_s();
     uint32_t gidx = 0;
-    while (rc == 0 && (m = lod_src_next(s, pos, rgba, BLOCK, err)) > 0) {
+    while (rc == 0 && (m = lod_ahead_next(&ah, &pos, &rgba, err)) > 0) {
         for (int64_t i = 0; i < m && rc == 0; i++) {
             uint64_t code = prep_morton_code(&b->f, pos + 3 * i);
             uint32_t c = b->cell_chunk[code >> (3 * (PREP_MORTON_BITS - b->cdepth))];
@@ -367,6 +370,7 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
             }
         }
     }
+    if (ahead) lod_ahead_stop(&ah);
     if (rc == 0 && m < 0) rc = (int)m;
     for (size_t c = 0; rc == 0 && c < b->nchunks; c++)
         if (fill[c] && lod__pwrite_all(b->chunks[c].fd_in, buf + c * PER, fill[c] * sizeof *buf, off[c]))
@@ -375,8 +379,6 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
     free(buf);
     free(fill);
     free(off);
-    free(pos);
-    free(rgba);
     return rc;
 }
 
