@@ -240,6 +240,7 @@ static int make_chunks(build *b, const uint64_t *cnt, sd_err *err)
  * second load). */
 static int halo_bounds(build *b, const uint64_t *cnt, sd_err *err)
 {
+    if (b->nchunks < 2) return 0; /* one chunk: its region is the whole cloud, no halo */
     int D = b->cdepth;
     size_t G = (size_t)1 << D, G1 = G + 1;
     uint32_t *sat = calloc(G1 * G1 * G1, sizeof *sat); /* sat[x][y][z]: cells below (x, y, z) */
