@@ -692,8 +692,8 @@ static size_t nblocks(size_t n)
     return (n + QBLOCK - 1) / QBLOCK;
 }
 
-/* The slots s (of nq) whose ball (k-th distance) leaves the region: their count; the halo they
- * need grows *need. */
+/* The slots s (of nq) whose ball (k-th distance) leaves the region: their count; the halo the
+ * balls need (those inside too) grows *need. */
 static size_t check_balls(const build *b, const chunk *c, const region *r, const njob *j,
                           size_t first, size_t n, uint8_t *exact, float *need)
 {
@@ -701,13 +701,13 @@ static size_t check_balls(const build *b, const chunk *c, const region *r, const
     for (size_t s = first; s < first + n; s++) {
         if (exact && exact[s]) continue;
         const float *pp = r->pos + 3 * (size_t)j->list[s];
+        float nd = halo_need(c, pp, j->kd2[s]); /* of every ball: the next chunk's first halo */
+        if (nd > *need) *need = nd;
         if (inside(r, pp, j->kd2[s])) {
             if (exact) exact[s] = 1;
             continue;
         }
         bad++;
-        float nd = halo_need(c, pp, j->kd2[s]);
-        if (nd > *need) *need = nd;
     }
     (void)b;
     return bad;
@@ -845,6 +845,7 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
     memset(&r, 0, sizeof r);
     memset(&old, 0, sizeof old);
     int attempt = 0;
+    float need_done = 0;      /* the halo the balls needed, once done */
     while (rc == 0) {
         double t = now_s();
         int got = attempt == 0 && b->pf ? prefetch_take(b->pf, ci, h, &r, err) : 1;
@@ -949,6 +950,7 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         if (rc < 0) goto next;
         phase_end(b, PH_F, &t);
         done = 1;
+        need_done = need;
     next:
         prep_knn_free(kn);
         if (rc < 0 || done) break;
@@ -965,7 +967,10 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         memset(&tmp, 0, sizeof tmp);
         if (prefetch_take(b->pf, b->pf->ci, 0, &tmp, NULL) == 0) region_free(&tmp);
     }
-    if (rc == 0 && !b->halo) b->halo = h;
+    /* the next chunk starts from the halo this one grew to, or from the one its balls needed
+     * (with a regrown halo's margin) when it did not grow: the count grid's bound is loose */
+    if (rc == 0 && c->retried) b->halo = h;
+    else if (rc == 0 && need_done * 1.05f > b->halo) b->halo = need_done * 1.05f;
     if (rc == 0) { /* a status line per chunk: the normals pass is most of the build */
         b->normals_done += c->count;
         status(b, "normals", 0.12 + 0.63 * (double)b->normals_done / (double)b->info.n,
