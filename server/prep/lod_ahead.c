@@ -61,13 +61,18 @@ int64_t lod_ahead_next(lod_ahead *a, const float **pos, const uint32_t **rgba, s
         m = lod_src_next(a->s, a->pos[i], a->rgba[i], a->block, err);
     } else {
         pthread_mutex_lock(&a->mu);
-        a->full[i ^ 1] = 0; /* the previous block is released: the reader may fill it */
-        pthread_cond_broadcast(&a->cv);
+        /* the block handed out last time is released: the reader may fill it. Only then: at
+         * the first call the reader may already have filled both buffers, and releasing the
+         * second would drop its block (or, at the end, the end itself, and wait forever). */
+        if (a->handed) {
+            a->full[i ^ 1] = 0;
+            pthread_cond_broadcast(&a->cv);
+        }
         while (!a->full[i]) pthread_cond_wait(&a->cv, &a->mu);
         m = a->m[i];
         pthread_mutex_unlock(&a->mu);
         if (m < 0 && err) *err = a->err;
-        if (m > 0) a->cur = i ^ 1;
+        if (m > 0) a->cur = i ^ 1, a->handed = 1;
     }
     *pos = a->pos[i];
     *rgba = a->rgba[i];

@@ -20,6 +20,7 @@ typedef struct lod_ahead {
     int64_t m[2];             /* points in buffer i, 0 at the end, or the read's error */
     int full[2];              /* 1: filled, not yet released */
     int stop, cur, started;
+    int handed;               /* 1: the caller holds a block (buffer cur ^ 1) */
     sd_err err;               /* the read's error */
     pthread_t th;
     pthread_mutex_t mu;
