@@ -316,9 +316,11 @@ void grow_rect(ivec4 bb)
 // soft points of the first soft layer: those whose centre depth lies within the pass-2 depth
 // tolerance of the nearest soft depth at their centre pixel (the keys of an earlier soft-only
 // pass, T_OLT_KEYS, same layout as the stripe's keys). The test is made at the start of both
-// passes (the raster and big lists are made of points that passed). The `splat` pipeline's own
-// programs do not have this.
+// passes (the raster and big lists are made of points that passed). Mode 3 skips nothing: the
+// visible ranges index the list of solid points on T_SOFT_SOLID, which gives the point. The
+// `splat` pipeline's own programs do not have this.
 layout(binding = T_SOFT_F) uniform usamplerBuffer u_sf;
+layout(binding = T_SOFT_SOLID) uniform usamplerBuffer u_solid;
 layout(binding = T_OLT_KEYS) uniform usamplerBuffer u_oltkeys;
 uniform int u_smode;
 uniform float u_st;
@@ -351,7 +353,8 @@ void main()
     for (uint g = gl_GlobalInvocationID.x; g < U.total; g += stride) {
         uint i = U.nranges == 1u ? first + g : point_of(u_ranges, U.nranges, g);
 #ifdef SOFT_FILTER
-        if (skip_point(i)) continue;
+        if (u_smode == 3) i = texelFetch(u_solid, int(i)).x;
+        else if (skip_point(i)) continue;
 #endif
         Splat s;
         if (!setup_core(U, i, s)) continue;

@@ -497,16 +497,31 @@ static void test_field_height(void **state)
 
 /* A random plane whose soft points (F > 0.4) are lifted in front by 0.05 + 0.1 F: several soft
  * layers per pixel (test_tile_matches_axis, test_cpu_bands). Returns the uploaded cloud. */
-static uint32_t upload_layered_plane(void)
+static uint32_t upload_layered_plane_to(rnd_ctx *r)
 {
     pc_prepared pc;
     random_plane(&pc, 90, 90, 0.02f, 3);
     for (uint64_t i = 0; i < pc.n; i++)
         if (pc.F[i] > 0.4f) pc.pos[3 * i + 2] = 0.05f + 0.1f * pc.F[i];
     tu_finish_cloud(&pc, OFF);
-    uint32_t id = tu_upload(tu_ctx, &pc);
+    uint32_t id = tu_upload(r, &pc);
     pc_prepared_free(&pc);
     return id;
+}
+
+static uint32_t upload_layered_plane(void)
+{
+    return upload_layered_plane_to(tu_ctx);
+}
+
+/* layered_scene: the layered plane on tu_ctx, seen obliquely, soft at t 0.4, lambda 0.5, l_m 0.6. */
+static uint32_t layered_scene(rnd_camera *cam, sp_params *p)
+{
+    *cam = cam_z(3.0);
+    cam->eye[0] += 1.0, cam->eye[1] += 0.5;
+    sp_params_defaults(p);
+    p->pipeline = SP_PIPE_SOFT, p->t = 0.4f, p->lambda = 0.5f, p->l_m = 0.6f;
+    return upload_layered_plane();
 }
 
 /* order=tile composites the same discs in the same order as order=axis, in float with one
@@ -517,12 +532,9 @@ static uint32_t upload_layered_plane(void)
 static void test_tile_matches_axis(void **state)
 {
     (void)state;
-    uint32_t id = upload_layered_plane();
-    rnd_camera cam = cam_z(3.0);
-    cam.eye[0] += 1.0, cam.eye[1] += 0.5;
+    rnd_camera cam;
     sp_params p;
-    sp_params_defaults(&p);
-    p.pipeline = SP_PIPE_SOFT, p.t = 0.4f, p.lambda = 0.5f, p.l_m = 0.6f;
+    uint32_t id = layered_scene(&cam, &p);
     rnd_frame a = {0}, b = {0}, c = {0}, u = {0};
     p.order = SP_ORDER_AXIS;
     tu_render(tu_ctx, id, &cam, &p, 0, &a);
@@ -558,7 +570,9 @@ static void test_tile_matches_axis(void **state)
 /* A frame whose float layer exceeds order=cpu's band (64 MiB: 2100 x 2100 x 16 bytes = 67 MiB,
  * so two bands): the bands meet without a seam. Against order=tile (the GL's compositor, the
  * same float blending) at most 1 level over every pixel, as in test_tile_matches_axis; a band
- * composited at the wrong rows or offset shows as differences of many levels. */
+ * composited at the wrong rows or offset shows as differences of many levels. The layer and its
+ * bands are what order=cpu makes when something follows it in the GL: a float frame here (an
+ * 8-bit one composites over the read-back pixels instead, test_after_matches_layer). */
 static void test_cpu_bands(void **state)
 {
     (void)state;
@@ -570,9 +584,9 @@ static void test_cpu_bands(void **state)
     p.pipeline = SP_PIPE_SOFT, p.t = 0.4f, p.lambda = 0.5f, p.l_m = 0.6f;
     rnd_frame a = {0}, b = {0};
     p.order = SP_ORDER_TILE;
-    tu_render(tu_ctx, id, &cam, &p, 0, &a);
+    tu_render(tu_ctx, id, &cam, &p, 1, &a);
     p.order = SP_ORDER_CPU;
-    tu_render(tu_ctx, id, &cam, &p, 0, &b);
+    tu_render(tu_ctx, id, &cam, &p, 1, &b);
     int n, m = max_diff(&a, &b, &n), cov = 0;
     for (size_t i = 0; i < (size_t)a.width * a.height; i++)
         cov += a.rgba8[4 * i] || a.rgba8[4 * i + 1] || a.rgba8[4 * i + 2];
@@ -582,6 +596,68 @@ static void test_cpu_bands(void **state)
     assert_true(m <= 1);
     rnd_frame_free(&a);
     rnd_frame_free(&b);
+    rnd_release(tu_ctx, id);
+}
+
+/* order=cpu on an opaque 8-bit frame with nothing after it in the GL composites the discs over
+ * the read-back pixels (pipe_soft.c soft_after: a float tile per thread, put over the frame
+ * tile by tile); on a float frame it uploads the layer and the GL puts it over the target. The
+ * two must agree: at most 1 level (the 8-bit path rounds the solid colour before the "over",
+ * the float one after), in a frame where the soft discs change at least 20 % of the pixels
+ * (against lambda = 0). A tile put over the wrong pixels, or a layer lost, differs by many
+ * levels. Then 3 stripes against 1 (the keys of every stripe kept for the host pass) on a comb:
+ * bands of solid points 6 grid rows high, the soft points between them 0.03 behind, seen face
+ * on, so that each band's edge is a row where the keys change from solid to empty: at most 1
+ * level (float sums added in another order), where keys taken from the wrong rows flip whole
+ * rows of soft discs. */
+static void test_after_matches_layer(void **state)
+{
+    (void)state;
+    rnd_camera cam;
+    sp_params p;
+    uint32_t id = layered_scene(&cam, &p);
+    p.order = SP_ORDER_CPU;
+    rnd_frame host = {0}, layer = {0}, none = {0}, striped = {0};
+    tu_render(tu_ctx, id, &cam, &p, 0, &host);
+    tu_render(tu_ctx, id, &cam, &p, 1, &layer);
+    int n, m = max_diff(&host, &layer, &n), nsoft;
+    p.lambda = 0.0f;
+    tu_render(tu_ctx, id, &cam, &p, 0, &none);
+    max_diff(&host, &none, &nsoft);
+    printf("order=cpu over the read-back pixels vs the GL's layer: max %d levels (%d pixels); "
+           "the discs changed %d of %d pixels\n", m, n, nsoft, W * H);
+    assert_true(nsoft >= W * H / 5);
+    assert_true(m <= 1);
+    rnd_release(tu_ctx, id);
+    rnd_frame_free(&host);
+    rnd_desc dd = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS"),
+                   .pipe = {.splat_stripe_rows = (H + 2) / 3}};
+    sd_err err = {0};
+    rnd_ctx *r3 = rnd_create(&dd, &err);
+    if (!r3) fail_msg("rnd_create: %s", err.msg);
+    pc_prepared pc;
+    random_plane(&pc, 90, 90, 0.02f, 5);
+    for (uint64_t k = 0; k < pc.n; k++) {
+        pc.F[k] = (k / 90 / 6) % 2 ? 0.9f : 0.1f;
+        if (pc.F[k] > 0.5f) pc.pos[3 * k + 2] = -0.03f;
+    }
+    tu_finish_cloud(&pc, OFF);
+    id = tu_upload(tu_ctx, &pc);
+    uint32_t id3 = tu_upload(r3, &pc);
+    pc_prepared_free(&pc);
+    cam = cam_z(3.0);
+    p.t = 0.5f, p.lambda = 0.5f, p.l_m = 0.0f;
+    tu_render(tu_ctx, id, &cam, &p, 0, &host);
+    tu_render(r3, id3, &cam, &p, 0, &striped);
+    rnd_release(r3, id3);
+    rnd_destroy(r3);
+    int ns, ms = max_diff(&host, &striped, &ns);
+    printf("comb, 3 stripes vs 1: max %d levels (%d pixels)\n", ms, ns);
+    assert_true(ms <= 1);
+    rnd_frame_free(&host);
+    rnd_frame_free(&layer);
+    rnd_frame_free(&none);
+    rnd_frame_free(&striped);
     rnd_release(tu_ctx, id);
 }
 
@@ -700,6 +776,7 @@ int main(void)
         cmocka_unit_test(test_field_height),
         cmocka_unit_test(test_tile_matches_axis),
         cmocka_unit_test(test_cpu_bands),
+        cmocka_unit_test(test_after_matches_layer),
         cmocka_unit_test(test_buffer_sets),
         cmocka_unit_test(test_many_soft_points),
     };

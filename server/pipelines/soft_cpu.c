@@ -156,10 +156,18 @@ static void *fill_main(void *arg)
     return NULL;
 }
 
+/* Where the blend writes: pixel (x, y) at dst + 4 ((y - oy) stride + x - ox), premultiplied
+ * RGBA floats: the job's layer, or a thread's tile. */
+typedef struct blend_dst {
+    float *dst;
+    size_t stride;
+    int ox, oy;
+} blend_dst;
+
 /* One disc over the pixels of rectangle [x0, x1] x [y0, y1] (inside the disc's own, and inside
  * this thread's tile, whose last column is xlim). */
-static void blend_disc(const soft_cpu_job *job, const float *q, int x0, int x1, int y0, int y1,
-                       int xlim, int *lo, int *hi)
+static void blend_disc(const soft_cpu_job *job, const blend_dst *o, const float *q, int x0,
+                       int x1, int y0, int y1, int xlim, int *lo, int *hi)
 {
     const int width = job->width;
     float cx = q[0], cy = q[1], r = q[2], depth = q[3], cr = q[4], cg = q[5], cb = q[6];
@@ -171,7 +179,7 @@ static void blend_disc(const soft_cpu_job *job, const float *q, int x0, int x1, 
         float dy = (float)y + 0.5f - cy, dy2 = dy * dy;
         if (!(dy2 < r2)) continue;
         int xa = x0, xb = x1;
-        float *row = job->layer + 4 * ((size_t)(y - job->y0) * (size_t)width);
+        float *row = o->dst + 4 * ((size_t)(y - o->oy) * o->stride);
         const uint32_t *krow = job->keys ? job->keys + (size_t)(y - job->kb) * (size_t)width
                                          : NULL;
         int any = 0, x = xa;
@@ -213,7 +221,7 @@ static void blend_disc(const soft_cpu_job *job, const float *q, int x0, int x1, 
              * col * 0 + 1 * l is l exactly (the layer holds finite values, never -0). Lanes
              * past the tile's last column are another thread's: those only by count. */
             int nl = x + 3 <= xlim ? 4 : xlim - x + 1;
-            float *L = row + 4 * (size_t)x;
+            float *L = row + 4 * (size_t)(x - o->ox);
 #define SOFT_CPU_LANE(i, sh)                                                                  \
     do {                                                                                      \
         __m128 p = _mm_shuffle_ps(phi, phi, sh), l = _mm_loadu_ps(L + 4 * (i));               \
@@ -238,7 +246,7 @@ static void blend_disc(const soft_cpu_job *job, const float *q, int x0, int x1, 
             }
             float phi = lambda * (cos_pi(d) + 1.0f) * 0.5f;
             phi = (1.0f - d) * (1.0f - wm) + phi * wm; /* mix(1 - d, phi, W) */
-            float *L = row + 4 * (size_t)x, keep = 1.0f - phi;
+            float *L = row + 4 * (size_t)(x - o->ox), keep = 1.0f - phi;
             L[0] = cr * phi + keep * L[0];
             L[1] = cg * phi + keep * L[1];
             L[2] = cb * phi + keep * L[2];
@@ -252,7 +260,29 @@ static void blend_disc(const soft_cpu_job *job, const float *q, int x0, int x1, 
     }
 }
 
-/* The tiles t, t + nt, ...: each its list of discs, back to front, clipped to the tile. */
+/* over8: the tile's premultiplied layer (rows ty0..ty1 of tile buffer L, TILE wide, from
+ * column tx0) put over the 8-bit pixels of job->rgba8 with the "over" soft_resolve's blending
+ * makes (ONE, ONE_MINUS_SRC_ALPHA; alpha left alone: the frame is opaque), in float on the
+ * 0..255 scale, rounded to nearest. Pixels no disc reached (alpha 0, colour 0) are skipped. */
+static void over8(const soft_cpu_job *job, const float *L, int tx0, int tx1, int ty0, int ty1)
+{
+    for (int y = ty0; y <= ty1; y++) {
+        const float *l = L + 4 * ((size_t)(y - ty0) << TILE_SHIFT);
+        uint8_t *px = job->rgba8 + 4 * ((size_t)y * (size_t)job->width + (size_t)tx0);
+        for (int x = tx0; x <= tx1; x++, l += 4, px += 4) {
+            if (l[3] == 0.0f && l[0] == 0.0f && l[1] == 0.0f && l[2] == 0.0f) continue;
+            float keep = 1.0f - l[3];
+            for (int c = 0; c < 3; c++) {
+                float v = l[c] * 255.0f + keep * (float)px[c];
+                v = v < 0.0f ? 0.0f : v > 255.0f ? 255.0f : v;
+                px[c] = (uint8_t)(int)(v + 0.5f);
+            }
+        }
+    }
+}
+
+/* The tiles t, t + nt, ...: each its list of discs, back to front, clipped to the tile, into
+ * the layer, or (job->rgba8) into this thread's tile buffer then over the frame's pixels. */
 static void *blend_main(void *arg)
 {
     worker *w = arg;
@@ -261,20 +291,31 @@ static void *blend_main(void *arg)
     const int y0 = job->y0, y1 = job->y0 + job->rows;
     int lo = y1, hi = -1;
     int ntiles = w->ntx * w->nty;
+    enum { TILE = 1 << TILE_SHIFT };
+    float *tbuf = job->rgba8 ? m->tbuf + (size_t)w->t * TILE * TILE * 4 : NULL;
     for (int tile = w->t; tile < ntiles; tile += w->nt) {
+        if (m->first[tile] == m->first[tile + 1]) continue;
         int tx = tile % w->ntx, ty = tile / w->ntx;
-        int tx0 = tx << TILE_SHIFT, tx1 = tx0 + (1 << TILE_SHIFT) - 1;
-        int ty0 = y0 + (ty << TILE_SHIFT), ty1 = ty0 + (1 << TILE_SHIFT) - 1;
+        int tx0 = tx << TILE_SHIFT, tx1 = tx0 + TILE - 1;
+        int ty0 = y0 + (ty << TILE_SHIFT), ty1 = ty0 + TILE - 1;
         if (tx1 >= job->width) tx1 = job->width - 1;
         if (ty1 >= y1) ty1 = y1 - 1;
+        blend_dst o = {job->layer, (size_t)job->width, 0, y0};
+        if (tbuf) {
+            o = (blend_dst){tbuf, TILE, tx0, ty0};
+            memset(tbuf, 0, (size_t)TILE * TILE * 4 * sizeof *tbuf);
+        }
+        int tlo = y1, thi = -1; /* the rows this tile's discs reached */
         for (uint32_t e = m->first[tile]; e < m->first[tile + 1]; e++) {
             const float *q = m->tiled + 8 * (size_t)e;
             int x0, x1, ya, yb;
             if (!disc_rect(q, job->width, y0, y1, &x0, &x1, &ya, &yb)) continue;
             x0 = x0 > tx0 ? x0 : tx0, x1 = x1 < tx1 ? x1 : tx1;
             ya = ya > ty0 ? ya : ty0, yb = yb < ty1 ? yb : ty1;
-            if (x0 <= x1 && ya <= yb) blend_disc(job, q, x0, x1, ya, yb, tx1, &lo, &hi);
+            if (x0 <= x1 && ya <= yb) blend_disc(job, &o, q, x0, x1, ya, yb, tx1, &tlo, &thi);
         }
+        if (tbuf && thi >= 0) over8(job, tbuf, tx0, tx1, ty0, ty1);
+        if (thi >= 0) lo = tlo < lo ? tlo : lo, hi = thi > hi ? thi : hi;
     }
     w->lo = lo;
     w->hi = hi;
@@ -333,7 +374,8 @@ static int bin(soft_cpu_job *job, worker *w, int nt, int ntx, int nty)
 
 int soft_cpu_composite(soft_cpu_job *job)
 {
-    memset(job->layer, 0, (size_t)job->width * (size_t)job->rows * 4 * sizeof(float));
+    if (!job->rgba8)
+        memset(job->layer, 0, (size_t)job->width * (size_t)job->rows * 4 * sizeof(float));
     job->touched[0] = job->touched[1] = -1;
     uint64_t n = 0;
     for (int s = 0; s < job->nsegs; s++) n += job->segs[s].n;
@@ -347,7 +389,9 @@ int soft_cpu_composite(soft_cpu_job *job)
         soft_cpu_grow((void **)&m->discs, &m->discs_cap, 8 * n, sizeof *m->discs) ||
         soft_cpu_grow((void **)&m->rect, &m->rect_cap, 4 * n, sizeof *m->rect) ||
         soft_cpu_grow((void **)&m->cnt, &m->cnt_cap, (size_t)nt * ntiles, sizeof *m->cnt) ||
-        soft_cpu_grow((void **)&m->first, &m->first_cap, ntiles + 1, sizeof *m->first))
+        soft_cpu_grow((void **)&m->first, &m->first_cap, ntiles + 1, sizeof *m->first) ||
+        (job->rgba8 && soft_cpu_grow((void **)&m->tbuf, &m->tbuf_cap,
+                                     (size_t)nt << (2 * TILE_SHIFT + 2), sizeof *m->tbuf)))
         return -1;
     worker w[MAX_THREADS];
     for (int t = 0; t < nt; t++)
@@ -374,5 +418,6 @@ void soft_cpu_mem_free(soft_cpu_mem *m)
     free(m->rect);
     free(m->cnt);
     free(m->first);
+    free(m->tbuf);
     memset(m, 0, sizeof *m);
 }

@@ -39,7 +39,8 @@ typedef struct soft_cpu_mem {
     uint32_t *first;           /* where each tile's discs start in tiled (in discs) */
     uint16_t *rect;            /* 4 per disc in draw order: its tiles' columns and rows */
     uint32_t *cnt;             /* per thread and tile: discs counted, then where they go */
-    size_t discs_cap, tiled_cap, first_cap, rect_cap, cnt_cap;
+    float *tbuf;               /* rgba8 jobs: a 64x64 RGBA float tile per thread */
+    size_t discs_cap, tiled_cap, first_cap, rect_cap, cnt_cap, tbuf_cap;
 } soft_cpu_mem;
 
 typedef struct soft_cpu_job {
@@ -51,14 +52,19 @@ typedef struct soft_cpu_job {
     const uint32_t *keys;      /* visibility keys of rows [kb, kb + nk) (width each), ~floatBits
                                 * of the solid eye depth, 0 where empty; NULL: no solid surface */
     int kb, nk;
-    float *layer;              /* width * rows * 4: premultiplied RGBA, written here */
+    float *layer;              /* width * rows * 4: premultiplied RGBA, written here; or: */
+    uint8_t *rgba8;            /* when not NULL (layer unused): the frame's opaque 8-bit RGBA
+                                * pixels, row y at 4 width y (window rows, as glReadPixels
+                                * gives them), over which each tile's layer is put (the "over"
+                                * soft_resolve makes, in float, rounded to nearest) */
     soft_cpu_mem *mem;
     int threads;               /* 1 to 16 (more are taken as 16) */
     int touched[2];            /* out: the first and last row any disc reached (-1: none) */
 } soft_cpu_job;
 
-/* soft_cpu_composite: fills job->layer (cleared first) and job->touched. Returns 0, or -1 when
- * the working memory cannot grow (the layer is then left cleared). */
+/* soft_cpu_composite: fills job->layer (cleared first), or blends over job->rgba8, and
+ * job->touched. Returns 0, or -1 when the working memory cannot grow (the layer is then left
+ * cleared, rgba8 untouched). */
 int soft_cpu_composite(soft_cpu_job *job);
 void soft_cpu_mem_free(soft_cpu_mem *m);
 

@@ -37,9 +37,14 @@ int splat__create_filtered(rnd_kit *k, void **state, sd_err *err);
 enum {
     SPLAT_SKIP_SOFT = 0,  /* points with F > t are skipped (t >= 1 skips none) */
     SPLAT_SKIP_SOLID = 1, /* points with F <= t are skipped */
-    SPLAT_PEEL = 2        /* soft points within the first soft layer are skipped: their centre
+    SPLAT_PEEL = 2,       /* soft points within the first soft layer are skipped: their centre
                              depth within the depth tolerance of the keys on RND_T_OLT_KEYS
                              (a copy of an earlier soft-only pass's keys of the same stripe) */
+    SPLAT_SOLID_LIST = 3  /* nothing is skipped, but the view's chunks count entries of the list
+                             on RND_T_SOFT_SOLID (R32UI, the solid points in point order), not
+                             points: entry j draws point list[j]. The passes then spend nothing
+                             on soft points, which the filter (mode 0) still reads one by one
+                             and which leave SIMD lanes idle among the solid ones */
 };
 /* splat__set_filter: after splat__frame_begin, the filter mode and threshold of a
  * splat__create_filtered state. */

@@ -52,6 +52,7 @@
     X(EDL_DEPTH)     /* EDL: a copy of the target's depth_eye as R32F */                      \
     X(SOFT_F)        /* soft: R32UI float bits of the field source (FIELD or INTENSITY) */    \
     X(SOFT_IDX)      /* soft: R32UI soft point indices, then their ranks along the 3 axes */  \
+    X(SOFT_SOLID)    /* soft: R32UI the solid points in point order (SPLAT_SOLID_LIST) */     \
     X(SOFT_PROJ)     /* soft: SOFT_PROJ as RGBA32F */                                          \
     X(SOFT_LIST)     /* soft: SOFT_LIST as R32UI */                                             \
     X(SOFT_CELLS)    /* soft: SOFT_CELLS as R32UI */                                            \

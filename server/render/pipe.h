@@ -192,6 +192,9 @@ typedef struct rnd_draw_out {
     uint32_t flags;            /* RND_FRAME_* (render.h): how the frame was degraded */
     uint32_t *probe;           /* kawata under kit.kawata_probe: rnd_frame.kawata_arrays
                                   (malloc'd; the renderer takes it) */
+    int after;                 /* 1: the frame is not finished; the renderer calls the
+                                  pipeline's `after` on its read-back pixels (only when
+                                  rnd_draw.host_after allowed it) */
 } rnd_draw_out;
 
 /* What one frame asks of a pipeline. */
@@ -202,6 +205,9 @@ typedef struct rnd_draw {
     const sp_params *params;
     const rnd_target *target;  /* bound, cleared to the background (depth_eye to +inf) */
     rnd_draw_out *out;         /* zeroed by the renderer; never NULL */
+    int host_after;            /* 1: the pipeline may leave the end of the frame to its `after`
+                                  hook on the host: the frame is an opaque 8-bit one and no GL
+                                  pass follows the pipeline's (no GL Eye-Dome Lighting) */
 } rnd_draw;
 
 typedef struct rnd_pipeline {
@@ -217,6 +223,10 @@ typedef struct rnd_pipeline {
     void (*detach)(rnd_kit *k, void *state, void *cloud_data);
     /* render: draws d into d->target. Returns 0 or SD_E*. */
     int (*render)(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err);
+    /* after (may be NULL): when render set d->out->after, finishes the frame on the host over
+     * its read-back pixels rgba8 (width * height RGBA, row y at 4 width y: window rows, as
+     * glReadPixels gives them), before the host Eye-Dome Lighting pass. Returns 0 or SD_E*. */
+    int (*after)(rnd_kit *k, void *state, const rnd_draw *d, uint8_t *rgba8, sd_err *err);
 } rnd_pipeline;
 
 /* pipe_<name> for every row of protocol/pipelines.h. */

@@ -932,7 +932,8 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     if (opaque8) gl->ColorMaski(0, GL_TRUE, GL_TRUE, GL_TRUE, GL_FALSE);
     rnd_draw_out out = {0};
     const rnd_draw draw = {.cloud = c, .cloud_data = slot->pdata[pi], .view = &v,
-                           .params = params, .target = t, .out = &out};
+                           .params = params, .target = t, .out = &out,
+                           .host_after = opaque8 && (!edl || edl_host)};
     rc = pipelines[pi]->render(&r->kit, r->pstate[pi], &draw, err);
     free(frame->kawata_arrays);
     frame->kawata_arrays = out.probe;
@@ -977,7 +978,10 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
         gl->ReadPixels(0, 0, cam->width, cam->height, GL_RED, GL_FLOAT, frame->depth);
     }
     uint64_t t2 = now_us();
-    if (edl_host)
+    /* the pipeline's host part, then the host EDL pass: both rendering */
+    if (out.after && pipelines[pi]->after)
+        rc = pipelines[pi]->after(&r->kit, r->pstate[pi], &draw, frame->rgba8, err);
+    if (rc == 0 && edl_host)
         rc = rnd__edl_host(&r->edl, gl, t, edl_rect, params->edl_strength, params->edl_radius,
                            frame->rgba8, want_float ? frame->rgba16f : NULL, cam->width, err);
     gl->BindFramebuffer(GL_FRAMEBUFFER, 0);
