@@ -1,5 +1,6 @@
 /* soft_cpu.c — the soft discs composited on the CPU (soft_cpu.h). */
 #include "soft_cpu.h"
+#include "simd.h"
 
 #include <math.h>
 #include <pthread.h>
@@ -9,42 +10,40 @@
 enum { MAX_THREADS = 16, TILE_SHIFT = 6 }; /* tiles of 64 x 64 pixels */
 enum { PREFETCH = 16 };                     /* discs the gather asks for ahead */
 
-/* cos(pi d) for d in [0, 1] as a polynomial in d^2: its Taylor series to d^14, within 4.2e-6
- * of the cosine there (the next term bounds the error), far below an 8-bit step. */
-static inline float cos_pi(float d)
+/* The blend works on 8 pixels at a time (GCC vector extensions, compiled for AVX2 and for the
+ * baseline by PREP_CLONES). */
+typedef float v8f __attribute__((vector_size(32)));
+typedef int v8i __attribute__((vector_size(32)));
+typedef float v8f_mem __attribute__((vector_size(32), aligned(4))); /* the planes, in memory */
+
+/* any8: whether any lane of mask m is set */
+static inline int any8(const v8i *m)
 {
-    static const float c[8] = {1.0f, -4.934802200544679f, 4.0587121264167676f,
-                               -1.3352627688545893f, 0.23533063035889312f,
-                               -0.025806891390014051f, 0.0019295743094039221f,
-                               -0.00010463810492484565f};
-    float u = d * d;
-    return c[0] + u * (c[1] + u * (c[2] + u * (c[3] + u * (c[4] + u * (c[5] + u * (c[6] +
-           u * c[7]))))));
+    uint64_t w[4];
+    memcpy(w, m, sizeof w);
+    return (w[0] | w[1] | w[2] | w[3]) != 0;
+}
+
+/* cos(pi d) for d in [0, 1] from u = d^2 as a polynomial in u: its Taylor series to d^14,
+ * within 4.2e-6 of the cosine there (the next term bounds the error), far below an 8-bit
+ * step. */
+static inline void cos_pi_u(v8f *out, const v8f *up)
+{
+    v8f u = *up;
+    const float c[8] = {1.0f, -4.934802200544679f, 4.0587121264167676f, -1.3352627688545893f,
+                        0.23533063035889312f, -0.025806891390014051f, 0.0019295743094039221f,
+                        -0.00010463810492484565f};
+    v8f s = u * c[7] + c[6];
+    s = s * u + c[5];
+    s = s * u + c[4];
+    s = s * u + c[3];
+    s = s * u + c[2];
+    s = s * u + c[1];
+    *out = s * u + c[0];
 }
 
 /* floor and ceil of v for |v| < 2^31 without libm calls (the baseline x86-64 has no rounding
  * instruction: ceilf and floorf are calls there). */
-#if defined(__SSE2__)
-#include <emmintrin.h>
-/* cos_pi on four lanes, the same operations in the same order */
-static inline __m128 cos_pi4(__m128 d)
-{
-    static const float c[8] = {1.0f, -4.934802200544679f, 4.0587121264167676f,
-                               -1.3352627688545893f, 0.23533063035889312f,
-                               -0.025806891390014051f, 0.0019295743094039221f,
-                               -0.00010463810492484565f};
-    /* written out (not a loop: GCC kept the loop and reloaded each coefficient) */
-    __m128 u = _mm_mul_ps(d, d), s = _mm_set1_ps(c[7]);
-    s = _mm_add_ps(_mm_set1_ps(c[6]), _mm_mul_ps(u, s));
-    s = _mm_add_ps(_mm_set1_ps(c[5]), _mm_mul_ps(u, s));
-    s = _mm_add_ps(_mm_set1_ps(c[4]), _mm_mul_ps(u, s));
-    s = _mm_add_ps(_mm_set1_ps(c[3]), _mm_mul_ps(u, s));
-    s = _mm_add_ps(_mm_set1_ps(c[2]), _mm_mul_ps(u, s));
-    s = _mm_add_ps(_mm_set1_ps(c[1]), _mm_mul_ps(u, s));
-    return _mm_add_ps(_mm_set1_ps(c[0]), _mm_mul_ps(u, s));
-}
-#endif
-
 static inline int ifloor(float v)
 {
     int i = (int)v;
@@ -156,124 +155,108 @@ static void *fill_main(void *arg)
     return NULL;
 }
 
-/* Where the blend writes: pixel (x, y) at dst + 4 ((y - oy) stride + x - ox), premultiplied
- * RGBA floats: the job's layer, or a thread's tile. */
-typedef struct blend_dst {
-    float *dst;
-    size_t stride;
-    int ox, oy;
-} blend_dst;
+/* A thread's tile: the premultiplied R, G, B and A of its pixels and the solid surface's eye
+ * depth there (+inf: none), each a plane of TILE x TILE floats, row by row from the tile's
+ * corner. Planes instead of RGBA quadruples so that 8 pixels blend in 8-wide operations. */
+enum { TILE = 1 << TILE_SHIFT, TPIX = TILE * TILE, TPLANES = 5 };
 
-/* One disc over the pixels of rectangle [x0, x1] x [y0, y1] (inside the disc's own, and inside
- * this thread's tile, whose last column is xlim). */
-static void blend_disc(const soft_cpu_job *job, const blend_dst *o, const float *q, int x0,
-                       int x1, int y0, int y1, int xlim, int *lo, int *hi)
+/* tile_depth: the Z plane from the job's keys (+inf where a key is 0, outside the frame, or
+ * without keys). */
+static void tile_depth(const soft_cpu_job *job, float *Z, int tx0, int tx1, int ty0, int ty1)
 {
-    const int width = job->width;
-    float cx = q[0], cy = q[1], r = q[2], depth = q[3], cr = q[4], cg = q[5], cb = q[6];
-    float wm = q[7], lambda = job->lambda;
-    float r2 = r * r, inv_r = 1.0f / r;
-    /* every row over the rectangle's columns: the lanes outside the disc are masked (cheaper
-     * than each row's chord, its square root and roundings: 13 % less CPU on Guanyin) */
-    for (int y = y0; y <= y1; y++) {
-        float dy = (float)y + 0.5f - cy, dy2 = dy * dy;
-        if (!(dy2 < r2)) continue;
-        int xa = x0, xb = x1;
-        float *row = o->dst + 4 * ((size_t)(y - o->oy) * o->stride);
-        const uint32_t *krow = job->keys ? job->keys + (size_t)(y - job->kb) * (size_t)width
-                                         : NULL;
-        int any = 0, x = xa;
-#if defined(__SSE2__)
-        /* four pixels at a time, with the same operations in the same order as the loop below
-         * (so the same results): lanes outside the disc or behind the solid surface are left
-         * alone */
-        const __m128 vcx = _mm_set1_ps(cx), vdy2 = _mm_set1_ps(dy2), vr2 = _mm_set1_ps(r2);
-        const __m128 vinv = _mm_set1_ps(inv_r), one = _mm_set1_ps(1.0f), half_ = _mm_set1_ps(0.5f);
-        const __m128 vdepth = _mm_set1_ps(depth), vlam = _mm_set1_ps(lambda);
-        const __m128 vwm = _mm_set1_ps(wm), vomw = _mm_set1_ps(1.0f - wm);
-        const __m128 col = _mm_set_ps(1.0f, cb, cg, cr);
-        /* a chord is a few pixels: the last group is masked (lanes past xb), and taken so
-         * while its four keys lie inside the row (else the loop below finishes it) */
-        const __m128 vxb = _mm_set1_ps((float)xb), lane = _mm_set_ps(3.0f, 2.0f, 1.0f, 0.0f);
-        for (; x <= xb && x + 3 < width; x += 4) {
-            /* x + i in float: exact (|x| < 2^24), as the four conversions were */
-            __m128 xs = _mm_add_ps(_mm_set1_ps((float)x), lane);
-            __m128 dx = _mm_sub_ps(_mm_add_ps(xs, half_), vcx);
-            __m128 d2 = _mm_add_ps(_mm_mul_ps(dx, dx), vdy2);
-            __m128 in = _mm_and_ps(_mm_cmplt_ps(d2, vr2), _mm_cmple_ps(xs, vxb));
-            __m128 d = _mm_mul_ps(_mm_sqrt_ps(d2), vinv);
-            in = _mm_and_ps(in, _mm_cmplt_ps(d, one));
-            if (krow) {
-                __m128i k4 = _mm_loadu_si128((const __m128i *)(krow + x));
-                __m128i empty = _mm_cmpeq_epi32(k4, _mm_setzero_si128());
-                __m128 kd = _mm_castsi128_ps(_mm_xor_si128(k4, _mm_set1_epi32(-1)));
-                __m128 vis = _mm_or_ps(_mm_castsi128_ps(empty), _mm_cmplt_ps(vdepth, kd));
-                in = _mm_and_ps(in, vis);
+    for (int i = 0; i < TPIX; i++) Z[i] = INFINITY;
+    if (!job->keys) return;
+    for (int y = ty0; y <= ty1; y++) {
+        const uint32_t *k = job->keys + (size_t)(y - job->kb) * (size_t)job->width;
+        float *z = Z + (size_t)(y - ty0) * TILE;
+        for (int x = tx0; x <= tx1; x++)
+            if (k[x]) z[x - tx0] = key_depth(k[x]);
+    }
+}
+
+/* blend_tile: discs [e0, e1) of tiled, back to front, over the pixels of the tile whose columns
+ * are [tx0, tx1] and rows [ty0, ty1] (within the job's), into the planes T (cleared, Z filled).
+ * Every pixel whose centre lies inside a disc (d = |p - c| / r < 1), in front of the solid
+ * surface, gets soft.frag's opacity Phi = lambda (cos(pi d) + 1) / 2 (eq. 19), modulated by eq.
+ * 22 as mix(1 - d, Phi, W), and the "over" in float. Lanes outside the disc or the rectangle,
+ * or hidden, have Phi 0 and stay as they were exactly (c * 0 + 1 * l = l: the planes hold
+ * finite values, never -0). *lo, *hi: the rows any disc reached. */
+PREP_CLONES
+static void blend_tile(const soft_cpu_job *job, const float *tiled, uint32_t e0, uint32_t e1,
+                       int tx0, int tx1, int ty0, int ty1, float *T, int *lo, int *hi)
+{
+    const float lambda = job->lambda;
+    const v8f lane = {0.5f, 1.5f, 2.5f, 3.5f, 4.5f, 5.5f, 6.5f, 7.5f}; /* pixel centres */
+    for (uint32_t e = e0; e < e1; e++) {
+        const float *q = tiled + 8 * (size_t)e;
+        int x0, x1, ya, yb;
+        if (!disc_rect(q, job->width, job->y0, job->y0 + job->rows, &x0, &x1, &ya, &yb))
+            continue;
+        x0 = x0 > tx0 ? x0 : tx0, x1 = x1 < tx1 ? x1 : tx1;
+        ya = ya > ty0 ? ya : ty0, yb = yb < ty1 ? yb : ty1;
+        if (x0 > x1 || ya > yb) continue;
+        const float cx = q[0], cy = q[1], r = q[2], depth = q[3], wm = q[7];
+        const float r2 = r * r, inv_r = 1.0f / r, inv_r2 = inv_r * inv_r;
+        const float cr = q[4], cg = q[5], cb = q[6];
+        const int modulated = wm != 1.0f;
+        const float fx0 = (float)x0, fx1 = (float)x1;
+        /* the 8-pixel groups of the tile's rows that the columns reach */
+        int g0 = (x0 - tx0) & ~7, g1 = x1 - tx0;
+        for (int y = ya; y <= yb; y++) {
+            float dy = (float)y + 0.5f - cy, dy2 = dy * dy;
+            if (!(dy2 < r2)) continue;
+            size_t row = (size_t)(y - ty0) * TILE;
+            v8i any = {0};
+            for (int g = g0; g <= g1; g += 8) {
+                v8f xs = (float)(tx0 + g) + lane; /* x + 0.5 */
+                v8f dx = xs - cx, d2 = dx * dx + dy2;
+                v8f px = xs - 0.5f;
+                const v8f_mem *zp = (const v8f_mem *)(T + 4 * TPIX + row + g);
+                v8i in = (d2 < r2) & (px >= fx0) & (px <= fx1) & (depth < *zp);
+                if (!any8(&in)) continue;
+                any |= in;
+                v8f u = d2 * inv_r2, cs;
+                cos_pi_u(&cs, &u);
+                v8f phi = lambda * (cs + 1.0f) * 0.5f;
+                if (modulated) {
+                    v8f d;
+                    for (int l = 0; l < 8; l++) d[l] = sqrtf(d2[l] > 0.0f ? d2[l] : 0.0f);
+                    d *= inv_r;
+                    phi = (1.0f - d) * (1.0f - wm) + phi * wm;
+                }
+                phi = (v8f)((v8i)phi & in);
+                v8f keep = 1.0f - phi;
+                v8f_mem *R = (v8f_mem *)(T + row + g), *G = (v8f_mem *)(T + TPIX + row + g);
+                v8f_mem *B = (v8f_mem *)(T + 2 * TPIX + row + g);
+                *R = cr * phi + keep * *R;
+                *G = cg * phi + keep * *G;
+                *B = cb * phi + keep * *B;
+                v8f_mem *A = (v8f_mem *)(T + 3 * (size_t)TPIX + row + g);
+                *A = phi + keep * *A;
             }
-            int m = _mm_movemask_ps(in);
-            if (!m) continue;
-            any = 1;
-            __m128 phi = _mm_mul_ps(_mm_mul_ps(vlam, _mm_add_ps(cos_pi4(d), one)), half_);
-            phi = _mm_add_ps(_mm_mul_ps(_mm_sub_ps(one, d), vomw), _mm_mul_ps(phi, vwm));
-            phi = _mm_and_ps(phi, in);
-            /* the lanes are blended without a test per lane (whose branches, on where the
-             * disc's edge falls, the CPU mispredicts): a masked lane has phi 0, and
-             * col * 0 + 1 * l is l exactly (the layer holds finite values, never -0). Lanes
-             * past the tile's last column are another thread's: those only by count. */
-            int nl = x + 3 <= xlim ? 4 : xlim - x + 1;
-            float *L = row + 4 * (size_t)(x - o->ox);
-#define SOFT_CPU_LANE(i, sh)                                                                  \
-    do {                                                                                      \
-        __m128 p = _mm_shuffle_ps(phi, phi, sh), l = _mm_loadu_ps(L + 4 * (i));               \
-        l = _mm_add_ps(_mm_mul_ps(col, p), _mm_mul_ps(_mm_sub_ps(one, p), l));                \
-        _mm_storeu_ps(L + 4 * (i), l);                                                        \
-    } while (0)
-            SOFT_CPU_LANE(0, 0x00);
-            if (nl > 1) SOFT_CPU_LANE(1, 0x55);
-            if (nl > 2) SOFT_CPU_LANE(2, 0xaa);
-            if (nl > 3) SOFT_CPU_LANE(3, 0xff);
-#undef SOFT_CPU_LANE
-        }
-#endif
-        for (; x <= xb; x++) {
-            float dx = (float)x + 0.5f - cx, d2 = dx * dx + dy2;
-            if (!(d2 < r2)) continue;
-            float d = sqrtf(d2) * inv_r; /* soft.frag's length(...) / r */
-            if (!(d < 1.0f)) continue;
-            if (krow) {
-                uint32_t key = krow[x];
-                if (key != 0u && depth >= key_depth(key)) continue;
+            if (any8(&any)) {
+                if (y < *lo) *lo = y;
+                if (y > *hi) *hi = y;
             }
-            float phi = lambda * (cos_pi(d) + 1.0f) * 0.5f;
-            phi = (1.0f - d) * (1.0f - wm) + phi * wm; /* mix(1 - d, phi, W) */
-            float *L = row + 4 * (size_t)(x - o->ox), keep = 1.0f - phi;
-            L[0] = cr * phi + keep * L[0];
-            L[1] = cg * phi + keep * L[1];
-            L[2] = cb * phi + keep * L[2];
-            L[3] = phi + keep * L[3];
-            any = 1;
-        }
-        if (any) {
-            if (y < *lo) *lo = y;
-            if (y > *hi) *hi = y;
         }
     }
 }
 
-/* over8: the tile's premultiplied layer (rows ty0..ty1 of tile buffer L, TILE wide, from
- * column tx0) put over the 8-bit pixels of job->rgba8 with the "over" soft_resolve's blending
- * makes (ONE, ONE_MINUS_SRC_ALPHA; alpha left alone: the frame is opaque), in float on the
- * 0..255 scale, rounded to nearest. Pixels no disc reached (alpha 0, colour 0) are skipped. */
-static void over8(const soft_cpu_job *job, const float *L, int tx0, int tx1, int ty0, int ty1)
+/* over8: the tile's planes put over the 8-bit pixels of job->rgba8 with the "over"
+ * soft_resolve's blending makes (ONE, ONE_MINUS_SRC_ALPHA; alpha left alone: the frame is
+ * opaque), in float on the 0..255 scale, rounded to nearest. Pixels no disc reached (alpha 0)
+ * are left alone. */
+static void over8(const soft_cpu_job *job, const float *T, int tx0, int tx1, int ty0, int ty1)
 {
     for (int y = ty0; y <= ty1; y++) {
-        const float *l = L + 4 * ((size_t)(y - ty0) << TILE_SHIFT);
+        size_t row = (size_t)(y - ty0) * TILE;
         uint8_t *px = job->rgba8 + 4 * ((size_t)y * (size_t)job->width + (size_t)tx0);
-        for (int x = tx0; x <= tx1; x++, l += 4, px += 4) {
-            if (l[3] == 0.0f && l[0] == 0.0f && l[1] == 0.0f && l[2] == 0.0f) continue;
-            float keep = 1.0f - l[3];
+        for (int x = 0; x <= tx1 - tx0; x++, px += 4) {
+            float a = T[3 * TPIX + row + x];
+            if (a == 0.0f) continue;
+            float keep = 1.0f - a;
             for (int c = 0; c < 3; c++) {
-                float v = l[c] * 255.0f + keep * (float)px[c];
+                float v = T[(size_t)c * TPIX + row + x] * 255.0f + keep * (float)px[c];
                 v = v < 0.0f ? 0.0f : v > 255.0f ? 255.0f : v;
                 px[c] = (uint8_t)(int)(v + 0.5f);
             }
@@ -281,8 +264,19 @@ static void over8(const soft_cpu_job *job, const float *L, int tx0, int tx1, int
     }
 }
 
-/* The tiles t, t + nt, ...: each its list of discs, back to front, clipped to the tile, into
- * the layer, or (job->rgba8) into this thread's tile buffer then over the frame's pixels. */
+/* to_layer: the tile's planes copied into the job's layer (RGBA quadruples). */
+static void to_layer(const soft_cpu_job *job, const float *T, int tx0, int tx1, int ty0, int ty1)
+{
+    for (int y = ty0; y <= ty1; y++) {
+        size_t row = (size_t)(y - ty0) * TILE;
+        float *L = job->layer + 4 * ((size_t)(y - job->y0) * (size_t)job->width + (size_t)tx0);
+        for (int x = 0; x <= tx1 - tx0; x++, L += 4)
+            for (int c = 0; c < 4; c++) L[c] = T[(size_t)c * TPIX + row + x];
+    }
+}
+
+/* The tiles t, t + nt, ...: each its list of discs, back to front, into this thread's planes,
+ * then over the frame's pixels (job->rgba8) or into the layer. */
 static void *blend_main(void *arg)
 {
     worker *w = arg;
@@ -291,8 +285,7 @@ static void *blend_main(void *arg)
     const int y0 = job->y0, y1 = job->y0 + job->rows;
     int lo = y1, hi = -1;
     int ntiles = w->ntx * w->nty;
-    enum { TILE = 1 << TILE_SHIFT };
-    float *tbuf = job->rgba8 ? m->tbuf + (size_t)w->t * TILE * TILE * 4 : NULL;
+    float *T = m->tbuf + (size_t)w->t * TPLANES * TPIX;
     for (int tile = w->t; tile < ntiles; tile += w->nt) {
         if (m->first[tile] == m->first[tile + 1]) continue;
         int tx = tile % w->ntx, ty = tile / w->ntx;
@@ -300,22 +293,15 @@ static void *blend_main(void *arg)
         int ty0 = y0 + (ty << TILE_SHIFT), ty1 = ty0 + TILE - 1;
         if (tx1 >= job->width) tx1 = job->width - 1;
         if (ty1 >= y1) ty1 = y1 - 1;
-        blend_dst o = {job->layer, (size_t)job->width, 0, y0};
-        if (tbuf) {
-            o = (blend_dst){tbuf, TILE, tx0, ty0};
-            memset(tbuf, 0, (size_t)TILE * TILE * 4 * sizeof *tbuf);
-        }
+        memset(T, 0, 4 * TPIX * sizeof *T);
+        tile_depth(job, T + 4 * TPIX, tx0, tx1, ty0, ty1);
         int tlo = y1, thi = -1; /* the rows this tile's discs reached */
-        for (uint32_t e = m->first[tile]; e < m->first[tile + 1]; e++) {
-            const float *q = m->tiled + 8 * (size_t)e;
-            int x0, x1, ya, yb;
-            if (!disc_rect(q, job->width, y0, y1, &x0, &x1, &ya, &yb)) continue;
-            x0 = x0 > tx0 ? x0 : tx0, x1 = x1 < tx1 ? x1 : tx1;
-            ya = ya > ty0 ? ya : ty0, yb = yb < ty1 ? yb : ty1;
-            if (x0 <= x1 && ya <= yb) blend_disc(job, &o, q, x0, x1, ya, yb, tx1, &tlo, &thi);
-        }
-        if (tbuf && thi >= 0) over8(job, tbuf, tx0, tx1, ty0, ty1);
-        if (thi >= 0) lo = tlo < lo ? tlo : lo, hi = thi > hi ? thi : hi;
+        blend_tile(job, m->tiled, m->first[tile], m->first[tile + 1], tx0, tx1, ty0, ty1, T,
+                   &tlo, &thi);
+        if (thi < 0) continue;
+        if (job->rgba8) over8(job, T, tx0, tx1, ty0, ty1);
+        else to_layer(job, T, tx0, tx1, ty0, ty1);
+        lo = tlo < lo ? tlo : lo, hi = thi > hi ? thi : hi;
     }
     w->lo = lo;
     w->hi = hi;
@@ -372,17 +358,29 @@ static int bin(soft_cpu_job *job, worker *w, int nt, int ntx, int nty)
     return 0;
 }
 
-int soft_cpu_composite(soft_cpu_job *job)
+/* setup: the job's thread count and tiles, and its workers (the gather's and fill's parts of
+ * the draw order). Returns the number of discs. */
+static uint64_t setup(soft_cpu_job *job, worker *w, int *nt_, int *ntx_, int *nty_)
 {
-    if (!job->rgba8)
-        memset(job->layer, 0, (size_t)job->width * (size_t)job->rows * 4 * sizeof(float));
-    job->touched[0] = job->touched[1] = -1;
     uint64_t n = 0;
     for (int s = 0; s < job->nsegs; s++) n += job->segs[s].n;
-    if (n == 0 || job->rows <= 0 || job->width <= 0) return 0;
     int nt = job->threads < 1 ? 1 : job->threads > MAX_THREADS ? MAX_THREADS : job->threads;
     int ntx = (job->width + (1 << TILE_SHIFT) - 1) >> TILE_SHIFT;
     int nty = (job->rows + (1 << TILE_SHIFT) - 1) >> TILE_SHIFT;
+    for (int t = 0; t < nt; t++)
+        w[t] = (worker){job, t, nt, n * (uint64_t)t / (uint64_t)nt,
+                        n * (uint64_t)(t + 1) / (uint64_t)nt, ntx, nty, 0, -1};
+    *nt_ = nt, *ntx_ = ntx, *nty_ = nty;
+    return job->rows > 0 && job->width > 0 ? n : 0;
+}
+
+int soft_cpu_bin(soft_cpu_job *job)
+{
+    worker w[MAX_THREADS];
+    int nt, ntx, nty;
+    uint64_t n = setup(job, w, &nt, &ntx, &nty);
+    job->binned = 0;
+    if (n == 0) return 0;
     size_t ntiles = (size_t)ntx * (size_t)nty;
     soft_cpu_mem *m = job->mem;
     if (n > UINT32_MAX || ntx > UINT16_MAX || nty > UINT16_MAX ||
@@ -390,15 +388,23 @@ int soft_cpu_composite(soft_cpu_job *job)
         soft_cpu_grow((void **)&m->rect, &m->rect_cap, 4 * n, sizeof *m->rect) ||
         soft_cpu_grow((void **)&m->cnt, &m->cnt_cap, (size_t)nt * ntiles, sizeof *m->cnt) ||
         soft_cpu_grow((void **)&m->first, &m->first_cap, ntiles + 1, sizeof *m->first) ||
-        (job->rgba8 && soft_cpu_grow((void **)&m->tbuf, &m->tbuf_cap,
-                                     (size_t)nt << (2 * TILE_SHIFT + 2), sizeof *m->tbuf)))
+        soft_cpu_grow((void **)&m->tbuf, &m->tbuf_cap, (size_t)nt * TPLANES * TPIX + 8,
+                      sizeof *m->tbuf))
         return -1;
-    worker w[MAX_THREADS];
-    for (int t = 0; t < nt; t++)
-        w[t] = (worker){job, t, nt, n * (uint64_t)t / (uint64_t)nt,
-                        n * (uint64_t)(t + 1) / (uint64_t)nt, ntx, nty, 0, -1};
     run_all(w, nt, gather_main);
     if (bin(job, w, nt, ntx, nty) != 0) return -1;
+    job->binned = 1;
+    return 0;
+}
+
+int soft_cpu_blend(soft_cpu_job *job)
+{
+    if (!job->rgba8)
+        memset(job->layer, 0, (size_t)job->width * (size_t)job->rows * 4 * sizeof(float));
+    job->touched[0] = job->touched[1] = -1;
+    worker w[MAX_THREADS];
+    int nt, ntx, nty;
+    if (setup(job, w, &nt, &ntx, &nty) == 0 || !job->binned) return 0;
     run_all(w, nt, blend_main);
     int lo = job->y0 + job->rows, hi = -1;
     for (int t = 0; t < nt; t++) {
@@ -409,6 +415,17 @@ int soft_cpu_composite(soft_cpu_job *job)
     job->touched[0] = hi >= 0 ? lo : -1;
     job->touched[1] = hi;
     return 0;
+}
+
+int soft_cpu_composite(soft_cpu_job *job)
+{
+    if (soft_cpu_bin(job) != 0) {
+        if (!job->rgba8)
+            memset(job->layer, 0, (size_t)job->width * (size_t)job->rows * 4 * sizeof(float));
+        job->touched[0] = job->touched[1] = -1;
+        return -1;
+    }
+    return soft_cpu_blend(job);
 }
 
 void soft_cpu_mem_free(soft_cpu_mem *m)

@@ -16,8 +16,11 @@
  * a counting sort that keeps the draw order within each tile (count, prefix sum, fill in
  * order; each tile's discs copied after one another, so that the blend walks memory in
  * sequence; the gather, the counts and the copies by every core, each a consecutive part of
- * the draw order), and the threads take whole tiles, whose layer and keys stay in cache. A pixel's
- * discs are the same, in the same order, whatever the thread count. */
+ * the draw order), and the threads take whole tiles. Each thread blends a tile's discs into
+ * planes of its own (R, G, B, A and the solid depth from the keys, 64 x 64 floats each, in
+ * cache), 8 pixels at a time (8-wide vectors, AVX2 where the CPU has it), then writes the tile
+ * into the layer or puts it over the frame's 8-bit pixels. A pixel's discs are the same, in the
+ * same order, whatever the thread count. */
 #pragma once
 #include <stddef.h>
 #include <stdint.h>
@@ -60,12 +63,19 @@ typedef struct soft_cpu_job {
     soft_cpu_mem *mem;
     int threads;               /* 1 to 16 (more are taken as 16) */
     int touched[2];            /* out: the first and last row any disc reached (-1: none) */
+    int binned;                /* set by soft_cpu_bin: the discs are in mem's tiles */
 } soft_cpu_job;
 
 /* soft_cpu_composite: fills job->layer (cleared first), or blends over job->rgba8, and
  * job->touched. Returns 0, or -1 when the working memory cannot grow (the layer is then left
- * cleared, rgba8 untouched). */
+ * cleared, rgba8 untouched). It is soft_cpu_bin then soft_cpu_blend, which may be called
+ * apart: the binning needs only the discs (segs, nsegs, width, y0, rows, mem, threads), so it
+ * can run while the keys are being made; the blend then uses the job as binned (with its keys,
+ * layer or rgba8 and lambda filled in). soft_cpu_bin returns 0 or -1 (out of memory: then
+ * nothing is binned and the blend draws nothing); soft_cpu_blend returns 0. */
 int soft_cpu_composite(soft_cpu_job *job);
+int soft_cpu_bin(soft_cpu_job *job);
+int soft_cpu_blend(soft_cpu_job *job);
 void soft_cpu_mem_free(soft_cpu_mem *m);
 
 /* soft_cpu_grow: makes the array *p of *cap elements of sz bytes hold n (doubling, from 4096),
