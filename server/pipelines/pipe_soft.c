@@ -1008,6 +1008,7 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     soft_state *s = state;
     soft_cloud *sc = d->cloud_data;
     const sp_params *p = d->params;
+    bin_join(s); /* a frame whose soft_after never came (the renderer failed after us) */
     if (!sc) return sd_errf(err, SD_EINVAL, "soft: the cloud was not attached");
     int lists = p->model != SP_MODEL_EXPRESS, concentric = p->model == SP_MODEL_CONCENTRIC;
     if (lists && sc->nsets != 1)
