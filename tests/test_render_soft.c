@@ -661,6 +661,39 @@ static void test_after_matches_layer(void **state)
     rnd_release(tu_ctx, id);
 }
 
+/* shading=edl: with the host EDL pass (edl_pass=cpu) the soft discs go over the read-back pixels
+ * first and the EDL shade after, as with the GL pass (edl_pass=gpu) the layer goes over the
+ * target before the GL's EDL: the two frames must agree within 2 levels (1 for the two "over"
+ * paths, test_after_matches_layer, and 1 for the two EDL passes, test_render_kawata's
+ * test_edl_passes_agree), on a frame where EDL darkens at least 2 % of the pixels (against
+ * lambert). Shading before the discs are put over would leave the discs undarkened at the
+ * plane's edges. */
+static void test_after_then_edl(void **state)
+{
+    (void)state;
+    rnd_camera cam;
+    sp_params p;
+    uint32_t id = layered_scene(&cam, &p);
+    p.order = SP_ORDER_CPU;
+    rnd_frame lam = {0}, gpu = {0}, cpu = {0};
+    tu_render(tu_ctx, id, &cam, &p, 0, &lam);
+    p.shading = SP_SHADING_EDL, p.edl_strength = 4.0f;
+    p.edl_pass = SP_EDL_PASS_GPU;
+    tu_render(tu_ctx, id, &cam, &p, 0, &gpu);
+    p.edl_pass = SP_EDL_PASS_CPU;
+    tu_render(tu_ctx, id, &cam, &p, 0, &cpu);
+    int nd, m = max_diff(&gpu, &cpu, &nd), ne;
+    max_diff(&lam, &cpu, &ne);
+    printf("soft with EDL: host passes vs GL passes max %d levels (%d pixels); EDL changed %d of "
+           "%d pixels\n", m, nd, ne, W * H);
+    assert_true(ne >= W * H / 50);
+    assert_true(m <= 2);
+    rnd_frame_free(&lam);
+    rnd_frame_free(&gpu);
+    rnd_frame_free(&cpu);
+    rnd_release(tu_ctx, id);
+}
+
 /* A cloud in several buffer sets (rnd_desc.max_set_points, as the renderer splits clouds over
  * GL_MAX_TEXTURE_BUFFER_SIZE / 3 points): the solid points then go through the splat passes as
  * runs of the view's chunks instead of the one-set filter, and the soft discs set by set (sets
@@ -777,6 +810,7 @@ int main(void)
         cmocka_unit_test(test_tile_matches_axis),
         cmocka_unit_test(test_cpu_bands),
         cmocka_unit_test(test_after_matches_layer),
+        cmocka_unit_test(test_after_then_edl),
         cmocka_unit_test(test_buffer_sets),
         cmocka_unit_test(test_many_soft_points),
     };
