@@ -86,6 +86,7 @@ typedef struct chunk {
     uint64_t code;            /* Morton prefix of depth `depth` */
     uint32_t depth;
     uint64_t count;
+    uint64_t cell0, cell1;    /* its count cells, [cell0, cell1) */
     int fd_in, fd_a;          /* scratch files: recs, arecs */
     float lo[3], hi[3];       /* its cube */
     float hb;                 /* a halo that holds every ball it needs (halo_bounds) */
@@ -106,6 +107,8 @@ typedef struct build {
     chunk *chunks;
     size_t nchunks;
     uint32_t *cell_chunk;     /* count cells -> chunk */
+    uint64_t *cell_pre;       /* count cells -> points in the cells before (ncell + 1) */
+    uint64_t nread;           /* records the region loads read (the normals pass) */
     uint64_t *hist_hi[4];     /* r20, Fraw, nnd, final radius: 65536 each */
     struct { int which; double q; uint32_t hi; uint64_t rank; uint64_t *lo; float value; } qs[NQ + 1];
     float scatter_cap, p99;
@@ -196,6 +199,7 @@ static int make_chunks(build *b, const uint64_t *cnt, sd_err *err)
             ch->code = code;
             ch->depth = (uint32_t)dep;
             ch->count = c;
+            ch->cell0 = a, ch->cell1 = e;
             ch->fd_in = ch->fd_a = -1;
             uint32_t x, y, z;
             prep_morton_decode(code, &x, &y, &z);
@@ -215,7 +219,7 @@ static int make_chunks(build *b, const uint64_t *cnt, sd_err *err)
             sp++;
         }
     }
-    free(pre);
+    b->cell_pre = pre; /* a cell's records in its chunk's (sorted) file: load_region */
     if (!b->chunks) return sd_errf(err, SD_ENOMEM, "lod: out of memory for the chunks");
     if (b->nchunks > 4000)
         return sd_errf(err, SD_ELIMIT, "lod: %zu chunks is too many open files; give more "
@@ -393,6 +397,7 @@ typedef struct region {
     uint8_t *own;
     float lo[3], hi[3];       /* the loaded box */
     int edge[6];              /* 1 where the box reaches the cube's face: nothing lies beyond */
+    uint64_t nread;           /* records read to load it */
 } region;
 
 static void region_free(region *r)
@@ -434,10 +439,88 @@ static int chunk_sort(void *ctx, size_t ci, int tid, sd_err *err)
     return rc;
 }
 
+/* Appends the records [from, to) of chunk o's file that lie in r's box to r (j: o is the
+ * region's own chunk: every record is kept), RBLOCK at a time through tmp. */
+enum { RBLOCK = 1 << 15 }; /* records read at a time */
+
+static int read_run(const chunk *o, int own, uint64_t from, uint64_t to, rec *tmp, region *r,
+                    sd_err *err)
+{
+    for (uint64_t i0 = from; i0 < to; i0 += RBLOCK) {
+        size_t nb = to - i0 < RBLOCK ? (size_t)(to - i0) : RBLOCK;
+        if (lod__pread_all(o->fd_in, tmp, nb * sizeof *tmp, i0 * sizeof *tmp))
+            return sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
+        r->nread += nb;
+        size_t m = r->m;
+        for (size_t i = 0; i < nb; i++) {
+            const float *p = tmp[i].pos;
+            if (!own && (p[0] < r->lo[0] || p[0] > r->hi[0] || p[1] < r->lo[1] ||
+                         p[1] > r->hi[1] || p[2] < r->lo[2] || p[2] > r->hi[2]))
+                continue;
+            memcpy(r->pos + 3 * m, p, 12);
+            r->rgba[m] = tmp[i].rgba;
+            r->gidx[m] = tmp[i].gidx;
+            r->code[m] = tmp[i].code;
+            r->own[m] = (uint8_t)own;
+            m++;
+        }
+        r->m = m;
+    }
+    return 0;
+}
+
+static int cmp_u32(const void *a, const void *b)
+{
+    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* The records of a neighbouring chunk o that may lie in r's box: only its count cells that meet
+ * the box are read (their records are runs of its sorted file: cell_pre). A point inside the
+ * box has each finest cell index between those of the box's corners (cell_of is monotonic),
+ * so no cell outside that range holds one; the per-point test then keeps exactly the points
+ * a read of the whole file would keep, in the same order. */
+static int read_neighbour(const build *b, const chunk *o, rec *tmp, region *r, sd_err *err)
+{
+    int D = b->cdepth, sh = 3 * (PREP_MORTON_BITS - D);
+    uint32_t lo[3], hi[3], c[3];
+    prep_morton_decode(prep_morton_code(&b->f, r->lo) >> sh, &lo[0], &lo[1], &lo[2]);
+    prep_morton_decode(prep_morton_code(&b->f, r->hi) >> sh, &hi[0], &hi[1], &hi[2]);
+    prep_morton_decode(o->code, &c[0], &c[1], &c[2]);
+    int csh = D - (int)o->depth;
+    size_t ncell = 1;
+    for (int a = 0; a < 3; a++) {
+        uint32_t c0 = c[a] << csh, c1 = ((c[a] + 1) << csh) - 1;
+        if (lo[a] < c0) lo[a] = c0;
+        if (hi[a] > c1) hi[a] = c1;
+        if (lo[a] > hi[a]) return 0;
+        ncell *= hi[a] - lo[a] + 1;
+    }
+    uint32_t *cells = malloc(ncell * sizeof *cells);
+    if (!cells) return sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+    size_t nc = 0;
+    for (uint32_t x = lo[0]; x <= hi[0]; x++)
+        for (uint32_t y = lo[1]; y <= hi[1]; y++)
+            for (uint32_t z = lo[2]; z <= hi[2]; z++) cells[nc++] = (uint32_t)prep_morton_encode(x, y, z);
+    int whole = nc == (size_t)(o->cell1 - o->cell0); /* every cell: the whole file */
+    if (!whole) qsort(cells, nc, sizeof *cells, cmp_u32);
+    const uint64_t *pre = b->cell_pre;
+    int rc = whole ? read_run(o, 0, 0, o->count, tmp, r, err) : 0;
+    for (size_t i = 0; !whole && i < nc && rc == 0;) {
+        size_t e = i + 1; /* cells[i..e) joined while no record lies between them */
+        while (e < nc && pre[cells[e]] == pre[cells[e - 1] + 1]) e++;
+        uint64_t from = pre[cells[i]] - pre[o->cell0], to = pre[cells[e - 1] + 1] - pre[o->cell0];
+        if (to > from) rc = read_run(o, 0, from, to, tmp, r, err);
+        i = e;
+    }
+    free(cells);
+    return rc;
+}
+
 /* Loads chunk ci with every point within h of its cube, in (code, file index) order: the
  * chunks are octree cells in Morton order and their files are sorted (chunk_sort), so each
  * one's points are a run of that order and the region is their filtered concatenation, read
- * a block at a time. */
+ * a block at a time (of the neighbouring chunks, only the cells that meet the box). */
 static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
 {
     memset(r, 0, sizeof *r);
@@ -464,36 +547,17 @@ static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
     r->own = malloc(cap ? cap : 1);
     if (!r->pos || !r->rgba || !r->gidx || !r->code || !r->own)
         rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
-    enum { RBLOCK = 1 << 15 }; /* records read at a time */
     rec *tmp = rc == 0 ? malloc(RBLOCK * sizeof *tmp) : NULL;
     if (rc == 0 && !tmp) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
-    size_t m = 0;
     for (size_t j = 0; j < b->nchunks && rc == 0; j++) {
         const chunk *o = &b->chunks[j];
         int hit = 1;
         for (int a = 0; a < 3; a++)
             if (o->lo[a] > r->hi[a] || o->hi[a] < r->lo[a]) hit = 0;
         if (!hit) continue;
-        for (size_t i0 = 0; i0 < o->count && rc == 0; i0 += RBLOCK) {
-            size_t nb = o->count - i0 < RBLOCK ? o->count - i0 : RBLOCK;
-            if (lod__pread_all(o->fd_in, tmp, nb * sizeof *tmp, i0 * sizeof *tmp))
-                rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
-            for (size_t i = 0; rc == 0 && i < nb; i++) {
-                const float *p = tmp[i].pos;
-                if (j != ci && (p[0] < r->lo[0] || p[0] > r->hi[0] || p[1] < r->lo[1] ||
-                                p[1] > r->hi[1] || p[2] < r->lo[2] || p[2] > r->hi[2]))
-                    continue;
-                memcpy(r->pos + 3 * m, p, 12);
-                r->rgba[m] = tmp[i].rgba;
-                r->gidx[m] = tmp[i].gidx;
-                r->code[m] = tmp[i].code;
-                r->own[m] = j == ci;
-                m++;
-            }
-        }
+        rc = j == ci ? read_run(o, 1, 0, o->count, tmp, r, err) : read_neighbour(b, o, tmp, r, err);
     }
     free(tmp);
-    r->m = m;
     if (rc < 0) region_free(r);
     return rc;
 }
@@ -574,12 +638,6 @@ static int inside(const region *r, const float *p, float d2)
 }
 
 enum { QBLOCK = 4096, QBLOCK_K = QBLOCK * PREP_MAX_K };
-
-static int cmp_u32(const void *a, const void *b)
-{
-    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
-    return x < y ? -1 : x > y;
-}
 
 typedef struct tls {
     uint64_t hist[3][65536];
@@ -858,6 +916,7 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         /* the next chunk's region loads meanwhile, with the halo this one starts from */
         if (attempt == 0 && b->pf && ci + 1 < b->nchunks) prefetch_start(b->pf, b, ci + 1, h);
         phase_end(b, PH_LOAD, &t);
+        b->nread += r.nread;
         size_t m = r.m;
         int full = r.edge[0] && r.edge[1] && r.edge[2] && r.edge[3] && r.edge[4] && r.edge[5];
         j.r = &r;
@@ -1541,9 +1600,11 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     res->halo_retries = b->nchunks ? (double)retried / (double)b->nchunks : 0;
     if (d->status) { /* where the normals pass went, wall seconds */
         char line[256];
-        snprintf(line, sizeof line, "lod normals: region loads %.2f s, indexes %.2f, kNN of the "
+        snprintf(line, sizeof line, "lod normals: region loads %.2f s (%.1fM records read), "
+                 "indexes %.2f, kNN of the "
                  "chunks %.2f, ball checks %.2f, kNN of halo neighbours %.2f, normals %.2f, F "
-                 "%.2f (with the scratch writes)", b->tph[PH_LOAD], b->tph[PH_INDEX],
+                 "%.2f (with the scratch writes)", b->tph[PH_LOAD], (double)b->nread / 1e6,
+                 b->tph[PH_INDEX],
                  b->tph[PH_QOWN], b->tph[PH_CHECK], b->tph[PH_QNBR], b->tph[PH_PCA],
                  b->tph[PH_F]);
         d->status(d->user, line);
@@ -1672,6 +1733,7 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     }
     free(b.chunks);
     free(b.cell_chunk);
+    free(b.cell_pre);
     free(b.order);
     for (int q = 0; q < 4; q++) free(b.hist_hi[q]);
     for (int q = 0; q <= NQ; q++) free(b.qs[q].lo);
