@@ -62,16 +62,18 @@
 enum { COUNT_DEPTH_MAX = 7, BLOCK = 1 << 16, NQ = 7 };
 #define BYTES_PER_CHUNK_POINT 400u /* the normals pass of one chunk (with its halo) */
 
+/* The scratch records are as small as they can be (at 100M points they go through the page
+ * cache and to the disk several times): the Morton code is not stored but recomputed from the
+ * position (prep_morton_code: the same bits), and the normals pass's record leaves out what the
+ * chunk file (sorted, in the same order) holds already. */
 typedef struct rec {          /* a point in a chunk file */
-    uint64_t code;            /* Morton code in the cloud's frame */
     float pos[3];
-    uint32_t rgba, gidx, pad;
+    uint32_t rgba, gidx;
 } rec;
 
-typedef struct arec {         /* a chunk's point after the normals pass */
-    uint64_t code;
-    uint32_t gidx, rgba;
-    float pos[3], normal[3];
+typedef struct arec {         /* a chunk's point after the normals pass: record i of fd_a is
+                                 record i of fd_in (the chunk's points in the same order) */
+    float normal[3];
     float r20, capn, svar, Fraw, nnd;
 } arec;
 
@@ -362,11 +364,9 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
             uint64_t code = prep_morton_code(&b->f, pos + 3 * i);
             uint32_t c = b->cell_chunk[code >> (3 * (PREP_MORTON_BITS - b->cdepth))];
             rec *r = &buf[(size_t)c * PER + fill[c]++];
-            r->code = code;
             memcpy(r->pos, pos + 3 * i, 12);
             r->rgba = rgba[i];
             r->gidx = gidx++;
-            r->pad = 0;
             if (fill[c] == PER) {
                 if (lod__pwrite_all(b->chunks[c].fd_in, buf + (size_t)c * PER, PER * sizeof *buf, off[c]))
                     rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
@@ -425,7 +425,8 @@ static int chunk_sort(void *ctx, size_t ci, int tid, sd_err *err)
     if (!in || !out || !key || !perm) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory sorting a chunk");
     if (rc == 0 && lod__pread_all(o->fd_in, in, n * sizeof *in, 0))
         rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
-    for (size_t i = 0; rc == 0 && i < n; i++) key[i] = in[i].code, perm[i] = (uint32_t)i;
+    for (size_t i = 0; rc == 0 && i < n; i++)
+        key[i] = prep_morton_code(&b->f, in[i].pos), perm[i] = (uint32_t)i;
     if (rc == 0) rc = prep_radix_sort64(key, perm, n, err);
     if (rc == 0) {
         for (size_t i = 0; i < n; i++) out[i] = in[perm[i]];
@@ -443,8 +444,8 @@ static int chunk_sort(void *ctx, size_t ci, int tid, sd_err *err)
  * region's own chunk: every record is kept), RBLOCK at a time through tmp. */
 enum { RBLOCK = 1 << 15 }; /* records read at a time */
 
-static int read_run(const chunk *o, int own, uint64_t from, uint64_t to, rec *tmp, region *r,
-                    sd_err *err)
+static int read_run(const build *b, const chunk *o, int own, uint64_t from, uint64_t to,
+                    rec *tmp, region *r, sd_err *err)
 {
     for (uint64_t i0 = from; i0 < to; i0 += RBLOCK) {
         size_t nb = to - i0 < RBLOCK ? (size_t)(to - i0) : RBLOCK;
@@ -460,7 +461,7 @@ static int read_run(const chunk *o, int own, uint64_t from, uint64_t to, rec *tm
             memcpy(r->pos + 3 * m, p, 12);
             r->rgba[m] = tmp[i].rgba;
             r->gidx[m] = tmp[i].gidx;
-            r->code[m] = tmp[i].code;
+            r->code[m] = prep_morton_code(&b->f, p);
             r->own[m] = (uint8_t)own;
             m++;
         }
@@ -505,12 +506,12 @@ static int read_neighbour(const build *b, const chunk *o, rec *tmp, region *r, s
     int whole = nc == (size_t)(o->cell1 - o->cell0); /* every cell: the whole file */
     if (!whole) qsort(cells, nc, sizeof *cells, cmp_u32);
     const uint64_t *pre = b->cell_pre;
-    int rc = whole ? read_run(o, 0, 0, o->count, tmp, r, err) : 0;
+    int rc = whole ? read_run(b, o, 0, 0, o->count, tmp, r, err) : 0;
     for (size_t i = 0; !whole && i < nc && rc == 0;) {
         size_t e = i + 1; /* cells[i..e) joined while no record lies between them */
         while (e < nc && pre[cells[e]] == pre[cells[e - 1] + 1]) e++;
         uint64_t from = pre[cells[i]] - pre[o->cell0], to = pre[cells[e - 1] + 1] - pre[o->cell0];
-        if (to > from) rc = read_run(o, 0, from, to, tmp, r, err);
+        if (to > from) rc = read_run(b, o, 0, from, to, tmp, r, err);
         i = e;
     }
     free(cells);
@@ -555,7 +556,7 @@ static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
         for (int a = 0; a < 3; a++)
             if (o->lo[a] > r->hi[a] || o->hi[a] < r->lo[a]) hit = 0;
         if (!hit) continue;
-        rc = j == ci ? read_run(o, 1, 0, o->count, tmp, r, err) : read_neighbour(b, o, tmp, r, err);
+        rc = j == ci ? read_run(b, o, 1, 0, o->count, tmp, r, err) : read_neighbour(b, o, tmp, r, err);
     }
     free(tmp);
     if (rc < 0) region_free(r);
@@ -724,11 +725,6 @@ static int nj_own(void *ctx, size_t blk, int tid, sd_err *err)
             rn[q] = j->r20[sq];
         }
         arec *o = &t->out[i - a];
-        uint32_t pi = j->list[i];
-        o->code = j->r->code[pi];
-        o->gidx = j->r->gidx[pi];
-        o->rgba = j->r->rgba[pi];
-        memcpy(o->pos, j->r->pos + 3 * (size_t)pi, 12);
         memcpy(o->normal, ni, 12);
         o->r20 = j->r20[i];
         o->capn = PREP_RADIUS_CAP * prep_percentile(rn, (size_t)K, 0.5);
@@ -1082,25 +1078,33 @@ static float pick_value(build *b, int q)
 
 enum { AREC_BLOCK = 1 << 16 }; /* records read at a time by the passes after the normals */
 
-/* Calls fn(ctx, records, count, first index) for chunk ci's records, AREC_BLOCK at a time
- * through one buffer (the passes after the normals pass stream the records: no chunk-sized
- * buffer and its fresh pages each pass). */
-static int each_arec_block(build *b, size_t ci, void (*fn)(void *, const arec *, size_t, size_t),
-                           void *ctx, sd_err *err)
+typedef void (*arec_fn)(void *ctx, const arec *a, const rec *r, size_t n, size_t first);
+
+/* Calls fn(ctx, records, chunk records (with_rec) or NULL, count, first index) for chunk ci's
+ * records, AREC_BLOCK at a time through one buffer (the passes after the normals pass stream
+ * the records: no chunk-sized buffer and its fresh pages each pass). */
+static int each_arec_block(build *b, size_t ci, int with_rec, arec_fn fn, void *ctx, sd_err *err)
 {
     const chunk *c = &b->chunks[ci];
     size_t blk = c->count < AREC_BLOCK ? c->count : AREC_BLOCK;
     arec *a = malloc((blk ? blk : 1) * sizeof *a);
-    if (!a) return sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+    rec *r = with_rec ? malloc((blk ? blk : 1) * sizeof *r) : NULL;
+    if (!a || (with_rec && !r)) {
+        free(a);
+        free(r);
+        return sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+    }
     int rc = 0;
     for (size_t i = 0; i < c->count && rc == 0; i += blk) {
         size_t m = c->count - i < blk ? c->count - i : blk;
-        if (lod__pread_all(c->fd_a, a, m * sizeof *a, i * sizeof *a))
+        if (lod__pread_all(c->fd_a, a, m * sizeof *a, i * sizeof *a) ||
+            (r && lod__pread_all(c->fd_in, r, m * sizeof *r, i * sizeof *r)))
             rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
         else
-            fn(ctx, a, m, i);
+            fn(ctx, a, r, m, i);
     }
     free(a);
+    free(r);
     return rc;
 }
 
@@ -1119,10 +1123,11 @@ static float final_F(const build *b, float raw)
 
 /* A counting pass over the normals pass's records: with b->radius_pass 0 the bottom-16-bit
  * histograms of the NQ quantiles' buckets, with 1 the top-16-bit histogram of the final radii. */
-static void hist_block(void *ctx, const arec *a, size_t n, size_t first)
+static void hist_block(void *ctx, const arec *a, const rec *r, size_t n, size_t first)
 {
     build *b = ctx;
     (void)first;
+    (void)r;
     pthread_mutex_lock(&b->mu); /* the other thread reads its next block meanwhile */
     for (size_t i = 0; i < n; i++) {
         if (b->radius_pass) {
@@ -1140,7 +1145,7 @@ static void hist_block(void *ctx, const arec *a, size_t n, size_t first)
 static int chunk_hist(void *ctx, size_t ci, int tid, sd_err *err)
 {
     (void)tid;
-    return each_arec_block(ctx, ci, hist_block, ctx, err);
+    return each_arec_block(ctx, ci, 0, hist_block, ctx, err);
 }
 
 /* ---- octree ---- */
@@ -1351,16 +1356,16 @@ typedef struct final_job {
 } final_job;
 
 /* A block of a chunk's records with their final values, into the octree pass's points. */
-static void final_block(void *ctx, const arec *a, size_t n, size_t first)
+static void final_block(void *ctx, const arec *a, const rec *r, size_t n, size_t first)
 {
     final_job *f = ctx;
     build *b = f->b;
     for (size_t k = 0; k < n; k++) {
         pt *q = &f->p[first + k];
-        q->code = a[k].code;
-        q->gidx = a[k].gidx;
-        q->rgba = a[k].rgba;
-        memcpy(q->pos, a[k].pos, 12);
+        q->code = prep_morton_code(&b->f, r[k].pos);
+        q->gidx = r[k].gidx;
+        q->rgba = r[k].rgba;
+        memcpy(q->pos, r[k].pos, 12);
         memcpy(q->normal, a[k].normal, 12);
         q->radius = final_radius(b, &a[k]);
         q->F = final_F(b, a[k].Fraw);
@@ -1386,7 +1391,11 @@ static int chunk_octree(void *ctx, size_t ci, int tid, sd_err *err)
     uint32_t *lo = calloc(65536, 4);
     if (!p || !idx || !scr || !lo) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
     final_job fj = {.b = b, .p = p, .idx = idx, .lo = lo};
-    if (rc == 0) rc = each_arec_block(b, ci, final_block, &fj, err);
+    if (rc == 0) rc = each_arec_block(b, ci, 1, final_block, &fj, err);
+    /* the chunk's scratch files are not read again: their pages go now */
+    close(c->fd_in);
+    close(c->fd_a);
+    c->fd_in = c->fd_a = -1;
     octx o = {.b = b, .p = p, .scratch = scr, .cdepth = (int)c->depth};
     if (rc == 0 && n) rc = process(&o, idx, n, 0, 0, err);
     pthread_mutex_lock(&b->mu);
@@ -1592,11 +1601,7 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     if (rc < 0) return rc;
     prep_progress_end(&pr);
     size_t retried = 0;
-    for (size_t i = 0; i < b->nchunks; i++) {
-        retried += b->chunks[i].retried;
-        close(b->chunks[i].fd_in);
-        b->chunks[i].fd_in = -1;
-    }
+    for (size_t i = 0; i < b->nchunks; i++) retried += b->chunks[i].retried;
     res->halo_retries = b->nchunks ? (double)retried / (double)b->nchunks : 0;
     if (d->status) { /* where the normals pass went, wall seconds */
         char line[256];
