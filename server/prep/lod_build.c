@@ -93,6 +93,7 @@ typedef struct chunk {
     float lo[3], hi[3];       /* its cube */
     float hb;                 /* a halo that holds every ball it needs (halo_bounds) */
     int retried;
+    int normals_done;         /* its records in fd_a are written (the normals pass) */
 } chunk;
 
 typedef struct nodeent {      /* a written node, before the table */
@@ -395,6 +396,8 @@ typedef struct region {
     uint32_t *gidx, *rgba;
     uint64_t *code;
     uint8_t *own;
+    uint16_t *chk;            /* each point's chunk (at most 4000) */
+    uint32_t *fidx;           /* and its record in that chunk's files */
     float lo[3], hi[3];       /* the loaded box */
     int edge[6];              /* 1 where the box reaches the cube's face: nothing lies beyond */
     uint64_t nread;           /* records read to load it */
@@ -407,6 +410,8 @@ static void region_free(region *r)
     free(r->rgba);
     free(r->code);
     free(r->own);
+    free(r->chk);
+    free(r->fidx);
     memset(r, 0, sizeof *r);
 }
 
@@ -463,6 +468,8 @@ static int read_run(const build *b, const chunk *o, int own, uint64_t from, uint
             r->gidx[m] = tmp[i].gidx;
             r->code[m] = prep_morton_code(&b->f, p);
             r->own[m] = (uint8_t)own;
+            r->chk[m] = (uint16_t)(o - b->chunks);
+            r->fidx[m] = (uint32_t)(i0 + i);
             m++;
         }
         r->m = m;
@@ -546,7 +553,9 @@ static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
     r->gidx = malloc((cap ? cap : 1) * 4);
     r->code = malloc((cap ? cap : 1) * 8);
     r->own = malloc(cap ? cap : 1);
-    if (!r->pos || !r->rgba || !r->gidx || !r->code || !r->own)
+    r->chk = malloc((cap ? cap : 1) * 2);
+    r->fidx = malloc((cap ? cap : 1) * 4);
+    if (!r->pos || !r->rgba || !r->gidx || !r->code || !r->own || !r->chk || !r->fidx)
         rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
     rec *tmp = rc == 0 ? malloc(RBLOCK * sizeof *tmp) : NULL;
     if (rc == 0 && !tmp) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
@@ -825,6 +834,29 @@ static void remap_own(const region *old, const region *r, njob *j, size_t nown,
             for (int q = 0; q < j->K; q++) j->nbr[s * j->K + q] = map[j->nbr[s * j->K + q]];
 }
 
+/* The normals and radii of slots [nu, ns): halo neighbours whose chunks are done, from those
+ * chunks' records (slots in region order: by chunk, then by record; records close together
+ * read at once). */
+static int read_known(build *b, const region *r, njob *j, size_t nu, size_t ns, sd_err *err)
+{
+    enum { SPAN = 256 };
+    arec buf[SPAN];
+    for (size_t s = nu; s < ns;) {
+        uint32_t ck = r->chk[j->list[s]], f0 = r->fidx[j->list[s]];
+        size_t e = s + 1;
+        while (e < ns && r->chk[j->list[e]] == ck && r->fidx[j->list[e]] - f0 < SPAN) e++;
+        uint32_t f1 = r->fidx[j->list[e - 1]] + 1;
+        if (lod__pread_all(b->chunks[ck].fd_a, buf, (f1 - f0) * sizeof *buf, (uint64_t)f0 * sizeof *buf))
+            return sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
+        for (; s < e; s++) {
+            const arec *a = &buf[r->fidx[j->list[s]] - f0];
+            memcpy(j->nrm + 3 * s, a->normal, 12);
+            j->r20[s] = a->r20;
+        }
+    }
+    return 0;
+}
+
 enum { PH_LOAD, PH_INDEX, PH_QOWN, PH_CHECK, PH_QNBR, PH_PCA, PH_F, PH_N };
 enum { KB_NBR, KB_KD2, KB_NN2, KB_EXACT, KB_REDO, KB_SLOT, KB_LIST, KB_R20, KB_NRM, KB_SVAR };
 
@@ -973,10 +1005,18 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         }
         for (size_t i = 0; i < nb; i++) free(cj.blk[i].x);
         free(cj.blk);
+        /* the halo neighbours of chunks done already first take slots [nu, ns): their normals
+         * and radii are in those chunks' records, the same values a query here would give
+         * (exact neighbours, the same order, the same arithmetic); the others [nown, nu) */
+        size_t nu = ns;
         if (xs) {
             qsort(xs, nx, sizeof *xs, cmp_u32);
-            for (size_t i = 0; i < nx; i++)
-                if (i == 0 || xs[i] != xs[i - 1]) j.slot[xs[i]] = (int32_t)ns, j.list[ns++] = xs[i];
+            for (int known = 0; known < 2; known++) {
+                for (size_t i = 0; i < nx; i++)
+                    if ((i == 0 || xs[i] != xs[i - 1]) && b->chunks[r.chk[xs[i]]].normals_done == known)
+                        j.slot[xs[i]] = (int32_t)ns, j.list[ns++] = xs[i];
+                if (!known) nu = ns;
+            }
             free(xs);
         }
         if (rc < 0 || bad > 0) goto next;
@@ -986,24 +1026,26 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         if (!nb2 || !kd2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
         j.nbr = nb2, j.kd2 = kd2;
         float *nn2 = j.nn2;
-        j.nn2 = NULL, j.qslot = NULL, j.first = nown, j.count = ns - nown;
-        if (ns > nown) rc = prep_par_for(T, nblocks(ns - nown), nj_query, &j, NULL, err);
+        j.nn2 = NULL, j.qslot = NULL, j.first = nown, j.count = nu - nown;
+        if (nu > nown) rc = prep_par_for(T, nblocks(nu - nown), nj_query, &j, NULL, err);
         j.nn2 = nn2;
         if (rc < 0) goto next;
-        if (!full && check_balls(b, c, &r, &j, nown, ns - nown, NULL, &need) > 0) goto next;
+        if (!full && check_balls(b, c, &r, &j, nown, nu - nown, NULL, &need) > 0) goto next;
         phase_end(b, PH_QNBR, &t);
         j.r20 = keep_buf(b, KB_R20, ns * 4);
         j.nrm = keep_buf(b, KB_NRM, ns * 12);
         j.svar = keep_buf(b, KB_SVAR, ns * 4);
         if (!j.r20 || !j.nrm || !j.svar) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
-        j.first = 0, j.count = ns;
-        rc = prep_par_for(T, nblocks(ns), nj_pca, &j, NULL, err);
+        j.first = 0, j.count = nu;
+        rc = prep_par_for(T, nblocks(nu), nj_pca, &j, NULL, err);
+        if (rc == 0) rc = read_known(b, &r, &j, nu, ns, err);
         if (rc < 0) goto next;
         phase_end(b, PH_PCA, &t);
         j.count = nown, j.fd_out = c->fd_a;
         rc = prep_par_for(T, nblocks(nown), nj_own, &j, NULL, err);
         if (rc < 0) goto next;
         phase_end(b, PH_F, &t);
+        c->normals_done = 1;
         done = 1;
         need_done = need;
     next:
