@@ -988,37 +988,30 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         cj.blk = calloc(nb ? nb : 1, sizeof *cj.blk);
         if (!cj.blk) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
         rc = prep_par_for(T, nb, nj_check, &cj, NULL, err);
-        size_t bad = 0, nx = 0;
+        size_t bad = 0;
         for (size_t i = 0; i < nb; i++) {
             bad += cj.blk[i].bad;
-            nx += cj.blk[i].n;
             if (cj.blk[i].need > need) need = cj.blk[i].need;
         }
-        /* the halo neighbours once each, in region (Morton) order: the grid search is fast
-         * for queries in that order only (knn.h) */
-        uint32_t *xs = rc == 0 && bad == 0 ? malloc((nx ? nx : 1) * sizeof *xs) : NULL;
-        if (rc == 0 && bad == 0 && !xs) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory");
-        for (size_t i = 0, o = 0; xs && i < nb; i++) {
-            if (!cj.blk[i].n) continue; /* x is NULL then */
-            memcpy(xs + o, cj.blk[i].x, cj.blk[i].n * sizeof *xs);
-            o += cj.blk[i].n;
+        /* the halo neighbours once each, in region (Morton) order (the grid search is fast
+         * for queries in that order only, knn.h): marked in the slot array (-2), then taken
+         * in a scan of the region, no sort of the repeats. The neighbours of chunks done
+         * already take slots [nu, ns): their normals and radii are in those chunks' records,
+         * the same values a query here would give (exact neighbours, the same order, the
+         * same arithmetic); the others [nown, nu). */
+        size_t nu = ns;
+        if (rc == 0 && bad == 0) {
+            for (size_t i = 0; i < nb; i++)
+                for (size_t q = 0; q < cj.blk[i].n; q++) j.slot[cj.blk[i].x[q]] = -2;
+            for (int known = 0; known < 2; known++) {
+                for (size_t i = 0; i < m; i++)
+                    if (j.slot[i] == -2 && b->chunks[r.chk[i]].normals_done == known)
+                        j.slot[i] = (int32_t)ns, j.list[ns++] = (uint32_t)i;
+                if (!known) nu = ns;
+            }
         }
         for (size_t i = 0; i < nb; i++) free(cj.blk[i].x);
         free(cj.blk);
-        /* the halo neighbours of chunks done already first take slots [nu, ns): their normals
-         * and radii are in those chunks' records, the same values a query here would give
-         * (exact neighbours, the same order, the same arithmetic); the others [nown, nu) */
-        size_t nu = ns;
-        if (xs) {
-            qsort(xs, nx, sizeof *xs, cmp_u32);
-            for (int known = 0; known < 2; known++) {
-                for (size_t i = 0; i < nx; i++)
-                    if ((i == 0 || xs[i] != xs[i - 1]) && b->chunks[r.chk[xs[i]]].normals_done == known)
-                        j.slot[xs[i]] = (int32_t)ns, j.list[ns++] = xs[i];
-                if (!known) nu = ns;
-            }
-            free(xs);
-        }
         if (rc < 0 || bad > 0) goto next;
         phase_end(b, PH_CHECK, &t);
         uint32_t *nb2 = keep_buf(b, KB_NBR, ns * (size_t)K * 4);
