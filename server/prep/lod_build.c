@@ -118,6 +118,7 @@ typedef struct build {
     float halo;               /* the halo the last chunk of the normals pass needed */
     uint64_t normals_done;    /* points through the normals pass so far */
     int radius_pass;          /* chunk_hist: which histograms */
+    uint64_t *tcount;         /* chunk_hist's counters, NQ x 65536 per thread */
     double t_pass;            /* when the normals pass began */
     double tph[7];            /* the normals pass's phases, wall seconds (PH_*) */
     struct prefetch *pf;      /* the next chunk's region, loaded while this one computes */
@@ -1158,29 +1159,56 @@ static float final_F(const build *b, float raw)
 
 /* A counting pass over the normals pass's records: with b->radius_pass 0 the bottom-16-bit
  * histograms of the NQ quantiles' buckets, with 1 the top-16-bit histogram of the final radii. */
+typedef struct hctx {
+    build *b;
+    uint64_t *h;              /* the thread's counters (tcount) */
+} hctx;
+
 static void hist_block(void *ctx, const arec *a, const rec *r, size_t n, size_t first)
 {
-    build *b = ctx;
+    hctx *x = ctx;
+    const build *b = x->b;
     (void)first;
     (void)r;
-    pthread_mutex_lock(&b->mu); /* the other thread reads its next block meanwhile */
     for (size_t i = 0; i < n; i++) {
         if (b->radius_pass) {
-            b->hist_hi[3][fbits(final_radius(b, &a[i])) >> 16]++;
+            x->h[fbits(final_radius(b, &a[i])) >> 16]++;
             continue;
         }
         for (int q = 0; q < NQ; q++) {
             uint32_t u = fbits(qvalue(b, q, &a[i], 0));
-            if (u >> 16 == b->qs[q].hi) b->qs[q].lo[u & 0xffff]++;
+            if (u >> 16 == b->qs[q].hi) x->h[(size_t)q << 16 | (u & 0xffff)]++;
         }
     }
-    pthread_mutex_unlock(&b->mu);
 }
 
 static int chunk_hist(void *ctx, size_t ci, int tid, sd_err *err)
 {
-    (void)tid;
-    return each_arec_block(ctx, ci, 0, hist_block, ctx, err);
+    build *b = ctx;
+    hctx x = {.b = b, .h = b->tcount + (size_t)tid * NQ * 65536};
+    return each_arec_block(b, ci, 0, hist_block, &x, err);
+}
+
+static int by_size(build *b, prep_par_fn fn, prep_progress *pr, sd_err *err);
+
+/* A counting pass over the chunks on every thread, each into counters of its own, then added
+ * up (into the NQ bottom histograms, or with radius_pass into the final radii's top one). */
+static int hist_pass(build *b, sd_err *err)
+{
+    size_t per = (size_t)NQ * 65536;
+    memset(b->tcount, 0, (size_t)b->threads * per * sizeof *b->tcount);
+    int rc = by_size(b, chunk_hist, NULL, err);
+    for (int t = 0; rc == 0 && t < b->threads; t++) {
+        const uint64_t *h = b->tcount + (size_t)t * per;
+        for (size_t i = 0; i < 65536; i++) {
+            if (b->radius_pass) {
+                b->hist_hi[3][i] += h[i];
+                continue;
+            }
+            for (int q = 0; q < NQ; q++) b->qs[q].lo[i] += h[(size_t)q << 16 | i];
+        }
+    }
+    return rc;
 }
 
 /* ---- octree ---- */
@@ -1661,13 +1689,15 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     }
     t = now_s();
     prep_progress_begin(&pr, d->progress, d->user, PROTO_PHASE_FIELD);
-    rc = by_size(b, chunk_hist, NULL, err);
+    b->tcount = malloc((size_t)b->threads * NQ * 65536 * sizeof *b->tcount);
+    if (!b->tcount) return sd_errf(err, SD_ENOMEM, "lod: out of memory");
+    rc = hist_pass(b, err);
     if (rc < 0) return rc;
     for (int q = 0; q < NQ; q++) b->qs[q].value = pick_value(b, q);
     b->scatter_cap = PREP_SCATTER_CAP * b->qs[0].value;
     b->p99 = b->qs[2].value;
     b->radius_pass = 1;
-    rc = by_size(b, chunk_hist, NULL, err);
+    rc = hist_pass(b, err);
     if (rc < 0) return rc;
     pick_bucket(b, NQ, b->hist_hi[3], n);
     prep_progress_end(&pr);
@@ -1775,6 +1805,7 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     free(b.cell_chunk);
     free(b.cell_pre);
     free(b.order);
+    free(b.tcount);
     for (int q = 0; q < 4; q++) free(b.hist_hi[q]);
     for (int q = 0; q <= NQ; q++) free(b.qs[q].lo);
     free(b.nodes);
