@@ -114,6 +114,8 @@ typedef struct build {
     uint64_t nread;           /* records the region loads read (the normals pass) */
     double load_cpu;          /* CPU seconds of those loads (on the prefetch thread mostly) */
     struct rbuf *rpool;       /* the regions' arrays, kept across chunks (RPOOL sets) */
+    void **tk;                /* per thread, TK_N arrays kept across the chunks of a pass */
+    size_t *tkcap;
     uint64_t *hist_hi[4];     /* r20, Fraw, nnd, final radius: 65536 each */
     struct { int which; double q; uint32_t hi; uint64_t rank; uint64_t *lo; float value; } qs[NQ + 1];
     float scatter_cap, p99;
@@ -450,15 +452,42 @@ static void region_free(region *r)
 
 /* The sorting pass for chunk ci: its file, written in file order, rewritten in (code, file
  * index) order (a stable radix sort by code). */
+enum { TK_N = 4 };
+
+/* Array which (of TK_N) of thread tid, at least bytes long (contents not kept when it grows).
+ * The sort and octree passes keep their per-chunk arrays across the chunks: arrays this big
+ * are mapped fresh by each malloc, so each chunk would fault in and zero new pages (~50 bytes
+ * a point a pass). NULL when out of memory. */
+static void *tkeep(build *b, int tid, int which, size_t bytes)
+{
+    size_t i = (size_t)tid * TK_N + (size_t)which;
+    if (bytes == 0) bytes = 1;
+    if (bytes > b->tkcap[i]) {
+        free(b->tk[i]);
+        b->tk[i] = malloc(bytes);
+        b->tkcap[i] = b->tk[i] ? bytes : 0;
+    }
+    return b->tk[i];
+}
+
+/* Frees the kept arrays (after a pass). */
+static void tkeep_free(build *b)
+{
+    for (size_t i = 0; b->tk && i < (size_t)b->threads * TK_N; i++) {
+        free(b->tk[i]);
+        b->tk[i] = NULL;
+        b->tkcap[i] = 0;
+    }
+}
+
 static int chunk_sort(void *ctx, size_t ci, int tid, sd_err *err)
 {
     build *b = ctx;
-    (void)tid;
     chunk *o = &b->chunks[ci];
     size_t n = o->count;
-    rec *in = malloc((n ? n : 1) * sizeof *in), *out = malloc((n ? n : 1) * sizeof *out);
-    uint64_t *key = malloc((n ? n : 1) * sizeof *key);
-    uint32_t *perm = malloc((n ? n : 1) * sizeof *perm);
+    rec *in = tkeep(b, tid, 0, n * sizeof *in), *out = tkeep(b, tid, 1, n * sizeof *out);
+    uint64_t *key = tkeep(b, tid, 2, n * sizeof *key);
+    uint32_t *perm = tkeep(b, tid, 3, n * sizeof *perm);
     int rc = 0;
     if (!in || !out || !key || !perm) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory sorting a chunk");
     if (rc == 0 && lod__pread_all(o->fd_in, in, n * sizeof *in, 0))
@@ -471,10 +500,6 @@ static int chunk_sort(void *ctx, size_t ci, int tid, sd_err *err)
         if (lod__pwrite_all(o->fd_in, out, n * sizeof *out, 0))
             rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
     }
-    free(in);
-    free(out);
-    free(key);
-    free(perm);
     return rc;
 }
 
@@ -1524,12 +1549,11 @@ static void final_block(void *ctx, const arec *a, const rec *r, size_t n, size_t
 static int chunk_octree(void *ctx, size_t ci, int tid, sd_err *err)
 {
     build *b = ctx;
-    (void)tid;
     chunk *c = &b->chunks[ci];
     int rc = 0;
     uint64_t n = c->count;
-    pt *p = malloc((n ? n : 1) * sizeof *p);
-    uint32_t *idx = malloc((n ? n : 1) * 4), *scr = malloc((n ? n : 1) * 4);
+    pt *p = tkeep(b, tid, 0, n * sizeof *p);
+    uint32_t *idx = tkeep(b, tid, 1, n * 4), *scr = tkeep(b, tid, 2, n * 4);
     uint32_t *lo = calloc(65536, 4);
     if (!p || !idx || !scr || !lo) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
     final_job fj = {.b = b, .p = p, .idx = idx, .lo = lo};
@@ -1556,9 +1580,6 @@ static int chunk_octree(void *ctx, size_t ci, int tid, sd_err *err)
     }
     pthread_mutex_unlock(&b->mu);
     free(o.up);
-    free(p);
-    free(idx);
-    free(scr);
     free(lo);
     return rc;
 }
@@ -1715,10 +1736,14 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
         b->hist_hi[q] = calloc(65536, sizeof(uint64_t));
         if (!b->hist_hi[q]) return sd_errf(err, SD_ENOMEM, "lod: out of memory");
     }
+    b->tk = calloc((size_t)b->threads * TK_N, sizeof *b->tk);
+    b->tkcap = calloc((size_t)b->threads * TK_N, sizeof *b->tkcap);
+    if (!b->tk || !b->tkcap) return sd_errf(err, SD_ENOMEM, "lod: out of memory");
     int rc = count_and_distribute(b, s, err);
     if (rc == 0) {
         double ts = now_s();
         rc = by_size(b, chunk_sort, NULL, err);
+        tkeep_free(b); /* not held through the normals pass */
         if (rc == 0) status(b, "sort", 0.14, b->info.n, now_s() - ts);
     }
     if (rc < 0) return rc;
@@ -1788,6 +1813,7 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     t = now_s();
     prep_progress_begin(&pr, d->progress, d->user, PROTO_PHASE_REORDER);
     rc = by_size(b, chunk_octree, &pr, err);
+    tkeep_free(b);
     if (rc == 0) rc = emit_upper(b, err);
     if (rc < 0) return rc;
     prep_progress_end(&pr);
@@ -1889,6 +1915,9 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     free(b.cell_pre);
     free(b.order);
     free(b.tcount);
+    tkeep_free(&b);
+    free(b.tk);
+    free(b.tkcap);
     for (int q = 0; q < 4; q++) free(b.hist_hi[q]);
     for (int q = 0; q <= NQ; q++) free(b.qs[q].lo);
     free(b.nodes);
