@@ -7,11 +7,14 @@
  *             depth D), chunk_max from the memory cap: memory / 400 bytes, the bytes a point
  *             of a chunk costs in the normals pass with its halo (chunks are processed one at a
  *             time, each on every thread, so the cap does not grow with the thread count).
- *   distribute every point (Morton code, position, colour, index in the file) into its chunk's
- *             scratch file (unnamed files in the cache directory: nothing is left behind by
- *             kill -9); then each chunk file sorted by code, in parallel over the chunks. The
- *             chunks are octree cells in Morton order, so a region (a chunk and its halo) is
- *             the filtered concatenation of its chunks' files, in order without a sort.
+ *   distribute every point (position, colour, index in the file: 20 bytes; its Morton code is
+ *             recomputed from the position wherever it is needed, the same bits) into its
+ *             chunk's scratch file (unnamed files in the cache directory: nothing is left
+ *             behind by kill -9); then each chunk file sorted by code, in parallel over the
+ *             chunks. The chunks are octree cells in Morton order, so a region (a chunk and
+ *             its halo) is the filtered concatenation of its chunks' files, in order without a
+ *             sort; of a neighbouring chunk only the count cells that meet the region's box are
+ *             read (a cell's records are a run of the sorted file: cell_pre).
  *   normals   chunk by chunk, each in parallel over blocks of points: the chunk and a halo
  *             (every point within H of its cube, read from the neighbouring chunks' files) in
  *             (Morton code, file index) order, the order prep.c gives the whole cloud, indexed
@@ -24,8 +27,11 @@
  *             thread of its own meanwhile. Then prep.c's per-point values: eq. 20 radius, PCA
  *             normal and surface variation, oriented as prep.c does, raw F, the neighbours'
  *             median radius, the nearest distance, written block by block by the threads to
- *             the chunk's second scratch file; histograms of the values whose percentiles
- *             prep.c takes. A status line gives the pass's phases in wall seconds.
+ *             the chunk's second scratch file (32 bytes a point: what the first one does not
+ *             hold already); histograms of the values whose percentiles prep.c takes. Halo
+ *             neighbours that belong to a chunk done already are not queried: their normals
+ *             and radii are read from its records. Region arrays come from a pool kept across
+ *             the chunks. A status line gives the pass's phases in wall seconds.
  *   quantiles exact percentiles out of core: the top 16 bits of each (non-negative) float
  *             counted in the normals pass, the bottom 16 bits of the values in the bucket that
  *             holds the wanted rank counted here: the radius median (scatter cap), F's 99th
