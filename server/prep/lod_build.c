@@ -7,11 +7,14 @@
  *             depth D), chunk_max from the memory cap: memory / 400 bytes, the bytes a point
  *             of a chunk costs in the normals pass with its halo (chunks are processed one at a
  *             time, each on every thread, so the cap does not grow with the thread count).
- *   distribute every point (Morton code, position, colour, index in the file) into its chunk's
- *             scratch file (unnamed files in the cache directory: nothing is left behind by
- *             kill -9); then each chunk file sorted by code, in parallel over the chunks. The
- *             chunks are octree cells in Morton order, so a region (a chunk and its halo) is
- *             the filtered concatenation of its chunks' files, in order without a sort.
+ *   distribute every point (position, colour, index in the file: 20 bytes; its Morton code is
+ *             recomputed from the position wherever it is needed, the same bits) into its
+ *             chunk's scratch file (unnamed files in the cache directory: nothing is left
+ *             behind by kill -9); then each chunk file sorted by code, in parallel over the
+ *             chunks. The chunks are octree cells in Morton order, so a region (a chunk and
+ *             its halo) is the filtered concatenation of its chunks' files, in order without a
+ *             sort; of a neighbouring chunk only the count cells that meet the region's box are
+ *             read (a cell's records are a run of the sorted file: cell_pre).
  *   normals   chunk by chunk, each in parallel over blocks of points: the chunk and a halo
  *             (every point within H of its cube, read from the neighbouring chunks' files) in
  *             (Morton code, file index) order, the order prep.c gives the whole cloud, indexed
@@ -24,8 +27,11 @@
  *             thread of its own meanwhile. Then prep.c's per-point values: eq. 20 radius, PCA
  *             normal and surface variation, oriented as prep.c does, raw F, the neighbours'
  *             median radius, the nearest distance, written block by block by the threads to
- *             the chunk's second scratch file; histograms of the values whose percentiles
- *             prep.c takes. A status line gives the pass's phases in wall seconds.
+ *             the chunk's second scratch file (32 bytes a point: what the first one does not
+ *             hold already); histograms of the values whose percentiles prep.c takes. Halo
+ *             neighbours that belong to a chunk done already are not queried: their normals
+ *             and radii are read from its records. Region arrays come from a pool kept across
+ *             the chunks. A status line gives the pass's phases in wall seconds.
  *   quantiles exact percentiles out of core: the top 16 bits of each (non-negative) float
  *             counted in the normals pass, the bottom 16 bits of the values in the bucket that
  *             holds the wanted rank counted here: the radius median (scatter cap), F's 99th
@@ -62,16 +68,18 @@
 enum { COUNT_DEPTH_MAX = 7, BLOCK = 1 << 16, NQ = 7 };
 #define BYTES_PER_CHUNK_POINT 400u /* the normals pass of one chunk (with its halo) */
 
+/* The scratch records are as small as they can be (at 100M points they go through the page
+ * cache and to the disk several times): the Morton code is not stored but recomputed from the
+ * position (prep_morton_code: the same bits), and the normals pass's record leaves out what the
+ * chunk file (sorted, in the same order) holds already. */
 typedef struct rec {          /* a point in a chunk file */
-    uint64_t code;            /* Morton code in the cloud's frame */
     float pos[3];
-    uint32_t rgba, gidx, pad;
+    uint32_t rgba, gidx;
 } rec;
 
-typedef struct arec {         /* a chunk's point after the normals pass */
-    uint64_t code;
-    uint32_t gidx, rgba;
-    float pos[3], normal[3];
+typedef struct arec {         /* a chunk's point after the normals pass: record i of fd_a is
+                                 record i of fd_in (the chunk's points in the same order) */
+    float normal[3];
     float r20, capn, svar, Fraw, nnd;
 } arec;
 
@@ -86,10 +94,12 @@ typedef struct chunk {
     uint64_t code;            /* Morton prefix of depth `depth` */
     uint32_t depth;
     uint64_t count;
+    uint64_t cell0, cell1;    /* its count cells, [cell0, cell1) */
     int fd_in, fd_a;          /* scratch files: recs, arecs */
     float lo[3], hi[3];       /* its cube */
     float hb;                 /* a halo that holds every ball it needs (halo_bounds) */
     int retried;
+    int normals_done;         /* its records in fd_a are written (the normals pass) */
 } chunk;
 
 typedef struct nodeent {      /* a written node, before the table */
@@ -106,12 +116,19 @@ typedef struct build {
     chunk *chunks;
     size_t nchunks;
     uint32_t *cell_chunk;     /* count cells -> chunk */
+    uint64_t *cell_pre;       /* count cells -> points in the cells before (ncell + 1) */
+    uint64_t nread;           /* records the region loads read (the normals pass) */
+    double load_cpu;          /* CPU seconds of those loads (on the prefetch thread mostly) */
+    struct rbuf *rpool;       /* the regions' arrays, kept across chunks (RPOOL sets) */
+    void **tk;                /* per thread, TK_N arrays kept across the chunks of a pass */
+    size_t *tkcap;
     uint64_t *hist_hi[4];     /* r20, Fraw, nnd, final radius: 65536 each */
     struct { int which; double q; uint32_t hi; uint64_t rank; uint64_t *lo; float value; } qs[NQ + 1];
     float scatter_cap, p99;
     float halo;               /* the halo the last chunk of the normals pass needed */
     uint64_t normals_done;    /* points through the normals pass so far */
     int radius_pass;          /* chunk_hist: which histograms */
+    uint64_t *tcount;         /* chunk_hist's counters, NQ x 65536 per thread */
     double t_pass;            /* when the normals pass began */
     double tph[7];            /* the normals pass's phases, wall seconds (PH_*) */
     struct prefetch *pf;      /* the next chunk's region, loaded while this one computes */
@@ -196,6 +213,7 @@ static int make_chunks(build *b, const uint64_t *cnt, sd_err *err)
             ch->code = code;
             ch->depth = (uint32_t)dep;
             ch->count = c;
+            ch->cell0 = a, ch->cell1 = e;
             ch->fd_in = ch->fd_a = -1;
             uint32_t x, y, z;
             prep_morton_decode(code, &x, &y, &z);
@@ -215,7 +233,7 @@ static int make_chunks(build *b, const uint64_t *cnt, sd_err *err)
             sp++;
         }
     }
-    free(pre);
+    b->cell_pre = pre; /* a cell's records in its chunk's (sorted) file: load_region */
     if (!b->chunks) return sd_errf(err, SD_ENOMEM, "lod: out of memory for the chunks");
     if (b->nchunks > 4000)
         return sd_errf(err, SD_ELIMIT, "lod: %zu chunks is too many open files; give more "
@@ -358,11 +376,9 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
             uint64_t code = prep_morton_code(&b->f, pos + 3 * i);
             uint32_t c = b->cell_chunk[code >> (3 * (PREP_MORTON_BITS - b->cdepth))];
             rec *r = &buf[(size_t)c * PER + fill[c]++];
-            r->code = code;
             memcpy(r->pos, pos + 3 * i, 12);
             r->rgba = rgba[i];
             r->gidx = gidx++;
-            r->pad = 0;
             if (fill[c] == PER) {
                 if (lod__pwrite_all(b->chunks[c].fd_in, buf + (size_t)c * PER, PER * sizeof *buf, off[c]))
                     rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
@@ -391,9 +407,42 @@ typedef struct region {
     uint32_t *gidx, *rgba;
     uint64_t *code;
     uint8_t *own;
+    uint16_t *chk;            /* each point's chunk (at most 4000) */
+    uint32_t *fidx;           /* and its record in that chunk's files */
     float lo[3], hi[3];       /* the loaded box */
     int edge[6];              /* 1 where the box reaches the cube's face: nothing lies beyond */
+    uint64_t nread;           /* records read to load it */
+    double cpu;               /* CPU seconds the load took */
+    int pool;                 /* 1 + its set in build.rpool, 0: its own arrays */
 } region;
+
+/* A set of region arrays for cap points. Regions take their arrays from a pool of RPOOL sets
+ * kept across the chunks (the current region, the next one loading, the smaller one of a halo
+ * that grew): each load writes into pages an earlier region faulted in, instead of ~35 fresh
+ * bytes a point (at 100M points, 374M region points: ~13 GB of page faults and zeroing). */
+enum { RPOOL = 4 };
+typedef struct rbuf {
+    float *pos;
+    uint32_t *rgba, *gidx, *fidx;
+    uint64_t *code;
+    uint8_t *own;
+    uint16_t *chk;
+    size_t cap;
+    int used;
+} rbuf;
+
+static void rbuf_free(rbuf *x)
+{
+    free(x->pos);
+    free(x->rgba);
+    free(x->gidx);
+    free(x->fidx);
+    free(x->code);
+    free(x->own);
+    free(x->chk);
+    x->pos = NULL, x->rgba = x->gidx = x->fidx = NULL, x->code = NULL, x->own = NULL, x->chk = NULL;
+    x->cap = 0;
+}
 
 static void region_free(region *r)
 {
@@ -402,44 +451,204 @@ static void region_free(region *r)
     free(r->rgba);
     free(r->code);
     free(r->own);
+    free(r->chk);
+    free(r->fidx);
     memset(r, 0, sizeof *r);
 }
 
 /* The sorting pass for chunk ci: its file, written in file order, rewritten in (code, file
  * index) order (a stable radix sort by code). */
+enum { TK_N = 4 };
+
+/* Array which (of TK_N) of thread tid, at least bytes long (contents not kept when it grows).
+ * The sort and octree passes keep their per-chunk arrays across the chunks: arrays this big
+ * are mapped fresh by each malloc, so each chunk would fault in and zero new pages (~50 bytes
+ * a point a pass). NULL when out of memory. */
+static void *tkeep(build *b, int tid, int which, size_t bytes)
+{
+    size_t i = (size_t)tid * TK_N + (size_t)which;
+    if (bytes == 0) bytes = 1;
+    if (bytes > b->tkcap[i]) {
+        free(b->tk[i]);
+        b->tk[i] = malloc(bytes);
+        b->tkcap[i] = b->tk[i] ? bytes : 0;
+    }
+    return b->tk[i];
+}
+
+/* Frees the kept arrays (after a pass). */
+static void tkeep_free(build *b)
+{
+    for (size_t i = 0; b->tk && i < (size_t)b->threads * TK_N; i++) {
+        free(b->tk[i]);
+        b->tk[i] = NULL;
+        b->tkcap[i] = 0;
+    }
+}
+
 static int chunk_sort(void *ctx, size_t ci, int tid, sd_err *err)
 {
     build *b = ctx;
-    (void)tid;
     chunk *o = &b->chunks[ci];
     size_t n = o->count;
-    rec *in = malloc((n ? n : 1) * sizeof *in), *out = malloc((n ? n : 1) * sizeof *out);
-    uint64_t *key = malloc((n ? n : 1) * sizeof *key);
-    uint32_t *perm = malloc((n ? n : 1) * sizeof *perm);
+    rec *in = tkeep(b, tid, 0, n * sizeof *in), *out = tkeep(b, tid, 1, n * sizeof *out);
+    uint64_t *key = tkeep(b, tid, 2, n * sizeof *key);
+    uint32_t *perm = tkeep(b, tid, 3, n * sizeof *perm);
     int rc = 0;
     if (!in || !out || !key || !perm) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory sorting a chunk");
     if (rc == 0 && lod__pread_all(o->fd_in, in, n * sizeof *in, 0))
         rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
-    for (size_t i = 0; rc == 0 && i < n; i++) key[i] = in[i].code, perm[i] = (uint32_t)i;
+    for (size_t i = 0; rc == 0 && i < n; i++)
+        key[i] = prep_morton_code(&b->f, in[i].pos), perm[i] = (uint32_t)i;
     if (rc == 0) rc = prep_radix_sort64(key, perm, n, err);
     if (rc == 0) {
         for (size_t i = 0; i < n; i++) out[i] = in[perm[i]];
         if (lod__pwrite_all(o->fd_in, out, n * sizeof *out, 0))
             rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
     }
-    free(in);
-    free(out);
-    free(key);
-    free(perm);
+    return rc;
+}
+
+/* Appends the records [from, to) of chunk o's file that lie in r's box to r (j: o is the
+ * region's own chunk: every record is kept), RBLOCK at a time through tmp. */
+enum { RBLOCK = 1 << 15 }; /* records read at a time */
+
+static int read_run(const build *b, const chunk *o, int own, uint64_t from, uint64_t to,
+                    rec *tmp, region *r, sd_err *err)
+{
+    for (uint64_t i0 = from; i0 < to; i0 += RBLOCK) {
+        size_t nb = to - i0 < RBLOCK ? (size_t)(to - i0) : RBLOCK;
+        if (lod__pread_all(o->fd_in, tmp, nb * sizeof *tmp, i0 * sizeof *tmp))
+            return sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
+        r->nread += nb;
+        size_t m = r->m;
+        for (size_t i = 0; i < nb; i++) {
+            const float *p = tmp[i].pos;
+            if (!own && (p[0] < r->lo[0] || p[0] > r->hi[0] || p[1] < r->lo[1] ||
+                         p[1] > r->hi[1] || p[2] < r->lo[2] || p[2] > r->hi[2]))
+                continue;
+            memcpy(r->pos + 3 * m, p, 12);
+            r->rgba[m] = tmp[i].rgba;
+            r->gidx[m] = tmp[i].gidx;
+            r->code[m] = prep_morton_code(&b->f, p);
+            r->own[m] = (uint8_t)own;
+            r->chk[m] = (uint16_t)(o - b->chunks);
+            r->fidx[m] = (uint32_t)(i0 + i);
+            m++;
+        }
+        r->m = m;
+    }
+    return 0;
+}
+
+static int cmp_u32(const void *a, const void *b)
+{
+    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* The records of a neighbouring chunk o that may lie in r's box: only its count cells that meet
+ * the box are read (their records are runs of its sorted file: cell_pre). A point inside the
+ * box has each finest cell index between those of the box's corners (cell_of is monotonic),
+ * so no cell outside that range holds one; the per-point test then keeps exactly the points
+ * a read of the whole file would keep, in the same order. */
+static int read_neighbour(const build *b, const chunk *o, rec *tmp, region *r, sd_err *err)
+{
+    int D = b->cdepth, sh = 3 * (PREP_MORTON_BITS - D);
+    uint32_t lo[3], hi[3], c[3];
+    prep_morton_decode(prep_morton_code(&b->f, r->lo) >> sh, &lo[0], &lo[1], &lo[2]);
+    prep_morton_decode(prep_morton_code(&b->f, r->hi) >> sh, &hi[0], &hi[1], &hi[2]);
+    prep_morton_decode(o->code, &c[0], &c[1], &c[2]);
+    int csh = D - (int)o->depth;
+    size_t ncell = 1;
+    for (int a = 0; a < 3; a++) {
+        uint32_t c0 = c[a] << csh, c1 = ((c[a] + 1) << csh) - 1;
+        if (lo[a] < c0) lo[a] = c0;
+        if (hi[a] > c1) hi[a] = c1;
+        if (lo[a] > hi[a]) return 0;
+        ncell *= hi[a] - lo[a] + 1;
+    }
+    uint32_t *cells = malloc(ncell * sizeof *cells);
+    if (!cells) return sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+    size_t nc = 0;
+    for (uint32_t x = lo[0]; x <= hi[0]; x++)
+        for (uint32_t y = lo[1]; y <= hi[1]; y++)
+            for (uint32_t z = lo[2]; z <= hi[2]; z++) cells[nc++] = (uint32_t)prep_morton_encode(x, y, z);
+    int whole = nc == (size_t)(o->cell1 - o->cell0); /* every cell: the whole file */
+    if (!whole) qsort(cells, nc, sizeof *cells, cmp_u32);
+    const uint64_t *pre = b->cell_pre;
+    int rc = whole ? read_run(b, o, 0, 0, o->count, tmp, r, err) : 0;
+    for (size_t i = 0; !whole && i < nc && rc == 0;) {
+        size_t e = i + 1; /* cells[i..e) joined while no record lies between them */
+        while (e < nc && pre[cells[e]] == pre[cells[e - 1] + 1]) e++;
+        uint64_t from = pre[cells[i]] - pre[o->cell0], to = pre[cells[e - 1] + 1] - pre[o->cell0];
+        if (to > from) rc = read_run(b, o, 0, from, to, tmp, r, err);
+        i = e;
+    }
+    free(cells);
     return rc;
 }
 
 /* Loads chunk ci with every point within h of its cube, in (code, file index) order: the
  * chunks are octree cells in Morton order and their files are sorted (chunk_sort), so each
  * one's points are a run of that order and the region is their filtered concatenation, read
- * a block at a time. */
+ * a block at a time (of the neighbouring chunks, only the cells that meet the box). */
+/* The arrays of r for cap points (at most: pages past the points stay untouched), from an unused
+ * set of the pool (grown when smaller than cap) or, with none left, of its own. */
+static int region_arrays(build *b, region *r, size_t cap, sd_err *err)
+{
+    rbuf *x = NULL;
+    pthread_mutex_lock(&b->mu); /* the prefetch thread takes sets too */
+    for (int i = 0; b->rpool && i < RPOOL; i++)
+        if (!b->rpool[i].used && (!x || b->rpool[i].cap > x->cap)) x = &b->rpool[i];
+    if (x) {
+        x->used = 1;
+        r->pool = 1 + (int)(x - b->rpool);
+    }
+    pthread_mutex_unlock(&b->mu);
+    rbuf own = {0};
+    if (!x) x = &own;
+    if (x->cap < cap) {
+        rbuf_free(x);
+        x->pos = malloc(cap * 12);
+        x->rgba = malloc(cap * 4);
+        x->gidx = malloc(cap * 4);
+        x->fidx = malloc(cap * 4);
+        x->code = malloc(cap * 8);
+        x->own = malloc(cap);
+        x->chk = malloc(cap * 2);
+        x->cap = cap;
+        if (!x->pos || !x->rgba || !x->gidx || !x->fidx || !x->code || !x->own || !x->chk)
+            rbuf_free(x);
+    }
+    r->pos = x->pos, r->rgba = x->rgba, r->gidx = x->gidx, r->fidx = x->fidx;
+    r->code = x->code, r->own = x->own, r->chk = x->chk;
+    return x->cap ? 0 : sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+}
+
+/* Gives r's arrays back (to the pool, or frees its own); r is empty after. */
+static void region_put(build *b, region *r)
+{
+    if (!r->pool) {
+        region_free(r);
+        return;
+    }
+    pthread_mutex_lock(&b->mu);
+    b->rpool[r->pool - 1].used = 0;
+    pthread_mutex_unlock(&b->mu);
+    memset(r, 0, sizeof *r);
+}
+
+static double cpu_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
 static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
 {
+    double c0 = cpu_s();
     memset(r, 0, sizeof *r);
     const chunk *c = &b->chunks[ci];
     for (int a = 0; a < 3; a++) {
@@ -456,45 +665,20 @@ static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
             if (o->lo[a] > r->hi[a] || o->hi[a] < r->lo[a]) hit = 0;
         if (hit) cap += o->count;
     }
-    int rc = 0;
-    r->pos = malloc((cap ? cap : 1) * 12); /* at most; pages past the points stay untouched */
-    r->rgba = malloc((cap ? cap : 1) * 4);
-    r->gidx = malloc((cap ? cap : 1) * 4);
-    r->code = malloc((cap ? cap : 1) * 8);
-    r->own = malloc(cap ? cap : 1);
-    if (!r->pos || !r->rgba || !r->gidx || !r->code || !r->own)
-        rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
-    enum { RBLOCK = 1 << 15 }; /* records read at a time */
+    int rc = region_arrays(b, r, cap ? cap : 1, err);
     rec *tmp = rc == 0 ? malloc(RBLOCK * sizeof *tmp) : NULL;
     if (rc == 0 && !tmp) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
-    size_t m = 0;
     for (size_t j = 0; j < b->nchunks && rc == 0; j++) {
         const chunk *o = &b->chunks[j];
         int hit = 1;
         for (int a = 0; a < 3; a++)
             if (o->lo[a] > r->hi[a] || o->hi[a] < r->lo[a]) hit = 0;
         if (!hit) continue;
-        for (size_t i0 = 0; i0 < o->count && rc == 0; i0 += RBLOCK) {
-            size_t nb = o->count - i0 < RBLOCK ? o->count - i0 : RBLOCK;
-            if (lod__pread_all(o->fd_in, tmp, nb * sizeof *tmp, i0 * sizeof *tmp))
-                rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
-            for (size_t i = 0; rc == 0 && i < nb; i++) {
-                const float *p = tmp[i].pos;
-                if (j != ci && (p[0] < r->lo[0] || p[0] > r->hi[0] || p[1] < r->lo[1] ||
-                                p[1] > r->hi[1] || p[2] < r->lo[2] || p[2] > r->hi[2]))
-                    continue;
-                memcpy(r->pos + 3 * m, p, 12);
-                r->rgba[m] = tmp[i].rgba;
-                r->gidx[m] = tmp[i].gidx;
-                r->code[m] = tmp[i].code;
-                r->own[m] = j == ci;
-                m++;
-            }
-        }
+        rc = j == ci ? read_run(b, o, 1, 0, o->count, tmp, r, err) : read_neighbour(b, o, tmp, r, err);
     }
     free(tmp);
-    r->m = m;
-    if (rc < 0) region_free(r);
+    if (rc < 0) region_put(b, r);
+    r->cpu = cpu_s() - c0;
     return rc;
 }
 
@@ -541,7 +725,7 @@ static int prefetch_take(prefetch *p, size_t ci, float h, region *r, sd_err *err
         return p->rc;
     }
     if (p->ci != ci || p->h < h) {
-        region_free(&p->r);
+        region_put(p->b, &p->r);
         return 1;
     }
     *r = p->r;
@@ -574,12 +758,6 @@ static int inside(const region *r, const float *p, float d2)
 }
 
 enum { QBLOCK = 4096, QBLOCK_K = QBLOCK * PREP_MAX_K };
-
-static int cmp_u32(const void *a, const void *b)
-{
-    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
-    return x < y ? -1 : x > y;
-}
 
 typedef struct tls {
     uint64_t hist[3][65536];
@@ -666,11 +844,6 @@ static int nj_own(void *ctx, size_t blk, int tid, sd_err *err)
             rn[q] = j->r20[sq];
         }
         arec *o = &t->out[i - a];
-        uint32_t pi = j->list[i];
-        o->code = j->r->code[pi];
-        o->gidx = j->r->gidx[pi];
-        o->rgba = j->r->rgba[pi];
-        memcpy(o->pos, j->r->pos + 3 * (size_t)pi, 12);
         memcpy(o->normal, ni, 12);
         o->r20 = j->r20[i];
         o->capn = PREP_RADIUS_CAP * prep_percentile(rn, (size_t)K, 0.5);
@@ -771,6 +944,29 @@ static void remap_own(const region *old, const region *r, njob *j, size_t nown,
             for (int q = 0; q < j->K; q++) j->nbr[s * j->K + q] = map[j->nbr[s * j->K + q]];
 }
 
+/* The normals and radii of slots [nu, ns): halo neighbours whose chunks are done, from those
+ * chunks' records (slots in region order: by chunk, then by record; records close together
+ * read at once). */
+static int read_known(build *b, const region *r, njob *j, size_t nu, size_t ns, sd_err *err)
+{
+    enum { SPAN = 256 };
+    arec buf[SPAN];
+    for (size_t s = nu; s < ns;) {
+        uint32_t ck = r->chk[j->list[s]], f0 = r->fidx[j->list[s]];
+        size_t e = s + 1;
+        while (e < ns && r->chk[j->list[e]] == ck && r->fidx[j->list[e]] - f0 < SPAN) e++;
+        uint32_t f1 = r->fidx[j->list[e - 1]] + 1;
+        if (lod__pread_all(b->chunks[ck].fd_a, buf, (f1 - f0) * sizeof *buf, (uint64_t)f0 * sizeof *buf))
+            return sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
+        for (; s < e; s++) {
+            const arec *a = &buf[r->fidx[j->list[s]] - f0];
+            memcpy(j->nrm + 3 * s, a->normal, 12);
+            j->r20[s] = a->r20;
+        }
+    }
+    return 0;
+}
+
 enum { PH_LOAD, PH_INDEX, PH_QOWN, PH_CHECK, PH_QNBR, PH_PCA, PH_F, PH_N };
 enum { KB_NBR, KB_KD2, KB_NN2, KB_EXACT, KB_REDO, KB_SLOT, KB_LIST, KB_R20, KB_NRM, KB_SVAR };
 
@@ -858,6 +1054,8 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         /* the next chunk's region loads meanwhile, with the halo this one starts from */
         if (attempt == 0 && b->pf && ci + 1 < b->nchunks) prefetch_start(b->pf, b, ci + 1, h);
         phase_end(b, PH_LOAD, &t);
+        b->nread += r.nread;
+        b->load_cpu += r.cpu;
         size_t m = r.m;
         int full = r.edge[0] && r.edge[1] && r.edge[2] && r.edge[3] && r.edge[4] && r.edge[5];
         j.r = &r;
@@ -868,7 +1066,7 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         j.list = keep_buf(b, KB_LIST, m * sizeof *j.list);
         if (!j.slot || !j.list) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
         if (attempt > 0) remap_own(&old, &r, &j, nown, exact);
-        region_free(&old);
+        region_put(b, &old);
         size_t ns = 0;
         for (size_t i = 0; i < m; i++) {
             j.slot[i] = -1;
@@ -901,29 +1099,30 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         cj.blk = calloc(nb ? nb : 1, sizeof *cj.blk);
         if (!cj.blk) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
         rc = prep_par_for(T, nb, nj_check, &cj, NULL, err);
-        size_t bad = 0, nx = 0;
+        size_t bad = 0;
         for (size_t i = 0; i < nb; i++) {
             bad += cj.blk[i].bad;
-            nx += cj.blk[i].n;
             if (cj.blk[i].need > need) need = cj.blk[i].need;
         }
-        /* the halo neighbours once each, in region (Morton) order: the grid search is fast
-         * for queries in that order only (knn.h) */
-        uint32_t *xs = rc == 0 && bad == 0 ? malloc((nx ? nx : 1) * sizeof *xs) : NULL;
-        if (rc == 0 && bad == 0 && !xs) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory");
-        for (size_t i = 0, o = 0; xs && i < nb; i++) {
-            if (!cj.blk[i].n) continue; /* x is NULL then */
-            memcpy(xs + o, cj.blk[i].x, cj.blk[i].n * sizeof *xs);
-            o += cj.blk[i].n;
+        /* the halo neighbours once each, in region (Morton) order (the grid search is fast
+         * for queries in that order only, knn.h): marked in the slot array (-2), then taken
+         * in a scan of the region, no sort of the repeats. The neighbours of chunks done
+         * already take slots [nu, ns): their normals and radii are in those chunks' records,
+         * the same values a query here would give (exact neighbours, the same order, the
+         * same arithmetic); the others [nown, nu). */
+        size_t nu = ns;
+        if (rc == 0 && bad == 0) {
+            for (size_t i = 0; i < nb; i++)
+                for (size_t q = 0; q < cj.blk[i].n; q++) j.slot[cj.blk[i].x[q]] = -2;
+            for (int known = 0; known < 2; known++) {
+                for (size_t i = 0; i < m; i++)
+                    if (j.slot[i] == -2 && b->chunks[r.chk[i]].normals_done == known)
+                        j.slot[i] = (int32_t)ns, j.list[ns++] = (uint32_t)i;
+                if (!known) nu = ns;
+            }
         }
         for (size_t i = 0; i < nb; i++) free(cj.blk[i].x);
         free(cj.blk);
-        if (xs) {
-            qsort(xs, nx, sizeof *xs, cmp_u32);
-            for (size_t i = 0; i < nx; i++)
-                if (i == 0 || xs[i] != xs[i - 1]) j.slot[xs[i]] = (int32_t)ns, j.list[ns++] = xs[i];
-            free(xs);
-        }
         if (rc < 0 || bad > 0) goto next;
         phase_end(b, PH_CHECK, &t);
         uint32_t *nb2 = keep_buf(b, KB_NBR, ns * (size_t)K * 4);
@@ -931,24 +1130,26 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         if (!nb2 || !kd2) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
         j.nbr = nb2, j.kd2 = kd2;
         float *nn2 = j.nn2;
-        j.nn2 = NULL, j.qslot = NULL, j.first = nown, j.count = ns - nown;
-        if (ns > nown) rc = prep_par_for(T, nblocks(ns - nown), nj_query, &j, NULL, err);
+        j.nn2 = NULL, j.qslot = NULL, j.first = nown, j.count = nu - nown;
+        if (nu > nown) rc = prep_par_for(T, nblocks(nu - nown), nj_query, &j, NULL, err);
         j.nn2 = nn2;
         if (rc < 0) goto next;
-        if (!full && check_balls(b, c, &r, &j, nown, ns - nown, NULL, &need) > 0) goto next;
+        if (!full && check_balls(b, c, &r, &j, nown, nu - nown, NULL, &need) > 0) goto next;
         phase_end(b, PH_QNBR, &t);
         j.r20 = keep_buf(b, KB_R20, ns * 4);
         j.nrm = keep_buf(b, KB_NRM, ns * 12);
         j.svar = keep_buf(b, KB_SVAR, ns * 4);
         if (!j.r20 || !j.nrm || !j.svar) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
-        j.first = 0, j.count = ns;
-        rc = prep_par_for(T, nblocks(ns), nj_pca, &j, NULL, err);
+        j.first = 0, j.count = nu;
+        rc = prep_par_for(T, nblocks(nu), nj_pca, &j, NULL, err);
+        if (rc == 0) rc = read_known(b, &r, &j, nu, ns, err);
         if (rc < 0) goto next;
         phase_end(b, PH_PCA, &t);
         j.count = nown, j.fd_out = c->fd_a;
         rc = prep_par_for(T, nblocks(nown), nj_own, &j, NULL, err);
         if (rc < 0) goto next;
         phase_end(b, PH_F, &t);
+        c->normals_done = 1;
         done = 1;
         need_done = need;
     next:
@@ -965,7 +1166,7 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
     if (rc < 0 && b->pf) { /* nothing more will take it */
         region tmp;
         memset(&tmp, 0, sizeof tmp);
-        if (prefetch_take(b->pf, b->pf->ci, 0, &tmp, NULL) == 0) region_free(&tmp);
+        if (prefetch_take(b->pf, b->pf->ci, 0, &tmp, NULL) == 0) region_put(b, &tmp);
     }
     /* the next chunk starts from the halo this one grew to, or from the one its balls needed
      * (with a regrown halo's margin) when it did not grow: the count grid's bound is loose */
@@ -983,8 +1184,8 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         prep_knn_scratch_free(ks[t]);
         free(tl[t]);
     }
-    region_free(&r);
-    region_free(&old);
+    region_put(b, &r);
+    region_put(b, &old);
     return rc; /* the arrays stay in b->keep for the next chunk */
 }
 
@@ -1023,25 +1224,33 @@ static float pick_value(build *b, int q)
 
 enum { AREC_BLOCK = 1 << 16 }; /* records read at a time by the passes after the normals */
 
-/* Calls fn(ctx, records, count, first index) for chunk ci's records, AREC_BLOCK at a time
- * through one buffer (the passes after the normals pass stream the records: no chunk-sized
- * buffer and its fresh pages each pass). */
-static int each_arec_block(build *b, size_t ci, void (*fn)(void *, const arec *, size_t, size_t),
-                           void *ctx, sd_err *err)
+typedef void (*arec_fn)(void *ctx, const arec *a, const rec *r, size_t n, size_t first);
+
+/* Calls fn(ctx, records, chunk records (with_rec) or NULL, count, first index) for chunk ci's
+ * records, AREC_BLOCK at a time through one buffer (the passes after the normals pass stream
+ * the records: no chunk-sized buffer and its fresh pages each pass). */
+static int each_arec_block(build *b, size_t ci, int with_rec, arec_fn fn, void *ctx, sd_err *err)
 {
     const chunk *c = &b->chunks[ci];
     size_t blk = c->count < AREC_BLOCK ? c->count : AREC_BLOCK;
     arec *a = malloc((blk ? blk : 1) * sizeof *a);
-    if (!a) return sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+    rec *r = with_rec ? malloc((blk ? blk : 1) * sizeof *r) : NULL;
+    if (!a || (with_rec && !r)) {
+        free(a);
+        free(r);
+        return sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
+    }
     int rc = 0;
     for (size_t i = 0; i < c->count && rc == 0; i += blk) {
         size_t m = c->count - i < blk ? c->count - i : blk;
-        if (lod__pread_all(c->fd_a, a, m * sizeof *a, i * sizeof *a))
+        if (lod__pread_all(c->fd_a, a, m * sizeof *a, i * sizeof *a) ||
+            (r && lod__pread_all(c->fd_in, r, m * sizeof *r, i * sizeof *r)))
             rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
         else
-            fn(ctx, a, m, i);
+            fn(ctx, a, r, m, i);
     }
     free(a);
+    free(r);
     return rc;
 }
 
@@ -1060,28 +1269,56 @@ static float final_F(const build *b, float raw)
 
 /* A counting pass over the normals pass's records: with b->radius_pass 0 the bottom-16-bit
  * histograms of the NQ quantiles' buckets, with 1 the top-16-bit histogram of the final radii. */
-static void hist_block(void *ctx, const arec *a, size_t n, size_t first)
+typedef struct hctx {
+    build *b;
+    uint64_t *h;              /* the thread's counters (tcount) */
+} hctx;
+
+static void hist_block(void *ctx, const arec *a, const rec *r, size_t n, size_t first)
 {
-    build *b = ctx;
+    hctx *x = ctx;
+    const build *b = x->b;
     (void)first;
-    pthread_mutex_lock(&b->mu); /* the other thread reads its next block meanwhile */
+    (void)r;
     for (size_t i = 0; i < n; i++) {
         if (b->radius_pass) {
-            b->hist_hi[3][fbits(final_radius(b, &a[i])) >> 16]++;
+            x->h[fbits(final_radius(b, &a[i])) >> 16]++;
             continue;
         }
         for (int q = 0; q < NQ; q++) {
             uint32_t u = fbits(qvalue(b, q, &a[i], 0));
-            if (u >> 16 == b->qs[q].hi) b->qs[q].lo[u & 0xffff]++;
+            if (u >> 16 == b->qs[q].hi) x->h[(size_t)q << 16 | (u & 0xffff)]++;
         }
     }
-    pthread_mutex_unlock(&b->mu);
 }
 
 static int chunk_hist(void *ctx, size_t ci, int tid, sd_err *err)
 {
-    (void)tid;
-    return each_arec_block(ctx, ci, hist_block, ctx, err);
+    build *b = ctx;
+    hctx x = {.b = b, .h = b->tcount + (size_t)tid * NQ * 65536};
+    return each_arec_block(b, ci, 0, hist_block, &x, err);
+}
+
+static int by_size(build *b, prep_par_fn fn, prep_progress *pr, sd_err *err);
+
+/* A counting pass over the chunks on every thread, each into counters of its own, then added
+ * up (into the NQ bottom histograms, or with radius_pass into the final radii's top one). */
+static int hist_pass(build *b, sd_err *err)
+{
+    size_t per = (size_t)NQ * 65536;
+    memset(b->tcount, 0, (size_t)b->threads * per * sizeof *b->tcount);
+    int rc = by_size(b, chunk_hist, NULL, err);
+    for (int t = 0; rc == 0 && t < b->threads; t++) {
+        const uint64_t *h = b->tcount + (size_t)t * per;
+        for (size_t i = 0; i < 65536; i++) {
+            if (b->radius_pass) {
+                b->hist_hi[3][i] += h[i];
+                continue;
+            }
+            for (int q = 0; q < NQ; q++) b->qs[q].lo[i] += h[(size_t)q << 16 | i];
+        }
+    }
+    return rc;
 }
 
 /* ---- octree ---- */
@@ -1292,16 +1529,16 @@ typedef struct final_job {
 } final_job;
 
 /* A block of a chunk's records with their final values, into the octree pass's points. */
-static void final_block(void *ctx, const arec *a, size_t n, size_t first)
+static void final_block(void *ctx, const arec *a, const rec *r, size_t n, size_t first)
 {
     final_job *f = ctx;
     build *b = f->b;
     for (size_t k = 0; k < n; k++) {
         pt *q = &f->p[first + k];
-        q->code = a[k].code;
-        q->gidx = a[k].gidx;
-        q->rgba = a[k].rgba;
-        memcpy(q->pos, a[k].pos, 12);
+        q->code = prep_morton_code(&b->f, r[k].pos);
+        q->gidx = r[k].gidx;
+        q->rgba = r[k].rgba;
+        memcpy(q->pos, r[k].pos, 12);
         memcpy(q->normal, a[k].normal, 12);
         q->radius = final_radius(b, &a[k]);
         q->F = final_F(b, a[k].Fraw);
@@ -1318,16 +1555,19 @@ static void final_block(void *ctx, const arec *a, size_t n, size_t first)
 static int chunk_octree(void *ctx, size_t ci, int tid, sd_err *err)
 {
     build *b = ctx;
-    (void)tid;
     chunk *c = &b->chunks[ci];
     int rc = 0;
     uint64_t n = c->count;
-    pt *p = malloc((n ? n : 1) * sizeof *p);
-    uint32_t *idx = malloc((n ? n : 1) * 4), *scr = malloc((n ? n : 1) * 4);
+    pt *p = tkeep(b, tid, 0, n * sizeof *p);
+    uint32_t *idx = tkeep(b, tid, 1, n * 4), *scr = tkeep(b, tid, 2, n * 4);
     uint32_t *lo = calloc(65536, 4);
     if (!p || !idx || !scr || !lo) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
     final_job fj = {.b = b, .p = p, .idx = idx, .lo = lo};
-    if (rc == 0) rc = each_arec_block(b, ci, final_block, &fj, err);
+    if (rc == 0) rc = each_arec_block(b, ci, 1, final_block, &fj, err);
+    /* the chunk's scratch files are not read again: their pages go now */
+    close(c->fd_in);
+    close(c->fd_a);
+    c->fd_in = c->fd_a = -1;
     octx o = {.b = b, .p = p, .scratch = scr, .cdepth = (int)c->depth};
     if (rc == 0 && n) rc = process(&o, idx, n, 0, 0, err);
     pthread_mutex_lock(&b->mu);
@@ -1346,9 +1586,6 @@ static int chunk_octree(void *ctx, size_t ci, int tid, sd_err *err)
     }
     pthread_mutex_unlock(&b->mu);
     free(o.up);
-    free(p);
-    free(idx);
-    free(scr);
     free(lo);
     return rc;
 }
@@ -1505,10 +1742,14 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
         b->hist_hi[q] = calloc(65536, sizeof(uint64_t));
         if (!b->hist_hi[q]) return sd_errf(err, SD_ENOMEM, "lod: out of memory");
     }
+    b->tk = calloc((size_t)b->threads * TK_N, sizeof *b->tk);
+    b->tkcap = calloc((size_t)b->threads * TK_N, sizeof *b->tkcap);
+    if (!b->tk || !b->tkcap) return sd_errf(err, SD_ENOMEM, "lod: out of memory");
     int rc = count_and_distribute(b, s, err);
     if (rc == 0) {
         double ts = now_s();
         rc = by_size(b, chunk_sort, NULL, err);
+        tkeep_free(b); /* not held through the normals pass */
         if (rc == 0) status(b, "sort", 0.14, b->info.n, now_s() - ts);
     }
     if (rc < 0) return rc;
@@ -1520,6 +1761,7 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     prefetch pf;
     memset(&pf, 0, sizeof pf);
     b->pf = b->threads > 1 ? &pf : NULL;
+    b->rpool = calloc(RPOOL, sizeof *b->rpool); /* NULL: every region has its own arrays */
     rc = prep_par_for(1, b->nchunks, chunk_normals, b, &pr, err); /* each chunk on every thread */
     b->pf = NULL;
     for (int i = 0; i < 10; i++) { /* the normals pass's arrays: not needed after it */
@@ -1529,21 +1771,22 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     }
     region left;
     memset(&left, 0, sizeof left);
-    if (prefetch_take(&pf, pf.ci, 0, &left, NULL) == 0) region_free(&left);
+    if (prefetch_take(&pf, pf.ci, 0, &left, NULL) == 0) region_put(b, &left);
+    for (int i = 0; i < RPOOL; i++) rbuf_free(&b->rpool[i]); /* not needed after the pass */
+    free(b->rpool);
+    b->rpool = NULL;
     if (rc < 0) return rc;
     prep_progress_end(&pr);
     size_t retried = 0;
-    for (size_t i = 0; i < b->nchunks; i++) {
-        retried += b->chunks[i].retried;
-        close(b->chunks[i].fd_in);
-        b->chunks[i].fd_in = -1;
-    }
+    for (size_t i = 0; i < b->nchunks; i++) retried += b->chunks[i].retried;
     res->halo_retries = b->nchunks ? (double)retried / (double)b->nchunks : 0;
     if (d->status) { /* where the normals pass went, wall seconds */
         char line[256];
-        snprintf(line, sizeof line, "lod normals: region loads %.2f s, indexes %.2f, kNN of the "
+        snprintf(line, sizeof line, "lod normals: region loads %.2f s (%.1fM records read, "
+                 "%.2f CPU s), indexes %.2f, kNN of the "
                  "chunks %.2f, ball checks %.2f, kNN of halo neighbours %.2f, normals %.2f, F "
-                 "%.2f (with the scratch writes)", b->tph[PH_LOAD], b->tph[PH_INDEX],
+                 "%.2f (with the scratch writes)", b->tph[PH_LOAD], (double)b->nread / 1e6, b->load_cpu,
+                 b->tph[PH_INDEX],
                  b->tph[PH_QOWN], b->tph[PH_CHECK], b->tph[PH_QNBR], b->tph[PH_PCA],
                  b->tph[PH_F]);
         d->status(d->user, line);
@@ -1560,13 +1803,15 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     }
     t = now_s();
     prep_progress_begin(&pr, d->progress, d->user, PROTO_PHASE_FIELD);
-    rc = by_size(b, chunk_hist, NULL, err);
+    b->tcount = malloc((size_t)b->threads * NQ * 65536 * sizeof *b->tcount);
+    if (!b->tcount) return sd_errf(err, SD_ENOMEM, "lod: out of memory");
+    rc = hist_pass(b, err);
     if (rc < 0) return rc;
     for (int q = 0; q < NQ; q++) b->qs[q].value = pick_value(b, q);
     b->scatter_cap = PREP_SCATTER_CAP * b->qs[0].value;
     b->p99 = b->qs[2].value;
     b->radius_pass = 1;
-    rc = by_size(b, chunk_hist, NULL, err);
+    rc = hist_pass(b, err);
     if (rc < 0) return rc;
     pick_bucket(b, NQ, b->hist_hi[3], n);
     prep_progress_end(&pr);
@@ -1574,6 +1819,7 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     t = now_s();
     prep_progress_begin(&pr, d->progress, d->user, PROTO_PHASE_REORDER);
     rc = by_size(b, chunk_octree, &pr, err);
+    tkeep_free(b);
     if (rc == 0) rc = emit_upper(b, err);
     if (rc < 0) return rc;
     prep_progress_end(&pr);
@@ -1672,7 +1918,12 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     }
     free(b.chunks);
     free(b.cell_chunk);
+    free(b.cell_pre);
     free(b.order);
+    free(b.tcount);
+    tkeep_free(&b);
+    free(b.tk);
+    free(b.tkcap);
     for (int q = 0; q < 4; q++) free(b.hist_hi[q]);
     for (int q = 0; q <= NQ; q++) free(b.qs[q].lo);
     free(b.nodes);
