@@ -569,6 +569,49 @@ static void test_text_streamed(void **state)
     tu_rm_rf(dir);
 }
 
+/* A binary PLY of several bounds-pass blocks (65,536 records each, read on every core and put
+ * together in block order): lod_src's bounds, offset, point count and points equal pc_load's,
+ * with non-finite rows in the middle, the last and the first block (dropped by both), and the
+ * cloud's extremes moved into different blocks (a reduction that lost a block's bounds would
+ * give another offset). */
+static void test_ply_bounds_blocks(void **state)
+{
+    (void)state;
+    char dir[512], ply[700];
+    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    gen(dir, 200000, ply, sizeof ply);
+    FILE *f = fopen(ply, "r+b");
+    assert_non_null(f);
+    char head[4096];
+    size_t got = fread(head, 1, sizeof head - 1, f);
+    head[got] = 0;
+    char *end = strstr(head, "end_header\n");
+    assert_non_null(end);
+    long data = (long)(end - head) + 11, rec = 15; /* x y z float, red green blue uchar */
+    const float nan = NAN, inf = INFINITY;
+    const struct { long row; int axis; float v; } edits[] = {
+        {70000, 0, nan}, {199999, 2, inf}, {5, 1, nan},      /* dropped rows */
+        {140000, 0, -1000.0f}, {66000, 1, 900.0f}, {199998, 2, -800.0f}, /* new extremes */
+    };
+    for (size_t i = 0; i < sizeof edits / sizeof *edits; i++) {
+        assert_int_equal(fseek(f, data + edits[i].row * rec + 4 * edits[i].axis, SEEK_SET), 0);
+        assert_int_equal(fwrite(&edits[i].v, 4, 1, f), 1);
+    }
+    fclose(f);
+    assert_int_equal(stream_equals_load(ply), 200000 - 3);
+    sd_err err = {0};
+    lod_src *src;
+    if (lod_src_open(ply, &src, &err) != 0) fail_msg("%s", err.msg);
+    lod_src_info info;
+    lod_src_get_info(src, &info);
+    print_message("200k-point PLY in 4 blocks: %llu points, %llu dropped, offset %.3f %.3f %.3f\n",
+                  (unsigned long long)info.n, (unsigned long long)info.n_dropped, info.offset[0],
+                  info.offset[1], info.offset[2]);
+    assert_int_equal(info.n_dropped, 3);
+    lod_src_close(src);
+    tu_rm_rf(dir);
+}
+
 /* gen_cloud's scene as a PCD file: binary (packed rgb) or ascii */
 static void write_pcd(const char *dir, const char *name, int ascii, char *out, size_t len)
 {
@@ -1283,6 +1326,7 @@ int main(void)
         cmocka_unit_test(test_laz_streamed),
         cmocka_unit_test(test_text_streamed),
         cmocka_unit_test(test_pcd_streamed),
+        cmocka_unit_test(test_ply_bounds_blocks),
         cmocka_unit_test(test_stream_file_shrinks),
         cmocka_unit_test(test_kill9_never_leaves_a_loadable_cache),
         cmocka_unit_test(test_daemon_progressive),

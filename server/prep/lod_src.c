@@ -15,6 +15,7 @@
 #include "las_stream.h"
 #include "laz_stream.h"
 #include "pcd_stream.h"
+#include "progress.h"
 #include "xyz_stream.h"
 
 enum { BLOCK = 1 << 16, MAX_PROPS = 64, MAX_HEADER = 64 * 1024 };
@@ -140,11 +141,13 @@ static int try_ply_header(lod_src *s, sd_err *err)
 }
 
 /* Reads records [r, r + m) into s->buf. */
-static int read_records(lod_src *s, uint64_t r, size_t m, sd_err *err)
+/* read_records_into: records [r, r + m) into buf (pread: the file offset is not used, so
+ * several threads may read at once). */
+static int read_records_into(const lod_src *s, uint8_t *buf, uint64_t r, size_t m, sd_err *err)
 {
     size_t len = m * s->rec, done = 0;
     while (done < len) {
-        ssize_t g = pread(s->fd, s->buf + done, len - done,
+        ssize_t g = pread(s->fd, buf + done, len - done,
                           (off_t)(s->data_off + r * s->rec + done));
         if (g < 0 && errno == EINTR) continue;
         if (g <= 0)
@@ -154,6 +157,11 @@ static int read_records(lod_src *s, uint64_t r, size_t m, sd_err *err)
         done += (size_t)g;
     }
     return 0;
+}
+
+static int read_records(lod_src *s, uint64_t r, size_t m, sd_err *err)
+{
+    return read_records_into(s, s->buf, r, m, err);
 }
 
 static void record_xyz(const lod_src *s, const uint8_t *p, double xyz[3])
@@ -192,30 +200,72 @@ static int set_bounds(lod_src *s, const double lo[3], const double hi[3], sd_err
     return 0;
 }
 
+/* The PLY bounds pass runs over blocks of records on every core (BOUNDS_THREADS at most), each
+ * block's bounds and count kept apart and put together in block order: the same bounds as one
+ * pass in file order, down to which of -0 and +0 an extreme is. */
+enum { BOUNDS_THREADS = 8 };
+typedef struct bounds_job {
+    const lod_src *s;
+    uint8_t *buf[BOUNDS_THREADS];  /* a block of records per thread */
+    double *lo, *hi;               /* 3 per block */
+    uint64_t *kept;                /* per block */
+} bounds_job;
+
+static int bounds_block(void *ctx, size_t c, int tid, sd_err *err)
+{
+    bounds_job *j = ctx;
+    const lod_src *s = j->s;
+    uint64_t r = (uint64_t)c * BLOCK;
+    size_t m = s->nrec - r < BLOCK ? (size_t)(s->nrec - r) : BLOCK;
+    int rc = read_records_into(s, j->buf[tid], r, m, err);
+    if (rc < 0) return rc;
+    double *lo = j->lo + 3 * c, *hi = j->hi + 3 * c;
+    uint64_t kept = 0;
+    for (int a = 0; a < 3; a++) lo[a] = INFINITY, hi[a] = -INFINITY;
+    for (size_t i = 0; i < m; i++) {
+        double p[3];
+        record_xyz(s, j->buf[tid] + i * s->rec, p);
+        if (!isfinite(p[0]) || !isfinite(p[1]) || !isfinite(p[2])) continue;
+        kept++;
+        for (int a = 0; a < 3; a++) {
+            if (p[a] < lo[a]) lo[a] = p[a];
+            if (p[a] > hi[a]) hi[a] = p[a];
+        }
+    }
+    j->kept[c] = kept;
+    return 0;
+}
+
 static int bounds_pass(lod_src *s, sd_err *err)
 {
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     uint64_t kept = 0;
-    for (uint64_t r = 0; r < s->nrec;) {
-        size_t m = s->nrec - r < BLOCK ? (size_t)(s->nrec - r) : BLOCK;
-        int rc = read_records(s, r, m, err);
-        if (rc < 0) return rc;
-        for (size_t i = 0; i < m; i++) {
-            double p[3];
-            record_xyz(s, s->buf + i * s->rec, p);
-            if (!isfinite(p[0]) || !isfinite(p[1]) || !isfinite(p[2])) continue;
-            kept++;
-            for (int a = 0; a < 3; a++) {
-                if (p[a] < lo[a]) lo[a] = p[a];
-                if (p[a] > hi[a]) hi[a] = p[a];
-            }
+    /* nrec is at most what the file holds (ply_header) */
+    size_t nblocks = (size_t)((s->nrec + BLOCK - 1) / BLOCK);
+    int nt = prep_default_threads();
+    if (nt > BOUNDS_THREADS) nt = BOUNDS_THREADS;
+    if ((size_t)nt > nblocks) nt = nblocks ? (int)nblocks : 1;
+    bounds_job j = {.s = s};
+    j.lo = malloc((nblocks ? nblocks : 1) * 3 * sizeof *j.lo);
+    j.hi = malloc((nblocks ? nblocks : 1) * 3 * sizeof *j.hi);
+    j.kept = malloc((nblocks ? nblocks : 1) * sizeof *j.kept);
+    int ok = j.lo && j.hi && j.kept;
+    for (int t = 0; t < nt && ok; t++) ok = (j.buf[t] = malloc((size_t)BLOCK * s->rec)) != NULL;
+    int rc = ok ? prep_par_for(nt, nblocks, bounds_block, &j, NULL, err)
+                : sd_errf(err, SD_ENOMEM, "%s: out of memory for the bounds pass", s->path);
+    for (size_t c = 0; c < nblocks && rc == 0; c++) {
+        kept += j.kept[c];
+        for (int a = 0; a < 3; a++) {
+            if (j.lo[3 * c + a] < lo[a]) lo[a] = j.lo[3 * c + a];
+            if (j.hi[3 * c + a] > hi[a]) hi[a] = j.hi[3 * c + a];
         }
-        r += m;
     }
+    for (int t = 0; t < nt; t++) free(j.buf[t]);
+    free(j.lo), free(j.hi), free(j.kept);
+    if (rc < 0) return rc;
     if (!kept) return sd_errf(err, SD_EEMPTY, "%s: no finite points (%llu read)", s->path,
                               (unsigned long long)s->nrec);
-    int rc = set_bounds(s, lo, hi, err);
-    if (rc < 0) return rc;
+    if ((rc = set_bounds(s, lo, hi, err)) < 0) return rc;
     s->info.n = kept;
     s->info.n_dropped = s->nrec - kept;
     s->info.attrs = s->off[3] >= 0 && s->off[4] >= 0 && s->off[5] >= 0 ? PC_ATTR_RGB : 0;
