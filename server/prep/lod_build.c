@@ -456,8 +456,6 @@ static void region_free(region *r)
     memset(r, 0, sizeof *r);
 }
 
-/* The sorting pass for chunk ci: its file, written in file order, rewritten in (code, file
- * index) order (a stable radix sort by code). */
 enum { TK_N = 4 };
 
 /* Array which (of TK_N) of thread tid, at least bytes long (contents not kept when it grows).
@@ -486,6 +484,8 @@ static void tkeep_free(build *b)
     }
 }
 
+/* The sorting pass for chunk ci: its file, written in file order, rewritten in (code, file
+ * index) order (a stable radix sort by code). */
 static int chunk_sort(void *ctx, size_t ci, int tid, sd_err *err)
 {
     build *b = ctx;
@@ -509,10 +509,10 @@ static int chunk_sort(void *ctx, size_t ci, int tid, sd_err *err)
     return rc;
 }
 
-/* Appends the records [from, to) of chunk o's file that lie in r's box to r (j: o is the
- * region's own chunk: every record is kept), RBLOCK at a time through tmp. */
 enum { RBLOCK = 1 << 15 }; /* records read at a time */
 
+/* Appends the records [from, to) of chunk o's file that lie in r's box to r (own: o is the
+ * region's own chunk: every record is kept), RBLOCK at a time through tmp. */
 static int read_run(const build *b, const chunk *o, int own, uint64_t from, uint64_t to,
                     rec *tmp, region *r, sd_err *err)
 {
@@ -589,10 +589,6 @@ static int read_neighbour(const build *b, const chunk *o, rec *tmp, region *r, s
     return rc;
 }
 
-/* Loads chunk ci with every point within h of its cube, in (code, file index) order: the
- * chunks are octree cells in Morton order and their files are sorted (chunk_sort), so each
- * one's points are a run of that order and the region is their filtered concatenation, read
- * a block at a time (of the neighbouring chunks, only the cells that meet the box). */
 /* The arrays of r for cap points (at most: pages past the points stay untouched), from an unused
  * set of the pool (grown when smaller than cap) or, with none left, of its own. */
 static int region_arrays(build *b, region *r, size_t cap, sd_err *err)
@@ -646,6 +642,10 @@ static double cpu_s(void)
     return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
 }
 
+/* Loads chunk ci with every point within h of its cube, in (code, file index) order: the
+ * chunks are octree cells in Morton order and their files are sorted (chunk_sort), so each
+ * one's points are a run of that order and the region is their filtered concatenation, read
+ * a block at a time (of the neighbouring chunks, only the cells that meet the box). */
 static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
 {
     double c0 = cpu_s();

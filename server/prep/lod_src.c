@@ -140,7 +140,6 @@ static int try_ply_header(lod_src *s, sd_err *err)
     return 1;
 }
 
-/* Reads records [r, r + m) into s->buf. */
 /* read_records_into: records [r, r + m) into buf (pread: the file offset is not used, so
  * several threads may read at once). */
 static int read_records_into(const lod_src *s, uint8_t *buf, uint64_t r, size_t m, sd_err *err)
@@ -159,6 +158,7 @@ static int read_records_into(const lod_src *s, uint8_t *buf, uint64_t r, size_t 
     return 0;
 }
 
+/* Reads records [r, r + m) into s->buf. */
 static int read_records(lod_src *s, uint64_t r, size_t m, sd_err *err)
 {
     return read_records_into(s, s->buf, r, m, err);
