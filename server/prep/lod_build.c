@@ -99,7 +99,6 @@ typedef struct chunk {
     float lo[3], hi[3];       /* its cube */
     float hb;                 /* a halo that holds every ball it needs (halo_bounds) */
     int retried;
-    int normals_done;         /* its records in fd_a are written (the normals pass) */
 } chunk;
 
 typedef struct nodeent {      /* a written node, before the table */
@@ -1109,14 +1108,16 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
          * in a scan of the region, no sort of the repeats. The neighbours of chunks done
          * already take slots [nu, ns): their normals and radii are in those chunks' records,
          * the same values a query here would give (exact neighbours, the same order, the
-         * same arithmetic); the others [nown, nu). */
+         * same arithmetic); the others [nown, nu). The chunks go through this pass one
+         * after another in index order (on one thread: prep_par_for(1, ...), which the
+         * prefetch of ci + 1 counts on too), so the chunks done are those before ci. */
         size_t nu = ns;
         if (rc == 0 && bad == 0) {
             for (size_t i = 0; i < nb; i++)
                 for (size_t q = 0; q < cj.blk[i].n; q++) j.slot[cj.blk[i].x[q]] = -2;
             for (int known = 0; known < 2; known++) {
                 for (size_t i = 0; i < m; i++)
-                    if (j.slot[i] == -2 && b->chunks[r.chk[i]].normals_done == known)
+                    if (j.slot[i] == -2 && (r.chk[i] < ci) == known)
                         j.slot[i] = (int32_t)ns, j.list[ns++] = (uint32_t)i;
                 if (!known) nu = ns;
             }
@@ -1149,7 +1150,6 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         rc = prep_par_for(T, nblocks(nown), nj_own, &j, NULL, err);
         if (rc < 0) goto next;
         phase_end(b, PH_F, &t);
-        c->normals_done = 1;
         done = 1;
         need_done = need;
     next:
