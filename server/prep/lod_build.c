@@ -132,7 +132,6 @@ typedef struct build {
     double tph[7];            /* the normals pass's phases, wall seconds (PH_*) */
     struct prefetch *pf;      /* the next chunk's region, loaded while this one computes */
     size_t *order;            /* the chunks, largest first (by_size) */
-    prep_par_fn order_fn;
     void *keep[10];           /* the normals pass's per-chunk arrays, kept across chunks (KB_*) */
     size_t keepcap[10];
     pthread_mutex_t mu;
@@ -1699,10 +1698,15 @@ static int cmp_size(const void *x, const void *y, void *ctx)
     return i < j ? -1 : i > j;
 }
 
+typedef struct by_size_ctx {
+    build *b;
+    prep_par_fn fn;           /* called with the chunk's index */
+} by_size_ctx;
+
 static int by_size_fn(void *ctx, size_t i, int tid, sd_err *err)
 {
-    build *b = ctx;
-    return b->order_fn(b, b->order[i], tid, err);
+    const by_size_ctx *x = ctx;
+    return x->fn(x->b, x->b->order[i], tid, err);
 }
 
 /* prep_par_for over the chunks, the largest handed out first: chunks of unequal sizes in
@@ -1716,8 +1720,8 @@ static int by_size(build *b, prep_par_fn fn, prep_progress *pr, sd_err *err)
         for (size_t i = 0; i < b->nchunks; i++) b->order[i] = i;
         qsort_r(b->order, b->nchunks, sizeof *b->order, cmp_size, b->chunks);
     }
-    b->order_fn = fn;
-    return prep_par_for(b->threads, b->nchunks, by_size_fn, b, pr, err);
+    by_size_ctx x = {.b = b, .fn = fn};
+    return prep_par_for(b->threads, b->nchunks, by_size_fn, &x, pr, err);
 }
 
 static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_err *err)
