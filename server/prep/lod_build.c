@@ -399,21 +399,6 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
 
 /* ---- normals pass ---- */
 
-typedef struct region {
-    size_t m;
-    float *pos;
-    uint32_t *gidx, *rgba;
-    uint64_t *code;
-    uint8_t *own;
-    uint16_t *chk;            /* each point's chunk (at most 4000) */
-    uint32_t *fidx;           /* and its record in that chunk's files */
-    float lo[3], hi[3];       /* the loaded box */
-    int edge[6];              /* 1 where the box reaches the cube's face: nothing lies beyond */
-    uint64_t nread;           /* records read to load it */
-    double cpu;               /* CPU seconds the load took */
-    int pool;                 /* 1 + its set in build.rpool, 0: its own arrays */
-} region;
-
 /* A set of region arrays for cap points. Regions take their arrays from a pool of RPOOL sets
  * kept across the chunks (the current region, the next one loading, the smaller one of a halo
  * that grew): each load writes into pages an earlier region faulted in, instead of ~35 fresh
@@ -442,17 +427,21 @@ static void rbuf_free(rbuf *x)
     x->cap = 0;
 }
 
-static void region_free(region *r)
-{
-    free(r->pos);
-    free(r->gidx);
-    free(r->rgba);
-    free(r->code);
-    free(r->own);
-    free(r->chk);
-    free(r->fidx);
-    memset(r, 0, sizeof *r);
-}
+typedef struct region {
+    size_t m;
+    float *pos;
+    uint32_t *gidx, *rgba;
+    uint64_t *code;
+    uint8_t *own;
+    uint16_t *chk;            /* each point's chunk (at most 4000) */
+    uint32_t *fidx;           /* and its record in that chunk's files */
+    float lo[3], hi[3];       /* the loaded box */
+    int edge[6];              /* 1 where the box reaches the cube's face: nothing lies beyond */
+    uint64_t nread;           /* records read to load it */
+    double cpu;               /* CPU seconds the load took */
+    int pool;                 /* 1 + its set in build.rpool, 0: its own arrays */
+    rbuf mine;                /* its own arrays (pool 0) */
+} region;
 
 enum { TK_N = 4 };
 
@@ -600,8 +589,7 @@ static int region_arrays(build *b, region *r, size_t cap, sd_err *err)
         r->pool = 1 + (int)(x - b->rpool);
     }
     pthread_mutex_unlock(&b->mu);
-    rbuf own = {0};
-    if (!x) x = &own;
+    if (!x) x = &r->mine;
     if (x->cap < cap) {
         rbuf_free(x);
         x->pos = malloc(cap * 12);
@@ -623,13 +611,12 @@ static int region_arrays(build *b, region *r, size_t cap, sd_err *err)
 /* Gives r's arrays back (to the pool, or frees its own); r is empty after. */
 static void region_put(build *b, region *r)
 {
-    if (!r->pool) {
-        region_free(r);
-        return;
+    if (r->pool) {
+        pthread_mutex_lock(&b->mu);
+        b->rpool[r->pool - 1].used = 0;
+        pthread_mutex_unlock(&b->mu);
     }
-    pthread_mutex_lock(&b->mu);
-    b->rpool[r->pool - 1].used = 0;
-    pthread_mutex_unlock(&b->mu);
+    rbuf_free(&r->mine);
     memset(r, 0, sizeof *r);
 }
 
