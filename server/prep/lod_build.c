@@ -627,6 +627,14 @@ static double cpu_s(void)
     return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
 }
 
+/* 1 when chunk o's cube meets r's box. */
+static int meets(const chunk *o, const region *r)
+{
+    for (int a = 0; a < 3; a++)
+        if (o->lo[a] > r->hi[a] || o->hi[a] < r->lo[a]) return 0;
+    return 1;
+}
+
 /* Loads chunk ci with every point within h of its cube, in (code, file index) order: the
  * chunks are octree cells in Morton order and their files are sorted (chunk_sort), so each
  * one's points are a run of that order and the region is their filtered concatenation, read
@@ -643,22 +651,14 @@ static int load_region(build *b, size_t ci, float h, region *r, sd_err *err)
         r->edge[3 + a] = r->hi[a] >= (float)(b->f.origin[a] + b->f.side);
     }
     size_t cap = 0;
-    for (size_t j = 0; j < b->nchunks; j++) {
-        const chunk *o = &b->chunks[j];
-        int hit = 1;
-        for (int a = 0; a < 3; a++)
-            if (o->lo[a] > r->hi[a] || o->hi[a] < r->lo[a]) hit = 0;
-        if (hit) cap += o->count;
-    }
+    for (size_t j = 0; j < b->nchunks; j++)
+        if (meets(&b->chunks[j], r)) cap += b->chunks[j].count;
     int rc = region_arrays(b, r, cap ? cap : 1, err);
     rec *tmp = rc == 0 ? malloc(RBLOCK * sizeof *tmp) : NULL;
     if (rc == 0 && !tmp) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory for a chunk");
     for (size_t j = 0; j < b->nchunks && rc == 0; j++) {
         const chunk *o = &b->chunks[j];
-        int hit = 1;
-        for (int a = 0; a < 3; a++)
-            if (o->lo[a] > r->hi[a] || o->hi[a] < r->lo[a]) hit = 0;
-        if (!hit) continue;
+        if (!meets(o, r)) continue;
         rc = j == ci ? read_run(b, o, 1, 0, o->count, tmp, r, err) : read_neighbour(b, o, tmp, r, err);
     }
     free(tmp);
