@@ -605,11 +605,7 @@ static void test_cpu_bands(void **state)
  * two must agree: at most 1 level (the 8-bit path rounds the solid colour before the "over",
  * the float one after), in a frame where the soft discs change at least 20 % of the pixels
  * (against lambda = 0). A tile put over the wrong pixels, or a layer lost, differs by many
- * levels. Then 3 stripes against 1 (the keys of every stripe kept for the host pass) on a comb:
- * bands of solid points 6 grid rows high, the soft points between them 0.03 behind, seen face
- * on, so that each band's edge is a row where the keys change from solid to empty: at most 1
- * level (float sums added in another order), where keys taken from the wrong rows flip whole
- * rows of soft discs. */
+ * levels. */
 static void test_after_matches_layer(void **state)
 {
     (void)state;
@@ -617,7 +613,7 @@ static void test_after_matches_layer(void **state)
     sp_params p;
     uint32_t id = layered_scene(&cam, &p);
     p.order = SP_ORDER_CPU;
-    rnd_frame host = {0}, layer = {0}, none = {0}, striped = {0};
+    rnd_frame host = {0}, layer = {0}, none = {0};
     tu_render(tu_ctx, id, &cam, &p, 0, &host);
     tu_render(tu_ctx, id, &cam, &p, 1, &layer);
     int n, m = max_diff(&host, &layer, &n), nsoft;
@@ -630,6 +626,18 @@ static void test_after_matches_layer(void **state)
     assert_true(m <= 1);
     rnd_release(tu_ctx, id);
     rnd_frame_free(&host);
+    rnd_frame_free(&layer);
+    rnd_frame_free(&none);
+}
+
+/* The host "over" with the frame in 3 stripes against 1 (the keys of every stripe kept for
+ * soft_after) on a comb: bands of solid points 6 grid rows high, the soft points between them
+ * 0.03 behind, seen face on, so that each band's edge is a row where the keys change from solid
+ * to empty: at most 1 level (float sums added in another order), where keys taken from the
+ * wrong rows flip whole rows of soft discs. */
+static void test_after_stripes(void **state)
+{
+    (void)state;
     rnd_desc dd = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS"),
                    .pipe = {.splat_stripe_rows = (H + 2) / 3}};
     sd_err err = {0};
@@ -642,11 +650,14 @@ static void test_after_matches_layer(void **state)
         if (pc.F[k] > 0.5f) pc.pos[3 * k + 2] = -0.03f;
     }
     tu_finish_cloud(&pc, OFF);
-    id = tu_upload(tu_ctx, &pc);
-    uint32_t id3 = tu_upload(r3, &pc);
+    uint32_t id = tu_upload(tu_ctx, &pc), id3 = tu_upload(r3, &pc);
     pc_prepared_free(&pc);
-    cam = cam_z(3.0);
+    rnd_camera cam = cam_z(3.0);
+    sp_params p;
+    sp_params_defaults(&p);
+    p.pipeline = SP_PIPE_SOFT, p.order = SP_ORDER_CPU;
     p.t = 0.5f, p.lambda = 0.5f, p.l_m = 0.0f;
+    rnd_frame host = {0}, striped = {0};
     tu_render(tu_ctx, id, &cam, &p, 0, &host);
     tu_render(r3, id3, &cam, &p, 0, &striped);
     rnd_release(r3, id3);
@@ -655,8 +666,6 @@ static void test_after_matches_layer(void **state)
     printf("comb, 3 stripes vs 1: max %d levels (%d pixels)\n", ms, ns);
     assert_true(ms <= 1);
     rnd_frame_free(&host);
-    rnd_frame_free(&layer);
-    rnd_frame_free(&none);
     rnd_frame_free(&striped);
     rnd_release(tu_ctx, id);
 }
@@ -810,6 +819,7 @@ int main(void)
         cmocka_unit_test(test_tile_matches_axis),
         cmocka_unit_test(test_cpu_bands),
         cmocka_unit_test(test_after_matches_layer),
+        cmocka_unit_test(test_after_stripes),
         cmocka_unit_test(test_after_then_edl),
         cmocka_unit_test(test_buffer_sets),
         cmocka_unit_test(test_many_soft_points),
