@@ -42,7 +42,7 @@ typedef struct soft_cpu_mem {
     uint32_t *first;           /* where each tile's discs start in tiled (in discs) */
     uint16_t *rect;            /* 4 per disc in draw order: its tiles' columns and rows */
     uint32_t *cnt;             /* per thread and tile: discs counted, then where they go */
-    float *tbuf;               /* rgba8 jobs: a 64x64 RGBA float tile per thread */
+    float *tbuf;               /* per thread: the blend's 5 planes of 64x64 floats (R, G, B, A, depth) */
     size_t discs_cap, tiled_cap, first_cap, rect_cap, cnt_cap, tbuf_cap;
 } soft_cpu_mem;
 
