@@ -1,8 +1,9 @@
 /* pipe_soft.c — the `soft` pipeline: Soft Transparency (Seemann et al.), the Express-Model.
  *
  * The solid/soft split. Each point has a scalar F in [0, 1] from the source `field`
- * (soft_field.h; the normalisation of each source is in params.h). Points with F <= t are solid and are drawn by the `splat`
- * pipeline's own passes (splat_passes.h), F > t are soft. Three forms of the split, measured:
+ * (soft_field.h; the normalisation of each source is in params.h). Points with F <= t are
+ * solid and are drawn by the `splat` pipeline's own passes (splat_passes.h), F > t are soft.
+ * Three forms of the split, measured:
  *   list    (a cloud in one buffer set, the usual case, with soft and solid points) the solid
  *           points listed in point order (made with the soft arrays below, uploaded as an
  *           R32UI buffer texture), the view's chunks cut to the list's entries in them (a
@@ -57,25 +58,24 @@
  * per-block count and scatter ~40, the per-pixel blend the rest). The sprites cost about 1 us a
  * soft disc whatever its size (1-pixel sprites cost the same; two triangles a disc instead of a
  * point sprite: 275 against 193 ms).
- *   cpu   the host compositor (soft_cpu.h): soft_bin.comp PASS 0's projection read back, each
- *         stripe's visibility keys read back, the discs binned into 64x64 tiles in draw order
- *         and blended by every core over only the pixels they cover, the rows they reached
+ *   cpu   (soft_host.c) the host compositor (soft_cpu.h): soft_bin.comp PASS 0's projection read
+ *         back, each stripe's visibility keys read back, the discs binned into 64x64 tiles in draw
+ *         order and blended by every core over only the pixels they cover, the rows they reached
  *         uploaded as the layer soft_resolve puts over the target. ~95 ms of CPU on the same
- *         Guanyin frame (of which the blending ~30, the GL projection ~25), half of axis and
- *         tile, and the fastest in wall time on every cloud measured (bench_soft.sh), so
- *         order=auto (the default) takes it on a software renderer; on a GPU the sprites stay.
- *         Clouds of more than 64 buffer sets take the sprites. The projection itself runs on
- *         the host too (soft_proj.h; soft_proj=auto on a software renderer, not color=field),
- *         from the sets' buffers mapped for reading: no dispatch, no read-back of the discs.
- *         With it and the compositor's later changes (discs copied per tile, no branch per
- *         lane, the binning on every core) the Guanyin frame above took ~72 ms of CPU against
- *         ~88 before (same run, 2 cores shared with other work). On an opaque 8-bit frame
- *         with nothing after the pipeline in the GL (rnd_draw.host_after: no GL Eye-Dome
- *         Lighting) there is no layer: the stripes' keys are kept and, after the read-back,
- *         soft_after blends each tile's discs into a float tile of its thread's and puts it
- *         over the frame's pixels (rnd_pipeline.after). Guanyin: the layer's upload (2-7 ms)
- *         and the GL pass putting it over the target (5-6.5 ms, one thread) go; the frame
- *         took 51.5 ms of CPU against 68.7 (both with the solid list). The binning
+ *         Guanyin frame (of which the blending ~30, the GL projection ~25), half of axis and tile,
+ *         and the fastest in wall time on every cloud measured (bench_soft.sh), so order=auto (the
+ *         default) takes it on a software renderer; on a GPU the sprites stay. Clouds of more than
+ *         64 buffer sets take the sprites. The projection itself runs on the host too (soft_proj.h;
+ *         soft_proj=auto on a software renderer, not color=field), from the sets' buffers mapped
+ *         for reading: no dispatch, no read-back of the discs. With it and the compositor's later
+ *         changes (discs copied per tile, no branch per lane, the binning on every core) the
+ *         Guanyin frame above took ~72 ms of CPU against ~88 before (same run, 2 cores shared with
+ *         other work). On an opaque 8-bit frame with nothing after the pipeline in the GL
+ *         (rnd_draw.host_after: no GL Eye-Dome Lighting) there is no layer: the stripes' keys are
+ *         kept and, after the read-back, soft__after blends each tile's discs into a float tile of
+ *         its thread's and puts it over the frame's pixels (rnd_pipeline.after). Guanyin: the
+ *         layer's upload (2-7 ms) and the GL pass putting it over the target (5-6.5 ms, one thread)
+ *         go; the frame took 51.5 ms of CPU against 68.7 (both with the solid list). The binning
  *         (soft_cpu_bin) then runs on a thread of its own while the GL makes the keys, where
  *         llvmpipe leaves a core partly idle: Guanyin 34-38 -> 30-31 ms a frame (splat 29.6).
  *
@@ -94,127 +94,31 @@
  * soft_field.h for every `field` source.
  *
  * What is not here: soft discs larger than the GL's point size limit (llvmpipe: 255 pixels) are
- * drawn at that size by order=axis. Culling: soft points are drawn whether or not their chunk was culled
- * (the GL clips them); the point budget applies to solid points only. */
+ * drawn at that size by order=axis. Culling: soft points are drawn whether or not their chunk
+ * was culled (the GL clips them); the point budget applies to solid points only. */
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <pthread.h>
 #include <unistd.h>
 
-#include "pipe.h"
 #include "shaders.h"
-#include "soft_cpu.h"
-#include "soft_field.h"
-#include "soft_lists.h"
+#include "soft_pipe.h"
 #include "soft_proj.h"
 #include "splat_passes.h"
 
-/* Uniform slots of the sprite program (soft.vert/.frag), looked up by name. */
-#define SOFT_UNIFORMS(X)                                                                     \
-    X(SIZE, "u_size") X(MAXSIZE, "u_maxsize") X(STRIPE, "u_stripe") X(KEYS_ON, "u_keys_on")    \
-    X(LAMBDA, "u_lambda") X(BASE, "u_base") X(N, "u_n") X(REV, "u_rev")
-
-enum {
-#define SOFT_U_ENUM_(id, name) SU_##id,
-    SOFT_UNIFORMS(SOFT_U_ENUM_)
-#undef SOFT_U_ENUM_
-    SU_COUNT
-};
-
-/* The compositor's programs. */
-enum { C_PROJ = 0, C_BIN1, C_BIN3, C_SCAN, C_BLEND, C_RESOLVE, C_COUNT };
 enum {
     SOFT_TILE = 8,             /* tile side in pixels: one 8x8 work group of soft_blend */
     SOFT_BLOCKS = 64,          /* binning blocks: invocations walking the order serially */
 };
-/* order=cpu composites at most this many bytes of float layer at a time (rows of a band): a
- * 1280x720 frame is one band; an 8192x8192 one, whose layer would be 1 GiB, sixteen. */
-#define SOFT_CPU_LAYER (64ull << 20)
 
-typedef struct soft_state {
-    void *splat;               /* the splat passes' own state (splat__create) */
-    GLuint prog;
-    GLint loc[SU_COUNT];
-    GLuint vao;                /* empty: the vertex shader pulls everything */
-    GLuint f_tex, idx_tex;     /* buffer textures on RND_T_SOFT_F and RND_T_SOFT_IDX */
-    GLuint solid_tex;          /* buffer texture on RND_T_SOFT_SOLID */
-    float max_point;           /* GL_POINT_SIZE_RANGE's upper end */
-    rnd_chunk *chunks;         /* the frame's solid chunks */
-    uint64_t chunks_cap;
-    /* the compositor of order=tile (see the file comment) */
-    GLuint cprog[C_COUNT];
-    GLuint proj_buf, cells_buf, list_buf, layer_buf;
-    uint64_t proj_bytes, cells_bytes, list_bytes, layer_bytes;
-    GLuint proj_tex, cells_tex, list_tex, layer_tex;
-    soft_lists lists;          /* model=base|concentric (soft_lists.h) */
-    /* order=cpu (soft_cpu.h): the projected discs of every set read back, their segments, the
-     * draw-order scratch, the stripe's keys and the layer, all on the host */
-    float *h_proj, *h_layer;
-    uint32_t *h_keys;
-    uint32_t *h_fkeys;         /* rnd_draw.host_after: the frame's keys, every stripe's rows */
-    size_t h_proj_cap, h_layer_cap, h_keys_cap, h_fkeys_cap;   /* in elements */
-    int after_keys;            /* soft_after: h_fkeys holds keys (else no solid surface) */
-    soft_cpu_job bin_job;      /* rnd_draw.host_after: the discs binned on bin_th ... */
-    pthread_t bin_th;          /* ... while the splat passes make the keys */
-    int bin_on;                /* bin_th runs (or ran) and has not been joined */
-    int bin_rc;
-    soft_cpu_mem mem;
-    soft_cpu_seg segs[64];
-    int nsegs;
-    int threads;
-} soft_state;
-
-/* Per buffer set of a cloud: what the split needs on the CPU and the soft index arrays. */
-typedef struct soft_set {
-    uint32_t n;
-    uint32_t *sorted[3];       /* point indices sorted along x, y, z */
-    uint32_t *runs;            /* solid runs: (first, count) pairs, in point order */
-    uint32_t nruns;
-    uint32_t nsoft;            /* soft points for the current split */
-    GLuint idx_buf;            /* 4 * nsoft uint32: the soft points, then of sorted[0..2] */
-    uint32_t *idx;             /* the same on the host (order=cpu) */
-    uint32_t *solid;           /* a cloud in one set: its n - nsoft solid points, in point order */
-    GLuint solid_buf;          /* the same, on RND_T_SOFT_SOLID (SPLAT_SOLID_LIST) */
-    float centre[3];           /* mean of the set's bounds: the order of sets */
-} soft_set;
-
-typedef struct soft_cloud {
-    uint32_t nsets;
-    soft_set *sets;
-    soft_fields fields;        /* F per point (soft_field.h) */
-    int have_split;            /* the split below has been made for fields' current F */
-    float t;
-} soft_cloud;
-
-/* The binning of the host compositor (soft_cpu_bin) on a thread of its own, and its end. */
-static void *bin_main(void *arg)
-{
-    soft_state *s = arg;
-    s->bin_rc = soft_cpu_bin(&s->bin_job);
-    return NULL;
-}
-
-static void bin_start(soft_state *s)
-{
-    s->bin_on = pthread_create(&s->bin_th, NULL, bin_main, s) == 0;
-    if (!s->bin_on) bin_main(s); /* no thread: here, now */
-}
-
-static int bin_join(soft_state *s)
-{
-    if (s->bin_on) pthread_join(s->bin_th, NULL);
-    s->bin_on = 0;
-    return s->bin_rc;
-}
 
 static void soft_destroy(rnd_kit *k, void *state)
 {
     soft_state *s = state;
     if (!s) return;
-    bin_join(s);
+    soft__bin_join(s);
     const gl_api *gl = k->gl;
     if (s->splat) splat__destroy(k, s->splat);
     soft_lists_destroy(k, &s->lists);
@@ -567,10 +471,6 @@ static int solid_list_view(soft_state *s, const rnd_view *v, const soft_set *ss,
 
 /* ---- the frame ------------------------------------------------------------------------------- */
 
-typedef struct soft_order {
-    int axis, rev;             /* the sorted array, and whether it is read backwards */
-    uint32_t set_order[64];    /* sets back to front (clouds of up to 64 sets; more: set order) */
-} soft_order;
 
 /* order_sets: the axis closest to the view direction and the sets back to front along it. */
 static void order_sets(const rnd_view *v, const soft_cloud *sc, soft_order *o)
@@ -599,8 +499,8 @@ static void order_sets(const rnd_view *v, const soft_cloud *sc, soft_order *o)
 }
 
 
-/* buf_tex: makes *buf hold at least bytes and *tex a buffer texture of format fmt over it. */
-static void buf_tex(const gl_api *gl, GLuint *buf, uint64_t *have, uint64_t bytes, GLuint tex,
+/* soft__buf_tex: makes *buf hold at least bytes and *tex a buffer texture of format fmt over it. */
+void soft__buf_tex(const gl_api *gl, GLuint *buf, uint64_t *have, uint64_t bytes, GLuint tex,
                     GLenum fmt)
 {
     if (rnd_kit_ensure_ssbo(gl, buf, have, bytes) || bytes == 0) {
@@ -659,9 +559,9 @@ static void bind_soft_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const so
     gl->ActiveTexture(GL_TEXTURE0);
 }
 
-/* project_set: soft_bin.comp PASS 0 over set si's soft discs in back-to-front order into the
+/* soft__project_set: soft_bin.comp PASS 0 over set si's soft discs in back-to-front order into the
  * proj buffer (2 texels a disc). Returns 0 or SD_ELIMIT. */
-static int project_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
+int soft__project_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
                        const soft_order *o, uint32_t si, sd_err *err)
 {
     const gl_api *gl = k->gl;
@@ -669,7 +569,7 @@ static int project_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_
     if ((uint64_t)nsoft * 32 > (uint64_t)k->max_ssbo)
         return sd_errf(err, SD_ELIMIT, "soft: %u soft points in one buffer set exceed a storage "
                        "block", nsoft);
-    buf_tex(gl, &s->proj_buf, &s->proj_bytes, (uint64_t)(nsoft ? nsoft : 1) * 32, s->proj_tex,
+    soft__buf_tex(gl, &s->proj_buf, &s->proj_bytes, (uint64_t)(nsoft ? nsoft : 1) * 32, s->proj_tex,
             GL_RGBA32F);
     bind_soft_set(k, s, d, sc, si);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_PROJ, s->proj_buf);
@@ -693,7 +593,7 @@ static int draw_soft(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cl
         uint32_t si = oi < nsets ? o->set_order[oi] : oi;
         uint32_t nsoft = sc->sets[si].nsoft;
         if (nsoft == 0) continue;
-        int rc = project_set(k, s, d, sc, o, si, err);
+        int rc = soft__project_set(k, s, d, sc, o, si, err);
         if (rc < 0) return rc;
         const GLint *l = s->loc;
         gl->UseProgram(s->prog);
@@ -745,13 +645,13 @@ static int tile_bin(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_clo
     if ((ncells + 1) * 4 > (uint64_t)k->max_ssbo)
         return sd_errf(err, SD_ELIMIT, "soft: %u soft points in a %dx%d frame exceed the "
                        "compositor's storage blocks", nsoft, v->width, v->height);
-    int rc = project_set(k, s, d, sc, o, 0, err);
+    int rc = soft__project_set(k, s, d, sc, o, 0, err);
     if (rc < 0) return rc;
-    buf_tex(gl, &s->cells_buf, &s->cells_bytes, (ncells + 1) * 4, s->cells_tex, GL_R32UI);
+    soft__buf_tex(gl, &s->cells_buf, &s->cells_bytes, (ncells + 1) * 4, s->cells_tex, GL_R32UI);
     GLuint zero = 0;
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->cells_buf);
     gl->ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
-    buf_tex(gl, &s->list_buf, &s->list_bytes, 4, s->list_tex, GL_R32UI);
+    soft__buf_tex(gl, &s->list_buf, &s->list_bytes, 4, s->list_tex, GL_R32UI);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_CELLS, s->cells_buf);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_LIST, s->list_buf);
     const GLuint groups = SOFT_BLOCKS / 32;
@@ -768,7 +668,7 @@ static int tile_bin(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_clo
     if ((uint64_t)total * 4 > (uint64_t)k->max_ssbo)
         return sd_errf(err, SD_ELIMIT, "soft: %u tile entries exceed the compositor's storage "
                        "block", total);
-    buf_tex(gl, &s->list_buf, &s->list_bytes, (uint64_t)(total ? total : 1) * 4, s->list_tex,
+    soft__buf_tex(gl, &s->list_buf, &s->list_bytes, (uint64_t)(total ? total : 1) * 4, s->list_tex,
             GL_R32UI);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_LIST, s->list_buf);
     set_view_uniforms(gl, s->cprog[C_BIN3], d, o, nsoft);
@@ -777,9 +677,9 @@ static int tile_bin(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_clo
     return 0;
 }
 
-/* resolve_layer: soft_resolve puts the layer (rows [y0, y0 + n) of the frame) over the
+/* soft__resolve_layer: soft_resolve puts the layer (rows [y0, y0 + n) of the frame) over the
  * target. */
-static void resolve_layer(rnd_kit *k, soft_state *s, const rnd_draw *d, int y0, int n)
+void soft__resolve_layer(rnd_kit *k, soft_state *s, const rnd_draw *d, int y0, int n)
 {
     const gl_api *gl = k->gl;
     const rnd_view *v = d->view;
@@ -801,7 +701,7 @@ static void tile_blend(rnd_kit *k, soft_state *s, const rnd_draw *d, int keys, i
     const gl_api *gl = k->gl;
     const rnd_view *v = d->view;
     int ntx = (v->width + SOFT_TILE - 1) / SOFT_TILE;
-    buf_tex(gl, &s->layer_buf, &s->layer_bytes, (uint64_t)v->width * n * 16, s->layer_tex,
+    soft__buf_tex(gl, &s->layer_buf, &s->layer_bytes, (uint64_t)v->width * n * 16, s->layer_tex,
             GL_RGBA32F);
     gl->BindBufferBase(GL_SHADER_STORAGE_BUFFER, RND_B_SOFT_LAYER, s->layer_buf);
     const GLuint units[4] = {RND_T_SOFT_PROJ, RND_T_SOFT_LIST, RND_T_SOFT_CELLS, RND_T_SPLAT_KEYS};
@@ -824,181 +724,7 @@ static void tile_blend(rnd_kit *k, soft_state *s, const rnd_draw *d, int keys, i
     gl->Uniform1i(gl_uniform(gl, pb, "u_ty0"), ty0);
     gl->DispatchCompute((GLuint)ntx, (GLuint)(ty1 - ty0 + 1), 1);
     gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
-    resolve_layer(k, s, d, y0, n);
-}
-
-/* host_project_set: soft_bin.comp PASS 0 on the host (soft_proj.h) for set si into out (8 floats
- * a disc): the set's positions, normals, radii and colour source mapped for reading (on a
- * software renderer the GL's own memory), then unmapped. Returns 0 or SD_EGL. */
-static int host_project_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
-                            uint32_t si, float *out, sd_err *err)
-{
-    const gl_api *gl = k->gl;
-    const rnd_view *v = d->view;
-    const sp_params *p = d->params;
-    const rnd_bufset *bs = &d->cloud->sets[si];
-    const int attr[4] = {RND_ATTR_POS, RND_ATTR_NORMAL, RND_ATTR_RADIUS,
-                         rnd_kit_color_source(p->color)};
-    const void *m[4] = {NULL, NULL, NULL, NULL};
-    int rc = 0;
-    for (int a = 0; a < 4 && rc == 0; a++) {
-        uint64_t bytes = (uint64_t)bs->n * (uint64_t)rnd_attrs[attr[a]].components * 4;
-        gl->BindBuffer(GL_COPY_READ_BUFFER, bs->buf[attr[a]]);
-        m[a] = gl->MapBufferRange(GL_COPY_READ_BUFFER, 0, (GLsizeiptr)(bytes ? bytes : 4),
-                                  GL_MAP_READ_BIT);
-        if (!m[a] && (rc = gl_check(gl, "soft: mapping a buffer set", err)) == 0)
-            rc = sd_errf(err, SD_EGL, "soft: mapping buffer set %u's %s failed", si,
-                         rnd_attrs[attr[a]].name);
-    }
-    if (rc == 0) {
-        soft_proj_job job = {.pos = m[0], .nrm = m[1], .rad = m[2], .src = m[3],
-                             .f = sc->fields.sets[si].f, .idx = sc->sets[si].idx,
-                             .n = sc->sets[si].nsoft, .width = v->width, .height = v->height,
-                             .scale = p->splat_scale, .znear = v->znear, .zfar = v->zfar,
-                             .t = p->t, .lm = p->l_m, .color = p->color, .out = out,
-                             .threads = s->threads};
-        memcpy(job.view, v->view, sizeof job.view);
-        memcpy(job.proj, v->proj, sizeof job.proj);
-        soft_light(p, job.light);
-        soft_proj_run(&job);
-    }
-    for (int a = 0; a < 4; a++)
-        if (m[a]) {
-            gl->BindBuffer(GL_COPY_READ_BUFFER, bs->buf[attr[a]]);
-            gl->UnmapBuffer(GL_COPY_READ_BUFFER);
-        }
-    gl->BindBuffer(GL_COPY_READ_BUFFER, 0);
-    return rc;
-}
-
-/* cpu_project: order=cpu, the soft discs of every set projected, one segment per set in the
- * sets' order: on the host (soft_proj=cpu, or auto on a software renderer; not color=field) or
- * by the GL (soft_bin.comp PASS 0, as for the sprites) and read back. Returns 0 or SD_E*. */
-static int cpu_project(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
-                       const soft_order *o, sd_err *err)
-{
-    const gl_api *gl = k->gl;
-    const sp_params *p = d->params;
-    int host = p->color != SP_COLOR_FIELD &&
-               (p->soft_proj == SP_SOFT_PROJ_CPU ||
-                (p->soft_proj == SP_SOFT_PROJ_AUTO && k->software));
-    uint32_t nsets = sc->nsets < 64 ? sc->nsets : 64;
-    size_t total = 0;
-    for (uint32_t si = 0; si < nsets; si++) total += sc->sets[si].nsoft;
-    if (soft_cpu_grow((void **)&s->h_proj, &s->h_proj_cap, 8 * total, sizeof(float)))
-        return sd_errf(err, SD_ENOMEM, "soft: out of memory for %zu soft discs", total);
-    s->nsegs = 0;
-    size_t at = 0;
-    for (uint32_t oi = 0; oi < nsets; oi++) {
-        uint32_t si = o->set_order[oi];
-        const soft_set *ss = &sc->sets[si];
-        if (ss->nsoft == 0) continue;
-        int rc = host ? host_project_set(k, s, d, sc, si, s->h_proj + at, err)
-                      : project_set(k, s, d, sc, o, si, err);
-        if (rc < 0) return rc;
-        if (!host) {
-            gl->MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-            gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->proj_buf);
-            gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)ss->nsoft * 32,
-                                 s->h_proj + at);
-        }
-        s->segs[s->nsegs++] = (soft_cpu_seg){s->h_proj + at, ss->idx + (size_t)(1 + o->axis) *
-                                             ss->nsoft, ss->nsoft, o->rev};
-        at += 8 * (size_t)ss->nsoft;
-    }
-    return 0;
-}
-
-/* cpu_blend: order=cpu over rows [y0, y0 + n): the stripe's visibility keys read back (keys,
- * yb, nb as draw_soft), then in bands of at most SOFT_CPU_LAYER bytes of layer (and of a storage
- * block) the discs composited on the host (soft_cpu.h), the rows they reached uploaded as the
- * layer and put over the target by soft_resolve. Returns 0 or SD_E*. */
-static int cpu_blend(rnd_kit *k, soft_state *s, const rnd_draw *d, int keys, int y0, int n,
-                     int yb, int nb, sd_err *err)
-{
-    const gl_api *gl = k->gl;
-    const rnd_view *v = d->view;
-    size_t w = (size_t)v->width;
-    if (s->nsegs == 0) return 0; /* no soft disc */
-    uint64_t cap = SOFT_CPU_LAYER < (uint64_t)k->max_ssbo ? SOFT_CPU_LAYER : (uint64_t)k->max_ssbo;
-    uint64_t band = cap / (w * 16);
-    if (band < 1) band = 1;
-    if (band > (uint64_t)n) band = (uint64_t)n;
-    if (soft_cpu_grow((void **)&s->h_layer, &s->h_layer_cap, w * band * 4, sizeof(float)) ||
-        (keys && soft_cpu_grow((void **)&s->h_keys, &s->h_keys_cap, w * (size_t)nb, 4)))
-        return sd_errf(err, SD_ENOMEM, "soft: out of memory for a %dx%d layer", v->width,
-                       (int)band);
-    if (keys) {
-        uint64_t have = 0;
-        GLuint kbuf = splat__keys_buffer(s->splat, &have);
-        if (have < (uint64_t)w * (uint64_t)nb * 4)
-            return sd_errf(err, SD_EINVAL, "soft: the visibility keys hold %llu bytes, not the "
-                           "%d rows of the stripe", (unsigned long long)have, nb);
-        gl->MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, kbuf);
-        gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)(w * (size_t)nb * 4),
-                             s->h_keys);
-    }
-    for (int b0 = y0; b0 < y0 + n; b0 += (int)band) {
-        int bn = y0 + n - b0 < (int)band ? y0 + n - b0 : (int)band;
-        soft_cpu_job job = {.segs = s->segs, .nsegs = s->nsegs, .lambda = d->params->lambda,
-                            .width = v->width, .y0 = b0, .rows = bn,
-                            .keys = keys ? s->h_keys : NULL, .kb = yb, .nk = nb,
-                            .layer = s->h_layer, .mem = &s->mem, .threads = s->threads};
-        if (soft_cpu_composite(&job) != 0)
-            return sd_errf(err, SD_ENOMEM, "soft: out of memory compositing the soft discs");
-        if (job.touched[0] < 0) continue; /* no disc reached these rows */
-        int r0 = job.touched[0], rn = job.touched[1] - job.touched[0] + 1;
-        uint64_t bytes = (uint64_t)w * (uint64_t)rn * 16;
-        buf_tex(gl, &s->layer_buf, &s->layer_bytes, bytes, s->layer_tex, GL_RGBA32F);
-        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->layer_buf);
-        gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)bytes,
-                          s->h_layer + (size_t)(r0 - b0) * w * 4);
-        resolve_layer(k, s, d, r0, rn);
-    }
-    return 0;
-}
-
-/* keep_keys: order=cpu with rnd_draw.host_after: the stripe's own rows [y0, y0 + n) of its
- * visibility keys (whose buffer starts at row yb) read back into the frame's keys, for
- * soft_after. Returns 0 or SD_E*. */
-static int keep_keys(rnd_kit *k, soft_state *s, const rnd_draw *d, int y0, int n, int yb,
-                     sd_err *err)
-{
-    const gl_api *gl = k->gl;
-    size_t w = (size_t)d->view->width;
-    if (soft_cpu_grow((void **)&s->h_fkeys, &s->h_fkeys_cap, w * (size_t)d->view->height, 4))
-        return sd_errf(err, SD_ENOMEM, "soft: out of memory for a %dx%d frame's keys",
-                       d->view->width, d->view->height);
-    uint64_t have = 0;
-    GLuint kbuf = splat__keys_buffer(s->splat, &have);
-    uint64_t off = (uint64_t)(y0 - yb) * w * 4, bytes = (uint64_t)n * w * 4;
-    if (have < off + bytes)
-        return sd_errf(err, SD_EINVAL, "soft: the visibility keys hold %llu bytes, not the %d "
-                       "rows of the stripe", (unsigned long long)have, n);
-    gl->MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, kbuf);
-    gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, (GLintptr)off, (GLsizeiptr)bytes,
-                         s->h_fkeys + (size_t)y0 * w);
-    return 0;
-}
-
-/* soft_after: order=cpu with rnd_draw.host_after: the discs cpu_project made composited over
- * the read-back frame (soft_cpu.h), tile by tile, tested against the keys keep_keys kept: no
- * layer to upload and no GL pass to put it over the target. Returns 0 or SD_ENOMEM. */
-static int soft_after(rnd_kit *k, void *state, const rnd_draw *d, uint8_t *rgba8, sd_err *err)
-{
-    (void)k;
-    soft_state *s = state;
-    const rnd_view *v = d->view;
-    if (bin_join(s) != 0)
-        return sd_errf(err, SD_ENOMEM, "soft: out of memory binning the soft discs");
-    soft_cpu_job *job = &s->bin_job;
-    job->lambda = d->params->lambda;
-    job->keys = s->after_keys ? s->h_fkeys : NULL, job->kb = 0, job->nk = v->height;
-    job->rgba8 = rgba8;
-    soft_cpu_blend(job);
-    return 0;
+    soft__resolve_layer(k, s, d, y0, n);
 }
 
 /* render: the split (remade when field or t changed), the splat passes over the solid runs,
@@ -1008,7 +734,7 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     soft_state *s = state;
     soft_cloud *sc = d->cloud_data;
     const sp_params *p = d->params;
-    bin_join(s); /* a frame whose soft_after never came (the renderer failed after us) */
+    soft__bin_join(s); /* a frame whose soft__after never came (the renderer failed after us) */
     if (!sc) return sd_errf(err, SD_EINVAL, "soft: the cloud was not attached");
     int lists = p->model != SP_MODEL_EXPRESS, concentric = p->model == SP_MODEL_CONCENTRIC;
     if (lists && sc->nsets != 1)
@@ -1040,15 +766,15 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
      * of up to 64 sets (more take the sprites) */
     int cpu = !lists && draw && !tile && sc->nsets <= 64 &&
               (p->order == SP_ORDER_CPU || (p->order == SP_ORDER_AUTO && k->software));
-    if (cpu && (rc = cpu_project(k, s, d, sc, &o, err)) < 0) return rc;
+    if (cpu && (rc = soft__cpu_project(k, s, d, sc, &o, err)) < 0) return rc;
     /* on an 8-bit frame with no GL pass after ours, the discs go over the read-back pixels
-     * (soft_after) */
+     * (soft__after) */
     int after = cpu && d->host_after && s->nsegs > 0;
-    if (after) { /* binned while the GL makes the keys; soft_after blends */
+    if (after) { /* binned while the GL makes the keys; soft__after blends */
         s->bin_job = (soft_cpu_job){.segs = s->segs, .nsegs = s->nsegs,
                                     .width = d->view->width, .y0 = 0, .rows = d->view->height,
                                     .mem = &s->mem, .threads = s->threads};
-        bin_start(s);
+        soft__bin_start(s);
     }
 
     splat_frame f;
@@ -1085,9 +811,9 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
             } else if (tile) {
                 tile_blend(k, s, d, 1, f.y0, f.n, yb, nb);
             } else if (after) {
-                rc = keep_keys(k, s, d, f.y0, f.n, yb, err);
+                rc = soft__keep_keys(k, s, d, f.y0, f.n, yb, err);
             } else if (cpu) {
-                rc = cpu_blend(k, s, d, 1, f.y0, f.n, yb, nb, err);
+                rc = soft__cpu_blend(k, s, d, 1, f.y0, f.n, yb, nb, err);
             } else if (draw) {
                 rc = draw_soft(k, s, d, sc, &o, 1, f.y0, f.n, yb, nb, err);
             }
@@ -1104,7 +830,7 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     } else if (nstripes == 0 && tile && whole_fits)
         tile_blend(k, s, d, 0, 0, d->view->height, 0, d->view->height);
     else if (nstripes == 0 && cpu && !after)
-        rc = cpu_blend(k, s, d, 0, 0, d->view->height, 0, d->view->height, err);
+        rc = soft__cpu_blend(k, s, d, 0, 0, d->view->height, 0, d->view->height, err);
     else if (nstripes == 0 && draw)
         rc = draw_soft(k, s, d, sc, &o, 0, 0, d->view->height, 0, d->view->height, err);
     int end = splat__frame_end(k, s->splat, err);
@@ -1112,7 +838,7 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
         d->out->after = 1;
         s->after_keys = nstripes > 0;
     } else {
-        bin_join(s); /* no soft_after for this frame */
+        soft__bin_join(s); /* no soft__after for this frame */
     }
     return rc < 0 ? rc : end;
 }
@@ -1127,5 +853,5 @@ const rnd_pipeline pipe_soft = {
     .attach = soft_attach,
     .detach = soft_detach,
     .render = soft_render,
-    .after = soft_after,
+    .after = soft__after,
 };
