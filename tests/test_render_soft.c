@@ -600,7 +600,7 @@ static void test_cpu_bands(void **state)
 }
 
 /* order=cpu on an opaque 8-bit frame with nothing after it in the GL composites the discs over
- * the read-back pixels (pipe_soft.c soft_after: a float tile per thread, put over the frame
+ * the read-back pixels (soft_host.c soft__after: a float tile per thread, put over the frame
  * tile by tile); on a float frame it uploads the layer and the GL puts it over the target. The
  * two must agree: at most 1 level (the 8-bit path rounds the solid colour before the "over",
  * the float one after), in a frame where the soft discs change at least 20 % of the pixels
@@ -631,7 +631,7 @@ static void test_after_matches_layer(void **state)
 }
 
 /* The host "over" with the frame in 3 stripes against 1 (the keys of every stripe kept for
- * soft_after) on a comb: bands of solid points 6 grid rows high, the soft points between them
+ * soft__after) on a comb: bands of solid points 6 grid rows high, the soft points between them
  * 0.03 behind, seen face on, so that each band's edge is a row where the keys change from solid
  * to empty: at most 1 level (float sums added in another order), where keys taken from the
  * wrong rows flip whole rows of soft discs. */

@@ -183,11 +183,11 @@ static void test_nothing(void **state)
     soft_cpu_mem_free(&mem);
 }
 
-/* The same discs over an opaque 8-bit frame (job.rgba8, soft_after's form), binned and blended
- * apart (soft_cpu_bin, then soft_cpu_blend with the keys): each pixel the reference reached
- * must be round(255 L + (1 - a) background) within 1 level (float against double rounding at
- * a half), at most 1 % of them off by 1; alpha and every pixel the discs did not reach
- * unchanged, rows outside the job's included; the same bytes with 1 and 3 threads. */
+/* The same discs over an opaque 8-bit frame (job.rgba8, soft_host.c soft__after's form), binned and
+ * blended apart (soft_cpu_bin, then soft_cpu_blend with the keys): each pixel the reference reached
+ * must be round(255 L + (1 - a) background) within 1 level (float against double rounding at a
+ * half), at most 1 % of them off by 1; alpha and every pixel the discs did not reach unchanged,
+ * rows outside the job's included; the same bytes with 1 and 3 threads. */
 static void test_over_frame(void **state)
 {
     (void)state;

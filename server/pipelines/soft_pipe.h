@@ -49,7 +49,7 @@ typedef struct soft_state {
     uint32_t *h_keys;
     uint32_t *h_fkeys;         /* rnd_draw.host_after: the frame's keys, every stripe's rows */
     size_t h_proj_cap, h_layer_cap, h_keys_cap, h_fkeys_cap;   /* in elements */
-    int after_keys;            /* soft_after: h_fkeys holds keys (else no solid surface) */
+    int after_keys;            /* soft__after: h_fkeys holds keys (else no solid surface) */
     soft_cpu_job bin_job;      /* rnd_draw.host_after: the discs binned on bin_th ... */
     pthread_t bin_th;          /* ... while the splat passes make the keys */
     int bin_on;                /* bin_th runs (or ran) and has not been joined */
