@@ -52,6 +52,7 @@ enum {
     KD_PAD = 32,     /* room past the packed candidates (vector stores, ranking blocks) */
     NSLOTS = 4,      /* cached candidate blocks per scratch */
     MAXLEVEL = PREP_MORTON_BITS,
+    BOUND_BITS = 11, /* the scratch's cache of run bounds: 2^BOUND_BITS entries */
 };
 
 /* The predicted k-th distance is the previous query's times this (measured on the synthetic
@@ -91,8 +92,17 @@ typedef struct cand_set {
     double lo[3], hi[3];     /* block faces; -inf / +inf where the block reaches the grid edge */
 } cand_set;
 
+/* A cached run bound: the first sorted position whose code is >= key (lower_bound over the
+ * whole array), valid while gen is the scratch's (one prep__grid_query call: one grid). */
+typedef struct bound_ent {
+    uint64_t key;
+    uint32_t pos, gen;
+} bound_ent;
+
 struct prep__grid_scratch {
     cand_set set[NSLOTS];
+    bound_ent bound[1 << BOUND_BITS];
+    uint32_t gen;
     uint64_t clock;
     float *d2;               /* candidate distances */
     uint64_t *key;           /* (distance, index) keys, for selections from many candidates */
@@ -311,7 +321,23 @@ typedef struct block {
 
 /* Finds the runs of sorted points in the cells cell +- h (per axis) at level, the block's
  * faces, and the number of points. Cells adjacent in Morton order are merged into one run. */
-static void block_of(const prep__grid *g, uint64_t cell, int level, int h, size_t hint, block *b)
+/* The first sorted position whose code is >= key, from the scratch's cache or searched now
+ * outwards from hint and remembered. The cells of consecutive blocks are mostly the same (a
+ * 3x3x3 block and the next one share 18 of 27), so most bounds are found again: a search
+ * through the codes (cache misses) becomes one hashed lookup. The answer is the whole array's
+ * lower bound; callers pass from <= that (block_of: the previous, smaller key's bound). */
+static size_t bound_of(const prep__grid *g, prep__grid_scratch *s, size_t from, size_t hint,
+                       uint64_t key)
+{
+    bound_ent *e = &s->bound[(key * 0x9E3779B97F4A7C15ull) >> (64 - BOUND_BITS)];
+    if (e->gen == s->gen && e->key == key) return e->pos;
+    size_t p = lower_bound_near(g->codes, from, g->n, hint, key);
+    e->key = key, e->pos = (uint32_t)p, e->gen = s->gen;
+    return p;
+}
+
+static void block_of(const prep__grid *g, prep__grid_scratch *s, uint64_t cell, int level,
+                     int h, size_t hint, block *b)
 {
     uint32_t c[3], a0[3], a1[3];
     prep_morton_decode(cell, &c[0], &c[1], &c[2]);
@@ -339,8 +365,8 @@ static void block_of(const prep__grid *g, uint64_t cell, int level, int h, size_
     for (int i = 0; i < nc;) {
         int j = i;
         while (j + 1 < nc && codes[j + 1] == codes[j] + 1) j++;
-        size_t ra = lower_bound_near(g->codes, from, g->n, hint, codes[i] << sh);
-        size_t rb = lower_bound_near(g->codes, ra, g->n, ra, (codes[j] + 1) << sh);
+        size_t ra = bound_of(g, s, from, hint, codes[i] << sh);
+        size_t rb = bound_of(g, s, ra, ra, (codes[j] + 1) << sh);
         from = rb;
         if (rb > ra) {
             b->ra[b->nr] = ra;
@@ -422,7 +448,7 @@ static cand_set *get_set(const prep__grid *g, prep__grid_scratch *s, uint64_t ce
         if (!cs || !t->valid || (cs->valid && t->stamp < cs->stamp)) cs = t;
     }
     block b;
-    block_of(g, cell, level, h, hint, &b);
+    block_of(g, s, cell, level, h, hint, &b);
     s->cnt.gathers++;
     cs->valid = 0;
     cs->cell = cell;
@@ -904,12 +930,13 @@ static size_t find_leaf(const prep__grid *g, prep__grid_scratch *s, size_t p)
 
 /* The finest level in [lo, hi] whose block (h = 1) around code holds more than k points, or lo
  * when none does; the count only shrinks as levels get finer, so a binary search finds it. */
-static int finest_level(const prep__grid *g, uint64_t code, size_t hint, int lo, int hi, int k)
+static int finest_level(const prep__grid *g, prep__grid_scratch *s, uint64_t code, size_t hint,
+                        int lo, int hi, int k)
 {
     while (lo < hi) {
         int mid = (lo + hi + 1) / 2;
         block b;
-        block_of(g, code >> 3 * (MAXLEVEL - mid), mid, 1, hint, &b);
+        block_of(g, s, code >> 3 * (MAXLEVEL - mid), mid, 1, hint, &b);
         if (b.count > (size_t)k) lo = mid;
         else hi = mid - 1;
     }
@@ -967,7 +994,7 @@ static int query_one(const prep__grid *g, prep__grid_scratch *s, uint32_t qi, in
         if (!cs) return -1;
         if (cs->too_big) {
             s->cnt.dense++;
-            level = finest_level(g, code, sp, level, MAXLEVEL, k);
+            level = finest_level(g, s, code, sp, level, MAXLEVEL, k);
         }
     }
     int found;
@@ -986,7 +1013,7 @@ static int query_one(const prep__grid *g, prep__grid_scratch *s, uint32_t qi, in
             l = level_for(g, sqrt((double)s->hd[k - 1]) * (1 + 1e-5) + 2 * g->eps);
         } else if (level > 0) {
             /* Too few points: the finest coarser level whose block holds enough. */
-            l = finest_level(g, code, sp, 0, level - 1, k);
+            l = finest_level(g, s, code, sp, 0, level - 1, k);
         }
         if (l < level) { level = l; h = 1; }
         else if (h == 1) h = 2; /* float rounding at a cell face: widen in place */
@@ -1008,8 +1035,12 @@ int prep__grid_query(const prep__grid *g, const uint32_t *qidx, size_t first, si
     if (k < 1 || k > 256 || (size_t)k >= g->n)
         return sd_errf(err, SD_EINVAL, "kNN query for k = %d neighbours among %zu points", k,
                        g->n);
-    /* The cached blocks may belong to another grid: start clean. */
+    /* The cached blocks and bounds may belong to another grid: start clean. */
     for (int i = 0; i < NSLOTS; i++) s->set[i].valid = 0;
+    if (++s->gen == 0) { /* wrapped: no entry may look current */
+        memset(s->bound, 0, sizeof s->bound);
+        s->gen = 1;
+    }
     s->leaf = 0;
     s->have_prev = 0;
 
