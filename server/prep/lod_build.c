@@ -130,6 +130,7 @@ typedef struct build {
     uint64_t *tcount;         /* chunk_hist's counters, NQ x 65536 per thread */
     double t_pass;            /* when the normals pass began */
     double tph[7];            /* the normals pass's phases, wall seconds (PH_*) */
+    prep_knn_counters kc;     /* the grid search's work on the chunks' own points */
     struct prefetch *pf;      /* the next chunk's region, loaded while this one computes */
     size_t *order;            /* the chunks, largest first (by_size) */
     void *keep[10];           /* the normals pass's per-chunk arrays, kept across chunks (KB_*) */
@@ -1072,8 +1073,18 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         for (size_t s = 0; s < nown; s++)
             if (!exact[s]) redo[nq++] = (uint32_t)s;
         j.qslot = nq < nown ? redo : NULL, j.first = 0, j.count = nq;
+        prep_knn_counters k0[64];
+        for (int q = 0; q < T; q++) prep_knn_scratch_counters(ks[q], &k0[q]);
         rc = prep_par_for(T, nblocks(nq), nj_query, &j, NULL, err);
         if (rc < 0) goto next;
+        for (int q = 0; q < T; q++) {
+            prep_knn_counters k1;
+            prep_knn_scratch_counters(ks[q], &k1);
+            b->kc.queries += k1.queries - k0[q].queries;
+            b->kc.candidates += k1.candidates - k0[q].candidates;
+            b->kc.gathers += k1.gathers - k0[q].gathers;
+            b->kc.widened += k1.widened - k0[q].widened;
+        }
         phase_end(b, PH_QOWN, &t);
         /* A result is exact when its ball lies in the region; else the region grows to the
          * farthest ball (the computed k-th distance bounds the true one from above). */
@@ -1772,13 +1783,15 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     for (size_t i = 0; i < b->nchunks; i++) retried += b->chunks[i].retried;
     res->halo_retries = b->nchunks ? (double)retried / (double)b->nchunks : 0;
     if (d->status) { /* where the normals pass went, wall seconds */
-        char line[256];
+        char line[384];
         snprintf(line, sizeof line, "lod normals: region loads %.2f s (%.1fM records read, "
                  "%.2f CPU s), indexes %.2f, kNN of the "
-                 "chunks %.2f, ball checks %.2f, kNN of halo neighbours %.2f, normals %.2f, F "
+                 "chunks %.2f (%.0f candidates, %.3f gathers, %.4f widened a query), ball checks %.2f, kNN of halo neighbours %.2f, normals %.2f, F "
                  "%.2f (with the scratch writes)", b->tph[PH_LOAD], (double)b->nread / 1e6, b->load_cpu,
                  b->tph[PH_INDEX],
-                 b->tph[PH_QOWN], b->tph[PH_CHECK], b->tph[PH_QNBR], b->tph[PH_PCA],
+                 b->tph[PH_QOWN], b->kc.queries ? (double)b->kc.candidates / b->kc.queries : 0.0,
+                 b->kc.queries ? (double)b->kc.gathers / b->kc.queries : 0.0,
+                 b->kc.queries ? (double)b->kc.widened / b->kc.queries : 0.0, b->tph[PH_CHECK], b->tph[PH_QNBR], b->tph[PH_PCA],
                  b->tph[PH_F]);
         d->status(d->user, line);
     }
