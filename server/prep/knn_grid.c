@@ -790,9 +790,12 @@ PREP_CLONES static size_t count_le(const uint32_t *kd, size_t c, int v)
 
 /* When more than RANK_MAX candidates passed the filter (a bad guess: the first query of a
  * call, a jump in density), keeps only those within a smaller distance that still holds at
- * least k1 of them, found by bisection on the distance bits (which order like the distances),
+ * least k1 of them, found by a few guesses, then bisection, on the distance bits (which order
+ * like the distances),
  * so the ranking applies. Returns the new count (unchanged when ties at one distance hold
  * more than RANK_MAX: the caller sorts keys then). The k1 smallest are among those kept. */
+enum { NARROW_AIM = 48, NARROW_GUESSES = 4 };
+
 static size_t narrow(uint32_t *kd, uint32_t *kid, size_t c, size_t k1)
 {
     for (size_t j = c; j < ((c + 7) & ~(size_t)7); j++) kd[j] = 0x7fffffffu;
@@ -801,10 +804,24 @@ static size_t narrow(uint32_t *kd, uint32_t *kid, size_t c, size_t k1)
         hi = kd[j] > hi ? kd[j] : hi;
         lo = kd[j] < lo ? kd[j] : lo;
     }
-    /* invariant: count(<= hi) > RANK_MAX and count(< lo) < k1 (at first: none below the least) */
-    while (lo < hi) {
+    /* invariant: count(<= hi) > RANK_MAX and count(< lo) < k1 (at first: none below the least).
+     * The first steps guess where NARROW_AIM of them lie, as if the count grew with the square
+     * of the distance (points on a surface; d is a squared distance: linearly), scaling the last
+     * guess by the count it gave; then bisection. Only the steps differ: any cut that keeps
+     * between k1 and RANK_MAX keeps the k1 smallest pairs. */
+    float g;
+    memcpy(&g, &hi, sizeof g);
+    size_t n = c;
+    for (int step = 0; lo < hi; step++) {
         uint32_t mid = lo + (hi - lo) / 2;
-        size_t n = count_le(kd, c, (int)mid);
+        if (step < NARROW_GUESSES) { /* g: the last cut tried, n: how many it kept */
+            float t = g * ((float)NARROW_AIM / (float)n);
+            uint32_t tb;
+            memcpy(&tb, &t, sizeof tb);
+            if (tb >= lo && tb < hi) mid = tb; /* else (or NaN, inf) bisect */
+        }
+        n = count_le(kd, c, (int)mid);
+        memcpy(&g, &mid, sizeof g);
         if (n < k1) {
             lo = mid + 1;
         } else if (n > RANK_MAX) {
