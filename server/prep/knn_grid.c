@@ -2,7 +2,8 @@
  *
  * Build: the points are sorted by 63-bit Morton code (morton.c), and the octree is split into
  * leaves of at most leaf_size points (a leaf is a cell at some level 0..21; the points of any
- * cell are one run of the sorted array, found by (galloping) binary search on the codes).
+ * cell are one run of the sorted array, found by (galloping) binary search on the codes; a
+ * query scratch remembers the run bounds it found, since consecutive blocks share most cells).
  *
  * Query for point q (queries are issued in Morton order, so consecutive ones are neighbours):
  *  1. pick a level: the finest whose cells are at least r wide, r = the previous query's k-th
@@ -13,9 +14,11 @@
  *     are exact if the k-th distance is below the distance from q to the block's boundary:
  *     every point outside the block is at least that far. A block face at the grid's edge has
  *     nothing beyond it and does not count;
- *  4. otherwise the k-th distance found bounds the true one, and the block of cells that wide
- *     settles it in one more step (with too few candidates: the finest coarser level whose
- *     block holds k + 1 points). Level 0 is the whole cloud, so every search ends exact.
+ *  4. otherwise the k-th distance found bounds the true one, and a block reaching that far
+ *     settles it in one more step: two cells each way of the level below the one whose cells
+ *     are that wide (2.5 such cells across instead of 3; with too few candidates: the finest
+ *     coarser level whose block holds k + 1 points). Level 0 is the whole cloud, so every
+ *     search ends exact.
  * Selection computes all candidate distances eight (AVX-512: sixteen) at a time and, in the
  * same pass, left-packs those within the previous k-th distance (times a little) into a short
  * list (AVX2: one compare, one table lookup and two permutes per 8 candidates; AVX-512: one
