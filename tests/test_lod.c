@@ -612,6 +612,56 @@ static void test_ply_bounds_blocks(void **state)
     tu_rm_rf(dir);
 }
 
+/* The PLY layouts lod_src decodes two ways: float coordinates with byte colours by plain loads
+ * (with an alpha byte, and without colours), any other by per-field conversion (double
+ * coordinates, 16-bit colours). Each file holds gen_cloud's scene (alpha i % 251, a few rows
+ * non-finite) and streams exactly pc_load's points, colours and drops (stream_equals_load). */
+static void test_ply_layouts(void **state)
+{
+    (void)state;
+    char dir[512], ply[700], path[800];
+    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    gen(dir, 20000, ply, sizeof ply);
+    pc_cloud g;
+    sd_err err = {0};
+    if (pc_load(ply, &g, &err) != 0) fail_msg("%s", err.msg);
+    static const struct { const char *xyz, *col; int ncol; } lay[] = {
+        {"float", "uchar", 4}, {"float", NULL, 0}, {"double", "uchar", 3}, {"float", "ushort", 3}};
+    static const char *const cn[4] = {"red", "green", "blue", "alpha"};
+    for (int l = 0; l < 4; l++) {
+        snprintf(path, sizeof path, "%s/layout%d.ply", dir, l);
+        FILE *f = fopen(path, "wb");
+        assert_non_null(f);
+        fprintf(f, "ply\nformat binary_little_endian 1.0\nelement vertex %zu\n", g.n);
+        for (int a = 0; a < 3; a++) fprintf(f, "property %s %c\n", lay[l].xyz, "xyz"[a]);
+        for (int c = 0; c < lay[l].ncol; c++) fprintf(f, "property %s %s\n", lay[l].col, cn[c]);
+        fprintf(f, "end_header\n");
+        for (size_t i = 0; i < g.n; i++) {
+            for (int a = 0; a < 3; a++) {
+                double v = (double)g.pos[3 * i + a] + g.offset[a];
+                if (i % 997 == 5 && a == (int)(i % 3)) v = i % 2 ? NAN : -INFINITY; /* dropped */
+                if (!strcmp(lay[l].xyz, "float")) {
+                    float x = (float)v;
+                    assert_int_equal(fwrite(&x, 4, 1, f), 1);
+                } else {
+                    assert_int_equal(fwrite(&v, 8, 1, f), 1);
+                }
+            }
+            for (int c = 0; c < lay[l].ncol; c++) {
+                uint8_t b = c < 3 ? g.rgba[4 * i + c] : (uint8_t)(i % 251);
+                uint16_t w = (uint16_t)(b * 257);
+                if (!strcmp(lay[l].col, "uchar")) assert_int_equal(fwrite(&b, 1, 1, f), 1);
+                else assert_int_equal(fwrite(&w, 2, 1, f), 1);
+            }
+        }
+        fclose(f);
+        uint64_t got = stream_equals_load(path);
+        assert_true(got < g.n && got > g.n - g.n / 900);
+    }
+    pc_cloud_free(&g);
+    tu_rm_rf(dir);
+}
+
 /* gen_cloud's scene as a PCD file: binary (packed rgb) or ascii */
 static void write_pcd(const char *dir, const char *name, int ascii, char *out, size_t len)
 {
@@ -1327,6 +1377,7 @@ int main(void)
         cmocka_unit_test(test_text_streamed),
         cmocka_unit_test(test_pcd_streamed),
         cmocka_unit_test(test_ply_bounds_blocks),
+        cmocka_unit_test(test_ply_layouts),
         cmocka_unit_test(test_stream_file_shrinks),
         cmocka_unit_test(test_kill9_never_leaves_a_loadable_cache),
         cmocka_unit_test(test_daemon_progressive),

@@ -518,6 +518,72 @@ static void test_knn_paths_exact(void **state)
     pc_cloud_free(&c);
 }
 
+/* One query scratch over several grids in turn (the LOD build queries each region's grid with
+ * the same scratches): the blocks and run bounds a scratch keeps from one grid must not answer
+ * for the next. Two clouds in one Morton frame (the same cell codes, different points: the
+ * second holds every third point of the first, shifted), each queried in Morton order with
+ * one scratch, alternately, against the float brute force. */
+static void test_knn_scratch_across_grids(void **state)
+{
+    (void)state;
+    enum { N = 3000, K = 16 };
+    float *a = malloc(3 * N * sizeof *a), *b = malloc(3 * N * sizeof *b);
+    assert_non_null(a); assert_non_null(b);
+    rng r = {91};
+    for (size_t i = 0; i < N; i++) { /* a wavy surface: blocks shared by many queries */
+        a[3 * i] = (float)uni(&r) * 8; a[3 * i + 1] = (float)uni(&r) * 8;
+        a[3 * i + 2] = 0.5f * sinf(a[3 * i]) + 0.01f * (float)uni(&r);
+    }
+    size_t nb = 0;
+    for (size_t i = 0; i < N; i += 3, nb++)
+        for (int x = 0; x < 3; x++) b[3 * nb + x] = a[3 * i + x] + (x == 2 ? 0.05f : 0.0f);
+    prep_morton_frame f;
+    float box[6] = {0, 0, -1, 8, 8, 1};
+    prep_morton_frame_of(box, 2, &f);
+    float *cl[2] = {a, b}, *sorted[2];
+    uint64_t *codes[2];
+    size_t n[2] = {N, nb};
+    sd_err err = {0};
+    for (int c = 0; c < 2; c++) {
+        uint32_t *perm = malloc(n[c] * sizeof *perm);
+        codes[c] = malloc(n[c] * sizeof *codes[c]);
+        sorted[c] = malloc(3 * n[c] * sizeof *sorted[c]);
+        assert_non_null(perm); assert_non_null(codes[c]); assert_non_null(sorted[c]);
+        assert_int_equal(prep_morton_sort(cl[c], n[c], &f, codes[c], perm, &err), 0);
+        for (size_t i = 0; i < n[c]; i++) memcpy(sorted[c] + 3 * i, cl[c] + 3 * (size_t)perm[i], 12);
+        free(perm);
+    }
+    prep_knn *kn[2] = {NULL, NULL};
+    for (int c = 0; c < 2; c++) {
+        prep_knn_opts o = {.method = PREP_KNN_GRID, .frame = &f, .codes = codes[c]};
+        assert_int_equal(prep_knn_build(sorted[c], n[c], &o, &kn[c], &err), 0);
+    }
+    prep_knn_scratch *s = prep_knn_scratch_new();
+    uint32_t *idx = malloc(N * K * sizeof *idx), wi[K];
+    float *d2 = malloc(N * K * sizeof *d2), wd[K];
+    assert_non_null(s); assert_non_null(idx); assert_non_null(d2);
+    static const int seq[5] = {0, 1, 0, 1, 1};
+    for (int t = 0; t < 5; t++) {
+        int c = seq[t];
+        if (prep_knn_query(kn[c], NULL, 0, n[c], K, idx, d2, s, &err) != 0) fail_msg("%s", err.msg);
+        for (size_t i = 0; i < n[c]; i++) {
+            brute_knn_exact(sorted[c], n[c], i, K, wd, wi);
+            for (int j = 0; j < K; j++)
+                if (idx[i * K + j] != wi[j] || memcmp(&d2[i * K + j], &wd[j], 4) != 0)
+                    fail_msg("call %d (cloud %d): query %zu neighbour %d: %u at %.9g, brute "
+                             "force %u at %.9g", t, c, i, j, idx[i * K + j], d2[i * K + j],
+                             wi[j], wd[j]);
+        }
+    }
+    prep_knn_scratch_free(s);
+    for (int c = 0; c < 2; c++) {
+        prep_knn_free(kn[c]);
+        free(codes[c]);
+        free(sorted[c]);
+    }
+    free(idx); free(d2); free(a); free(b);
+}
+
 static void test_knn_bad_args(void **state)
 {
     (void)state;
@@ -1399,6 +1465,7 @@ int main(void)
         cmocka_unit_test(test_knn_bad_args),
         cmocka_unit_test(test_knn_hard_cases),
         cmocka_unit_test(test_knn_paths_exact),
+        cmocka_unit_test(test_knn_scratch_across_grids),
         cmocka_unit_test(test_knn_real_scan),
         cmocka_unit_test(test_knn_real_scan_guanyin),
         cmocka_unit_test(test_normals_plane),

@@ -2,7 +2,8 @@
  *
  * Build: the points are sorted by 63-bit Morton code (morton.c), and the octree is split into
  * leaves of at most leaf_size points (a leaf is a cell at some level 0..21; the points of any
- * cell are one run of the sorted array, found by (galloping) binary search on the codes).
+ * cell are one run of the sorted array, found by (galloping) binary search on the codes; a
+ * query scratch remembers the run bounds it found, since consecutive blocks share most cells).
  *
  * Query for point q (queries are issued in Morton order, so consecutive ones are neighbours):
  *  1. pick a level: the finest whose cells are at least r wide, r = the previous query's k-th
@@ -13,9 +14,11 @@
  *     are exact if the k-th distance is below the distance from q to the block's boundary:
  *     every point outside the block is at least that far. A block face at the grid's edge has
  *     nothing beyond it and does not count;
- *  4. otherwise the k-th distance found bounds the true one, and the block of cells that wide
- *     settles it in one more step (with too few candidates: the finest coarser level whose
- *     block holds k + 1 points). Level 0 is the whole cloud, so every search ends exact.
+ *  4. otherwise the k-th distance found bounds the true one, and a block reaching that far
+ *     settles it in one more step: two cells each way of the level below the one whose cells
+ *     are that wide (2.5 such cells across instead of 3; with too few candidates: the finest
+ *     coarser level whose block holds k + 1 points). Level 0 is the whole cloud, so every
+ *     search ends exact.
  * Selection computes all candidate distances eight (AVX-512: sixteen) at a time and, in the
  * same pass, left-packs those within the previous k-th distance (times a little) into a short
  * list (AVX2: one compare, one table lookup and two permutes per 8 candidates; AVX-512: one
@@ -52,6 +55,7 @@ enum {
     KD_PAD = 32,     /* room past the packed candidates (vector stores, ranking blocks) */
     NSLOTS = 4,      /* cached candidate blocks per scratch */
     MAXLEVEL = PREP_MORTON_BITS,
+    BOUND_BITS = 11, /* the scratch's cache of run bounds: 2^BOUND_BITS entries */
 };
 
 /* The predicted k-th distance is the previous query's times this (measured on the synthetic
@@ -91,8 +95,17 @@ typedef struct cand_set {
     double lo[3], hi[3];     /* block faces; -inf / +inf where the block reaches the grid edge */
 } cand_set;
 
+/* A cached run bound: the first sorted position whose code is >= key (lower_bound over the
+ * whole array), valid while gen is the scratch's (one prep__grid_query call: one grid). */
+typedef struct bound_ent {
+    uint64_t key;
+    uint32_t pos, gen;
+} bound_ent;
+
 struct prep__grid_scratch {
     cand_set set[NSLOTS];
+    bound_ent bound[1 << BOUND_BITS];
+    uint32_t gen;
     uint64_t clock;
     float *d2;               /* candidate distances */
     uint64_t *key;           /* (distance, index) keys, for selections from many candidates */
@@ -311,7 +324,23 @@ typedef struct block {
 
 /* Finds the runs of sorted points in the cells cell +- h (per axis) at level, the block's
  * faces, and the number of points. Cells adjacent in Morton order are merged into one run. */
-static void block_of(const prep__grid *g, uint64_t cell, int level, int h, size_t hint, block *b)
+/* The first sorted position whose code is >= key, from the scratch's cache or searched now
+ * outwards from hint and remembered. The cells of consecutive blocks are mostly the same (a
+ * 3x3x3 block and the next one share 18 of 27), so most bounds are found again: a search
+ * through the codes (cache misses) becomes one hashed lookup. The answer is the whole array's
+ * lower bound; callers pass from <= that (block_of: the previous, smaller key's bound). */
+static size_t bound_of(const prep__grid *g, prep__grid_scratch *s, size_t from, size_t hint,
+                       uint64_t key)
+{
+    bound_ent *e = &s->bound[(key * 0x9E3779B97F4A7C15ull) >> (64 - BOUND_BITS)];
+    if (e->gen == s->gen && e->key == key) return e->pos;
+    size_t p = lower_bound_near(g->codes, from, g->n, hint, key);
+    e->key = key, e->pos = (uint32_t)p, e->gen = s->gen;
+    return p;
+}
+
+static void block_of(const prep__grid *g, prep__grid_scratch *s, uint64_t cell, int level,
+                     int h, size_t hint, block *b)
 {
     uint32_t c[3], a0[3], a1[3];
     prep_morton_decode(cell, &c[0], &c[1], &c[2]);
@@ -339,8 +368,8 @@ static void block_of(const prep__grid *g, uint64_t cell, int level, int h, size_
     for (int i = 0; i < nc;) {
         int j = i;
         while (j + 1 < nc && codes[j + 1] == codes[j] + 1) j++;
-        size_t ra = lower_bound_near(g->codes, from, g->n, hint, codes[i] << sh);
-        size_t rb = lower_bound_near(g->codes, ra, g->n, ra, (codes[j] + 1) << sh);
+        size_t ra = bound_of(g, s, from, hint, codes[i] << sh);
+        size_t rb = bound_of(g, s, ra, ra, (codes[j] + 1) << sh);
         from = rb;
         if (rb > ra) {
             b->ra[b->nr] = ra;
@@ -422,7 +451,7 @@ static cand_set *get_set(const prep__grid *g, prep__grid_scratch *s, uint64_t ce
         if (!cs || !t->valid || (cs->valid && t->stamp < cs->stamp)) cs = t;
     }
     block b;
-    block_of(g, cell, level, h, hint, &b);
+    block_of(g, s, cell, level, h, hint, &b);
     s->cnt.gathers++;
     cs->valid = 0;
     cs->cell = cell;
@@ -764,9 +793,12 @@ PREP_CLONES static size_t count_le(const uint32_t *kd, size_t c, int v)
 
 /* When more than RANK_MAX candidates passed the filter (a bad guess: the first query of a
  * call, a jump in density), keeps only those within a smaller distance that still holds at
- * least k1 of them, found by bisection on the distance bits (which order like the distances),
+ * least k1 of them, found by a few guesses, then bisection, on the distance bits (which order
+ * like the distances),
  * so the ranking applies. Returns the new count (unchanged when ties at one distance hold
  * more than RANK_MAX: the caller sorts keys then). The k1 smallest are among those kept. */
+enum { NARROW_AIM = 48, NARROW_GUESSES = 4 };
+
 static size_t narrow(uint32_t *kd, uint32_t *kid, size_t c, size_t k1)
 {
     for (size_t j = c; j < ((c + 7) & ~(size_t)7); j++) kd[j] = 0x7fffffffu;
@@ -775,10 +807,24 @@ static size_t narrow(uint32_t *kd, uint32_t *kid, size_t c, size_t k1)
         hi = kd[j] > hi ? kd[j] : hi;
         lo = kd[j] < lo ? kd[j] : lo;
     }
-    /* invariant: count(<= hi) > RANK_MAX and count(< lo) < k1 (at first: none below the least) */
-    while (lo < hi) {
+    /* invariant: count(<= hi) > RANK_MAX and count(< lo) < k1 (at first: none below the least).
+     * The first steps guess where NARROW_AIM of them lie, as if the count grew with the square
+     * of the distance (points on a surface; d is a squared distance: linearly), scaling the last
+     * guess by the count it gave; then bisection. Only the steps differ: any cut that keeps
+     * between k1 and RANK_MAX keeps the k1 smallest pairs. */
+    float g;
+    memcpy(&g, &hi, sizeof g);
+    size_t n = c;
+    for (int step = 0; lo < hi; step++) {
         uint32_t mid = lo + (hi - lo) / 2;
-        size_t n = count_le(kd, c, (int)mid);
+        if (step < NARROW_GUESSES) { /* g: the last cut tried, n: how many it kept */
+            float t = g * ((float)NARROW_AIM / (float)n);
+            uint32_t tb;
+            memcpy(&tb, &t, sizeof tb);
+            if (tb >= lo && tb < hi) mid = tb; /* else (or NaN, inf) bisect */
+        }
+        n = count_le(kd, c, (int)mid);
+        memcpy(&g, &mid, sizeof g);
         if (n < k1) {
             lo = mid + 1;
         } else if (n > RANK_MAX) {
@@ -904,12 +950,13 @@ static size_t find_leaf(const prep__grid *g, prep__grid_scratch *s, size_t p)
 
 /* The finest level in [lo, hi] whose block (h = 1) around code holds more than k points, or lo
  * when none does; the count only shrinks as levels get finer, so a binary search finds it. */
-static int finest_level(const prep__grid *g, uint64_t code, size_t hint, int lo, int hi, int k)
+static int finest_level(const prep__grid *g, prep__grid_scratch *s, uint64_t code, size_t hint,
+                        int lo, int hi, int k)
 {
     while (lo < hi) {
         int mid = (lo + hi + 1) / 2;
         block b;
-        block_of(g, code >> 3 * (MAXLEVEL - mid), mid, 1, hint, &b);
+        block_of(g, s, code >> 3 * (MAXLEVEL - mid), mid, 1, hint, &b);
         if (b.count > (size_t)k) lo = mid;
         else hi = mid - 1;
     }
@@ -967,7 +1014,7 @@ static int query_one(const prep__grid *g, prep__grid_scratch *s, uint32_t qi, in
         if (!cs) return -1;
         if (cs->too_big) {
             s->cnt.dense++;
-            level = finest_level(g, code, sp, level, MAXLEVEL, k);
+            level = finest_level(g, s, code, sp, level, MAXLEVEL, k);
         }
     }
     int found;
@@ -984,9 +1031,18 @@ static int query_one(const prep__grid *g, prep__grid_scratch *s, uint32_t qi, in
             /* The k-th distance found bounds the true one, so a block of cells that wide
              * settles it in one step. */
             l = level_for(g, sqrt((double)s->hd[k - 1]) * (1 + 1e-5) + 2 * g->eps);
+            /* Two cells of the next finer level reach as far as one of l: that block is 2.5
+             * cells of l wide instead of 3 (0.58 of the volume; widened blocks are a query's
+             * own, mostly sparse points beside dense ones). When it does not settle it
+             * (rounding at a face), the block of l follows. */
+            if (l < MAXLEVEL && (l + 1 < level || (l + 1 == level && h == 1))) {
+                level = l + 1;
+                h = 2;
+                continue;
+            }
         } else if (level > 0) {
             /* Too few points: the finest coarser level whose block holds enough. */
-            l = finest_level(g, code, sp, 0, level - 1, k);
+            l = finest_level(g, s, code, sp, 0, level - 1, k);
         }
         if (l < level) { level = l; h = 1; }
         else if (h == 1) h = 2; /* float rounding at a cell face: widen in place */
@@ -1008,8 +1064,12 @@ int prep__grid_query(const prep__grid *g, const uint32_t *qidx, size_t first, si
     if (k < 1 || k > 256 || (size_t)k >= g->n)
         return sd_errf(err, SD_EINVAL, "kNN query for k = %d neighbours among %zu points", k,
                        g->n);
-    /* The cached blocks may belong to another grid: start clean. */
+    /* The cached blocks and bounds may belong to another grid: start clean. */
     for (int i = 0; i < NSLOTS; i++) s->set[i].valid = 0;
+    if (++s->gen == 0) { /* wrapped: no entry may look current */
+        memset(s->bound, 0, sizeof s->bound);
+        s->gen = 1;
+    }
     s->leaf = 0;
     s->have_prev = 0;
 

@@ -66,6 +66,8 @@
 #include "sd_hash.h"
 
 enum { COUNT_DEPTH_MAX = 7, BLOCK = 1 << 16, NQ = 7 };
+enum { KB_NBR, KB_KD2, KB_NN2, KB_EXACT, KB_REDO, KB_SLOT, KB_LIST, KB_R20, KB_NRM, KB_SVAR,
+       KB_KNOWN, KB_N };
 #define BYTES_PER_CHUNK_POINT 400u /* the normals pass of one chunk (with its halo) */
 
 /* The scratch records are as small as they can be (at 100M points they go through the page
@@ -130,10 +132,11 @@ typedef struct build {
     uint64_t *tcount;         /* chunk_hist's counters, NQ x 65536 per thread */
     double t_pass;            /* when the normals pass began */
     double tph[7];            /* the normals pass's phases, wall seconds (PH_*) */
+    prep_knn_counters kc;     /* the grid search's work on the chunks' own points */
     struct prefetch *pf;      /* the next chunk's region, loaded while this one computes */
     size_t *order;            /* the chunks, largest first (by_size) */
-    void *keep[10];           /* the normals pass's per-chunk arrays, kept across chunks (KB_*) */
-    size_t keepcap[10];
+    void *keep[KB_N];         /* the normals pass's per-chunk arrays, kept across chunks (KB_*) */
+    size_t keepcap[KB_N];
     pthread_mutex_t mu;
     nodeent *nodes;
     size_t nnodes, capnodes;
@@ -768,6 +771,7 @@ typedef struct njob {
     const uint32_t *qslot;    /* nj_query: the slots to query (NULL: first..first+count) */
     size_t first, count;      /* the step's range of S (or of qslot) */
     int fd_out;               /* the chunk's records go here, each block by its thread */
+    size_t nu, ns;            /* nj_pca_known: slots [nu, ns) are read (read_known) */
     double vp[3];
 } njob;
 
@@ -952,8 +956,15 @@ static int read_known(build *b, const region *r, njob *j, size_t nu, size_t ns, 
     return 0;
 }
 
+/* Block 0: the known halo neighbours' normals and radii (read_known, serial: its reads overlap
+ * the normals of the others); blocks 1..: nj_pca's blocks 0... They fill disjoint slots. */
+static int nj_pca_known(void *ctx, size_t blk, int tid, sd_err *err)
+{
+    njob *j = ctx;
+    return blk == 0 ? read_known(j->b, j->r, j, j->nu, j->ns, err) : nj_pca(ctx, blk - 1, tid, err);
+}
+
 enum { PH_LOAD, PH_INDEX, PH_QOWN, PH_CHECK, PH_QNBR, PH_PCA, PH_F, PH_N };
-enum { KB_NBR, KB_KD2, KB_NN2, KB_EXACT, KB_REDO, KB_SLOT, KB_LIST, KB_R20, KB_NRM, KB_SVAR };
 
 /* One of the normals pass's arrays, at least bytes long, its contents kept when it grows. The
  * arrays live across chunks (grown, never shrunk): each chunk reuses the pages the previous
@@ -1072,8 +1083,18 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         for (size_t s = 0; s < nown; s++)
             if (!exact[s]) redo[nq++] = (uint32_t)s;
         j.qslot = nq < nown ? redo : NULL, j.first = 0, j.count = nq;
+        prep_knn_counters k0[64];
+        for (int q = 0; q < T; q++) prep_knn_scratch_counters(ks[q], &k0[q]);
         rc = prep_par_for(T, nblocks(nq), nj_query, &j, NULL, err);
         if (rc < 0) goto next;
+        for (int q = 0; q < T; q++) {
+            prep_knn_counters k1;
+            prep_knn_scratch_counters(ks[q], &k1);
+            b->kc.queries += k1.queries - k0[q].queries;
+            b->kc.candidates += k1.candidates - k0[q].candidates;
+            b->kc.gathers += k1.gathers - k0[q].gathers;
+            b->kc.widened += k1.widened - k0[q].widened;
+        }
         phase_end(b, PH_QOWN, &t);
         /* A result is exact when its ball lies in the region; else the region grows to the
          * farthest ball (the computed k-th distance bounds the true one from above). */
@@ -1101,12 +1122,17 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         if (rc == 0 && bad == 0) {
             for (size_t i = 0; i < nb; i++)
                 for (size_t q = 0; q < cj.blk[i].n; q++) j.slot[cj.blk[i].x[q]] = -2;
-            for (int known = 0; known < 2; known++) {
-                for (size_t i = 0; i < m; i++)
-                    if (j.slot[i] == -2 && (r.chk[i] < ci) == known)
-                        j.slot[i] = (int32_t)ns, j.list[ns++] = (uint32_t)i;
-                if (!known) nu = ns;
-            }
+            /* one scan: the others take their slots, the known ones wait in kl */
+            uint32_t *kl = keep_buf(b, KB_KNOWN, m * sizeof *kl);
+            if (!kl) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory");
+            size_t nk = 0;
+            for (size_t i = 0; kl && i < m; i++)
+                if (j.slot[i] == -2) {
+                    if (r.chk[i] < ci) kl[nk++] = (uint32_t)i;
+                    else j.slot[i] = (int32_t)ns, j.list[ns++] = (uint32_t)i;
+                }
+            nu = ns;
+            for (size_t q = 0; q < nk; q++) j.slot[kl[q]] = (int32_t)ns, j.list[ns++] = kl[q];
         }
         for (size_t i = 0; i < nb; i++) free(cj.blk[i].x);
         free(cj.blk);
@@ -1128,8 +1154,8 @@ static int chunk_normals(void *ctx, size_t ci, int tid_unused, sd_err *err)
         j.svar = keep_buf(b, KB_SVAR, ns * 4);
         if (!j.r20 || !j.nrm || !j.svar) { rc = sd_errf(err, SD_ENOMEM, "lod: out of memory"); goto next; }
         j.first = 0, j.count = nu;
-        rc = prep_par_for(T, nblocks(nu), nj_pca, &j, NULL, err);
-        if (rc == 0) rc = read_known(b, &r, &j, nu, ns, err);
+        j.nu = nu, j.ns = ns;
+        rc = prep_par_for(T, 1 + nblocks(nu), nj_pca_known, &j, NULL, err);
         if (rc < 0) goto next;
         phase_end(b, PH_PCA, &t);
         j.count = nown, j.fd_out = c->fd_a;
@@ -1755,7 +1781,7 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     b->rpool = calloc(RPOOL, sizeof *b->rpool); /* NULL: every region has its own arrays */
     rc = prep_par_for(1, b->nchunks, chunk_normals, b, &pr, err); /* each chunk on every thread */
     b->pf = NULL;
-    for (int i = 0; i < 10; i++) { /* the normals pass's arrays: not needed after it */
+    for (int i = 0; i < KB_N; i++) { /* the normals pass's arrays: not needed after it */
         free(b->keep[i]);
         b->keep[i] = NULL;
         b->keepcap[i] = 0;
@@ -1772,13 +1798,15 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     for (size_t i = 0; i < b->nchunks; i++) retried += b->chunks[i].retried;
     res->halo_retries = b->nchunks ? (double)retried / (double)b->nchunks : 0;
     if (d->status) { /* where the normals pass went, wall seconds */
-        char line[256];
+        char line[384];
         snprintf(line, sizeof line, "lod normals: region loads %.2f s (%.1fM records read, "
                  "%.2f CPU s), indexes %.2f, kNN of the "
-                 "chunks %.2f, ball checks %.2f, kNN of halo neighbours %.2f, normals %.2f, F "
+                 "chunks %.2f (%.0f candidates, %.3f gathers, %.4f widened a query), ball checks %.2f, kNN of halo neighbours %.2f, normals %.2f, F "
                  "%.2f (with the scratch writes)", b->tph[PH_LOAD], (double)b->nread / 1e6, b->load_cpu,
                  b->tph[PH_INDEX],
-                 b->tph[PH_QOWN], b->tph[PH_CHECK], b->tph[PH_QNBR], b->tph[PH_PCA],
+                 b->tph[PH_QOWN], b->kc.queries ? (double)b->kc.candidates / b->kc.queries : 0.0,
+                 b->kc.queries ? (double)b->kc.gathers / b->kc.queries : 0.0,
+                 b->kc.queries ? (double)b->kc.widened / b->kc.queries : 0.0, b->tph[PH_CHECK], b->tph[PH_QNBR], b->tph[PH_PCA],
                  b->tph[PH_F]);
         d->status(d->user, line);
     }
@@ -1919,7 +1947,7 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     for (int q = 0; q <= NQ; q++) free(b.qs[q].lo);
     free(b.nodes);
     free(b.up);
-    for (int i = 0; i < 10; i++) free(b.keep[i]);
+    for (int i = 0; i < KB_N; i++) free(b.keep[i]);
     pthread_mutex_destroy(&b.mu);
     if (rc < 0) return rc;
     char why[256];

@@ -169,6 +169,45 @@ static void record_xyz(const lod_src *s, const uint8_t *p, double xyz[3])
     for (int a = 0; a < 3; a++) xyz[a] = load(p + s->off[a], s->type[a]);
 }
 
+/* 1 when x, y, z are floats and the colours (where present) bytes: the layout gen_cloud and
+ * most tools write, decoded by plain loads (ply_block_f32) instead of per-field conversions. */
+static int layout_f32_u8(const lod_src *s)
+{
+    for (int a = 0; a < 3; a++)
+        if (s->type[a] != T_F32) return 0;
+    for (int c = 3; c < 7; c++)
+        if (s->off[c] >= 0 && s->type[c] != T_U8) return 0;
+    return 1;
+}
+
+/* The m records of buf in that layout into pos / rgba, the finite ones only, with the values
+ * record_xyz and record_rgba give (a float widened to double is exact; a byte's colour8 is the
+ * byte itself): the count of points. */
+static size_t ply_block_f32(const lod_src *s, const uint8_t *buf, size_t m, float *pos,
+                            uint32_t *rgba)
+{
+    const size_t rec = s->rec;
+    const int ox = s->off[0], oy = s->off[1], oz = s->off[2];
+    const int rgb = s->off[3] >= 0 && s->off[4] >= 0 && s->off[5] >= 0, oa = s->off[6];
+    const double o0 = s->info.offset[0], o1 = s->info.offset[1], o2 = s->info.offset[2];
+    size_t k = 0;
+    for (size_t i = 0; i < m; i++) {
+        const uint8_t *p = buf + i * rec;
+        float x, y, z;
+        memcpy(&x, p + ox, 4);
+        memcpy(&y, p + oy, 4);
+        memcpy(&z, p + oz, 4);
+        if (!isfinite(x) || !isfinite(y) || !isfinite(z)) continue;
+        pos[3 * k] = (float)((double)x - o0);
+        pos[3 * k + 1] = (float)((double)y - o1);
+        pos[3 * k + 2] = (float)((double)z - o2);
+        rgba[k++] = !rgb ? 0xFFFFFFFFu
+                         : (uint32_t)p[s->off[3]] | (uint32_t)p[s->off[4]] << 8 |
+                               (uint32_t)p[s->off[5]] << 16 | (uint32_t)(oa >= 0 ? p[oa] : 255) << 24;
+    }
+    return k;
+}
+
 static uint32_t record_rgba(const lod_src *s, const uint8_t *p)
 {
     if (s->off[3] < 0 || s->off[4] < 0 || s->off[5] < 0) return 0xFFFFFFFFu;
@@ -222,9 +261,19 @@ static int bounds_block(void *ctx, size_t c, int tid, sd_err *err)
     double *lo = j->lo + 3 * c, *hi = j->hi + 3 * c;
     uint64_t kept = 0;
     for (int a = 0; a < 3; a++) lo[a] = INFINITY, hi[a] = -INFINITY;
+    const int f32 = layout_f32_u8(s);
     for (size_t i = 0; i < m; i++) {
         double p[3];
-        record_xyz(s, j->buf[tid] + i * s->rec, p);
+        const uint8_t *rp = j->buf[tid] + i * s->rec;
+        if (f32) { /* record_xyz's values, by plain loads */
+            for (int a = 0; a < 3; a++) {
+                float v;
+                memcpy(&v, rp + s->off[a], 4);
+                p[a] = v;
+            }
+        } else {
+            record_xyz(s, rp, p);
+        }
         if (!isfinite(p[0]) || !isfinite(p[1]) || !isfinite(p[2])) continue;
         kept++;
         for (int a = 0; a < 3; a++) {
@@ -518,6 +567,11 @@ int64_t lod_src_next(lod_src *s, float *pos, uint32_t *rgba, size_t max, sd_err 
         size_t m = s->nrec - s->next < want ? (size_t)(s->nrec - s->next) : want;
         int rc = read_records(s, s->next, m, err);
         if (rc < 0) return rc;
+        if (layout_f32_u8(s)) {
+            k += ply_block_f32(s, s->buf, m, pos + 3 * k, rgba + k);
+            s->next += m;
+            continue;
+        }
         for (size_t i = 0; i < m; i++) {
             const uint8_t *p = s->buf + i * s->rec;
             double x[3];
