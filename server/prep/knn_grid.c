@@ -322,8 +322,6 @@ typedef struct block {
     double lo[3], hi[3];
 } block;
 
-/* Finds the runs of sorted points in the cells cell +- h (per axis) at level, the block's
- * faces, and the number of points. Cells adjacent in Morton order are merged into one run. */
 /* The first sorted position whose code is >= key, from the scratch's cache or searched now
  * outwards from hint and remembered. The cells of consecutive blocks are mostly the same (a
  * 3x3x3 block and the next one share 18 of 27), so most bounds are found again: a search
@@ -339,6 +337,8 @@ static size_t bound_of(const prep__grid *g, prep__grid_scratch *s, size_t from, 
     return p;
 }
 
+/* Finds the runs of sorted points in the cells cell +- h (per axis) at level, the block's
+ * faces, and the number of points. Cells adjacent in Morton order are merged into one run. */
 static void block_of(const prep__grid *g, prep__grid_scratch *s, uint64_t cell, int level,
                      int h, size_t hint, block *b)
 {

@@ -1799,14 +1799,15 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     res->halo_retries = b->nchunks ? (double)retried / (double)b->nchunks : 0;
     if (d->status) { /* where the normals pass went, wall seconds */
         char line[384];
-        snprintf(line, sizeof line, "lod normals: region loads %.2f s (%.1fM records read, "
-                 "%.2f CPU s), indexes %.2f, kNN of the "
-                 "chunks %.2f (%.0f candidates, %.3f gathers, %.4f widened a query), ball checks %.2f, kNN of halo neighbours %.2f, normals %.2f, F "
-                 "%.2f (with the scratch writes)", b->tph[PH_LOAD], (double)b->nread / 1e6, b->load_cpu,
-                 b->tph[PH_INDEX],
-                 b->tph[PH_QOWN], b->kc.queries ? (double)b->kc.candidates / b->kc.queries : 0.0,
-                 b->kc.queries ? (double)b->kc.gathers / b->kc.queries : 0.0,
-                 b->kc.queries ? (double)b->kc.widened / b->kc.queries : 0.0, b->tph[PH_CHECK], b->tph[PH_QNBR], b->tph[PH_PCA],
+        double nq = b->kc.queries ? (double)b->kc.queries : 1.0; /* per query */
+        snprintf(line, sizeof line,
+                 "lod normals: region loads %.2f s (%.1fM records read, %.2f CPU s), indexes "
+                 "%.2f, kNN of the chunks %.2f (%.0f candidates, %.3f gathers, %.4f widened a "
+                 "query), ball checks %.2f, kNN of halo neighbours %.2f, normals %.2f, F %.2f "
+                 "(with the scratch writes)",
+                 b->tph[PH_LOAD], (double)b->nread / 1e6, b->load_cpu, b->tph[PH_INDEX],
+                 b->tph[PH_QOWN], (double)b->kc.candidates / nq, (double)b->kc.gathers / nq,
+                 (double)b->kc.widened / nq, b->tph[PH_CHECK], b->tph[PH_QNBR], b->tph[PH_PCA],
                  b->tph[PH_F]);
         d->status(d->user, line);
     }

@@ -180,6 +180,12 @@ static int layout_f32_u8(const lod_src *s)
     return 1;
 }
 
+/* A record's float x, y, z in that layout (record_xyz's values, by plain loads). */
+static void record_xyz_f32(const lod_src *s, const uint8_t *p, float xyz[3])
+{
+    for (int a = 0; a < 3; a++) memcpy(&xyz[a], p + s->off[a], 4);
+}
+
 /* The m records of buf in that layout into pos / rgba, the finite ones only, with the values
  * record_xyz and record_rgba give (a float widened to double is exact; a byte's colour8 is the
  * byte itself): the count of points. */
@@ -187,20 +193,17 @@ static size_t ply_block_f32(const lod_src *s, const uint8_t *buf, size_t m, floa
                             uint32_t *rgba)
 {
     const size_t rec = s->rec;
-    const int ox = s->off[0], oy = s->off[1], oz = s->off[2];
     const int rgb = s->off[3] >= 0 && s->off[4] >= 0 && s->off[5] >= 0, oa = s->off[6];
     const double o0 = s->info.offset[0], o1 = s->info.offset[1], o2 = s->info.offset[2];
     size_t k = 0;
     for (size_t i = 0; i < m; i++) {
         const uint8_t *p = buf + i * rec;
-        float x, y, z;
-        memcpy(&x, p + ox, 4);
-        memcpy(&y, p + oy, 4);
-        memcpy(&z, p + oz, 4);
-        if (!isfinite(x) || !isfinite(y) || !isfinite(z)) continue;
-        pos[3 * k] = (float)((double)x - o0);
-        pos[3 * k + 1] = (float)((double)y - o1);
-        pos[3 * k + 2] = (float)((double)z - o2);
+        float v[3];
+        record_xyz_f32(s, p, v);
+        if (!isfinite(v[0]) || !isfinite(v[1]) || !isfinite(v[2])) continue;
+        pos[3 * k] = (float)((double)v[0] - o0);
+        pos[3 * k + 1] = (float)((double)v[1] - o1);
+        pos[3 * k + 2] = (float)((double)v[2] - o2);
         rgba[k++] = !rgb ? 0xFFFFFFFFu
                          : (uint32_t)p[s->off[3]] | (uint32_t)p[s->off[4]] << 8 |
                                (uint32_t)p[s->off[5]] << 16 | (uint32_t)(oa >= 0 ? p[oa] : 255) << 24;
@@ -265,12 +268,10 @@ static int bounds_block(void *ctx, size_t c, int tid, sd_err *err)
     for (size_t i = 0; i < m; i++) {
         double p[3];
         const uint8_t *rp = j->buf[tid] + i * s->rec;
-        if (f32) { /* record_xyz's values, by plain loads */
-            for (int a = 0; a < 3; a++) {
-                float v;
-                memcpy(&v, rp + s->off[a], 4);
-                p[a] = v;
-            }
+        if (f32) {
+            float v[3];
+            record_xyz_f32(s, rp, v);
+            for (int a = 0; a < 3; a++) p[a] = v[a];
         } else {
             record_xyz(s, rp, p);
         }
