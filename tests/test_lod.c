@@ -1367,8 +1367,9 @@ static void test_kawata_host_equals_gpu(void **state)
     rnd_set_kawata_probe(f->r, 0);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest prep_tests[] = {
         cmocka_unit_test(test_octree_invariants),
         cmocka_unit_test(test_equals_in_memory_prep),

@@ -334,8 +334,9 @@ static void test_memory_cap(void **state)
     rnd_release(tu_ctx, id20), rnd_release(tu_ctx, id60);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_base_one_sphere),
         cmocka_unit_test(test_base_two_spheres),

@@ -115,8 +115,9 @@ static void test_host_matches_gl(void **state)
     tu_scans_free(&sc);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_host_matches_gl),
     };
