@@ -54,8 +54,8 @@ static void expect_fail(const char *path, int code, ...)
     sd_err e = {0};
     int rc = pc_load(path, &c, &e);
     if (rc != code || e.code != code)
-        fail_msg("%s: got %d (%s), expected %d (%s); message: %s", path, rc, sd_strerror(rc),
-                 code, sd_strerror(code), e.msg);
+        fail_msg("%s: got %d (%s), expected %d (%s); message: %s", path, rc, sd_strerror(rc), code,
+                 sd_strerror(code), e.msg);
     if (!strstr(e.msg, path)) fail_msg("the message does not name the file: %s", e.msg);
     va_list ap;
     va_start(ap, code);
@@ -100,14 +100,16 @@ static void test_shared_counts_bounds(void **state)
         snprintf(name, sizeof name, "e57/%s", shared[f].name);
         pc_cloud c;
         tu_load_ok(tu_data(name, p, sizeof p), &c);
-        if (c.n != shared[f].n) fail_msg("%s: %zu points, SOURCES.md says %zu", name, c.n, shared[f].n);
+        if (c.n != shared[f].n)
+            fail_msg("%s: %zu points, SOURCES.md says %zu", name, c.n, shared[f].n);
         assert_int_equal(c.n_dropped, 0);
         assert_int_equal(c.attrs, shared[f].attrs);
         assert_string_equal(c.format, "E57 1.0, 1 scan");
         for (int k = 0; k < 3; k++)
-            if (fabs(c.bmin[k] - shared[f].lo[k]) > 1e-12 || fabs(c.bmax[k] - shared[f].hi[k]) > 1e-12)
-                fail_msg("%s axis %d: [%.17g, %.17g], expected [%.17g, %.17g]", name, k,
-                         c.bmin[k], c.bmax[k], shared[f].lo[k], shared[f].hi[k]);
+            if (fabs(c.bmin[k] - shared[f].lo[k]) > 1e-12 ||
+                fabs(c.bmax[k] - shared[f].hi[k]) > 1e-12)
+                fail_msg("%s axis %d: [%.17g, %.17g], expected [%.17g, %.17g]", name, k, c.bmin[k],
+                         c.bmax[k], shared[f].lo[k], shared[f].hi[k]);
         pc_cloud_free(&c);
     }
 }
@@ -137,7 +139,8 @@ static void test_bunny_matches_pts(void **state)
     qsort(a.xyz, a.n, 3 * sizeof(double), cmp_xyz);
     qsort(b.xyz, b.n, 3 * sizeof(double), cmp_xyz);
     for (size_t i = 0; i < 3 * a.n; i++)
-        if (fabs(a.xyz[i] - b.xyz[i]) > 5e-7) fail_msg("value %zu: %.9f vs %.9f", i, a.xyz[i], b.xyz[i]);
+        if (fabs(a.xyz[i] - b.xyz[i]) > 5e-7)
+            fail_msg("value %zu: %.9f vs %.9f", i, a.xyz[i], b.xyz[i]);
     pc_raw_free(&a);
     pc_raw_free(&b);
 }
@@ -148,7 +151,10 @@ static void test_bunny_matches_pts(void **state)
 static void test_shared_colours(void **state)
 {
     (void)state;
-    const struct { const char *name; uint64_t sum[3]; } want[] = {
+    const struct {
+        const char *name;
+        uint64_t sum[3];
+    } want[] = {
         {"e57/ColouredCubeDouble.e57", {652800, 652800, 652800}},
         {"e57/ColouredCubeFloat.e57", {652800, 652800, 652800}},
         {"e57/ColourRepresentation.e57", {12700, 13208, 12954}},
@@ -292,7 +298,9 @@ static void test_bitpack_widths(void **state)
             }
             for (int i = 0; i < PER; i++) {
                 double want = (double)(int64_t)((uint64_t)f.min + vals[i]);
-                if (out[i] != want) fail_msg("width %d piece %zu value %d: %.17g, want %.17g", w, piece, i, out[i], want);
+                if (out[i] != want)
+                    fail_msg("width %d piece %zu value %d: %.17g, want %.17g", w, piece, i, out[i],
+                             want);
             }
             assert_true(b.len <= piece + 8); /* only the bytes of a cut value stay */
             e57_bp_free(&b);
@@ -402,13 +410,25 @@ static void test_widths_end_to_end(void **state)
         g.min[1] = w >= 63 ? INT64_MIN : 1000;
         g.min[2] = 65 - w >= 63 ? INT64_MIN : -3;
         e57w_field fl[4] = {
-            {"cartesianX", E57W_INT, g.min[0], (int64_t)((uint64_t)g.min[0] + (w == 64 ? UINT64_MAX : (UINT64_C(1) << w) - 1)), 0, 0, 0},
-            {"cartesianY", E57W_SCALED, g.min[1], (int64_t)((uint64_t)g.min[1] + (w == 64 ? UINT64_MAX : (UINT64_C(1) << w) - 1)), 0.001, 12.5, 0},
-            {"cartesianZ", E57W_INT, g.min[2], (int64_t)((uint64_t)g.min[2] + (65 - w == 64 ? UINT64_MAX : (UINT64_C(1) << (65 - w)) - 1)), 0, 0, 0},
+            {"cartesianX", E57W_INT, g.min[0],
+             (int64_t)((uint64_t)g.min[0] + (w == 64 ? UINT64_MAX : (UINT64_C(1) << w) - 1)), 0, 0,
+             0},
+            {"cartesianY", E57W_SCALED, g.min[1],
+             (int64_t)((uint64_t)g.min[1] + (w == 64 ? UINT64_MAX : (UINT64_C(1) << w) - 1)), 0.001,
+             12.5, 0},
+            {"cartesianZ", E57W_INT, g.min[2],
+             (int64_t)((uint64_t)g.min[2] +
+                       (65 - w == 64 ? UINT64_MAX : (UINT64_C(1) << (65 - w)) - 1)),
+             0, 0, 0},
             {"intensity", E57W_F64, 0, 0, 0, 0, 0},
         };
-        e57w_scan s = {.nfields = 4, .fields = fl, .records = 300, .per_packet = 7, .stagger = 5,
-                       .empty_packet = w % 2, .index_packet = w % 3 == 0};
+        e57w_scan s = {.nfields = 4,
+                       .fields = fl,
+                       .records = 300,
+                       .per_packet = 7,
+                       .stagger = 5,
+                       .empty_packet = w % 2,
+                       .index_packet = w % 3 == 0};
         char p[1024];
         tmp_path("widths.e57", p, sizeof p);
         assert_int_equal(e57w_write(p, &s, 1, NULL, gen_ints, &g), 0);
@@ -417,7 +437,8 @@ static void test_widths_end_to_end(void **state)
         assert_int_equal(r.n, 300);
         assert_int_equal(r.attrs, PC_ATTR_INTENSITY);
         for (uint64_t i = 0; i < 300; i++) {
-            double want[3] = {(double)raw_int(&g, 0, i, 0), (double)raw_int(&g, 0, i, 1) * 0.001 + 12.5,
+            double want[3] = {(double)raw_int(&g, 0, i, 0),
+                              (double)raw_int(&g, 0, i, 1) * 0.001 + 12.5,
                               (double)raw_int(&g, 0, i, 2)};
             for (int k = 0; k < 3; k++)
                 if (r.xyz[3 * i + k] != want[k])
@@ -434,11 +455,11 @@ static void test_widths_end_to_end(void **state)
 static void gen_sph(void *ctx, uint32_t scan, uint64_t i, int64_t *ints, double *dbls)
 {
     (void)ctx;
-    dbls[0] = 1.0 + (double)i;                     /* range */
-    dbls[1] = (double)i * 0.3 + scan;              /* azimuth */
-    dbls[2] = -1.2 + (double)i * 0.1;              /* elevation */
-    ints[3] = (int64_t)(i % 3);                    /* sphericalInvalidState 0, 1, 2 */
-    ints[4] = (int64_t)(i * 7 % 256);              /* colorRed */
+    dbls[0] = 1.0 + (double)i; /* range */
+    dbls[1] = (double)i * 0.3 + scan; /* azimuth */
+    dbls[2] = -1.2 + (double)i * 0.1; /* elevation */
+    ints[3] = (int64_t)(i % 3); /* sphericalInvalidState 0, 1, 2 */
+    ints[4] = (int64_t)(i * 7 % 256); /* colorRed */
     ints[5] = 100;
     ints[6] = 200;
 }
@@ -459,8 +480,10 @@ static void rotate(const double q[4], const double p[3], double out[3])
     double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
     double w = q[0] / n, v[3] = {q[1] / n, q[2] / n, q[3] / n};
     /* p + 2 w (v x p) + 2 v x (v x p): a form other than the reader's matrix */
-    double c1[3] = {v[1] * p[2] - v[2] * p[1], v[2] * p[0] - v[0] * p[2], v[0] * p[1] - v[1] * p[0]};
-    double c2[3] = {v[1] * c1[2] - v[2] * c1[1], v[2] * c1[0] - v[0] * c1[2], v[0] * c1[1] - v[1] * c1[0]};
+    double c1[3] = {v[1] * p[2] - v[2] * p[1], v[2] * p[0] - v[0] * p[2],
+                    v[0] * p[1] - v[1] * p[0]};
+    double c2[3] = {v[1] * c1[2] - v[2] * c1[1], v[2] * c1[0] - v[0] * c1[2],
+                    v[0] * c1[1] - v[1] * c1[0]};
     for (int k = 0; k < 3; k++) out[k] = p[k] + 2 * w * c1[k] + 2 * c2[k];
 }
 
@@ -471,16 +494,30 @@ static void test_spherical_multi_scan_poses(void **state)
 {
     (void)state;
     const e57w_field *fl = sph_fields;
-    const char *limits = "<colorLimits type=\"Structure\"><colorRedMaximum type=\"Integer\">255"
-                         "</colorRedMaximum><colorGreenMaximum type=\"Integer\">255</colorGreenMaximum>"
-                         "<colorBlueMinimum type=\"Integer\">100</colorBlueMinimum>"
-                         "<colorBlueMaximum type=\"Integer\">300</colorBlueMaximum></colorLimits>";
+    const char *limits =
+        "<colorLimits type=\"Structure\"><colorRedMaximum type=\"Integer\">255"
+        "</colorRedMaximum><colorGreenMaximum type=\"Integer\">255</colorGreenMaximum>"
+        "<colorBlueMinimum type=\"Integer\">100</colorBlueMinimum>"
+        "<colorBlueMaximum type=\"Integer\">300</colorBlueMaximum></colorLimits>";
     e57w_scan s[3] = {
         {.nfields = 7, .fields = fl, .records = 30, .extra_xml = limits},
-        {.nfields = 7, .fields = fl, .records = 31, .pose = 1, .quat = {0.7071067811865476, 0, 0, 0.7071067811865476},
-         .trans = {1000, -2000, 3}, .extra_xml = limits, .per_packet = 4},
-        {.nfields = 7, .fields = fl, .records = 32, .pose = 1, .quat = {2, 1, -1, 0.5}, /* not unit */
-         .trans = {-5, 0, 1e6}, .extra_xml = limits, .per_packet = 3, .stagger = 2},
+        {.nfields = 7,
+         .fields = fl,
+         .records = 31,
+         .pose = 1,
+         .quat = {0.7071067811865476, 0, 0, 0.7071067811865476},
+         .trans = {1000, -2000, 3},
+         .extra_xml = limits,
+         .per_packet = 4},
+        {.nfields = 7,
+         .fields = fl,
+         .records = 32,
+         .pose = 1,
+         .quat = {2, 1, -1, 0.5}, /* not unit */
+         .trans = {-5, 0, 1e6},
+         .extra_xml = limits,
+         .per_packet = 3,
+         .stagger = 2},
     };
     char p[1024];
     tmp_path("sph.e57", p, sizeof p);
@@ -493,10 +530,13 @@ static void test_spherical_multi_scan_poses(void **state)
     for (uint32_t sc = 0; sc < 3; sc++)
         for (uint64_t i = 0; i < s[sc].records; i++) {
             if (i % 3) continue; /* states 1 and 2 */
-            double az = (double)(float)((double)i * 0.3 + sc), el = -1.2 + (double)i * 0.1, rg = 1.0 + (double)i;
+            double az = (double)(float)((double)i * 0.3 + sc), el = -1.2 + (double)i * 0.1,
+                   rg = 1.0 + (double)i;
             double q[3] = {rg * cos(el) * cos(az), rg * cos(el) * sin(az), rg * sin(el)}, w[3];
-            if (s[sc].pose) rotate(s[sc].quat, q, w);
-            else memcpy(w, q, sizeof w);
+            if (s[sc].pose)
+                rotate(s[sc].quat, q, w);
+            else
+                memcpy(w, q, sizeof w);
             for (int k = 0; k < 3; k++) {
                 double want = w[k] + s[sc].trans[k];
                 if (fabs(r.xyz[3 * j + k] - want) > 1e-9 * (1 + fabs(want)))
@@ -529,12 +569,12 @@ static void gen_cart(void *ctx, uint32_t scan, uint64_t i, int64_t *ints, double
     dbls[1] = 2.0 * (double)i;
     dbls[2] = -1.0;
     ints[3] = i % 4 == 3 ? 1 : i % 4 == 2 ? 2 : 0; /* cartesianInvalidState */
-    ints[4] = (int64_t)(i % 1000);                  /* intensity, limits 0-999 */
-    ints[5] = i % 5 == 0;                           /* isIntensityInvalid */
-    ints[6] = 9, ints[7] = 9, ints[8] = 9;          /* colours 9 of 0-255 */
-    ints[9] = i % 7 == 0;                           /* isColorInvalid */
-    dbls[10] = 1, dbls[11] = 0, dbls[12] = 0;       /* nor:normal (1, 0, 0) */
-    ints[13] = (int64_t)i;                          /* rowIndex: never read */
+    ints[4] = (int64_t)(i % 1000); /* intensity, limits 0-999 */
+    ints[5] = i % 5 == 0; /* isIntensityInvalid */
+    ints[6] = 9, ints[7] = 9, ints[8] = 9; /* colours 9 of 0-255 */
+    ints[9] = i % 7 == 0; /* isColorInvalid */
+    dbls[10] = 1, dbls[11] = 0, dbls[12] = 0; /* nor:normal (1, 0, 0) */
+    ints[13] = (int64_t)i; /* rowIndex: never read */
 }
 
 static void test_invalid_states_limits_normals(void **state)
@@ -556,8 +596,13 @@ static void test_invalid_states_limits_normals(void **state)
         {"nor:normalZ", E57W_F32, 0, 0, 0, 0, 0},
         {"rowIndex", E57W_INT, 0, 1 << 20, 0, 0, 0},
     };
-    e57w_scan s = {.nfields = 14, .fields = fl, .records = 2000, .per_packet = 61, .stagger = 13,
-                   .pose = 1, .quat = {0.7071067811865476, 0.7071067811865476, 0, 0},
+    e57w_scan s = {.nfields = 14,
+                   .fields = fl,
+                   .records = 2000,
+                   .per_packet = 61,
+                   .stagger = 13,
+                   .pose = 1,
+                   .quat = {0.7071067811865476, 0.7071067811865476, 0, 0},
                    .extra_xml = "<intensityLimits type=\"Structure\"><intensityMinimum "
                                 "type=\"Integer\">0</intensityMinimum><intensityMaximum "
                                 "type=\"Integer\">999</intensityMaximum></intensityLimits>"};
@@ -600,9 +645,11 @@ static void test_pages_read_once(void **state)
     (void)state;
     char p[1024];
     tmp_path("cart.e57", p, sizeof p);
-    e57w_field fl[3] = {{"cartesianX", E57W_F64, 0, 0, 0, 0, 0}, {"cartesianY", E57W_F64, 0, 0, 0, 0, 0},
+    e57w_field fl[3] = {{"cartesianX", E57W_F64, 0, 0, 0, 0, 0},
+                        {"cartesianY", E57W_F64, 0, 0, 0, 0, 0},
                         {"cartesianZ", E57W_F32, 0, 0, 0, 0, 0}};
-    e57w_scan s = {.nfields = 3, .fields = fl, .records = 100000, .per_packet = 2000, .stagger = 100};
+    e57w_scan s = {
+        .nfields = 3, .fields = fl, .records = 100000, .per_packet = 2000, .stagger = 100};
     assert_int_equal(e57w_write(p, &s, 1, NULL, gen_line, NULL), 0);
     pc_e57_stream *st;
     sd_err e = {0};
@@ -622,7 +669,9 @@ static void test_pages_read_once(void **state)
     free(d);
     uint64_t pages = len / 1024, checked = pc_e57_stream_pages_checked(st);
     /* header, XML and the packets' boundary pages may be read twice; nothing more */
-    if (checked > pages + pages / 10 + 8) fail_msg("%llu page checks for %llu pages", (unsigned long long)checked, (unsigned long long)pages);
+    if (checked > pages + pages / 10 + 8)
+        fail_msg("%llu page checks for %llu pages", (unsigned long long)checked,
+                 (unsigned long long)pages);
     pc_e57_stream_close(st);
     free(xyz);
 }
@@ -645,7 +694,8 @@ static uint8_t *small_file(size_t *len)
 {
     char p[1024];
     e57w_scan s = {.nfields = 3, .fields = small_fields, .records = 500, .per_packet = 100};
-    assert_int_equal(e57w_write(tmp_path("small.e57", p, sizeof p), &s, 1, NULL, gen_small, NULL), 0);
+    assert_int_equal(e57w_write(tmp_path("small.e57", p, sizeof p), &s, 1, NULL, gen_small, NULL),
+                     0);
     return tu_read_file(p, len);
 }
 
@@ -670,7 +720,8 @@ static void put64(uint8_t *p, uint64_t v)
 
 /* replace_xml: the file d with its XML text's first `from` replaced by `to` (same length, or
  * the XML length in the header adjusted), checksums fixed. */
-static uint8_t *replace_xml(const uint8_t *d, size_t n, const char *from, const char *to, size_t *out_len)
+static uint8_t *replace_xml(const uint8_t *d, size_t n, const char *from, const char *to,
+                            size_t *out_len)
 {
     uint64_t xo = get64(d + 24), xl = get64(d + 32);
     /* the XML section of the writer's small files lies in its last pages: rebuild it logically */
@@ -714,7 +765,8 @@ static void test_damaged_pages(void **state)
     uint8_t *b = malloc(n);
     memcpy(b, d, n);
     b[3 * 1024 + 100] ^= 4;
-    expect_fail(save("crc.e57", b, n, p, sizeof p), SD_EFORMAT, "bad checksum", "physical offset 3072 ", NULL);
+    expect_fail(save("crc.e57", b, n, p, sizeof p), SD_EFORMAT, "bad checksum",
+                "physical offset 3072 ", NULL);
     /* cut in the middle of the last page: the header's length no longer holds */
     expect_fail(save("cut.e57", d, n - 300, p, sizeof p), SD_ETRUNC, "offset 16", NULL);
     /* the header's length adjusted to the cut: the page itself is truncated */
@@ -727,7 +779,8 @@ static void test_damaged_pages(void **state)
     memcpy(b, d, n);
     put64(b + 16, n - 1024);
     e57w_fix_crcs(b, 1024, 1024);
-    expect_fail(save("cut3.e57", b, n - 1024, p, sizeof p), SD_EFORMAT, "XML section", "not inside the file", NULL);
+    expect_fail(save("cut3.e57", b, n - 1024, p, sizeof p), SD_EFORMAT, "XML section",
+                "not inside the file", NULL);
     /* the XML length lies (longer than the file) */
     memcpy(b, d, n);
     put64(b + 32, (uint64_t)1 << 40);
@@ -747,7 +800,8 @@ static void test_damaged_pages(void **state)
     memcpy(b, d, n);
     put64(b + cvl + 8, (uint64_t)1 << 50);
     e57w_fix_crcs(b, n, 1024);
-    expect_fail(save("seclen.e57", b, n, p, sizeof p), SD_ETRUNC, "physical offset 48", "logical bytes", NULL);
+    expect_fail(save("seclen.e57", b, n, p, sizeof p), SD_ETRUNC, "physical offset 48",
+                "logical bytes", NULL);
     memcpy(b, d, n);
     put64(b + cvl + 16, 8);
     e57w_fix_crcs(b, n, 1024);
@@ -756,7 +810,8 @@ static void test_damaged_pages(void **state)
     memcpy(b, d, n);
     b[80 + 2] = 0xFF, b[80 + 3] = 0xFF;
     e57w_fix_crcs(b, n, 1024);
-    expect_fail(save("pktlen.e57", b, n, p, sizeof p), SD_EFORMAT, "packet at physical offset 80", NULL);
+    expect_fail(save("pktlen.e57", b, n, p, sizeof p), SD_EFORMAT, "packet at physical offset 80",
+                NULL);
     memcpy(b, d, n);
     b[80] = 7;
     e57w_fix_crcs(b, n, 1024);
@@ -769,7 +824,8 @@ static void test_damaged_pages(void **state)
     memcpy(b, d, n);
     b[86] = 0xFF, b[87] = 0xF0;
     e57w_fix_crcs(b, n, 1024);
-    expect_fail(save("buflen.e57", b, n, p, sizeof p), SD_EFORMAT, "data packet at physical offset 80", NULL);
+    expect_fail(save("buflen.e57", b, n, p, sizeof p), SD_EFORMAT,
+                "data packet at physical offset 80", NULL);
     free(b);
     free(d);
 }
@@ -782,7 +838,8 @@ static void test_damaged_xml(void **state)
     char p[1024];
     /* a recordCount that lies: the streams end first, naming the field and the record */
     b = replace_xml(d, n, "recordCount=\"500\"", "recordCount=\"501\"", &m);
-    expect_fail(save("count.e57", b, m, p, sizeof p), SD_EFORMAT, "field cartesianX", "after 500 of the 501", NULL);
+    expect_fail(save("count.e57", b, m, p, sizeof p), SD_EFORMAT, "field cartesianX",
+                "after 500 of the 501", NULL);
     free(b);
     /* a huge recordCount: refused when the bytes end, without reserving 10^18 points (the
      * reservation is bounded by the section's bits; an allocation of the claim fails ASan) */
@@ -798,7 +855,8 @@ static void test_damaged_xml(void **state)
     free(b);
     /* fileOffset past the end of the file */
     b = replace_xml(d, n, "fileOffset=\"48\"", "fileOffset=\"4800000\"", &m);
-    expect_fail(save("off.e57", b, m, p, sizeof p), SD_EFORMAT, "fileOffset 4800000", "past the end", NULL);
+    expect_fail(save("off.e57", b, m, p, sizeof p), SD_EFORMAT, "fileOffset 4800000",
+                "past the end", NULL);
     free(b);
     /* fileOffset in a checksum */
     b = replace_xml(d, n, "fileOffset=\"48\"", "fileOffset=\"1022\"", &m);
@@ -806,14 +864,17 @@ static void test_damaged_xml(void **state)
     free(b);
     /* a prototype without coordinates */
     b = replace_xml(d, n, "<cartesianY", "<cartesianQ", &m);
-    expect_fail(save("nocoord.e57", b, m, p, sizeof p), SD_EFORMAT, "neither cartesianX/Y/Z", "line", NULL);
+    expect_fail(save("nocoord.e57", b, m, p, sizeof p), SD_EFORMAT, "neither cartesianX/Y/Z",
+                "line", NULL);
     free(b);
     /* a String field, a foreign codec, a bad number, a zero quaternion, broken XML */
     b = replace_xml(d, n, "<cartesianZ type=\"Float\" precision=\"double\"/>",
                     "<cartesianZ type=\"Float\" precision=\"double\"/><s type=\"String\"/>", &m);
     expect_fail(save("str.e57", b, m, p, sizeof p), SD_EUNSUP, "String", NULL);
     free(b);
-    b = replace_xml(d, n, "</codecs>", "<vectorChild type=\"Structure\"><zlib type=\"Structure\"/></vectorChild></codecs>", &m);
+    b = replace_xml(
+        d, n, "</codecs>",
+        "<vectorChild type=\"Structure\"><zlib type=\"Structure\"/></vectorChild></codecs>", &m);
     expect_fail(save("codec.e57", b, m, p, sizeof p), SD_EUNSUP, "bit-pack", NULL);
     free(b);
     b = replace_xml(d, n, "recordCount=\"500\"", "recordCount=\"-5\"", &m);
@@ -821,11 +882,13 @@ static void test_damaged_xml(void **state)
     free(b);
     b = replace_xml(d, n, "<guid type=\"String\">scan 0</guid>",
                     "<pose type=\"Structure\"><rotation type=\"Structure\"><w type=\"Float\">0</w>"
-                    "</rotation></pose>", &m);
+                    "</rotation></pose>",
+                    &m);
     expect_fail(save("quat.e57", b, m, p, sizeof p), SD_EFORMAT, "quaternion", NULL);
     free(b);
     b = replace_xml(d, n, "</data3D>", "</data3X>", &m);
-    expect_fail(save("broken.e57", b, m, p, sizeof p), SD_EFORMAT, "XML section at physical offset", "line", NULL);
+    expect_fail(save("broken.e57", b, m, p, sizeof p), SD_EFORMAT, "XML section at physical offset",
+                "line", NULL);
     free(b);
     free(d);
 }
@@ -841,7 +904,8 @@ static void gen_over(void *ctx, uint32_t scan, uint64_t i, int64_t *ints, double
 static void test_value_over_maximum(void **state)
 {
     (void)state;
-    e57w_field fl[3] = {{"cartesianX", E57W_INT, 0, 7, 0, 0, 0}, {"cartesianY", E57W_INT, 0, 7, 0, 0, 0},
+    e57w_field fl[3] = {{"cartesianX", E57W_INT, 0, 7, 0, 0, 0},
+                        {"cartesianY", E57W_INT, 0, 7, 0, 0, 0},
                         {"cartesianZ", E57W_INT, 0, 7, 0, 0, 0}};
     e57w_scan s = {.nfields = 3, .fields = fl, .records = 20};
     char p[1024];
@@ -851,7 +915,8 @@ static void test_value_over_maximum(void **state)
     /* the same 3 bits, a maximum of 6: record 7 holds 7 */
     uint8_t *b = replace_xml(d, n, "<cartesianY type=\"Integer\" minimum=\"0\" maximum=\"7\"/>",
                              "<cartesianY type=\"Integer\" minimum=\"0\" maximum=\"6\"/>", &m);
-    expect_fail(save("over2.e57", b, m, p, sizeof p), SD_EFORMAT, "record 7", "cartesianY", "maximum 6", NULL);
+    expect_fail(save("over2.e57", b, m, p, sizeof p), SD_EFORMAT, "record 7", "cartesianY",
+                "maximum 6", NULL);
     free(b);
     free(d);
 }
@@ -864,8 +929,13 @@ static void test_lod_stream(void **state)
     const e57w_field *fl = sph_fields;
     e57w_scan s[2] = {
         {.nfields = 7, .fields = fl, .records = 9000, .per_packet = 500, .stagger = 50},
-        {.nfields = 7, .fields = fl, .records = 7000, .pose = 1, .quat = {1, 0, 1, 0},
-         .trans = {654321.5, 5432109.25, 80}, .per_packet = 333},
+        {.nfields = 7,
+         .fields = fl,
+         .records = 7000,
+         .pose = 1,
+         .quat = {1, 0, 1, 0},
+         .trans = {654321.5, 5432109.25, 80},
+         .per_packet = 333},
     };
     char p[1024];
     tmp_path("lod.e57", p, sizeof p);

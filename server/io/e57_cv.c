@@ -11,24 +11,24 @@ enum { PACKET_MAX = 65536, CACHE_SLOTS = 8, SECTION_HEADER = 32 };
 enum { PKT_INDEX = 0, PKT_DATA = 1, PKT_EMPTY = 2 };
 
 typedef struct slot {
-    uint64_t phys;     /* where the packet starts; UINT64_MAX: empty slot */
-    uint64_t next;     /* the physical offset of the packet after it */
-    uint64_t stamp;    /* last use, for eviction */
-    uint32_t len;      /* logical length */
-    uint8_t *data;     /* PACKET_MAX bytes */
+    uint64_t phys; /* where the packet starts; UINT64_MAX: empty slot */
+    uint64_t next; /* the physical offset of the packet after it */
+    uint64_t stamp; /* last use, for eviction */
+    uint32_t len; /* logical length */
+    uint8_t *data; /* PACKET_MAX bytes */
 } slot;
 
 typedef struct chan {
     e57_bp bp;
-    uint64_t next;     /* the next packet this field has not taken its buffer from */
+    uint64_t next; /* the next packet this field has not taken its buffer from */
 } chan;
 
 struct e57_cv {
     e57_file *f;
     const e57_scan *s;
     uint64_t sec_off, sec_len, sec_end, data_off;
-    uint64_t done;     /* records handed out */
-    chan *ch;          /* one per field */
+    uint64_t done; /* records handed out */
+    chan *ch; /* one per field */
     slot cache[CACHE_SLOTS];
     uint64_t clock, reads;
 };
@@ -69,23 +69,26 @@ int e57_cv_open(e57_file *f, const e57_scan *s, e57_cv **out, sd_err *err)
     *out = NULL;
     uint8_t h[SECTION_HEADER];
     if (s->cv_offset >= f->size)
-        return sd_errf(err, SD_EFORMAT, "%s: scan %u (XML line %lu): its compressed vector's "
-                       "fileOffset %llu is past the end of the file (%llu bytes)", f->path,
-                       s->index, s->line, (unsigned long long)s->cv_offset,
+        return sd_errf(err, SD_EFORMAT,
+                       "%s: scan %u (XML line %lu): its compressed vector's "
+                       "fileOffset %llu is past the end of the file (%llu bytes)",
+                       f->path, s->index, s->line, (unsigned long long)s->cv_offset,
                        (unsigned long long)f->size);
     int rc = e57_file_read(f, s->cv_offset, h, sizeof h, err);
     if (rc < 0) return rc;
     uint64_t len = rd64(h + 8), data = rd64(h + 16);
     if (h[0] != 1)
-        return sd_errf(err, SD_EFORMAT, "%s: scan %u: the compressed vector section at physical "
-                       "offset %llu has section id %u, not 1: an invalid header", f->path,
-                       s->index, (unsigned long long)s->cv_offset, h[0]);
+        return sd_errf(err, SD_EFORMAT,
+                       "%s: scan %u: the compressed vector section at physical "
+                       "offset %llu has section id %u, not 1: an invalid header",
+                       f->path, s->index, (unsigned long long)s->cv_offset, h[0]);
     uint64_t room = e57_logical_room(f, s->cv_offset);
     if (len < SECTION_HEADER || len > room)
-        return sd_errf(err, len > room ? SD_ETRUNC : SD_EFORMAT, "%s: scan %u: the compressed "
+        return sd_errf(err, len > room ? SD_ETRUNC : SD_EFORMAT,
+                       "%s: scan %u: the compressed "
                        "vector section at physical offset %llu says it is %llu logical bytes "
-                       "long; the file holds %llu from there", f->path, s->index,
-                       (unsigned long long)s->cv_offset, (unsigned long long)len,
+                       "long; the file holds %llu from there",
+                       f->path, s->index, (unsigned long long)s->cv_offset, (unsigned long long)len,
                        (unsigned long long)room);
     e57_cv *cv = calloc(1, sizeof *cv);
     if (!cv) return sd_errf(err, SD_ENOMEM, "%s: out of memory", f->path);
@@ -97,10 +100,11 @@ int e57_cv_open(e57_file *f, const e57_scan *s, e57_cv **out, sd_err *err)
     cv->data_off = data;
     uint64_t first = e57_phys_advance(f, s->cv_offset, SECTION_HEADER);
     if (s->records > 0 && (data < first || data >= cv->sec_end || data % f->page >= f->page - 4)) {
-        rc = sd_errf(err, SD_EFORMAT, "%s: scan %u: the compressed vector section at physical "
+        rc = sd_errf(err, SD_EFORMAT,
+                     "%s: scan %u: the compressed vector section at physical "
                      "offset %llu puts its data packets at physical offset %llu, outside the "
-                     "section (%llu to %llu)", f->path, s->index,
-                     (unsigned long long)s->cv_offset, (unsigned long long)data,
+                     "section (%llu to %llu)",
+                     f->path, s->index, (unsigned long long)s->cv_offset, (unsigned long long)data,
                      (unsigned long long)first, (unsigned long long)cv->sec_end);
         e57_cv_close(cv);
         return rc;
@@ -153,10 +157,12 @@ static int packet(e57_cv *cv, uint64_t phys, const slot **out, sd_err *err)
         uint32_t count = len >= 6 ? rd16(d + 4) : 0, head = 6 + 2 * count, sum = 0;
         for (uint32_t i = 0; i < count && head <= len; i++) sum += rd16(d + 6 + 2 * i);
         if (len < 6 || count != s->nfields || head > len || sum > len - head)
-            return sd_errf(err, SD_EFORMAT, "%s: scan %u: the data packet at physical offset "
+            return sd_errf(err, SD_EFORMAT,
+                           "%s: scan %u: the data packet at physical offset "
                            "%llu (%u bytes) holds %u bytestreams for %u prototype fields, their "
-                           "buffers %u bytes after a %u-byte header", f->path, s->index,
-                           (unsigned long long)phys, len, count, s->nfields, sum, head);
+                           "buffers %u bytes after a %u-byte header",
+                           f->path, s->index, (unsigned long long)phys, len, count, s->nfields, sum,
+                           head);
     }
     victim->phys = phys;
     victim->next = next;
@@ -212,13 +218,14 @@ int64_t e57_cv_read(e57_cv *cv, double *const *cols, size_t n, sd_err *err)
                 if (rc < 0) return rc;
                 if (rc == 0) {
                     char b[16];
-                    return sd_errf(err, SD_EFORMAT, "%s: scan %u: the bytestream of field %s "
+                    return sd_errf(err, SD_EFORMAT,
+                                   "%s: scan %u: the bytestream of field %s "
                                    "ends after %llu of the %llu records the XML declares (the "
                                    "compressed vector section at physical offset %llu holds no "
-                                   "more)", cv->f->path, s->index, field_name(f, i, b, sizeof b),
+                                   "more)",
+                                   cv->f->path, s->index, field_name(f, i, b, sizeof b),
                                    (unsigned long long)(cv->done + got),
-                                   (unsigned long long)s->records,
-                                   (unsigned long long)cv->sec_off);
+                                   (unsigned long long)s->records, (unsigned long long)cv->sec_off);
                 }
                 continue;
             }
@@ -226,8 +233,10 @@ int64_t e57_cv_read(e57_cv *cv, double *const *cols, size_t n, sd_err *err)
             int64_t bad = e57_bp_decode(&c->bp, f, cols[i] + got, m);
             if (bad >= 0) {
                 char b[16];
-                return sd_errf(err, SD_EFORMAT, "%s: scan %u: record %llu: field %s holds a "
-                               "value over the prototype's maximum %lld", cv->f->path, s->index,
+                return sd_errf(err, SD_EFORMAT,
+                               "%s: scan %u: record %llu: field %s holds a "
+                               "value over the prototype's maximum %lld",
+                               cv->f->path, s->index,
                                (unsigned long long)(cv->done + got + (uint64_t)bad),
                                field_name(f, i, b, sizeof b), (long long)f->max);
             }

@@ -95,11 +95,13 @@ static int read_pages(e57_file *f, uint64_t first, uint64_t count, sd_err *err)
         ssize_t g = pread(f->fd, f->buf + done, len - done, (off_t)(first * f->page + done));
         if (g < 0 && errno == EINTR) continue;
         if (g < 0)
-            return sd_errf(err, SD_EIO, "%s: %s reading the page at physical offset %llu",
-                           f->path, strerror(errno), (unsigned long long)(first * f->page + done));
+            return sd_errf(err, SD_EIO, "%s: %s reading the page at physical offset %llu", f->path,
+                           strerror(errno), (unsigned long long)(first * f->page + done));
         if (g == 0)
-            return sd_errf(err, SD_ETRUNC, "%s: the page at physical offset %llu is truncated: "
-                           "the file ends at byte %llu", f->path,
+            return sd_errf(err, SD_ETRUNC,
+                           "%s: the page at physical offset %llu is truncated: "
+                           "the file ends at byte %llu",
+                           f->path,
                            (unsigned long long)((first * f->page + done) / f->page * f->page),
                            (unsigned long long)(first * f->page + done));
         done += (size_t)g;
@@ -112,13 +114,14 @@ static int check_page(e57_file *f, uint64_t p, const uint8_t *pg, sd_err *err)
 {
     uint64_t data = f->page - E57_CRC_BYTES;
     uint32_t want = (uint32_t)pg[data] << 24 | (uint32_t)pg[data + 1] << 16 |
-                    (uint32_t)pg[data + 2] << 8 | pg[data + 3];
+        (uint32_t)pg[data + 2] << 8 | pg[data + 3];
     uint32_t got = e57_crc32c(f, pg, (size_t)data);
     f->pages_checked++;
     if (got != want)
-        return sd_errf(err, SD_EFORMAT, "%s: bad checksum in the page at physical offset %llu "
-                       "(stored 0x%08x, computed CRC-32C 0x%08x): the file is damaged", f->path,
-                       (unsigned long long)(p * f->page), want, got);
+        return sd_errf(err, SD_EFORMAT,
+                       "%s: bad checksum in the page at physical offset %llu "
+                       "(stored 0x%08x, computed CRC-32C 0x%08x): the file is damaged",
+                       f->path, (unsigned long long)(p * f->page), want, got);
     return 0;
 }
 
@@ -131,9 +134,10 @@ int e57_file_read(e57_file *f, uint64_t phys, void *out, size_t len, sd_err *err
         return sd_errf(err, SD_EFORMAT, "%s: physical offset %llu points into a page checksum",
                        f->path, (unsigned long long)phys);
     if (e57_logical_room(f, phys) < len)
-        return sd_errf(err, SD_ETRUNC, "%s: %zu bytes at physical offset %llu run past the end "
-                       "of the file (%llu bytes)", f->path, len, (unsigned long long)phys,
-                       (unsigned long long)f->size);
+        return sd_errf(err, SD_ETRUNC,
+                       "%s: %zu bytes at physical offset %llu run past the end "
+                       "of the file (%llu bytes)",
+                       f->path, len, (unsigned long long)phys, (unsigned long long)f->size);
     uint64_t p = phys / f->page, in = phys % f->page;
     while (len > 0) {
         const uint8_t *pg;
@@ -189,8 +193,10 @@ int e57_file_open(const char *path, e57_file *f, sd_err *err)
     uint8_t h[E57_HEADER_BYTES];
     ssize_t g = f->size >= E57_HEADER_BYTES ? pread(f->fd, h, sizeof h, 0) : 0;
     if (g != (ssize_t)sizeof h || memcmp(h, "ASTM-E57", 8) != 0)
-        return sd_errf(err, SD_EFORMAT, "%s: not an E57 file: it does not start with the "
-                       "48-byte header whose signature at offset 0 is 'ASTM-E57'", path);
+        return sd_errf(err, SD_EFORMAT,
+                       "%s: not an E57 file: it does not start with the "
+                       "48-byte header whose signature at offset 0 is 'ASTM-E57'",
+                       path);
     f->major = rd32(h + 8);
     f->minor = rd32(h + 12);
     uint64_t flen = rd64(h + 16);
@@ -198,18 +204,25 @@ int e57_file_open(const char *path, e57_file *f, sd_err *err)
     f->xml_len = rd64(h + 32);
     f->page = rd64(h + 40);
     if (f->major != 1)
-        return sd_errf(err, SD_EUNSUP, "%s: E57 version %u.%u at offset 8 (this reader knows "
-                       "version 1)", path, f->major, f->minor);
+        return sd_errf(err, SD_EUNSUP,
+                       "%s: E57 version %u.%u at offset 8 (this reader knows "
+                       "version 1)",
+                       path, f->major, f->minor);
     if (f->page < 64 || f->page > (1u << 20) || f->page % 4)
-        return sd_errf(err, SD_EFORMAT, "%s: page size %llu at offset 40 (want a multiple of 4 "
-                       "in [64, 1048576]; writers use 1024)", path, (unsigned long long)f->page);
+        return sd_errf(err, SD_EFORMAT,
+                       "%s: page size %llu at offset 40 (want a multiple of 4 "
+                       "in [64, 1048576]; writers use 1024)",
+                       path, (unsigned long long)f->page);
     if (flen != f->size)
-        return sd_errf(err, flen > f->size ? SD_ETRUNC : SD_EFORMAT, "%s: the header at offset "
-                       "16 says the file is %llu bytes long, it is %llu", path,
-                       (unsigned long long)flen, (unsigned long long)f->size);
+        return sd_errf(err, flen > f->size ? SD_ETRUNC : SD_EFORMAT,
+                       "%s: the header at offset "
+                       "16 says the file is %llu bytes long, it is %llu",
+                       path, (unsigned long long)flen, (unsigned long long)f->size);
     if (f->size % f->page)
-        return sd_errf(err, SD_ETRUNC, "%s: the page at physical offset %llu is truncated (%llu "
-                       "of %llu bytes)", path, (unsigned long long)(f->size / f->page * f->page),
+        return sd_errf(err, SD_ETRUNC,
+                       "%s: the page at physical offset %llu is truncated (%llu "
+                       "of %llu bytes)",
+                       path, (unsigned long long)(f->size / f->page * f->page),
                        (unsigned long long)(f->size % f->page), (unsigned long long)f->page);
     f->buf = malloc((size_t)f->page * E57_READ_PAGES);
     f->cache = malloc((size_t)f->page);
@@ -217,11 +230,12 @@ int e57_file_open(const char *path, e57_file *f, sd_err *err)
     uint8_t chk[E57_HEADER_BYTES];
     int rc = e57_file_read(f, 0, chk, sizeof chk, err); /* page 0's checksum */
     if (rc < 0) return rc;
-    if (f->xml_off % f->page >= f->page - E57_CRC_BYTES || e57_logical_room(f, f->xml_off) < f->xml_len ||
-        f->xml_len == 0)
-        return sd_errf(err, SD_EFORMAT, "%s: the XML section the header names (physical offset "
-                       "%llu, %llu logical bytes, at offsets 24 and 32) is %s", path,
-                       (unsigned long long)f->xml_off, (unsigned long long)f->xml_len,
+    if (f->xml_off % f->page >= f->page - E57_CRC_BYTES ||
+        e57_logical_room(f, f->xml_off) < f->xml_len || f->xml_len == 0)
+        return sd_errf(err, SD_EFORMAT,
+                       "%s: the XML section the header names (physical offset "
+                       "%llu, %llu logical bytes, at offsets 24 and 32) is %s",
+                       path, (unsigned long long)f->xml_off, (unsigned long long)f->xml_len,
                        f->xml_len == 0 ? "empty" : "not inside the file");
     return 0;
 }

@@ -11,7 +11,7 @@ typedef struct ctx {
     const char *what;
     sd_err *err;
     e57_desc *d;
-    uint32_t nfields, cap;        /* fields used / allocated in d->fields */
+    uint32_t nfields, cap; /* fields used / allocated in d->fields */
 } ctx;
 
 static const char *const role_names[E57_R_COUNT] = {
@@ -101,7 +101,7 @@ static int number(ctx *c, const e57_node *n, double *v)
         int64_t i;
         double scale, off;
         rc = parse_i64(n->text, 0, &i) | parse_f64(e57_attr(n, "scale"), 1.0, &scale) |
-             parse_f64(e57_attr(n, "offset"), 0.0, &off);
+            parse_f64(e57_attr(n, "offset"), 0.0, &off);
         *v = (double)i * scale + off;
     } else if (!strcmp(n->type, "Float")) {
         rc = parse_f64(n->text, 0.0, v);
@@ -156,9 +156,10 @@ static int leaf(ctx *c, e57_scan *s, const e57_node *n, int depth)
         return 0;
     }
     if (!strcmp(n->type, "String"))
-        return sd_errf(c->err, SD_EUNSUP, "%s: line %lu: scan %u: the prototype field <%s> is a "
-                       "String, which the bit-pack codec cannot hold", c->what, n->line,
-                       s->index, n->name);
+        return sd_errf(c->err, SD_EUNSUP,
+                       "%s: line %lu: scan %u: the prototype field <%s> is a "
+                       "String, which the bit-pack codec cannot hold",
+                       c->what, n->line, s->index, n->name);
     if (s->nfields >= E57_MAX_FIELDS)
         return sd_errf(c->err, SD_ELIMIT, "%s: line %lu: scan %u: more than %d prototype fields",
                        c->what, n->line, s->index, E57_MAX_FIELDS);
@@ -169,8 +170,10 @@ static int leaf(ctx *c, e57_scan *s, const e57_node *n, int depth)
         f->kind = n->type[0] == 'I' ? E57_INTEGER : E57_SCALED;
         if (parse_i64(e57_attr(n, "minimum"), INT64_MIN, &f->min) < 0 ||
             parse_i64(e57_attr(n, "maximum"), INT64_MAX, &f->max) < 0 || f->min > f->max)
-            return bad(c, n, "minimum '%s' and maximum '%s' are not integers with minimum <= "
-                       "maximum", e57_attr(n, "minimum") ? e57_attr(n, "minimum") : "",
+            return bad(c, n,
+                       "minimum '%s' and maximum '%s' are not integers with minimum <= "
+                       "maximum",
+                       e57_attr(n, "minimum") ? e57_attr(n, "minimum") : "",
                        e57_attr(n, "maximum") ? e57_attr(n, "maximum") : "");
         f->bits = bits_for((uint64_t)f->max - (uint64_t)f->min);
         f->scale = 1.0;
@@ -183,15 +186,20 @@ static int leaf(ctx *c, e57_scan *s, const e57_node *n, int depth)
                        e57_attr(n, "offset") ? e57_attr(n, "offset") : "");
     } else if (!strcmp(n->type, "Float")) {
         const char *prec = e57_attr(n, "precision");
-        if (!prec || !strcmp(prec, "double")) f->kind = E57_DOUBLE, f->bits = 64;
-        else if (!strcmp(prec, "single")) f->kind = E57_FLOAT, f->bits = 32;
-        else return bad(c, n, "precision '%s' (want single or double)%s", prec, "");
+        if (!prec || !strcmp(prec, "double"))
+            f->kind = E57_DOUBLE, f->bits = 64;
+        else if (!strcmp(prec, "single"))
+            f->kind = E57_FLOAT, f->bits = 32;
+        else
+            return bad(c, n, "precision '%s' (want single or double)%s", prec, "");
         if (parse_f64(e57_attr(n, "minimum"), -HUGE_VAL, &f->fmin) < 0 ||
             parse_f64(e57_attr(n, "maximum"), HUGE_VAL, &f->fmax) < 0)
             return bad(c, n, "minimum or maximum is not a number%s%s", "", "");
     } else {
-        return bad(c, n, "type '%s' in a prototype (want Integer, ScaledInteger, Float, "
-                   "Structure or Vector)%s", n->type, "");
+        return bad(c, n,
+                   "type '%s' in a prototype (want Integer, ScaledInteger, Float, "
+                   "Structure or Vector)%s",
+                   n->type, "");
     }
     if (depth == 0 && n->ns != E57_NS_OTHER)
         for (int r = 0; r < E57_R_COUNT; r++) {
@@ -253,8 +261,7 @@ static int limits(ctx *c, e57_scan *s, const e57_node *sn, const e57_field *f)
         if (l && (rc = opt_number(c, l, "intensityMinimum", 0.0, &lo)) == 0)
             rc = opt_number(c, l, "intensityMaximum", 0.0, &hi);
         if (rc < 0) return rc;
-        if ((!l || !(hi > lo)) && !bounds_of(&f[s->role[E57_R_INTENSITY]], &lo, &hi))
-            lo = hi = 0;
+        if ((!l || !(hi > lo)) && !bounds_of(&f[s->role[E57_R_INTENSITY]], &lo, &hi)) lo = hi = 0;
         s->ilo = lo;
         s->ihi = hi;
     }
@@ -284,9 +291,10 @@ static int codecs(ctx *c, const e57_scan *s, const e57_node *pts)
     const e57_node *cv = e57_child(pts, "codecs");
     for (const e57_node *k = cv ? cv->child : NULL; k; k = k->next)
         if (!e57_child(k, "bitPackCodec"))
-            return sd_errf(c->err, SD_EUNSUP, "%s: line %lu: scan %u: a codec other than the "
-                           "bit-pack codec (the only one E2807 defines)", c->what, k->line,
-                           s->index);
+            return sd_errf(c->err, SD_EUNSUP,
+                           "%s: line %lu: scan %u: a codec other than the "
+                           "bit-pack codec (the only one E2807 defines)",
+                           c->what, k->line, s->index);
     return 0;
 }
 
@@ -312,11 +320,13 @@ static int scan(ctx *c, e57_scan *s, const e57_node *sn)
     if (rc < 0) return rc;
     s->field0 = first;
     const int *ro = s->role;
-    if (ro[E57_R_CX] >= 0 && ro[E57_R_CY] >= 0 && ro[E57_R_CZ] >= 0) s->coords = E57_CARTESIAN;
+    if (ro[E57_R_CX] >= 0 && ro[E57_R_CY] >= 0 && ro[E57_R_CZ] >= 0)
+        s->coords = E57_CARTESIAN;
     else if (ro[E57_R_RANGE] >= 0 && ro[E57_R_AZIMUTH] >= 0 && ro[E57_R_ELEVATION] >= 0)
         s->coords = E57_SPHERICAL;
     else
-        return sd_errf(c->err, SD_EFORMAT, "%s: line %lu: scan %u: the prototype has neither "
+        return sd_errf(c->err, SD_EFORMAT,
+                       "%s: line %lu: scan %u: the prototype has neither "
                        "cartesianX/Y/Z nor sphericalRange/Azimuth/Elevation: no coordinates",
                        c->what, proto->line, s->index);
     s->has_intensity = ro[E57_R_INTENSITY] >= 0;
@@ -346,8 +356,10 @@ int e57_desc_read(const e57_node *root, e57_desc *d, const char *what, sd_err *e
     for (const e57_node *k = d3 ? d3->child : NULL; k && rc == 0; k = k->next) {
         e57_scan *s = &d->scans[d->nscans];
         s->index = d->nscans++;
-        rc = strcmp(k->type, "Structure") ? bad(&c, k, "a /data3D child of type '%s', not "
-                                                "Structure%s", k->type, "")
+        rc = strcmp(k->type, "Structure") ? bad(&c, k,
+                                                "a /data3D child of type '%s', not "
+                                                "Structure%s",
+                                                k->type, "")
                                           : scan(&c, s, k);
     }
     /* the field array is final: point each scan at its fields */

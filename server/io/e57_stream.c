@@ -27,8 +27,8 @@ struct pc_e57_stream {
     /* the scan being read */
     uint32_t cur;
     e57_cv *cv;
-    double **cols;      /* per field of the scan: a column of BATCH values, NULL when unused */
-    double *colbuf;     /* the columns' storage: BATCH per used field */
+    double **cols; /* per field of the scan: a column of BATCH values, NULL when unused */
+    double *colbuf; /* the columns' storage: BATCH per used field */
 };
 
 int pc_e57_signature(const char *path)
@@ -116,9 +116,11 @@ static int check_scans(pc_e57_stream *s, sd_err *err)
          * claim more records than its section has bits */
         uint64_t cap = bytes > UINT64_MAX / 8 ? UINT64_MAX : 8 * bytes;
         if (!bits && sc->records > cap)
-            return sd_errf(err, SD_EFORMAT, "%s: scan %u (XML line %lu): %llu records of 0 bits "
-                           "each in a compressed vector of %llu bytes: refused", s->f.path, i,
-                           sc->line, (unsigned long long)sc->records, (unsigned long long)bytes);
+            return sd_errf(err, SD_EFORMAT,
+                           "%s: scan %u (XML line %lu): %llu records of 0 bits "
+                           "each in a compressed vector of %llu bytes: refused",
+                           s->f.path, i, sc->line, (unsigned long long)sc->records,
+                           (unsigned long long)bytes);
         uint64_t fit = bits ? cap / bits : cap;
         uint64_t b = sc->records < fit ? sc->records : fit;
         s->bound = b > UINT64_MAX - s->bound ? UINT64_MAX : s->bound + b;
@@ -137,8 +139,10 @@ int pc_e57_stream_open(const char *path, pc_e57_stream **out, sd_err *err)
     int rc = e57_file_open(path, &s->f, err);
     if (rc == 0) rc = read_xml(s, err);
     if (rc == 0 && s->d.nscans == 0)
-        rc = sd_errf(err, SD_EEMPTY, "%s: no scans: /data3D is %s (%u images in /images2D, "
-                     "which are not read)", path, "empty or absent", s->d.nimages);
+        rc = sd_errf(err, SD_EEMPTY,
+                     "%s: no scans: /data3D is %s (%u images in /images2D, "
+                     "which are not read)",
+                     path, "empty or absent", s->d.nimages);
     if (rc == 0) rc = check_scans(s, err);
     if (rc < 0) {
         pc_e57_stream_close(s);
@@ -174,9 +178,18 @@ void pc_e57_stream_rewind(pc_e57_stream *s)
     s->cur = 0;
 }
 
-uint32_t pc_e57_stream_attrs(const pc_e57_stream *s) { return s->attrs; }
-uint64_t pc_e57_stream_bound(const pc_e57_stream *s) { return s->bound; }
-uint32_t pc_e57_stream_scans(const pc_e57_stream *s) { return s->d.nscans; }
+uint32_t pc_e57_stream_attrs(const pc_e57_stream *s)
+{
+    return s->attrs;
+}
+uint64_t pc_e57_stream_bound(const pc_e57_stream *s)
+{
+    return s->bound;
+}
+uint32_t pc_e57_stream_scans(const pc_e57_stream *s)
+{
+    return s->d.nscans;
+}
 
 uint64_t pc_e57_stream_records(const pc_e57_stream *s)
 {
@@ -185,8 +198,14 @@ uint64_t pc_e57_stream_records(const pc_e57_stream *s)
         n = s->d.scans[i].records > UINT64_MAX - n ? UINT64_MAX : n + s->d.scans[i].records;
     return n;
 }
-const char *pc_e57_stream_format(const pc_e57_stream *s) { return s->format; }
-uint64_t pc_e57_stream_pages_checked(const pc_e57_stream *s) { return s->f.pages_checked; }
+const char *pc_e57_stream_format(const pc_e57_stream *s)
+{
+    return s->format;
+}
+uint64_t pc_e57_stream_pages_checked(const pc_e57_stream *s)
+{
+    return s->f.pages_checked;
+}
 
 /* open_scan: the reader and the columns of scan s->cur. */
 static int open_scan(pc_e57_stream *s, sd_err *err)
@@ -241,18 +260,21 @@ static size_t emit(const pc_e57_stream *s, const e57_scan *sc, size_t m, const p
         size_t j = k + kept++;
         if (o->xyz)
             for (int r = 0; r < 3; r++)
-                o->xyz[3 * j + r] = R[3 * r] * p[0] + R[3 * r + 1] * p[1] + R[3 * r + 2] * p[2] + T[r];
+                o->xyz[3 * j + r] =
+                    R[3 * r] * p[0] + R[3 * r + 1] * p[1] + R[3 * r + 2] * p[2] + T[r];
         if (rgb) {
             uint8_t *q = o->rgba + 4 * j;
-            int bad = ro[E57_R_COLOR_INVALID] >= 0 && sc->has_color && c[ro[E57_R_COLOR_INVALID]][i] != 0;
+            int bad =
+                ro[E57_R_COLOR_INVALID] >= 0 && sc->has_color && c[ro[E57_R_COLOR_INVALID]][i] != 0;
             for (int r = 0; r < 3; r++)
-                q[r] = !sc->has_color || bad ? 255 : to8(c[ro[E57_R_RED + r]][i], sc->clo[r], sc->chi[r]);
+                q[r] = !sc->has_color || bad ? 255
+                                             : to8(c[ro[E57_R_RED + r]][i], sc->clo[r], sc->chi[r]);
             q[3] = 255;
         }
         if (inten) {
             float v = 0.0f;
             int bad = ro[E57_R_INTENSITY_INVALID] >= 0 && sc->has_intensity &&
-                      c[ro[E57_R_INTENSITY_INVALID]][i] != 0;
+                c[ro[E57_R_INTENSITY_INVALID]][i] != 0;
             if (sc->has_intensity && !bad) {
                 double x = c[ro[E57_R_INTENSITY]][i];
                 if (sc->ihi > sc->ilo) {
@@ -266,7 +288,8 @@ static size_t emit(const pc_e57_stream *s, const e57_scan *sc, size_t m, const p
         if (nrm) {
             double n[3], w[3];
             for (int r = 0; r < 3; r++) n[r] = c[ro[E57_R_NX + r]][i];
-            for (int r = 0; r < 3; r++) w[r] = R[3 * r] * n[0] + R[3 * r + 1] * n[1] + R[3 * r + 2] * n[2];
+            for (int r = 0; r < 3; r++)
+                w[r] = R[3 * r] * n[0] + R[3 * r + 1] * n[1] + R[3 * r + 2] * n[2];
             double len = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
             for (int r = 0; r < 3; r++) o->normal[3 * j + r] = len > 0 ? (float)(w[r] / len) : 0.0f;
         }

@@ -23,9 +23,9 @@ struct e57_xml {
     e57_node *last[E57_XML_MAX_DEPTH + 1]; /* the latest child of the open element at depth d */
     int depth;
     size_t nodes;
-    char *text;                /* the current element's character data so far */
+    char *text; /* the current element's character data so far */
     size_t text_len, text_cap;
-    int failed;                /* a handler stopped the parse: msg says why */
+    int failed; /* a handler stopped the parse: msg says why */
     char msg[200];
     int done;
 };
@@ -64,8 +64,8 @@ static void stop(e57_xml *x, const char *fmt, const char *arg)
     x->failed = 1;
     char m[160];
     snprintf(m, sizeof m, fmt, arg);
-    snprintf(x->msg, sizeof x->msg, "line %lu: %s",
-             (unsigned long)XML_GetCurrentLineNumber(x->p), m);
+    snprintf(x->msg, sizeof x->msg, "line %lu: %s", (unsigned long)XML_GetCurrentLineNumber(x->p),
+             m);
     XML_StopParser(x->p, XML_FALSE);
 }
 
@@ -138,8 +138,10 @@ static void XMLCALL on_start(void *ud, const XML_Char *name, const XML_Char **at
     n->attrs = attrs;
     n->parent = x->cur;
     if (x->cur) {
-        if (x->cur->child) x->last[x->depth]->next = n;
-        else x->cur->child = n;
+        if (x->cur->child)
+            x->last[x->depth]->next = n;
+        else
+            x->cur->child = n;
         x->last[x->depth] = n;
     } else if (!x->root) {
         x->root = n;
@@ -224,9 +226,11 @@ int e57_xml_feed(e57_xml *x, const char *p, size_t n, int final, const char *wha
             x->done = 1;
             x->failed = 1; /* no root for e57_xml_root */
             if (ours)
-                return sd_errf(err, strstr(x->msg, "out of memory") ? SD_ENOMEM
-                                    : strstr(x->msg, "more than") || strstr(x->msg, "deeper")
-                                        ? SD_ELIMIT : SD_EFORMAT,
+                return sd_errf(err,
+                               strstr(x->msg, "out of memory") ? SD_ENOMEM
+                                   : strstr(x->msg, "more than") || strstr(x->msg, "deeper")
+                                   ? SD_ELIMIT
+                                   : SD_EFORMAT,
                                "%s: %s", what, x->msg);
             return sd_errf(err, SD_EFORMAT, "%s: line %lu, column %lu: %s", what,
                            (unsigned long)XML_GetCurrentLineNumber(x->p),

@@ -16,14 +16,18 @@ int pc_read_e57(const char *path, pc_raw *raw, sd_err *err)
     pc_e57_stream *s;
     int rc = pc_e57_stream_open(path, &s, err);
     if (rc == 0)
-        return sd_errf(err, SD_EFORMAT, "%s: not an E57 file: it does not start with the "
-                       "signature 'ASTM-E57'", path);
+        return sd_errf(err, SD_EFORMAT,
+                       "%s: not an E57 file: it does not start with the "
+                       "signature 'ASTM-E57'",
+                       path);
     if (rc < 0) return rc;
     raw->attrs = pc_e57_stream_attrs(s);
     snprintf(raw->format, sizeof raw->format, "%s", pc_e57_stream_format(s));
     uint64_t bound = pc_e57_stream_bound(s);
-    rc = bound > SIZE_MAX / 64 ? sd_errf(err, SD_ELIMIT, "%s: %llu points is over this "
-                                         "machine's limit", path, (unsigned long long)bound)
+    rc = bound > SIZE_MAX / 64 ? sd_errf(err, SD_ELIMIT,
+                                         "%s: %llu points is over this "
+                                         "machine's limit",
+                                         path, (unsigned long long)bound)
                                : pc_raw_reserve(raw, (size_t)bound, err);
     while (rc == 0) {
         size_t room = raw->cap - raw->n;

@@ -40,8 +40,8 @@ void e57w_fix_crcs(uint8_t *d, size_t n, uint32_t page)
 typedef struct pw {
     FILE *fp;
     uint32_t page;
-    uint64_t l;              /* logical bytes written */
-    uint8_t *cur, *page0;    /* the page being filled; page 0 */
+    uint64_t l; /* logical bytes written */
+    uint8_t *cur, *page0; /* the page being filled; page 0 */
     uint32_t table[256];
     int failed;
 } pw;
@@ -92,10 +92,10 @@ static void pw_uint(pw *w, uint64_t v, int size)
 /* A field's bit writer: whole bytes in buf, the bits of a started byte in acc. */
 typedef struct bw {
     uint8_t *buf;
-    size_t len, cap, taken;  /* bytes written, allocated, already put in packets */
+    size_t len, cap, taken; /* bytes written, allocated, already put in packets */
     uint64_t acc;
     int nacc;
-    uint64_t bits;           /* bits written so far */
+    uint64_t bits; /* bits written so far */
 } bw;
 
 static void bw_byte(bw *b, uint8_t v)
@@ -149,9 +149,9 @@ static int bits_of(const e57w_field *f)
 
 /* The layout of a scan's packets: per packet, each field's bytes. */
 typedef struct plan {
-    uint64_t npk;            /* data packets */
-    uint64_t *bytes;         /* npk * nfields: bytes of field f in packet k */
-    uint64_t section_len;    /* logical bytes of the section */
+    uint64_t npk; /* data packets */
+    uint64_t *bytes; /* npk * nfields: bytes of field f in packet k */
+    uint64_t section_len; /* logical bytes of the section */
 } plan;
 
 /* byte_end: the bytes of field f's stream up to the end of packet k (0-based). */
@@ -166,8 +166,19 @@ static uint64_t byte_end(const e57w_scan *s, uint32_t f, uint64_t k, uint64_t np
     return recs * bits / 8;
 }
 
-static int make_plan(const e57w_scan *s, plan *p)
+static int make_plan(const e57w_scan *in, plan *p)
 {
+    /* per_packet 0: as many records as fit a packet (the slowest field's count) */
+    e57w_scan sv = *in;
+    const e57w_scan *s = &sv;
+    if (!sv.per_packet) {
+        uint64_t bits = 0;
+        for (uint32_t f = 0; f < sv.nfields; f++) bits += (uint64_t)bits_of(&sv.fields[f]);
+        uint64_t room = 8 * ((uint64_t)PACKET_MAX - 8 - 2 * (uint64_t)sv.nfields - 4 * sv.nfields);
+        uint64_t per = bits ? room / bits : sv.records;
+        uint64_t grow = (uint64_t)(sv.nfields ? sv.nfields - 1 : 0) * sv.stagger;
+        sv.per_packet = (uint32_t)(per > grow + 1 ? per - grow : 1);
+    }
     uint64_t npk = 1;
     for (uint32_t f = 0; f < s->nfields && s->per_packet; f++) {
         uint64_t per = s->per_packet + (uint64_t)f * s->stagger;
@@ -187,8 +198,10 @@ static int make_plan(const e57w_scan *s, plan *p)
         }
         pk = (pk + 3) & ~(uint64_t)3; /* packets padded to 4 bytes */
         if (pk > PACKET_MAX) {
-            fprintf(stderr, "e57w: packet %llu would be %llu bytes (at most 65536): set "
-                    "per_packet\n", (unsigned long long)k, (unsigned long long)pk);
+            fprintf(stderr,
+                    "e57w: packet %llu would be %llu bytes (at most 65536): set "
+                    "per_packet\n",
+                    (unsigned long long)k, (unsigned long long)pk);
             free(p->bytes);
             return -1;
         }
@@ -284,8 +297,9 @@ static int write_scan(pw *w, const e57w_scan *s, uint32_t si, e57w_gen gen, void
         pw_uint(w, e57w_phys(l0 + 32, w->page), 8);
     }
     int ok = w->l == l0 + p.section_len;
-    if (!ok) fprintf(stderr, "e57w: scan %u: wrote %llu section bytes, planned %llu\n", si,
-                     (unsigned long long)(w->l - l0), (unsigned long long)p.section_len);
+    if (!ok)
+        fprintf(stderr, "e57w: scan %u: wrote %llu section bytes, planned %llu\n", si,
+                (unsigned long long)(w->l - l0), (unsigned long long)p.section_len);
     for (uint32_t f = 0; f < nf; f++) free(b[f].buf);
     free(b);
     free(iv);
@@ -295,13 +309,14 @@ static int write_scan(pw *w, const e57w_scan *s, uint32_t si, e57w_gen gen, void
 }
 
 /* xml_of: the XML section for the scans at the physical offsets cv. */
-static char *xml_of(const e57w_scan *scans, uint32_t nscans, const uint64_t *cv,
-                    const e57w_opts *o, size_t *len)
+static char *xml_of(const e57w_scan *scans, uint32_t nscans, const uint64_t *cv, const e57w_opts *o,
+                    size_t *len)
 {
     char *x = NULL;
     FILE *m = open_memstream(&x, len);
     if (!m) abort();
-    fprintf(m, "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<e57Root type=\"Structure\" "
+    fprintf(m,
+            "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<e57Root type=\"Structure\" "
             "xmlns=\"http://www.astm.org/COMMIT/E57/2010-e57-v1.0\" "
             "xmlns:nor=\"http://www.libe57.org/E57_NOR_surface_normals.txt\">\n"
             "<formatName type=\"String\"><![CDATA[ASTM E57 3D Imaging Data File]]></formatName>\n"
@@ -314,17 +329,22 @@ static char *xml_of(const e57w_scan *scans, uint32_t nscans, const uint64_t *cv,
         if (s->pose) {
             fprintf(m, "<pose type=\"Structure\">\n");
             if (!s->pose_no_rotation)
-                fprintf(m, "<rotation type=\"Structure\"><w type=\"Float\">%.17g</w><x "
+                fprintf(m,
+                        "<rotation type=\"Structure\"><w type=\"Float\">%.17g</w><x "
                         "type=\"Float\">%.17g</x><y type=\"Float\">%.17g</y><z type=\"Float\">"
-                        "%.17g</z></rotation>\n", s->quat[0], s->quat[1], s->quat[2], s->quat[3]);
-            fprintf(m, "<translation type=\"Structure\"><x type=\"Float\">%.17g</x><y "
+                        "%.17g</z></rotation>\n",
+                        s->quat[0], s->quat[1], s->quat[2], s->quat[3]);
+            fprintf(m,
+                    "<translation type=\"Structure\"><x type=\"Float\">%.17g</x><y "
                     "type=\"Float\">%.17g</y><z type=\"Float\">%.17g</z></translation>\n"
-                    "</pose>\n", s->trans[0], s->trans[1], s->trans[2]);
+                    "</pose>\n",
+                    s->trans[0], s->trans[1], s->trans[2]);
         }
         if (s->extra_xml) fprintf(m, "%s\n", s->extra_xml);
-        fprintf(m, "<points type=\"CompressedVector\" fileOffset=\"%llu\" recordCount=\"%llu\">\n"
-                "<prototype type=\"Structure\">\n", (unsigned long long)cv[i],
-                (unsigned long long)s->records);
+        fprintf(m,
+                "<points type=\"CompressedVector\" fileOffset=\"%llu\" recordCount=\"%llu\">\n"
+                "<prototype type=\"Structure\">\n",
+                (unsigned long long)cv[i], (unsigned long long)s->records);
         for (uint32_t f = 0; f < s->nfields; f++) {
             const e57w_field *fd = &s->fields[f];
             if (fd->kind == E57W_F32 || fd->kind == E57W_F64)
@@ -336,11 +356,14 @@ static char *xml_of(const e57w_scan *scans, uint32_t nscans, const uint64_t *cv,
                 fprintf(m, "<%s type=\"Integer\" minimum=\"%lld\" maximum=\"%lld\"/>\n", fd->name,
                         (long long)fd->min, (long long)fd->max);
             else
-                fprintf(m, "<%s type=\"ScaledInteger\" minimum=\"%lld\" maximum=\"%lld\" "
-                        "scale=\"%.17g\" offset=\"%.17g\"/>\n", fd->name, (long long)fd->min,
-                        (long long)fd->max, fd->scale ? fd->scale : 1.0, fd->offset);
+                fprintf(m,
+                        "<%s type=\"ScaledInteger\" minimum=\"%lld\" maximum=\"%lld\" "
+                        "scale=\"%.17g\" offset=\"%.17g\"/>\n",
+                        fd->name, (long long)fd->min, (long long)fd->max,
+                        fd->scale ? fd->scale : 1.0, fd->offset);
         }
-        fprintf(m, "</prototype>\n<codecs type=\"Vector\" allowHeterogeneousChildren=\"1\">"
+        fprintf(m,
+                "</prototype>\n<codecs type=\"Vector\" allowHeterogeneousChildren=\"1\">"
                 "</codecs>\n</points>\n</vectorChild>\n");
     }
     fprintf(m, "</data3D>\n%s</e57Root>\n", o && o->root_extra ? o->root_extra : "");
@@ -371,9 +394,10 @@ int e57w_write(const char *path, const e57w_scan *scans, uint32_t nscans, const 
     }
     uint8_t zero[48] = {0};
     if (fwrite(w.page0, 1, w.page, w.fp) != w.page) w.failed = 1; /* page 0's place */
-    pw_put(&w, zero, 48);                                           /* the header's place */
+    pw_put(&w, zero, 48); /* the header's place */
     int rc = 0;
-    for (uint32_t i = 0; i < nscans && rc == 0; i++) rc = write_scan(&w, &scans[i], i, gen, ctx, &cv[i]);
+    for (uint32_t i = 0; i < nscans && rc == 0; i++)
+        rc = write_scan(&w, &scans[i], i, gen, ctx, &cv[i]);
     size_t xlen = 0;
     char *x = rc == 0 ? xml_of(scans, nscans, cv, o, &xlen) : NULL;
     uint64_t xl = w.l;
