@@ -573,7 +573,7 @@ static void gen_cart(void *ctx, uint32_t scan, uint64_t i, int64_t *ints, double
     ints[5] = i % 5 == 0; /* isIntensityInvalid */
     ints[6] = 9, ints[7] = 9, ints[8] = 9; /* colours 9 of 0-255 */
     ints[9] = i % 7 == 0; /* isColorInvalid */
-    dbls[10] = 1, dbls[11] = 0, dbls[12] = 0; /* nor:normal (1, 0, 0) */
+    dbls[10] = 0, dbls[11] = 2, dbls[12] = 0; /* nor:normal (0, 2, 0): not unit */
     ints[13] = (int64_t)i; /* rowIndex: never read */
 }
 
@@ -623,8 +623,10 @@ static void test_invalid_states_limits_normals(void **state)
         float want_i = i % 5 == 0 ? 0.0f : (float)((double)(i % 1000) / 999.0);
         assert_float_equal(r.intensity[j], want_i, 1e-7);
         for (int k = 0; k < 3; k++) assert_int_equal(r.rgba[4 * j + k], i % 7 == 0 ? 255 : 9);
-        assert_float_equal(r.normal[3 * j], 1.0f, 1e-7);
+        /* the normal turned as the points, (0, 1, 0) -> (0, 0, 1), and made unit */
+        assert_float_equal(r.normal[3 * j], 0.0f, 1e-7);
         assert_float_equal(r.normal[3 * j + 1], 0.0f, 1e-7);
+        assert_float_equal(r.normal[3 * j + 2], 1.0f, 1e-7);
         j++;
     }
     pc_raw_free(&r);
