@@ -67,10 +67,52 @@ static inline uint64_t take_wide(e57_bp *b, int k)
     return lo | hi << 32;
 }
 
+/* aligned: values of whole bytes (8, 16, 32, 64 bits) starting on a byte: read as they lie
+ * (the common layout: doubles, floats, 8- and 16-bit integers). Returns as e57_bp_decode. */
+static int64_t aligned(e57_bp *b, const e57_field *f, double *out, size_t n)
+{
+    const int k = f->bits, nb = k / 8;
+    const uint8_t *p = b->buf + b->bit / 8;
+    b->bit += (uint64_t)n * (uint64_t)k;
+    if (!out) {
+        if (f->kind == E57_FLOAT || f->kind == E57_DOUBLE) return -1;
+    } else if (f->kind == E57_DOUBLE) {
+        memcpy(out, p, 8 * n);
+        return -1;
+    } else if (f->kind == E57_FLOAT) {
+        for (size_t i = 0; i < n; i++) {
+            float x;
+            memcpy(&x, p + 4 * i, 4);
+            out[i] = x;
+        }
+        return -1;
+    }
+    const uint64_t range = (uint64_t)f->max - (uint64_t)f->min;
+    const int scaled = f->kind == E57_SCALED;
+    int64_t bad = -1;
+    for (size_t i = 0; i < n; i++) {
+        uint64_t raw = 0;
+        if (nb == 1) raw = p[i];
+        else if (nb == 2) raw = (uint64_t)p[2 * i] | (uint64_t)p[2 * i + 1] << 8;
+        else for (int j = nb - 1; j >= 0; j--) raw = raw << 8 | p[(size_t)nb * i + (size_t)j];
+        if (raw > range) {
+            if (bad < 0) bad = (int64_t)i;
+            raw = range;
+        }
+        if (!out) continue;
+        int64_t v = (int64_t)((uint64_t)f->min + raw);
+        out[i] = scaled ? (double)v * f->scale + f->offset : (double)v;
+    }
+    return bad;
+}
+
 int64_t e57_bp_decode(e57_bp *b, const e57_field *f, double *out, size_t n)
 {
     const int k = f->bits;
     int64_t bad = -1;
+#if __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+    if (k && k % 8 == 0 && b->bit % 8 == 0) return aligned(b, f, out, n);
+#endif
     if (f->kind == E57_FLOAT || f->kind == E57_DOUBLE) {
         for (size_t i = 0; i < n; i++) {
             uint64_t raw = take_wide(b, k);

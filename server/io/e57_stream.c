@@ -221,6 +221,8 @@ static int open_scan(pc_e57_stream *s, sd_err *err)
     return e57_cv_open(&s->f, sc, &s->cv, err);
 }
 
+/* to8: colour value v mapped from [lo, hi] to 0-255, rounded to nearest (a division, not a
+ * multiplication by 255 / (hi - lo): a half lands on the half). */
 static uint8_t to8(double v, double lo, double hi)
 {
     double x = (v - lo) * 255.0 / (hi - lo);
@@ -243,7 +245,16 @@ static size_t emit(const pc_e57_stream *s, const e57_scan *sc, size_t m, const p
     const double *R = sc->rot, *T = sc->trans;
     /* colours and intensities are written whenever asked for (white, 0 where the scan has
      * none); normals only when every scan has them */
-    const int rgb = o->rgba != NULL, inten = o->intensity != NULL;
+    const double *col[3] = {NULL, NULL, NULL}, *cbad = NULL, *in = NULL, *ibad = NULL;
+    if (sc->has_color) {
+        for (int r = 0; r < 3; r++) col[r] = c[ro[E57_R_RED + r]];
+        if (ro[E57_R_COLOR_INVALID] >= 0) cbad = c[ro[E57_R_COLOR_INVALID]];
+    }
+    if (sc->has_intensity) {
+        in = c[ro[E57_R_INTENSITY]];
+        if (ro[E57_R_INTENSITY_INVALID] >= 0) ibad = c[ro[E57_R_INTENSITY_INVALID]];
+    }
+    const double ilo = sc->ilo, iscale = sc->ihi > sc->ilo ? 1.0 / (sc->ihi - sc->ilo) : 0.0;
     const int nrm = (s->attrs & PC_ATTR_NORMAL) && o->normal;
     size_t kept = 0;
     for (size_t i = 0; i < m; i++) {
@@ -262,28 +273,20 @@ static size_t emit(const pc_e57_stream *s, const e57_scan *sc, size_t m, const p
             for (int r = 0; r < 3; r++)
                 o->xyz[3 * j + r] =
                     R[3 * r] * p[0] + R[3 * r + 1] * p[1] + R[3 * r + 2] * p[2] + T[r];
-        if (rgb) {
+        if (o->rgba) {
             uint8_t *q = o->rgba + 4 * j;
-            int bad =
-                ro[E57_R_COLOR_INVALID] >= 0 && sc->has_color && c[ro[E57_R_COLOR_INVALID]][i] != 0;
+            int white = !col[0] || (cbad && cbad[i] != 0);
             for (int r = 0; r < 3; r++)
-                q[r] = !sc->has_color || bad ? 255
-                                             : to8(c[ro[E57_R_RED + r]][i], sc->clo[r], sc->chi[r]);
+                q[r] = white ? 255 : to8(col[r][i], sc->clo[r], sc->chi[r]);
             q[3] = 255;
         }
-        if (inten) {
-            float v = 0.0f;
-            int bad = ro[E57_R_INTENSITY_INVALID] >= 0 && sc->has_intensity &&
-                c[ro[E57_R_INTENSITY_INVALID]][i] != 0;
-            if (sc->has_intensity && !bad) {
-                double x = c[ro[E57_R_INTENSITY]][i];
-                if (sc->ihi > sc->ilo) {
-                    x = (x - sc->ilo) / (sc->ihi - sc->ilo);
-                    x = x > 0 ? (x < 1 ? x : 1) : 0;
-                }
-                v = (float)x;
+        if (o->intensity) {
+            double x = in && !(ibad && ibad[i] != 0) ? in[i] : 0.0;
+            if (in && iscale > 0) {
+                x = (x - ilo) * iscale;
+                x = x > 0 ? (x < 1 ? x : 1) : 0;
             }
-            o->intensity[j] = v;
+            o->intensity[j] = (float)x;
         }
         if (nrm) {
             double n[3], w[3];
@@ -291,7 +294,8 @@ static size_t emit(const pc_e57_stream *s, const e57_scan *sc, size_t m, const p
             for (int r = 0; r < 3; r++)
                 w[r] = R[3 * r] * n[0] + R[3 * r + 1] * n[1] + R[3 * r + 2] * n[2];
             double len = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
-            for (int r = 0; r < 3; r++) o->normal[3 * j + r] = len > 0 ? (float)(w[r] / len) : 0.0f;
+            for (int r = 0; r < 3; r++)
+                o->normal[3 * j + r] = len > 0 ? (float)(w[r] / len) : 0.0f;
         }
         if (o->scan) o->scan[j] = (uint16_t)sc->index;
     }
