@@ -22,12 +22,11 @@
 #include "cloud.h"
 #include "e57_stream.h"
 #include "e57test.h"
+#include "testutil.h"
 
 static double now_s(void)
 {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+    return tu_now_us() * 1e-6;
 }
 
 /* CPU seconds of the process: steadier than wall time on a shared machine. */
@@ -38,19 +37,8 @@ static double cpu_s(void)
     return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
 }
 
-static int cmp_d(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-
 /* The points: a terrain-like sheet of 1 mm resolution, per scan a 2000-wide grid, values the
  * LAS grid holds exactly (local coordinates in mm, the pose a translation of whole metres). */
-typedef struct gen {
-    uint64_t per_scan;
-    int scaled;               /* coordinates as ScaledInteger (mm) */
-} gen;
-
 static void point(uint64_t i, int64_t mm[3], int rgbi[4])
 {
     int64_t gx = (int64_t)(i % 2000), gy = (int64_t)(i / 2000);
@@ -63,8 +51,7 @@ static void point(uint64_t i, int64_t mm[3], int rgbi[4])
 
 static void gen_rec(void *ctx, uint32_t scan, uint64_t i, int64_t *ints, double *dbls)
 {
-    const gen *g = ctx;
-    (void)scan;
+    (void)ctx, (void)scan;
     int64_t mm[3];
     int c[4];
     point(i, mm, c);
@@ -72,7 +59,6 @@ static void gen_rec(void *ctx, uint32_t scan, uint64_t i, int64_t *ints, double 
         ints[k] = mm[k];
         dbls[k] = (double)mm[k] * 0.001;
     }
-    (void)g;
     for (int k = 0; k < 4; k++) ints[3 + k] = c[k];
 }
 
@@ -151,10 +137,8 @@ static double read_whole(int (*rd)(const char *, pc_raw *, sd_err *), const char
         *sum = sum_xyz(&r);
         pc_raw_free(&r);
     }
-    qsort(t, (size_t)runs, sizeof *t, cmp_d);
-    qsort(c, (size_t)runs, sizeof *c, cmp_d);
-    *cpu = c[runs / 2];
-    return t[runs / 2];
+    *cpu = tu_median(c, runs);
+    return tu_median(t, runs);
 }
 
 /* stream_pass: median seconds of runs passes of the E57 point stream (xyz and colours). */
@@ -184,8 +168,7 @@ static double stream_pass(const char *path, int runs, uint64_t *n)
     }
     free(xyz);
     free(rgba);
-    qsort(t, (size_t)runs, sizeof *t, cmp_d);
-    return t[runs / 2];
+    return tu_median(t, runs);
 }
 
 int main(int argc, char **argv)
@@ -225,9 +208,8 @@ int main(int argc, char **argv)
         for (int k = 0; k < 2; k++)
             s[k] = (e57w_scan){.nfields = 7, .fields = v ? sci : dbl, .records = per, .pose = 1,
                                .quat = {1, 0, 0, 0}, .trans = {1000.0 * k, 0, 0}};
-        gen g = {.per_scan = per, .scaled = v};
         double t0 = now_s();
-        if (e57w_write(p[v], s, 2, NULL, gen_rec, &g)) return 1;
+        if (e57w_write(p[v], s, 2, NULL, gen_rec, NULL)) return 1;
         fprintf(stderr, "e57_bench: wrote %s in %.1f s\n", p[v], now_s() - t0);
     }
     if (write_las(p[2], per)) return 1;
