@@ -521,7 +521,12 @@ static void test_spherical_multi_scan_poses(void **state)
     };
     char p[1024];
     tmp_path("sph.e57", p, sizeof p);
-    assert_int_equal(e57w_write(p, s, 3, NULL, gen_sph, NULL), 0);
+    /* an image beside the scans: skipped */
+    e57w_opts opts = {.root_extra = "<images2D type=\"Vector\" allowHeterogeneousChildren=\"1\">"
+                                 "<vectorChild type=\"Structure\"><pinholeRepresentation "
+                                 "type=\"Structure\"><jpegImage type=\"Blob\" fileOffset=\"9999999\" "
+                                 "length=\"100\"/></pinholeRepresentation></vectorChild></images2D>\n"};
+    assert_int_equal(e57w_write(p, s, 3, &opts, gen_sph, NULL), 0);
     pc_raw r;
     read_raw_ok(p, &r);
     assert_int_equal(r.attrs, PC_ATTR_RGB | PC_ATTR_SCAN);
