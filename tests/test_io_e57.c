@@ -865,6 +865,15 @@ static void test_damaged_xml(void **state)
     expect_fail(save("off.e57", b, m, p, sizeof p), SD_EFORMAT, "fileOffset 4800000",
                 "past the end", NULL);
     free(b);
+    /* two scans reading the same bytes: refused (a file's points come from bytes of their own) */
+    b = replace_xml(d, n, "</data3D>",
+                    "<vectorChild type=\"Structure\"><points type=\"CompressedVector\" "
+                    "fileOffset=\"48\" recordCount=\"500\"><prototype type=\"Structure\">"
+                    "<cartesianX type=\"Float\"/><cartesianY type=\"Float\"/><cartesianZ "
+                    "type=\"Float\"/></prototype></points></vectorChild></data3D>", &m);
+    expect_fail(save("twice.e57", b, m, p, sizeof p), SD_EFORMAT, "scans 0", "and 1", "overlap",
+                NULL);
+    free(b);
     /* fileOffset in a checksum */
     b = replace_xml(d, n, "fileOffset=\"48\"", "fileOffset=\"1022\"", &m);
     expect_fail(save("off2.e57", b, m, p, sizeof p), SD_EFORMAT, "into a page checksum", NULL);

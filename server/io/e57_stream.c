@@ -90,7 +90,34 @@ static int used(const pc_e57_stream *s, const e57_scan *sc, uint32_t i)
     return 0;
 }
 
-/* check_scans: every compressed vector's section header, the attributes and the bound. */
+typedef struct span {
+    uint64_t lo, hi; /* physical offsets: a compressed vector section */
+    uint32_t scan;
+} span;
+
+static int cmp_span(const void *a, const void *b)
+{
+    const span *x = a, *y = b;
+    return x->lo < y->lo ? -1 : x->lo > y->lo;
+}
+
+/* overlaps: 0 when no two scans' sections share a byte (each scan's points then come from bytes
+ * of their own, so the points a file gives are bounded by its size); else SD_EFORMAT. */
+static int overlaps(const pc_e57_stream *s, span *sp, uint32_t n, sd_err *err)
+{
+    qsort(sp, n, sizeof *sp, cmp_span);
+    for (uint32_t i = 1; i < n; i++)
+        if (sp[i].lo < sp[i - 1].hi)
+            return sd_errf(err, SD_EFORMAT, "%s: the compressed vectors of scans %u (physical "
+                           "offsets %llu to %llu) and %u (from %llu) overlap", s->f.path,
+                           sp[i - 1].scan, (unsigned long long)sp[i - 1].lo,
+                           (unsigned long long)sp[i - 1].hi, sp[i].scan,
+                           (unsigned long long)sp[i].lo);
+    return 0;
+}
+
+/* check_scans: every compressed vector's section header (no two overlapping), the attributes
+ * and the bound. */
 static int check_scans(pc_e57_stream *s, sd_err *err)
 {
     uint32_t normals = 1, with_records = 0;
@@ -102,29 +129,39 @@ static int check_scans(pc_e57_stream *s, sd_err *err)
     }
     if (with_records && normals) s->attrs |= PC_ATTR_NORMAL;
     if (s->d.nscans > 1) s->attrs |= PC_ATTR_SCAN;
-    for (uint32_t i = 0; i < s->d.nscans; i++) {
+    span *sp = malloc((s->d.nscans ? s->d.nscans : 1) * sizeof *sp);
+    if (!sp) return sd_errf(err, SD_ENOMEM, "%s: out of memory", s->f.path);
+    int rc = 0;
+    uint32_t nsp = 0;
+    for (uint32_t i = 0; i < s->d.nscans && rc == 0; i++) {
         const e57_scan *sc = &s->d.scans[i];
         e57_cv *cv;
-        int rc = e57_cv_open(&s->f, sc, &cv, err);
-        if (rc < 0) return rc;
+        if ((rc = e57_cv_open(&s->f, sc, &cv, err)) < 0) break;
         uint64_t bytes = e57_cv_logical_len(cv);
         e57_cv_close(cv);
+        if (sc->records) /* an empty scan's section is never read */
+            sp[nsp++] = (span){sc->cv_offset, e57_phys_advance(&s->f, sc->cv_offset, bytes), i};
         uint64_t bits = 0;
         for (uint32_t k = 0; k < sc->nfields; k++)
             if (used(s, sc, k)) bits += (uint64_t)sc->fields[k].bits;
         /* a record of 0 bits (every field read a constant) takes no room: such a scan may not
          * claim more records than its section has bits */
         uint64_t cap = bytes > UINT64_MAX / 8 ? UINT64_MAX : 8 * bytes;
-        if (!bits && sc->records > cap)
-            return sd_errf(err, SD_EFORMAT,
+        if (!bits && sc->records > cap) {
+            rc = sd_errf(err, SD_EFORMAT,
                            "%s: scan %u (XML line %lu): %llu records of 0 bits "
                            "each in a compressed vector of %llu bytes: refused",
-                           s->f.path, i, sc->line, (unsigned long long)sc->records,
-                           (unsigned long long)bytes);
+                         s->f.path, i, sc->line, (unsigned long long)sc->records,
+                         (unsigned long long)bytes);
+            break;
+        }
         uint64_t fit = bits ? cap / bits : cap;
         uint64_t b = sc->records < fit ? sc->records : fit;
         s->bound = b > UINT64_MAX - s->bound ? UINT64_MAX : s->bound + b;
     }
+    if (rc == 0) rc = overlaps(s, sp, nsp, err);
+    free(sp);
+    if (rc < 0) return rc;
     snprintf(s->format, sizeof s->format, "E57 %u.%u, %u scan%s", s->f.major, s->f.minor,
              s->d.nscans, s->d.nscans == 1 ? "" : "s");
     return 0;
