@@ -33,7 +33,7 @@ int pc_e57_signature(const char *path);
 
 /* pc_e57_stream_open: 1 and *out when path has the extension e57 (any case) or starts with the
  * signature "ASTM-E57", and its header, XML, scans and every compressed vector's section
- * header check out; 0 when it is neither (another format); a negative SD_E* naming the file
+ * header check out (no two scans' sections overlapping); 0 when it is neither (another format); a negative SD_E* naming the file
  * and the offset or XML line otherwise (SD_EEMPTY: no /data3D scan). */
 int pc_e57_stream_open(const char *path, pc_e57_stream **out, sd_err *err);
 void pc_e57_stream_close(pc_e57_stream *s);
