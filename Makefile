@@ -39,13 +39,14 @@ FLANN_LIBS := -lflann
 EXR_CFLAGS := -I/usr/include/OpenEXR
 EXR_LIBS   := -lOpenEXRCore
 
-PKG_CFLAGS := $(shell pkg-config --cflags egl opengl osmesa libturbojpeg libpng liblz4 libssl libcrypto cmocka 2>/dev/null)
+PKG_CFLAGS := $(shell pkg-config --cflags egl opengl osmesa libturbojpeg libpng liblz4 libssl libcrypto cmocka expat 2>/dev/null)
 # Link lines per binary: each gets only the libraries it uses.
 #   CLIENT_LIBS  libsplatclient and the `splat` command: TLS, HMAC, frame decoding (LZ4, JPEG)
-#   SERVER_LIBS  splatd and the tools built on libsplatd: GL back ends, kNN, encoders
+#   SERVER_LIBS  splatd and the tools built on libsplatd: GL back ends, kNN, encoders, expat
+#                (the E57 reader's XML section)
 #   TEST_LIBS    the test and bench programs, which link both libraries
 CLIENT_LIBS := $(shell pkg-config --libs libssl libcrypto liblz4 libturbojpeg 2>/dev/null) -lm
-SERVER_LIBS := $(shell pkg-config --libs egl opengl osmesa libturbojpeg libpng liblz4 libssl libcrypto libxxhash liblzf 2>/dev/null) \
+SERVER_LIBS := $(shell pkg-config --libs egl opengl osmesa libturbojpeg libpng liblz4 libssl libcrypto libxxhash liblzf expat 2>/dev/null) \
                $(FLANN_LIBS) $(EXR_LIBS) -lpthread -lm
 TEST_LIBS   := $(SERVER_LIBS) $(shell pkg-config --libs cmocka 2>/dev/null)
 #   VIEW_LIBS    splat-view, the SDL2 window of `splat view` (a binary of its own, so that

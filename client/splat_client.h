@@ -132,7 +132,7 @@ int spc_list(spc_client *c, spc_cloud **list);
 void spc_free_list(spc_cloud *list);
 
 enum { SPC_ATTR_RGB = 1, SPC_ATTR_NORMAL = 2, SPC_ATTR_INTENSITY = 4, SPC_ATTR_CLASS = 8,
-       SPC_ATTR_RADIUS = 16, SPC_ATTR_SCALAR = 32, SPC_ATTR_F = 64 };
+       SPC_ATTR_RADIUS = 16, SPC_ATTR_SCALAR = 32, SPC_ATTR_F = 64, SPC_ATTR_SCAN = 128 };
 /* spc_info.attrs bit 31: the cloud is provisional (see spc_open). */
 #define SPC_INFO_PROVISIONAL 0x80000000u
 

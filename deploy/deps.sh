@@ -33,6 +33,7 @@ pc:libcrypto=libssl-dev
 pc:libssl=libssl-dev
 pc:libxxhash=libxxhash-dev
 pc:liblzf=liblzf-dev
+pc:expat=libexpat1-dev
 pc:cmocka=libcmocka-dev
 pc:sdl2=libsdl2-dev
 file:/usr/bin/Xvfb=xvfb

@@ -13,7 +13,8 @@
     X(CLASS, 3, "classification")    /* uint8 per point (LAS classes) */                     \
     X(RADIUS, 4, "radius")           /* float per point (the file's, or prep eq. 20) */      \
     X(SCALAR, 5, "scalar")           /* float per point (quality, confidence, scalar_*) */   \
-    X(F, 6, "F")                     /* uncertainty in [0,1] (prep eq. 21) */
+    X(F, 6, "F")                     /* uncertainty in [0,1] (prep eq. 21) */                \
+    X(SCAN, 7, "scan")               /* uint16 per point: the scan it came from (E57) */
 
 enum {
 #define SP_ATTR_ENUM_(id, bit, name) SP_ATTR_##id = 1u << (bit),

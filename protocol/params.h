@@ -19,7 +19,7 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(EWA,          "ewa",          SP_T_ENUM,  ewa,          0,    0,        "auto",   "auto|exact|split") \
     X(POINT_SIZE,   "point_size",   SP_T_FLOAT, point_size,   1,    64,       "1",      NULL)     \
     X(POINT_BUDGET, "point_budget", SP_T_INT,   point_budget, 0,    4e9,      "0",      NULL)     \
-    X(COLOR,        "color",        SP_T_ENUM,  color,        0,    0,        "rgb",    "rgb|field|normal|depth|intensity") \
+    X(COLOR,        "color",        SP_T_ENUM,  color,        0,    0,        "rgb",    "rgb|field|normal|depth|intensity|scan") \
     X(LIGHT,        "light",        SP_T_VEC3,  light,        -1,   1,        "0.3,0.4,1", NULL)  \
     X(BACKGROUND,   "background",   SP_T_VEC3,  background,   0,    1,        "0,0,0",  NULL)     \
     X(FORMAT,       "format",       SP_T_ENUM,  format,       0,    0,        "jpeg",   "jpeg|png|lz4|raw|exr") \
@@ -34,7 +34,7 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(LAMBDA,       "lambda",       SP_T_FLOAT, lambda,       0,    1,        "0.5",    NULL)     \
     X(T,            "t",            SP_T_FLOAT, t,            0,    1,        "0.5",    NULL)     \
     X(L_M,          "l_m",          SP_T_FLOAT, l_m,          0,    1,        "0",      NULL)     \
-    X(FIELD,        "field",        SP_T_ENUM,  field,        0,    0,        "uncertainty", "uncertainty|height|intensity|scalar|quality|confidence|class|axis-distance") \
+    X(FIELD,        "field",        SP_T_ENUM,  field,        0,    0,        "uncertainty", "uncertainty|height|intensity|scalar|quality|confidence|class|axis-distance|scan") \
     X(ORDER,        "order",        SP_T_ENUM,  order,        0,    0,        "auto",   "axis|tile|auto|cpu") \
     X(CLASSES,      "classes",      SP_T_INT,   classes,      0,    4294967295, "0",    NULL)     \
     X(AXIS_A,       "axis_a",       SP_T_VEC3,  axis_a,       -1e9, 1e9,      "0,0,0",  NULL)     \
@@ -59,7 +59,10 @@ enum {
  * the low-pass in the resolve (pipe_splat.c); auto: exact on a GPU, split on a software
  * renderer. */
 enum { SP_EWA_AUTO = 0, SP_EWA_EXACT, SP_EWA_SPLIT };
-enum { SP_COLOR_RGB = 0, SP_COLOR_FIELD, SP_COLOR_NORMAL, SP_COLOR_DEPTH, SP_COLOR_INTENSITY };
+/* color=scan: the scan index (E57 files of several scans) through color=field's colour map,
+ * scan / the largest scan index; one colour for a cloud of one scan. */
+enum { SP_COLOR_RGB = 0, SP_COLOR_FIELD, SP_COLOR_NORMAL, SP_COLOR_DEPTH, SP_COLOR_INTENSITY,
+       SP_COLOR_SCAN };
 enum { SP_FMT_JPEG = 0, SP_FMT_PNG, SP_FMT_LZ4, SP_FMT_RAW, SP_FMT_EXR };
 enum { SP_SUB_444 = 0, SP_SUB_422, SP_SUB_420, SP_SUB_GRAY };
 /* shading: lambert = each pipeline's own shading only (splat: Lambert from the file's or
@@ -88,10 +91,12 @@ enum { SP_MODEL_EXPRESS = 0, SP_MODEL_BASE, SP_MODEL_CONCENTRIC };
  *   class         1 for LAS classes in the bit mask `classes` (bit c: class c, 0-31), else 0;
  *                 the text form field=class:3,4,5 (sp_param_set_text) sets both parameters;
  *   axis-distance the distance to the line through axis_a and axis_b divided by the largest
- *                 such distance of any point of the cloud. */
+ *                 such distance of any point of the cloud;
+ *   scan          the index of the scan a point came from (E57) over the largest index (scans
+ *                 up to t * largest are solid); refused for a cloud without scan indices. */
 enum {
     SP_FIELD_UNCERTAINTY = 0, SP_FIELD_HEIGHT, SP_FIELD_INTENSITY, SP_FIELD_SCALAR,
-    SP_FIELD_QUALITY, SP_FIELD_CONFIDENCE, SP_FIELD_CLASS, SP_FIELD_AXIS
+    SP_FIELD_QUALITY, SP_FIELD_CONFIDENCE, SP_FIELD_CLASS, SP_FIELD_AXIS, SP_FIELD_SCAN
 };
 /* order: every value composites the soft discs back to front in the order of the axis-sorted
  * index arrays (pipe_soft.c); axis = as GL point sprites blended in primitive order, tile = a

@@ -68,7 +68,7 @@ void put(uint i, int e, bool all)
     pts[e] = vec4((u_view * vec4(fetch3(u_pos, l), 1.0)).xyz, 1.0);
     uint v = texelFetch(u_src, int(l)).x;
     int color = u_color;
-    vec3 c = color == 1   ? colormap(uintBitsToFloat(v))
+    vec3 c = color == 1 || color == 5 ? colormap(uintBitsToFloat(v))
              : color == 4 ? vec3(clamp(uintBitsToFloat(v), 0.0, 1.0))
                           : unpackUnorm4x8(v).rgb;
     pts[e + 2] = vec4(c, 1.0);

@@ -8,10 +8,11 @@ layout(location = 1) in vec4 a_rgba;      // RGBA8, normalised
 layout(location = 2) in vec3 a_normal;
 layout(location = 3) in float a_field;
 layout(location = 4) in float a_intensity;
+layout(location = 5) in float a_scan;
 
 uniform mat4 u_viewproj;
 uniform float u_point_size;
-uniform int u_color;          // 0 rgb, 1 field, 2 normal, 3 depth, 4 intensity (params.h)
+uniform int u_color;          // 0 rgb, 1 field, 2 normal, 3 depth, 4 intensity, 5 scan (params.h)
 uniform float u_znear, u_zfar;
 
 flat out vec3 v_color;
@@ -30,5 +31,6 @@ void main()
     else if (u_color == 3)
         v_color = vec3(1.0 - clamp((c.w - u_znear) / (u_zfar - u_znear), 0.0, 1.0));
     else if (u_color == 4) v_color = vec3(clamp(a_intensity, 0.0, 1.0));
+    else if (u_color == 5) v_color = colormap(a_scan);
     else v_color = a_rgba.rgb;
 }

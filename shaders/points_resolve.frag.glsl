@@ -24,7 +24,7 @@ uniform uint u_index_bits;    // 0: exact mode (u_index holds the point); else p
 uniform uint u_base, u_count; // this pass resolves the winners of points [u_base, +u_count):
                               // one buffer set (a cloud may have several, resolved in turn)
 uniform mat4 u_viewproj;
-uniform int u_color;          // 0 rgb, 1 field, 2 normal, 3 depth, 4 intensity (params.h)
+uniform int u_color;          // 0 rgb, 1 field, 2 normal, 3 depth, 4 intensity, 5 scan (params.h)
 uniform float u_znear, u_zfar;
 
 layout(location = 0) out vec4 o_color;
@@ -57,7 +57,7 @@ void main()
         d = (u_viewproj * vec4(fetch3(u_pos, i), 1.0)).w;
     }
     vec3 col;
-    if (color == 1) col = colormap(uintBitsToFloat(texelFetch(u_src, int(i)).x));
+    if (color == 1 || color == 5) col = colormap(uintBitsToFloat(texelFetch(u_src, int(i)).x));
     else if (color == 2) col = fetch3(u_nrm, i) * 0.5 + 0.5;
     else if (color == 3) col = vec3(1.0 - clamp((d - u_znear) / (u_zfar - u_znear), 0.0, 1.0));
     else if (color == 4) col = vec3(clamp(uintBitsToFloat(texelFetch(u_src, int(i)).x), 0.0, 1.0));

@@ -72,11 +72,11 @@ void main()
         vec3 col;
         uint src = texelFetch(u_src, int(i)).x;
         if (color == 0) col = unpackUnorm4x8(src).rgb;
-        else if (color == 1) col = colormap(uintBitsToFloat(src));
+        else if (color == 1 || color == 5) col = colormap(uintBitsToFloat(src));
         else if (color == 4) col = vec3(clamp(uintBitsToFloat(src), 0.0, 1.0));
         else if (color == 3) col = vec3(1.0 - clamp((depth - znear) / (zfar - znear), 0.0, 1.0));
         else col = vec3(0.5, 0.5, 1.0);
-        if (color == 0 || color == 1 || color == 4) {
+        if (color == 0 || color == 1 || color == 4 || color == 5) {
             // Lambert shading as splat's resolve (the paper shades all points), from the
             // point's normal turned towards the viewer
             vec3 nn = mat3(view) * fetch3(u_nrm, i);

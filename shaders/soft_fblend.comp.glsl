@@ -48,7 +48,7 @@ vec3 colour_of(uint i)
 {
     vec3 c;
     if (u_color == 0) c = unpackUnorm4x8(texelFetch(u_src, int(i)).x).rgb;
-    else if (u_color == 1) c = colormap(uintBitsToFloat(texelFetch(u_src, int(i)).x));
+    else if (u_color == 1 || u_color == 5) c = colormap(uintBitsToFloat(texelFetch(u_src, int(i)).x));
     else if (u_color == 4) c = vec3(clamp(uintBitsToFloat(texelFetch(u_src, int(i)).x), 0.0, 1.0));
     else return vec3(1.0);
     mat3 v = mat3(u_view);

@@ -222,14 +222,14 @@ float frag_depth(Uni U, Splat s, float sx, float sy)
 }
 
 #if PASS == 2
-// The splat's base colour (RGB in [0,1], the points pipeline's rules): rgba8, the field through
-// viridis, intensity as grey; normal and depth colours are made by the resolve.
+// The splat's base colour (RGB in [0,1], the points pipeline's rules): rgba8, the field and the
+// scan index through viridis, intensity as grey; normal and depth colours are made by the resolve.
 #include "lib_colormap.glsl"
 
 vec3 base_colour(Uni U, uint i)
 {
     if (U.color == 0) return unpackUnorm4x8(texelFetch(u_src, int(i)).x).rgb;
-    if (U.color == 1) return colormap(uintBitsToFloat(texelFetch(u_src, int(i)).x));
+    if (U.color == 1 || U.color == 5) return colormap(uintBitsToFloat(texelFetch(u_src, int(i)).x));
     if (U.color == 4) return vec3(clamp(uintBitsToFloat(texelFetch(u_src, int(i)).x), 0.0, 1.0));
     return vec3(1.0);
 }

@@ -27,7 +27,8 @@
 #define MUTATIONS 1000 /* per valid seed: about 0.5 s in all without ASan, 4 s with it */
 
 static const char *const targets[] = {"proto", "ply", "pcd", "las", "xyz", "lzf", "params",
-                                      "ws", "laz", "copc", "cache", "frame", "dispatch"};
+                                      "ws", "laz", "copc", "cache", "frame", "dispatch",
+                                      "e57", "e57xml", "e57bits"};
 
 /* find: fuzz_target_find, and the dispatch target, which only binaries linking the whole
  * server have (this one does). */
@@ -171,6 +172,9 @@ static void test_corpus_copc(void **state) { (void)state; run_corpus("copc"); }
 static void test_corpus_cache(void **state) { (void)state; run_corpus("cache"); }
 static void test_corpus_frame(void **state) { (void)state; run_corpus("frame"); }
 static void test_corpus_dispatch(void **state) { (void)state; run_corpus("dispatch"); }
+static void test_corpus_e57(void **state) { (void)state; run_corpus("e57"); }
+static void test_corpus_e57xml(void **state) { (void)state; run_corpus("e57xml"); }
+static void test_corpus_e57bits(void **state) { (void)state; run_corpus("e57bits"); }
 
 /* Every saved crash input, through its target: must return (any code) without crashing. */
 static void test_crashes(void **state)
@@ -238,6 +242,8 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_corpus_copc),
         cmocka_unit_test(test_corpus_cache),  cmocka_unit_test(test_corpus_frame),
         cmocka_unit_test(test_corpus_dispatch),
+        cmocka_unit_test(test_corpus_e57),    cmocka_unit_test(test_corpus_e57xml),
+        cmocka_unit_test(test_corpus_e57bits),
         cmocka_unit_test(test_crashes),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

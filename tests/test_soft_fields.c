@@ -11,7 +11,10 @@
  * differ, so the splat lists run in another order and float sums may round differently). Each
  * split is required to be real: between 3 % and 97 % of the points soft. On the LAS (trees over
  * ground) the same split through `olt` with lambda = 0 hides the first soft layer only and shows
- * what lies behind it, so it must differ from soft's. All sources change live on one upload. */
+ * what lies behind it, so it must differ from soft's. All sources change live on one upload.
+ * The scan index of an E57 file of three scans (written by tests/common/e57test.c) as `field`,
+ * and as the colour source (color=scan: the same frame as color=field of a copy whose F is the
+ * scan index over the largest). */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -23,6 +26,7 @@
 #include <string.h>
 
 #include "cloud.h"
+#include "e57test.h"
 #include "prep.h"
 #include "render.h"
 #include "rndtest.h"
@@ -230,12 +234,91 @@ static void test_ply_quality(void **state)
     pc_prepared_free(&pc);
 }
 
+/* Three scans of a wavy 60 x 60 sheet each, side by side through their poses' translations. */
+static void gen_sheet(void *ctx, uint32_t scan, uint64_t i, int64_t *ints, double *dbls)
+{
+    (void)ctx, (void)scan, (void)ints;
+    double x = (double)(i % 60) * 0.01, y = (double)(i / 60) * 0.01;
+    dbls[0] = x, dbls[1] = y, dbls[2] = 0.05 * sin(9.0 * x) * cos(7.0 * y);
+}
+
+static void test_e57_scan(void **state)
+{
+    (void)state;
+    static const e57w_field fl[3] = {{"cartesianX", E57W_F64, 0, 0, 0, 0, 0},
+                                     {"cartesianY", E57W_F64, 0, 0, 0, 0, 0},
+                                     {"cartesianZ", E57W_F64, 0, 0, 0, 0, 0}};
+    e57w_scan sc[3];
+    for (int k = 0; k < 3; k++)
+        sc[k] = (e57w_scan){.nfields = 3, .fields = fl, .records = 3600, .pose = 1,
+                            .quat = {1, 0, 0, 0}, .trans = {0.62 * k, 0, 0}};
+    char dir[4096], path[4200];
+    tu_tmpdir(dir, sizeof dir);
+    snprintf(path, sizeof path, "%s/three.e57", dir);
+    assert_int_equal(e57w_write(path, sc, 3, NULL, gen_sheet, NULL), 0);
+    pc_prepared pc;
+    load_prepared(path, &pc);
+    tu_rm_rf(dir);
+    assert_true(pc.attrs & PC_ATTR_SCAN);
+    uint32_t id = tu_upload(tu_ctx, &pc);
+    rnd_camera cam;
+    rnd_camera_frame(pc.bmin, pc.bmax, S, S, &cam);
+    float *f = malloc(pc.n * sizeof *f);
+    assert_non_null(f);
+    for (uint64_t i = 0; i < pc.n; i++) f[i] = pc.scan[i] / 2.0f;
+    sp_params p;
+    sp_params_defaults(&p);
+    p.field = SP_FIELD_SCAN, p.t = 0.5f; /* scans 0 and 1 solid, 2 soft */
+    check_split("scan", &pc, id, p, f, &cam, 0);
+    /* color=scan against color=field of a copy whose F is the scan index over the largest */
+    pc_prepared cp;
+    tu_new_cloud(&cp, pc.n, 0);
+    memcpy(cp.pos, pc.pos, 12 * pc.n);
+    memcpy(cp.normal, pc.normal, 12 * pc.n);
+    memcpy(cp.radius, pc.radius, 4 * pc.n);
+    memcpy(cp.F, f, 4 * pc.n);
+    tu_finish_cloud(&cp, pc.offset);
+    uint32_t cid = tu_upload(tu_ctx, &cp);
+    const int pipes[2] = {SP_PIPE_POINTS, SP_PIPE_SPLAT};
+    for (int k = 0; k < 2; k++) {
+        rnd_frame a = {0}, b = {0};
+        sp_params q;
+        sp_params_defaults(&q);
+        q.pipeline = pipes[k];
+        q.color = SP_COLOR_SCAN;
+        tu_render(tu_ctx, id, &cam, &q, 0, &a);
+        q.color = SP_COLOR_FIELD;
+        tu_render(tu_ctx, cid, &cam, &q, 0, &b);
+        int diff = 0, lit = 0;
+        for (size_t i = 0; i < (size_t)S * S * 4; i++) diff += a.rgba8[i] != b.rgba8[i];
+        for (size_t i = 0; i < (size_t)S * S; i++) lit += a.rgba8[4 * i] != b.rgba8[0];
+        printf("color=scan vs color=field (pipeline %d): %d bytes differ, %d pixels drawn\n",
+               pipes[k], diff, lit);
+        assert_int_equal(diff, 0);
+        assert_true(lit > S * S / 10);
+        rnd_frame_free(&a), rnd_frame_free(&b);
+    }
+    /* a cloud of one scan has no scan indices */
+    p.field = SP_FIELD_SCAN, p.pipeline = SP_PIPE_SOFT;
+    rnd_frame fr = {0};
+    sd_err err = {0};
+    assert_true(rnd_render(tu_ctx, cid, &cam, &p, 0, &fr, &err) < 0);
+    assert_non_null(strstr(err.msg, "field=scan"));
+    rnd_frame_free(&fr);
+    rnd_release(tu_ctx, cid);
+    rnd_release(tu_ctx, id);
+    pc_prepared_free(&cp);
+    pc_prepared_free(&pc);
+    free(f);
+}
+
 int main(int argc, char **argv)
 {
     tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_las_sources),
         cmocka_unit_test(test_ply_quality),
+        cmocka_unit_test(test_e57_scan),
     };
     return cmocka_run_group_tests(tests, tu_egl_group_setup, tu_egl_group_teardown);
 }

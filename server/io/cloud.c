@@ -8,6 +8,8 @@
 #include <string.h>
 #include <strings.h>
 
+#include "e57_stream.h"
+
 static int grow(void **p, size_t cap, size_t elem)
 {
     if (cap > SIZE_MAX / elem) return -1;
@@ -154,7 +156,15 @@ static reader_fn reader_for(const char *path)
     if (!strcasecmp(e, "las")) return pc_read_las;
     if (!strcasecmp(e, "laz")) return pc_read_laz; /* also .copc.laz */
     if (!strcasecmp(e, "xyz") || !strcasecmp(e, "pts") || !strcasecmp(e, "txt")) return pc_read_xyz;
+    if (!strcasecmp(e, "e57")) return pc_read_e57;
     return NULL;
+}
+
+/* reader_by_magic: the reader of a file whose extension names none, from its first bytes (E57's
+ * signature); NULL when they match no format. */
+static reader_fn reader_by_magic(const char *path)
+{
+    return pc_e57_signature(path) ? pc_read_e57 : NULL;
 }
 
 int pc_supported_ext(const char *name)
@@ -165,11 +175,12 @@ int pc_supported_ext(const char *name)
 int pc_load_threads(const char *path, int threads, pc_cloud *out, sd_err *err)
 {
     reader_fn rd = reader_for(path);
+    if (!rd) rd = reader_by_magic(path);
     memset(out, 0, sizeof *out);
     if (!rd)
         return sd_errf(err, SD_EUNSUP,
                        "%s: unknown extension '.%s' (supported: ply, pcd, las, laz, copc.laz, "
-                       "xyz, pts, txt)",
+                       "xyz, pts, txt, e57)",
                        path, ext_of(path));
     pc_raw raw = {0};
     /* the LAZ reader decodes chunks on threads; every other reader is single-threaded */

@@ -22,6 +22,7 @@ enum pc_attr {
     PC_ATTR_RADIUS = SP_ATTR_RADIUS,
     PC_ATTR_SCALAR = SP_ATTR_SCALAR,
     PC_ATTR_F = SP_ATTR_F,
+    PC_ATTR_SCAN = SP_ATTR_SCAN,
 };
 
 /* The per-point attributes besides the position, one row each, in one table that every
@@ -35,7 +36,8 @@ enum pc_attr {
     X(INTENSITY, intensity, float, 1)      \
     X(CLASS, cls, uint8_t, 1)              \
     X(RADIUS, radius, float, 1)            \
-    X(SCALAR, scalar, float, 1)
+    X(SCALAR, scalar, float, 1)            \
+    X(SCAN, scan, uint16_t, 1)
 
 typedef struct pc_attr_info {
     uint32_t bit;            /* PC_ATTR_* */
@@ -63,7 +65,7 @@ typedef struct pc_raw {
     size_t n, cap;
     uint32_t attrs;          /* set before the first pc_raw_reserve */
     double *xyz;             /* 3 * cap */
-    PC_ATTR_ARRAYS           /* rgba, normal, intensity, cls, radius, scalar: cap points */
+    PC_ATTR_ARRAYS           /* rgba, normal, intensity, cls, radius, scalar, scan: cap */
     char scalar_name[32];    /* which file property scalar holds */
     char format[64];         /* "PLY binary_little_endian 1.0", "LAS 1.2 format 3", ... */
     int has_viewpoint;       /* the file gives the sensor's position (PCD VIEWPOINT) */
@@ -81,7 +83,7 @@ typedef struct pc_cloud {
     size_t n;
     uint32_t attrs;
     float *pos;              /* 3 * n, file coordinates minus offset */
-    PC_ATTR_ARRAYS           /* rgba, normal, intensity, cls, radius, scalar: n points */
+    PC_ATTR_ARRAYS           /* rgba, normal, intensity, cls, radius, scalar, scan: n */
     double offset[3];        /* add to pos to get the file's coordinates */
     double bmin[3], bmax[3]; /* bounding box in the file's coordinates */
     uint64_t n_dropped;      /* non-finite points removed */
@@ -103,6 +105,10 @@ int pc_read_ply(const char *path, pc_raw *raw, sd_err *err);
 int pc_read_pcd(const char *path, pc_raw *raw, sd_err *err);
 int pc_read_las(const char *path, pc_raw *raw, sd_err *err);
 int pc_read_xyz(const char *path, pc_raw *raw, sd_err *err); /* .xyz, .pts, .txt */
+/* pc_read_e57: every scan of an E57 file (ASTM E2807; io_e57.c, e57_stream.h), posed, invalid
+ * points dropped, colours and intensities normalised by their limits, PC_ATTR_SCAN with more
+ * than one scan. */
+int pc_read_e57(const char *path, pc_raw *raw, sd_err *err);
 /* pc_read_laz: LAZ and COPC (.laz, .copc.laz; also a .las whose format byte marks LAZ), chunks
  * decoded on threads threads (pc_read_laz: one per online CPU). io_laz.c. */
 int pc_read_laz(const char *path, pc_raw *raw, sd_err *err);
@@ -117,8 +123,9 @@ int pc_read_copc_levels(const char *path, int max_level, pc_raw *raw, sd_err *er
  * COPC file (its provisional cloud). io_copc.c. */
 int pc_read_copc_budget(const char *path, uint64_t budget, pc_raw *raw, int *level, sd_err *err);
 
-/* pc_load: picks the reader from the file's extension (ply, pcd, las, laz, xyz, pts, txt; any
- * case; .copc.laz is laz), reads and finalizes. Returns 0 or a negative SD_E* code with err filled. */
+/* pc_load: picks the reader from the file's extension (ply, pcd, las, laz, xyz, pts, txt, e57;
+ * any case; .copc.laz is laz), or, for another extension, from the signature "ASTM-E57" at
+ * the start (E57), reads and finalizes. Returns 0 or a negative SD_E* code with err filled. */
 int pc_load(const char *path, pc_cloud *out, sd_err *err);
 /* pc_load_threads: pc_load with threads threads for the readers that use them (LAZ: chunks in
  * parallel); 0: one per online CPU, as pc_load. */

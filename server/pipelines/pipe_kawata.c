@@ -544,10 +544,10 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     GLsizeiptr rows = (GLsizeiptr)(brect[3] - brect[1]) * bw * 4;
     /* passes 1-2 on the host (kawata_cpu.h) or in kawata_raster.comp: see params.h; on the
      * host the list and pass 3's first half too, but for color=field (its colour map is the
-     * GL's) */
+     * GL's; color=scan likewise) */
     int host = p->kawata_raster == SP_KAWATA_RASTER_CPU ||
                (p->kawata_raster == SP_KAWATA_RASTER_AUTO && k->software);
-    int host_resolve = host && p->color != SP_COLOR_FIELD;
+    int host_resolve = host && p->color != SP_COLOR_FIELD && p->color != SP_COLOR_SCAN;
     if (!host) {
         fill(gl, s->buf[B_DEPTH], row0, rows, 0xFFFFFFFFu);
         fill(gl, s->buf[B_NEAR], row0, rows, 0xFFFFFFFFu);
@@ -707,7 +707,7 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
 const rnd_pipeline pipe_kawata = {
     .name = "kawata",
     .needs = 1u << RND_ATTR_POS | 1u << RND_ATTR_RGBA | 1u << RND_ATTR_FIELD |
-             1u << RND_ATTR_INTENSITY,
+             1u << RND_ATTR_INTENSITY | 1u << RND_ATTR_SCAN,
     .create = kawata_create,
     .destroy = kawata_destroy,
     .render = kawata_render,

@@ -230,7 +230,7 @@ const rnd_pipeline pipe_olt = {
     .name = "olt",
     .needs = 1u << RND_ATTR_POS | 1u << RND_ATTR_NORMAL | 1u << RND_ATTR_RADIUS |
              1u << RND_ATTR_RGBA | 1u << RND_ATTR_FIELD | 1u << RND_ATTR_INTENSITY |
-             1u << RND_ATTR_CLASS | 1u << RND_ATTR_SCALAR,
+             1u << RND_ATTR_SCAN | 1u << RND_ATTR_CLASS | 1u << RND_ATTR_SCALAR,
     .create = olt_create,
     .destroy = olt_destroy,
     .attach = olt_attach,

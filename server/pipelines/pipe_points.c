@@ -128,7 +128,7 @@ fail:
     return err && err->code ? err->code : SD_EGL;
 }
 
-/* Binds buffer set b's attribute buffers to vertex attributes 0-4 of the bound VAO. */
+/* Binds buffer set b's attribute buffers to vertex attributes 0-5 of the bound VAO. */
 static void bind_attributes(const gl_api *gl, const rnd_bufset *b)
 {
     const struct {
@@ -136,14 +136,15 @@ static void bind_attributes(const gl_api *gl, const rnd_bufset *b)
         GLint n;
         GLenum type;
         GLboolean norm;
-    } attr[5] = {
+    } attr[6] = {
         {b->buf[RND_ATTR_POS], 3, GL_FLOAT, GL_FALSE},
         {b->buf[RND_ATTR_RGBA], 4, GL_UNSIGNED_BYTE, GL_TRUE},
         {b->buf[RND_ATTR_NORMAL], 3, GL_FLOAT, GL_FALSE},
         {b->buf[RND_ATTR_FIELD], 1, GL_FLOAT, GL_FALSE},
         {b->buf[RND_ATTR_INTENSITY], 1, GL_FLOAT, GL_FALSE},
+        {b->buf[RND_ATTR_SCAN], 1, GL_FLOAT, GL_FALSE},
     };
-    for (GLuint i = 0; i < 5; i++) {
+    for (GLuint i = 0; i < 6; i++) {
         gl->BindBuffer(GL_ARRAY_BUFFER, attr[i].buf);
         gl->VertexAttribPointer(i, attr[i].n, attr[i].type, attr[i].norm, 0, NULL);
         gl->EnableVertexAttribArray(i);
@@ -354,7 +355,7 @@ static int points_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
 const rnd_pipeline pipe_points = {
     .name = "points",
     .needs = 1u << RND_ATTR_POS | 1u << RND_ATTR_NORMAL | 1u << RND_ATTR_RGBA |
-             1u << RND_ATTR_FIELD | 1u << RND_ATTR_INTENSITY,
+             1u << RND_ATTR_FIELD | 1u << RND_ATTR_INTENSITY | 1u << RND_ATTR_SCAN,
     .create = points_create,
     .destroy = points_destroy,
     .render = points_render,

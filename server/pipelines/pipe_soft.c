@@ -847,7 +847,7 @@ const rnd_pipeline pipe_soft = {
     .name = "soft",
     .needs = 1u << RND_ATTR_POS | 1u << RND_ATTR_NORMAL | 1u << RND_ATTR_RADIUS |
              1u << RND_ATTR_RGBA | 1u << RND_ATTR_FIELD | 1u << RND_ATTR_INTENSITY |
-             1u << RND_ATTR_CLASS | 1u << RND_ATTR_SCALAR,
+             1u << RND_ATTR_SCAN | 1u << RND_ATTR_CLASS | 1u << RND_ATTR_SCALAR,
     .create = soft_create,
     .destroy = soft_destroy,
     .attach = soft_attach,

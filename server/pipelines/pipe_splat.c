@@ -624,7 +624,8 @@ void splat__destroy(rnd_kit *k, void *state)
 const rnd_pipeline pipe_splat = {
     .name = "splat",
     .needs = 1u << RND_ATTR_POS | 1u << RND_ATTR_NORMAL | 1u << RND_ATTR_RADIUS |
-             1u << RND_ATTR_RGBA | 1u << RND_ATTR_FIELD | 1u << RND_ATTR_INTENSITY,
+             1u << RND_ATTR_RGBA | 1u << RND_ATTR_FIELD | 1u << RND_ATTR_INTENSITY |
+             1u << RND_ATTR_SCAN,
     .create = splat_create,
     .destroy = splat_destroy,
     .render = splat_render,

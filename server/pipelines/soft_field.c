@@ -21,7 +21,8 @@ void soft_fields_free(const gl_api *gl, soft_fields *fs)
 {
     for (uint32_t i = 0; i < fs->nsets; i++) {
         soft_fset *s = &fs->sets[i];
-        free(s->pos), free(s->unc), free(s->inten), free(s->sca), free(s->cls), free(s->f);
+        free(s->pos), free(s->unc), free(s->inten), free(s->sca), free(s->cls), free(s->scan);
+        free(s->f);
         if (s->f_buf) gl->DeleteBuffers(1, &s->f_buf);
     }
     free(fs->sets);
@@ -37,6 +38,7 @@ int soft_fields_attach(const gl_api *gl, const rnd_gpu_cloud *c, soft_fields *fs
     memcpy(fs->scalar_name, c->scalar_name, sizeof fs->scalar_name);
     fs->scalar_name[sizeof fs->scalar_name - 1] = 0;
     int has_cls = (c->attrs & PC_ATTR_CLASS) != 0, has_sca = (c->attrs & PC_ATTR_SCALAR) != 0;
+    int has_scan = (c->attrs & PC_ATTR_SCAN) != 0;
     for (uint32_t si = 0; si < c->nsets; si++) {
         const rnd_bufset *b = &c->sets[si];
         soft_fset *s = &fs->sets[si];
@@ -47,8 +49,10 @@ int soft_fields_attach(const gl_api *gl, const rnd_gpu_cloud *c, soft_fields *fs
         s->inten = read_words(gl, b->buf[RND_ATTR_INTENSITY], n);
         s->sca = has_sca ? read_words(gl, b->buf[RND_ATTR_SCALAR], n) : calloc(n ? n : 1, 4);
         s->cls = has_cls ? read_words(gl, b->buf[RND_ATTR_CLASS], n) : NULL;
+        s->scan = has_scan ? read_words(gl, b->buf[RND_ATTR_SCAN], n) : NULL;
         s->f = malloc((size_t)(n ? n : 1) * 4);
-        if (!s->pos || !s->unc || !s->inten || !s->sca || (has_cls && !s->cls) || !s->f) {
+        if (!s->pos || !s->unc || !s->inten || !s->sca || (has_cls && !s->cls) ||
+            (has_scan && !s->scan) || !s->f) {
             soft_fields_free(gl, fs);
             return sd_errf(err, SD_ENOMEM, "out of memory attaching a cloud's fields");
         }
@@ -90,6 +94,9 @@ int soft_fields_update(const gl_api *gl, const rnd_gpu_cloud *c, soft_fields *fs
         return sd_errf(err, SD_EINVAL, "field=scalar: the cloud has no scalar property");
     if (field == SP_FIELD_CLASS && (c->attrs & PC_ATTR_CLASS) == 0)
         return sd_errf(err, SD_EINVAL, "field=class: the cloud has no classification");
+    if (field == SP_FIELD_SCAN && (c->attrs & PC_ATTR_SCAN) == 0)
+        return sd_errf(err, SD_EINVAL, "field=scan: the cloud has no scan indices (they come "
+                       "from E57 files of more than one scan)");
     float u[3] = {p->axis_b[0] - p->axis_a[0], p->axis_b[1] - p->axis_a[1],
                   p->axis_b[2] - p->axis_a[2]};
     float ul = sqrtf(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
@@ -113,6 +120,7 @@ int soft_fields_update(const gl_api *gl, const rnd_gpu_cloud *c, soft_fields *fs
             case SP_FIELD_CLASS:
                 f = s->cls[i] < 32 && ((uint64_t)p->classes >> s->cls[i] & 1u) ? 1.0f : 0.0f;
                 break;
+            case SP_FIELD_SCAN: f = s->scan[i]; break;
             case SP_FIELD_AXIS:
                 f = axis_distance(&s->pos[3 * (size_t)i], p->axis_a, u);
                 dmax = fmaxf(dmax, f);

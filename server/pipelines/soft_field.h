@@ -14,6 +14,7 @@ typedef struct soft_fset {
     float *pos;                /* 3n, local coordinates */
     float *unc, *inten, *sca;  /* n each: uncertainty, intensity, scalar (normalised) */
     uint32_t *cls;             /* n LAS classes; NULL when the cloud has none */
+    float *scan;               /* n scan indices over the largest; NULL when the cloud has none */
     float *f;                  /* n: F for the current source */
     GLuint f_buf;              /* f as float bits (R32UI buffer texture source) */
 } soft_fset;

@@ -82,14 +82,15 @@ static int host_project_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const 
 }
 
 /* soft__cpu_project: order=cpu, the soft discs of every set projected, one segment per set in the
- * sets' order: on the host (soft_proj=cpu, or auto on a software renderer; not color=field) or
+ * sets' order: on the host (soft_proj=cpu, or auto on a software renderer; not color=field or
+ * color=scan, whose colour map is the GL's) or
  * by the GL (soft_bin.comp PASS 0, as for the sprites) and read back. Returns 0 or SD_E*. */
 int soft__cpu_project(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
                        const soft_order *o, sd_err *err)
 {
     const gl_api *gl = k->gl;
     const sp_params *p = d->params;
-    int host = p->color != SP_COLOR_FIELD &&
+    int host = p->color != SP_COLOR_FIELD && p->color != SP_COLOR_SCAN &&
                (p->soft_proj == SP_SOFT_PROJ_CPU ||
                 (p->soft_proj == SP_SOFT_PROJ_AUTO && k->software));
     uint32_t nsets = sc->nsets < 64 ? sc->nsets : 64;

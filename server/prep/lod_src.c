@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include "cloud.h"
+#include "e57_stream.h"
 #include "las_stream.h"
 #include "laz_stream.h"
 #include "pcd_stream.h"
@@ -33,9 +34,11 @@ struct lod_src {
     /* streamed LAS: uncompressed (las) or LAZ and COPC (laz), as coordinates and 16-bit colours */
     pc_las_stream *las;
     pc_laz_stream *laz;
-    /* streamed XYZ/PTS text (xyz) or PCD (pcd): coordinates in las_xyz, colours as RGBA8 */
+    /* streamed XYZ/PTS text (xyz), PCD (pcd) or E57 (e57, scan by scan, a batch of records at a
+     * time): coordinates in las_xyz, colours as RGBA8 */
     pc_xyz_stream *xyz;
     pc_pcd_stream *pcd;
+    pc_e57_stream *e57;
     uint8_t *xyz_rgba;
     int las_wide;                        /* colours scaled down from 16 bits (pc_read_las's rule) */
     double *las_xyz;
@@ -400,9 +403,13 @@ static int64_t las_next(lod_src *s, float *pos, uint32_t *rgba, size_t max, sd_e
     return (int64_t)k;
 }
 
-/* The next rows of the streamed text or PCD file. */
+/* The next rows of the streamed text, PCD or E57 file. */
 static int64_t rows_next(lod_src *s, uint8_t *rgba, size_t max, sd_err *err)
 {
+    if (s->e57) {
+        pc_e57_points o = {.xyz = s->las_xyz, .rgba = rgba};
+        return pc_e57_stream_next(s->e57, &o, max, err);
+    }
     return s->xyz ? pc_xyz_stream_next(s->xyz, s->las_xyz, rgba, max, err)
                   : pc_pcd_stream_next(s->pcd, s->las_xyz, rgba, max, err);
 }
@@ -433,10 +440,12 @@ static int rows_bounds_pass(lod_src *s, sd_err *err)
     if (rc < 0) return rc;
     s->info.n = kept;
     s->info.n_dropped = rows - kept;
-    int rgb = s->xyz ? pc_xyz_stream_has_rgb(s->xyz) : pc_pcd_stream_has_rgb(s->pcd);
+    int rgb = s->e57 ? (pc_e57_stream_attrs(s->e57) & PC_ATTR_RGB) != 0
+            : s->xyz ? pc_xyz_stream_has_rgb(s->xyz) : pc_pcd_stream_has_rgb(s->pcd);
     s->info.attrs = rgb ? PC_ATTR_RGB : 0;
     snprintf(s->info.format, sizeof s->info.format, "%s",
-             s->xyz ? pc_xyz_stream_format(s->xyz) : pc_pcd_stream_format(s->pcd));
+             s->e57 ? pc_e57_stream_format(s->e57)
+             : s->xyz ? pc_xyz_stream_format(s->xyz) : pc_pcd_stream_format(s->pcd));
     if (s->pcd) s->info.has_viewpoint = pc_pcd_stream_viewpoint(s->pcd, s->info.viewpoint);
     s->info.streamed = 1;
     return 0;
@@ -480,6 +489,7 @@ int lod_src_open(const char *path, lod_src **out, sd_err *err)
     int rows = 0; /* 1: a streamed text or PCD file */
     if (rc == 0) rows = rc = pc_xyz_stream_open(path, &s->xyz, err);
     if (rc == 0) rows = rc = pc_pcd_stream_open(path, &s->pcd, err);
+    if (rc == 0) rows = rc = pc_e57_stream_open(path, &s->e57, err);
     if (rc == 1 && rows) {
         s->las_xyz = malloc((size_t)BLOCK * 3 * sizeof(double));
         s->xyz_rgba = malloc((size_t)BLOCK * 4);
@@ -527,6 +537,7 @@ void lod_src_close(lod_src *s)
     pc_laz_stream_close(s->laz);
     pc_xyz_stream_close(s->xyz);
     pc_pcd_stream_close(s->pcd);
+    pc_e57_stream_close(s->e57);
     free(s->xyz_rgba);
     free(s->las_xyz);
     free(s->las_rgb);
@@ -545,6 +556,7 @@ int lod_src_rewind(lod_src *s, sd_err *err)
     s->next = 0;
     if (s->xyz) pc_xyz_stream_rewind(s->xyz);
     if (s->pcd) pc_pcd_stream_rewind(s->pcd);
+    if (s->e57) pc_e57_stream_rewind(s->e57);
     return 0;
 }
 
@@ -562,7 +574,7 @@ int64_t lod_src_next(lod_src *s, float *pos, uint32_t *rgba, size_t max, sd_err 
         return (int64_t)k;
     }
     if (s->las || s->laz) return las_next(s, pos, rgba, max, err);
-    if (s->xyz || s->pcd) return rows_next_points(s, pos, rgba, max, err);
+    if (s->xyz || s->pcd || s->e57) return rows_next_points(s, pos, rgba, max, err);
     while (k < max && s->next < s->nrec) {
         size_t want = max - k < BLOCK ? max - k : BLOCK;
         size_t m = s->nrec - s->next < want ? (size_t)(s->nrec - s->next) : want;

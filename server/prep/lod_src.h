@@ -3,9 +3,10 @@
  * Binary little-endian PLY whose first element is the vertex element with scalar properties
  * (what scanners' exports and gen_cloud write) and uncompressed LAS (io/las_stream.h) are
  * streamed with pread in blocks, LAZ and COPC (io/laz_stream.h) a round of chunks at a time,
- * decoded in parallel, XYZ/PTS text (io/xyz_stream.h) and PCD (io/pcd_stream.h; a
- * binary_compressed body is decompressed whole first) a window of rows at a time: memory does
- * not grow with the file. Any other file (ascii or big-endian PLY, PLY whose first element is
+ * decoded in parallel, XYZ/PTS text (io/xyz_stream.h), PCD (io/pcd_stream.h; a
+ * binary_compressed body is decompressed whole first) and E57 (io/e57_stream.h: scan by scan,
+ * packets read as the records need them) a window of rows at a time: memory does not grow with
+ * the file. Any other file (ascii or big-endian PLY, PLY whose first element is
  * not the vertices) is read whole by pc_load (io/) and handed out from memory; that path is in
  * core, and says so in lod_src_info.streamed.
  *

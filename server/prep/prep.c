@@ -250,6 +250,7 @@ static int check_input(const pc_cloud *in, const prep_desc *desc, prep_desc *d, 
         {PC_ATTR_RGB, in->rgba, "rgb"},           {PC_ATTR_NORMAL, in->normal, "normal"},
         {PC_ATTR_INTENSITY, in->intensity, "intensity"}, {PC_ATTR_CLASS, in->cls, "class"},
         {PC_ATTR_RADIUS, in->radius, "radius"},   {PC_ATTR_SCALAR, in->scalar, "scalar"},
+        {PC_ATTR_SCAN, in->scan, "scan"},
     };
     for (size_t i = 0; i < sizeof a / sizeof a[0]; i++)
         if ((in->attrs & a[i].bit) && !a[i].arr)
@@ -293,6 +294,7 @@ static int order_gather(void *ctx, size_t c, int tid, sd_err *err)
         if (in->attrs & PC_ATTR_INTENSITY) out->intensity[i] = in->intensity[s];
         if (in->attrs & PC_ATTR_CLASS) out->cls[i] = in->cls[s];
         if (in->attrs & PC_ATTR_SCALAR) out->scalar[i] = in->scalar[s];
+        if (in->attrs & PC_ATTR_SCAN) out->scan[i] = in->scan[s];
     }
     return 0;
 }
@@ -323,7 +325,7 @@ static int reorder(const pc_cloud *in, int K, int threads, pc_prepared *out, dou
     *codes_out = codes; /* the kNN index takes them: the points are in their order now */
     out->n = n;
     out->attrs = (in->attrs & (PC_ATTR_RGB | PC_ATTR_NORMAL | PC_ATTR_INTENSITY | PC_ATTR_CLASS |
-                               PC_ATTR_RADIUS | PC_ATTR_SCALAR)) |
+                               PC_ATTR_RADIUS | PC_ATTR_SCALAR | PC_ATTR_SCAN)) |
                  PC_ATTR_NORMAL | PC_ATTR_RADIUS | PC_ATTR_F;
     out->nbatches = (n + PC_BATCH_POINTS - 1) / PC_BATCH_POINTS;
     out->k = (uint32_t)K;

@@ -10,7 +10,7 @@ int prep_preview(const pc_cloud *in, pc_prepared *out, sd_err *err)
     if (!in->n) return sd_errf(err, SD_EEMPTY, "a preview of a cloud without points");
     if (in->n >= ((uint64_t)1 << 31))
         return sd_errf(err, SD_ELIMIT, "a preview of %zu points: at most 2^31 - 1", in->n);
-    const uint32_t keep = PC_ATTR_RGB | PC_ATTR_INTENSITY | PC_ATTR_CLASS | PC_ATTR_SCALAR;
+    const uint32_t keep = PC_ATTR_RGB | PC_ATTR_INTENSITY | PC_ATTR_CLASS | PC_ATTR_SCALAR | PC_ATTR_SCAN;
     out->n = in->n;
     out->attrs = in->attrs & keep;
     out->nbatches = (in->n + PC_BATCH_POINTS - 1) / PC_BATCH_POINTS;

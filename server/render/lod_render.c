@@ -219,10 +219,14 @@ int rnd__lod_make_pool(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, sd_err *e
         gl->BufferData(GL_SHADER_STORAGE_BUFFER, (GLsizeiptr)((uint64_t)l->cap * 4 * comps), NULL,
                        GL_DYNAMIC_DRAW);
     }
-    /* intensity: LOD clouds have none (0) */
+    /* intensity and scan index: LOD clouds have none (0) */
     const GLuint zero = 0;
-    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, l->buf[RND_ATTR_INTENSITY]);
-    gl->ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
+    const int none[2] = {RND_ATTR_INTENSITY, RND_ATTR_SCAN};
+    for (int k = 0; k < 2; k++) {
+        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, l->buf[none[k]]);
+        gl->ClearBufferData(GL_SHADER_STORAGE_BUFFER, GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT,
+                            &zero);
+    }
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
     for (int s = 0; s < 2; s++) {
         g->sets[s].base = 0;

@@ -35,7 +35,9 @@
     X(INTENSITY, "intensity", 1, GL_R32UI) /* float bits, normalised to [0,1]; 0 if absent */ \
     X(CLASS, "class", 1, GL_R32UI)     /* LAS classification 0-255; one word if absent */     \
     X(SCALAR, "scalar", 1, GL_R32UI)   /* float bits of the file's scalar property, normalised \
-                                          to [0,1] by its range; one word if absent */
+                                          to [0,1] by its range; one word if absent */         \
+    X(SCAN, "scan", 1, GL_R32UI)       /* float bits of the scan index over the largest one;   \
+                                          one word if absent */
 
 enum {
 #define RND_ATTR_ENUM_(id, name, comps, fmt) RND_ATTR_##id,
@@ -158,7 +160,7 @@ GLuint rnd_kit_program(const rnd_kit *k, const char *const *names, int n, const 
 int rnd_kit_ensure_ssbo(const gl_api *gl, GLuint *buf, uint64_t *have, uint64_t bytes);
 
 /* rnd_kit_color_source: the attribute the colour mode reads per point (RND_ATTR_RGBA, FIELD
- * or INTENSITY; RGBA for the modes that read none). */
+ * INTENSITY or SCAN; RGBA for the modes that read none). */
 int rnd_kit_color_source(int color);
 
 /* rnd_kit_bind_set: binds buffer set s's position, normal, radius and colour-source buffers

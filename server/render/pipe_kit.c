@@ -77,7 +77,8 @@ int rnd_kit_ensure_ssbo(const gl_api *gl, GLuint *buf, uint64_t *have, uint64_t 
 int rnd_kit_color_source(int color)
 {
     return color == SP_COLOR_FIELD ? RND_ATTR_FIELD
-         : color == SP_COLOR_INTENSITY ? RND_ATTR_INTENSITY : RND_ATTR_RGBA;
+         : color == SP_COLOR_INTENSITY ? RND_ATTR_INTENSITY
+         : color == SP_COLOR_SCAN ? RND_ATTR_SCAN : RND_ATTR_RGBA;
 }
 
 void rnd_kit_bind_set(rnd_kit *k, const rnd_bufset *s, int color)

@@ -288,9 +288,11 @@ const char *rnd_backend_name(const rnd_ctx *r)
     return r->ops->name;
 }
 
-/* The ranges that normalise a cloud's intensities and scalar property to [0, 1]. */
+/* The ranges that normalise a cloud's intensities and scalar property to [0, 1], and the
+ * factor of its scan indices (1 / the largest; 0 when it is 0: every point 0). */
 typedef struct attr_norm {
     float lo[2], scale[2];     /* [0] intensity, [1] scalar; scale 0: constant, all 1 */
+    float scan_scale;
 } attr_norm;
 
 /* norm_range: lo and 1 / (hi - lo) of the finite values of v[0..n). */
@@ -307,7 +309,8 @@ static void norm_range(const float *v, uint64_t n, float *lo_out, float *scale_o
 }
 
 /* upload_converted: fills the bound buffer with attribute a (intensity, scalar: normalised
- * float bits; class: the byte as a word) of points [base, base + n), in chunks. */
+ * float bits; class: the byte as a word; scan: the index times nm->scan_scale as float bits)
+ * of points [base, base + n), in chunks. */
 static int upload_converted(const gl_api *gl, int a, const pc_prepared *pc, uint64_t base,
                             uint32_t n, const attr_norm *nm, sd_err *err)
 {
@@ -316,10 +319,17 @@ static int upload_converted(const gl_api *gl, int a, const pc_prepared *pc, uint
     if (!tmp) return sd_errf(err, SD_ENOMEM, "out of memory uploading a cloud's %s",
                              rnd_attrs[a].name);
     int w = a == RND_ATTR_SCALAR;
-    const float *in = a == RND_ATTR_CLASS ? NULL : w ? pc->scalar + base : pc->intensity + base;
+    const float *in = a == RND_ATTR_SCALAR      ? pc->scalar + base
+                      : a == RND_ATTR_INTENSITY ? pc->intensity + base
+                                                : NULL; /* class, scan: below */
     for (uint64_t i = 0; i < n; i += CHUNK) {
         uint64_t m = n - i < CHUNK ? n - i : CHUNK;
         for (uint64_t j = 0; j < m; j++) {
+            if (a == RND_ATTR_SCAN) {
+                float f = (float)pc->scan[base + i + j] * nm->scan_scale;
+                memcpy(&tmp[j], &f, 4);
+                continue;
+            }
             if (!in) {
                 tmp[j] = pc->cls[base + i + j];
                 continue;
@@ -361,6 +371,10 @@ static int upload_attr(const gl_api *gl, GLuint *b, int a, const pc_prepared *pc
         convert = (pc->attrs & PC_ATTR_SCALAR) && pc->scalar;
         if (!convert) len = 4;
         break;
+    case RND_ATTR_SCAN:
+        convert = (pc->attrs & PC_ATTR_SCAN) && pc->scan;
+        if (!convert) len = 4;
+        break;
     default: break;
     }
     gl->GenBuffers(1, b);
@@ -375,14 +389,15 @@ static int upload_attr(const gl_api *gl, GLuint *b, int a, const pc_prepared *pc
     return 0;
 }
 
-/* cloud_bytes: the GPU bytes of cloud pc (every attribute, 4 bytes a component; class and
- * scalar only when the cloud has them, upload_attr gives the others one word). */
+/* cloud_bytes: the GPU bytes of cloud pc (every attribute, 4 bytes a component; class,
+ * scalar and scan only when the cloud has them, upload_attr gives the others one word). */
 static uint64_t cloud_bytes(const pc_prepared *pc)
 {
     uint64_t per = 0;
     for (int a = 0; a < RND_ATTR_COUNT; a++) {
         if ((a == RND_ATTR_CLASS && !(pc->attrs & PC_ATTR_CLASS)) ||
-            (a == RND_ATTR_SCALAR && !(pc->attrs & PC_ATTR_SCALAR)))
+            (a == RND_ATTR_SCALAR && !(pc->attrs & PC_ATTR_SCALAR)) ||
+            (a == RND_ATTR_SCAN && !(pc->attrs & PC_ATTR_SCAN)))
             continue;
         per += 4 * (uint64_t)rnd_attrs[a].components;
     }
@@ -484,11 +499,16 @@ static int make_resident(rnd_ctx *r, cloud_slot *slot, const pc_prepared *pc, sd
         uint32_t end = c->chunks[k].first + c->chunks[k].count;
         if (end > bs->n) bs->n = end;
     }
-    attr_norm nm = {{0, 0}, {0, 0}};
+    attr_norm nm = {{0, 0}, {0, 0}, 0};
     if ((pc->attrs & PC_ATTR_INTENSITY) && pc->intensity)
         norm_range(pc->intensity, pc->n, &nm.lo[0], &nm.scale[0]);
     if ((pc->attrs & PC_ATTR_SCALAR) && pc->scalar)
         norm_range(pc->scalar, pc->n, &nm.lo[1], &nm.scale[1]);
+    if ((pc->attrs & PC_ATTR_SCAN) && pc->scan) {
+        uint16_t top = 0;
+        for (uint64_t i = 0; i < pc->n; i++) top = pc->scan[i] > top ? pc->scan[i] : top;
+        nm.scan_scale = top ? 1.0f / (float)top : 0.0f;
+    }
     const gl_api *gl = &r->gl;
     c->nsets = nsets;
     for (uint32_t s = 0; s < nsets && rc == 0; s++)

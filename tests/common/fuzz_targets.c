@@ -16,6 +16,10 @@
 
 #include "cache.h"
 #include "cloud.h"
+#include "e57_bitpack.h"
+#include "e57_scan.h"
+#include "e57_xml.h"
+#include "e57test.h"
 #include "frame_decode.h"
 #include "lzf.h"
 #include "params.h"
@@ -394,6 +398,7 @@ static void check_raw(const pc_raw *raw, size_t len, int ok, const char *what)
     s += touch(raw->cls, n, 1, raw->attrs, PC_ATTR_CLASS, what, "class");
     s += touch(raw->radius, n, sizeof(float), raw->attrs, PC_ATTR_RADIUS, what, "radius");
     s += touch(raw->scalar, n, sizeof(float), raw->attrs, PC_ATTR_SCALAR, what, "scalar");
+    s += touch(raw->scan, n, sizeof(uint16_t), raw->attrs, PC_ATTR_SCAN, what, "scan");
     (void)s;
 }
 
@@ -422,6 +427,7 @@ static void check_cloud(const pc_cloud *c, size_t n, const char *what)
     s += touch(c->cls, c->n, 1, c->attrs, PC_ATTR_CLASS, what, "class");
     s += touch(c->radius, c->n, sizeof(float), c->attrs, PC_ATTR_RADIUS, what, "radius");
     s += touch(c->scalar, c->n, sizeof(float), c->attrs, PC_ATTR_SCALAR, what, "scalar");
+    s += touch(c->scan, c->n, sizeof(uint16_t), c->attrs, PC_ATTR_SCAN, what, "scan");
     (void)s;
 }
 
@@ -778,6 +784,7 @@ fuzz_fn fuzz_target_find(const char *name)
         {"params", fuzz_one_params}, {"ws", fuzz_one_ws},
         {"laz", fuzz_one_laz},     {"copc", fuzz_one_copc},
         {"cache", fuzz_one_cache}, {"frame", fuzz_one_frame},
+        {"e57", fuzz_one_e57},     {"e57xml", fuzz_one_e57xml}, {"e57bits", fuzz_one_e57bits},
     };
     for (size_t i = 0; i < sizeof targets / sizeof targets[0]; i++)
         if (!strcmp(targets[i].name, name)) return targets[i].fn;
@@ -868,4 +875,148 @@ int fuzz_one_ws(const uint8_t *data, size_t len)
     if (h < 0 && ((h != -400 && h != -414 && h != -431 && h != -505) || !err[0]))
         fz_fail("http", "status %d, text '%s'", -h, err);
     return rc;
+}
+
+/* ---- E57 (server/io/e57_*.c) ---- */
+
+int fuzz_one_e57(const uint8_t *data, size_t len)
+{
+    uint8_t *d = malloc(len ? len : 1);
+    if (!d) abort();
+    if (len) memcpy(d, data, len);
+    /* the checksums made to match, so that inputs reach past page 0 (test_io_e57 covers them) */
+    uint64_t page = 0;
+    for (int i = 7; len >= 48 && i >= 0; i--) page = page << 8 | d[40 + i];
+    if (page >= 64 && page <= (1u << 20) && page % 4 == 0) e57w_fix_crcs(d, len, (uint32_t)page);
+    int rc = fuzz_reader(pc_read_e57, "e57", d, len);
+    free(d);
+    return rc;
+}
+
+/* xml_desc: the document in pieces of chunk bytes through e57_xml, then e57_desc_read. */
+static int xml_desc(const uint8_t *p, size_t n, size_t chunk, e57_desc *d, sd_err *err)
+{
+    e57_xml *x = e57_xml_new();
+    if (!x) abort();
+    int rc = 0;
+    for (size_t i = 0; rc == 0 && (i < n || i == 0); i += chunk) {
+        size_t m = n - i < chunk ? n - i : chunk;
+        rc = e57_xml_feed(x, (const char *)p + i, m, i + m >= n, "xml", err);
+        if (n == 0) break;
+    }
+    memset(d, 0, sizeof *d);
+    if (rc == 0) rc = e57_desc_read(e57_xml_root(x), d, "xml", err);
+    e57_xml_free(x);
+    return rc;
+}
+
+int fuzz_one_e57xml(const uint8_t *data, size_t len)
+{
+    if (len < 1) return 0;
+    size_t chunk = 1 + data[0] % 64;
+    e57_desc a, b;
+    sd_err ea = {0}, eb = {0};
+    int rc = xml_desc(data + 1, len - 1, chunk, &a, &ea);
+    int rc1 = xml_desc(data + 1, len - 1, len, &b, &eb); /* all at once */
+    check_sd_err(rc, &ea, "xml", "e57xml");
+    if (rc != rc1 || (rc == 0 && a.nscans != b.nscans))
+        fz_fail("e57xml", "in pieces of %zu: %d (%s); at once: %d (%s)", chunk, rc, ea.msg, rc1,
+                eb.msg);
+    for (uint32_t i = 0; rc == 0 && i < a.nscans; i++) {
+        const e57_scan *s = &a.scans[i];
+        if (s->nfields > E57_MAX_FIELDS) fz_fail("e57xml", "scan %u: %u fields", i, s->nfields);
+        for (int r = 0; r < E57_R_COUNT; r++)
+            if (s->role[r] >= (int)s->nfields || (s->role[r] >= 0 && s->fields[s->role[r]].role != r))
+                fz_fail("e57xml", "scan %u: role %d at field %d", i, r, s->role[r]);
+        for (uint32_t f = 0; f < s->nfields; f++) {
+            const e57_field *fl = &s->fields[f];
+            int want = fl->kind == E57_FLOAT ? 32 : fl->kind == E57_DOUBLE ? 64 : -1;
+            uint64_t range = (uint64_t)fl->max - (uint64_t)fl->min;
+            if (want < 0) want = range ? 64 - __builtin_clzll(range) : 0;
+            if (fl->bits != want || ((fl->kind == E57_INTEGER || fl->kind == E57_SCALED) && fl->min > fl->max))
+                fz_fail("e57xml", "scan %u field %u: %d bits, kind %d", i, f, fl->bits, fl->kind);
+        }
+        /* the pose's rotation is orthonormal (a normalised quaternion) */
+        for (int r = 0; r < 3; r++)
+            for (int c = 0; c < 3; c++) {
+                double dot = 0;
+                for (int k = 0; k < 3; k++) dot += s->rot[3 * r + k] * s->rot[3 * c + k];
+                if (!(fabs(dot - (r == c)) < 1e-9))
+                    fz_fail("e57xml", "scan %u: rotation rows %d, %d: dot %g", i, r, c, dot);
+            }
+        int cart = s->role[E57_R_CX] >= 0 && s->role[E57_R_CY] >= 0 && s->role[E57_R_CZ] >= 0;
+        if ((s->coords == E57_CARTESIAN) != cart)
+            fz_fail("e57xml", "scan %u: coordinates %d, cartesian fields %d", i, s->coords, cart);
+    }
+    if (rc == 0) e57_desc_free(&a);
+    if (rc1 == 0) e57_desc_free(&b);
+    return rc;
+}
+
+int fuzz_one_e57bits(const uint8_t *data, size_t len)
+{
+    if (len < 5) return 0;
+    e57_field f = {.kind = data[1] % 4, .scale = 0.5, .offset = -3};
+    f.bits = f.kind == E57_FLOAT ? 32 : f.kind == E57_DOUBLE ? 64 : data[0] % 65;
+    /* the raw range: 2^bits - 1 less the amount in data[2] (values above it are errors) */
+    uint64_t full = f.bits == 64 ? UINT64_MAX : f.bits ? (UINT64_C(1) << f.bits) - 1 : 0;
+    uint64_t range = full > data[2] ? full - data[2] : 0;
+    if (f.bits && range && 64 - __builtin_clzll(range) != f.bits) range = full; /* keep the width */
+    f.min = f.bits == 64 ? INT64_MIN : -7;
+    f.max = (int64_t)((uint64_t)f.min + range);
+    size_t piece = 1 + data[3] % 16;
+    const uint8_t *s = data + 5;
+    size_t n = len - 5;
+    size_t total = f.bits ? n * 8 / (size_t)f.bits : (size_t)data[4];
+    double *got = malloc((total ? total : 1) * sizeof *got);
+    if (!got) abort();
+    e57_bp b = {0};
+    size_t fed = 0, done = 0;
+    int64_t bad = -1;
+    while (done < total) {
+        size_t a = e57_bp_avail(&b, f.bits);
+        if (a == 0) {
+            size_t m = n - fed < piece ? n - fed : piece;
+            if (m == 0) fz_fail("e57bits", "ran dry at value %zu of %zu", done, total);
+            if (e57_bp_append(&b, s + fed, m) < 0) abort();
+            fed += m;
+            continue;
+        }
+        if (a > total - done) a = total - done;
+        int64_t r = e57_bp_decode(&b, &f, got + done, a);
+        if (r >= 0 && bad < 0) bad = (int64_t)done + r;
+        done += a;
+    }
+    if (b.len > piece + 8) fz_fail("e57bits", "%zu bytes held with pieces of %zu", b.len, piece);
+    e57_bp_free(&b);
+    /* the reference: bit k of the stream is bit k % 8 of byte k / 8, one at a time */
+    for (size_t i = 0; i < total; i++) {
+        uint64_t raw = 0;
+        for (int k = 0; k < f.bits; k++) {
+            size_t bit = i * (size_t)f.bits + (size_t)k;
+            raw |= (uint64_t)((s[bit / 8] >> (bit % 8)) & 1u) << k;
+        }
+        double want;
+        if (f.kind == E57_FLOAT) {
+            uint32_t w = (uint32_t)raw;
+            float x;
+            memcpy(&x, &w, 4);
+            want = x;
+        } else if (f.kind == E57_DOUBLE) {
+            memcpy(&want, &raw, 8);
+        } else {
+            if (raw > range) {
+                if (bad < 0 || (size_t)bad > i) fz_fail("e57bits", "value %zu over the range unflagged", i);
+                if ((size_t)bad == i) break; /* the reader stops at the first */
+                continue;
+            }
+            int64_t v = (int64_t)((uint64_t)f.min + raw);
+            want = f.kind == E57_SCALED ? (double)v * f.scale + f.offset : (double)v;
+        }
+        if (memcmp(&want, &got[i], 8) != 0 && !(isnan(want) && isnan(got[i])))
+            fz_fail("e57bits", "width %d kind %d value %zu: %.17g, the reference %.17g", f.bits,
+                    f.kind, i, got[i], want);
+    }
+    free(got);
+    return bad >= 0 ? SD_EFORMAT : 0;
 }

@@ -81,9 +81,26 @@ int fuzz_one_dispatch(const uint8_t *data, size_t len);
 typedef struct proto_msg proto_msg;
 int fuzz_parse_msg(const proto_msg *m);
 
+/* fuzz_one_e57: the bytes as an E57 file (its page checksums made to match first, so that
+ * inputs get past page 0) through pc_read_e57 and pc_finalize, as fuzz_one_las. */
+int fuzz_one_e57(const uint8_t *data, size_t len);
+
+/* fuzz_one_e57xml: byte 0 picks a piece size (1-64); the rest is an E57 XML section fed to
+ * e57_xml in pieces and at once (both must agree), then e57_desc_read. What is accepted must
+ * be consistent: each role at a field of that role, bit widths those of the bounds, an
+ * orthonormal rotation. Returns 0 or the negative code. */
+int fuzz_one_e57xml(const uint8_t *data, size_t len);
+
+/* fuzz_one_e57bits: byte 0 the bit width (0-64), byte 1 the kind (integer, scaled, float,
+ * double), byte 2 how far the maximum lies below 2^width - 1, byte 3 the piece size, byte 4 the
+ * value count of a 0-bit field; the rest a bytestream, appended to an e57_bp in pieces and
+ * decoded whole, against a bit-at-a-time reference decoder, values and the first value over
+ * the maximum alike. Returns 0, or SD_EFORMAT when a value was over the maximum. */
+int fuzz_one_e57bits(const uint8_t *data, size_t len);
+
 /* fuzz_target_find: the fuzz_one_* function of a target name ("proto", "ply", "pcd", "las",
- * "xyz", "lzf", "params", "laz", "copc", "ws", "cache", "frame"; "dispatch" where the server is
- * linked), or NULL. */
+ * "xyz", "lzf", "params", "laz", "copc", "ws", "cache", "frame", "e57", "e57xml", "e57bits";
+ * "dispatch" where the server is linked), or NULL. */
 typedef int (*fuzz_fn)(const uint8_t *data, size_t len);
 fuzz_fn fuzz_target_find(const char *name);
 

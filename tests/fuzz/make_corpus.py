@@ -443,6 +443,44 @@ def frame_seeds():
     put("frame", "bad_png", b"\x03\x00\x00\x89PNG\r\n\x1a\n")
 
 
+def e57():
+    """E57: small files of tests/data/e57 (other writers'), their XML sections, bit streams."""
+    data = os.path.join(os.path.dirname(ROOT), "..", "data", "e57")
+    for name in ("translationWithoutRotation.e57", "testWithNormals.e57",
+                 "ColourRepresentation.e57"):
+        with open(os.path.join(data, name), "rb") as f:
+            raw = f.read()
+        put("e57", name, raw)
+        _, _, _, _, xo, xl, page = struct.unpack("<8sIIQQQQ", raw[:48])
+        logical = b"".join(raw[p:p + page - 4] for p in range(0, len(raw), page))
+        lo = xo // page * (page - 4) + xo % page
+        put("e57xml", name.replace(".e57", ".xml"), bytes([17]) + logical[lo:lo + xl])
+    with open(os.path.join(data, "empty.e57"), "rb") as f:
+        put("e57", "bad_no_scans.e57", f.read())
+    with open(os.path.join(data, "InvalidCVHeader.e57"), "rb") as f:
+        put("e57", "bad_cv_header.e57", f.read())
+    root = ('<e57Root type="Structure" xmlns="http://www.astm.org/COMMIT/E57/2010-e57-v1.0">'
+            '<data3D type="Vector"><vectorChild type="Structure">%s<points type="CompressedVector"'
+            ' fileOffset="48" recordCount="3"><prototype type="Structure">%s</prototype>'
+            '<codecs type="Vector"/></points></vectorChild></data3D></e57Root>')
+    sph = ('<sphericalRange type="ScaledInteger" minimum="0" maximum="1000" scale="0.01"/>'
+           '<sphericalAzimuth type="Float" precision="single"/><sphericalElevation type="Float"/>'
+           '<sphericalInvalidState type="Integer" minimum="0" maximum="2"/>')
+    pose = ('<pose type="Structure"><rotation type="Structure"><w type="Float">0.5</w>'
+            '<x type="Float">0.5</x><y type="Float">0.5</y><z type="Float">0.5</z></rotation>'
+            '<translation type="Structure"><x type="Float">1e6</x></translation></pose>')
+    put("e57xml", "spherical_pose.xml", bytes([3]) + (root % (pose, sph)).encode())
+    put("e57xml", "bad_no_coordinates.xml", bytes([0]) + (root % ("", "<intensity type=\"Integer\"/>")).encode())
+    put("e57xml", "bad_doctype.xml", b"\x05<!DOCTYPE e [<!ENTITY a 'b'>]><e57Root/>")
+    # bit streams: width, kind, maximum below 2^width - 1, piece size, 0-bit count; bytes
+    put("e57bits", "w13_int.bin", bytes([13, 0, 0, 3, 0]) + bytes(range(40)))
+    put("e57bits", "w64_scaled.bin", bytes([64, 1, 0, 7, 0]) + bytes(range(255, 200, -1)))
+    put("e57bits", "float.bin", bytes([0, 2, 0, 5, 0]) + struct.pack("<3f", 1.5, -2.0, 1e30))
+    put("e57bits", "double.bin", bytes([0, 3, 0, 1, 0]) + struct.pack("<2d", 3.25, -1e300))
+    put("e57bits", "zero_bits.bin", bytes([0, 0, 0, 1, 9]) + b"x")
+    put("e57bits", "bad_over_max.bin", bytes([3, 0, 2, 2, 0]) + b"\xff\xff")
+
+
 def main():
     proto()
     frame_seeds()
@@ -455,6 +493,7 @@ def main():
     params()
     laz()
     copc()
+    e57()
     total = sum(os.path.getsize(os.path.join(dp, f))
                 for dp, _, fs in os.walk(ROOT) for f in fs)
     print("corpus: %d bytes under %s" % (total, ROOT))

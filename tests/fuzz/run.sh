@@ -3,7 +3,8 @@
 #
 #   sh tests/fuzz/run.sh [SECONDS] [TARGET...]      (from the repository root; make fuzz)
 #
-# Targets: proto ply pcd las xyz lzf params ws laz copc cache frame dispatch (default: all).
+# Targets: proto ply pcd las xyz lzf params ws laz copc cache frame e57 e57xml e57bits dispatch
+# (default: all).
 # dispatch links the whole server (its session, dispatch and render-thread code, on the real
 # renderer) and tests/common/fuzz_dispatch.c; it needs `make` to have generated
 # build/gen/shaders_gen.c and page_gen.c. Each fuzzer is
@@ -20,7 +21,7 @@ cd "$(dirname "$0")/../.." || exit 2
 
 secs=${1:-60}
 [ $# -gt 0 ] && shift
-targets=${*:-proto ply pcd las xyz lzf params ws laz copc cache frame dispatch}
+targets=${*:-proto ply pcd las xyz lzf params ws laz copc cache frame e57 e57xml e57bits dispatch}
 CLANG=${CLANG:-clang}
 max_len=${FUZZ_MAX_LEN:-65536}
 out=build/fuzz
@@ -36,8 +37,8 @@ CFLAGS="-std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer -Wall -Wextra -Wno
         -Iprotocol $(for d in util io prep render pipelines enc net daemon cmd; do printf -- "-Iserver/%s " $d; done)-Iclient -Itests -Itests/common -Ibuild/gen -I/usr/include/OpenEXR"
 SRCS="$(ls protocol/*.c) $(ls server/io/*.c) server/util/sd_err.c server/util/sd_hash.c
       server/net/ws.c server/net/http.c tests/common/fuzz_copc.c
-      $(ls server/prep/*.c) client/frame_decode.c tests/common/fuzz_targets.c"
-LIBS="-lflann -lturbojpeg -llz4 -lxxhash -llzf -lcrypto -lpthread -lm"
+      $(ls server/prep/*.c) client/frame_decode.c tests/common/fuzz_targets.c tests/common/e57test.c"
+LIBS="-lflann -lturbojpeg -llz4 -lxxhash -llzf -lcrypto -lexpat -lpthread -lm"
 # The dispatch target: the rest of the server (all but its main), the embedded shaders.
 # (ws.c and http.c are in SRCS already, for the ws target; server/mpi is the MPI binary's.)
 DISPATCH_SRCS="$(ls server/*/*.c | grep -v -e '^server/cmd/main.c$' -e '^server/io/' -e '^server/prep/' \
