@@ -814,7 +814,7 @@ static void test_kill9_never_leaves_a_loadable_cache(void **state)
         killed += WIFSIGNALED(st);
         char why[256];
         lod_cloud cc;
-        int got = lod_load_file(path, ply, PREP_DEFAULT_K, &cc, why, sizeof why);
+        int got = lod_load_file(path, ply, &d, &cc, why, sizeof why);
         if (got == 1) {
             loaded++;
             for (uint64_t j = 0; j < cc.nnodes; j++) assert_true(lod_node_verify(&cc, j));

@@ -34,7 +34,7 @@ fi
 CFLAGS="-std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer -Wall -Wextra -Wno-unused-parameter
         -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=undefined
         -Iprotocol $(for d in util io prep render pipelines enc net daemon cmd; do printf -- "-Iserver/%s " $d; done)-Iclient -Itests -Itests/common -Ibuild/gen -I/usr/include/OpenEXR"
-SRCS="$(ls protocol/*.c) $(ls server/io/*.c) server/util/sd_err.c server/util/sd_hash.c
+SRCS="$(ls protocol/*.c) $(ls server/io/*.c) server/util/sd_err.c server/util/sd_hash.c server/util/sd_sigbus.c server/util/cachefile.c
       server/net/ws.c server/net/http.c tests/common/fuzz_copc.c
       $(ls server/prep/*.c) client/frame_decode.c tests/common/fuzz_targets.c"
 LIBS="-lflann -lturbojpeg -llz4 -lxxhash -llzf -lcrypto -lpthread -lm"
