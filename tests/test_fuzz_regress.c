@@ -27,7 +27,8 @@
 #define MUTATIONS 1000 /* per valid seed: about 0.5 s in all without ASan, 4 s with it */
 
 static const char *const targets[] = {"proto", "ply", "pcd", "las", "xyz", "lzf", "params",
-                                      "ws", "laz", "copc", "cache", "frame", "dispatch"};
+                                      "ws", "laz", "copc", "cache", "frame", "dispatch",
+                                      "splod"};
 
 /* find: fuzz_target_find, and the dispatch target, which only binaries linking the whole
  * server have (this one does). */
@@ -169,6 +170,7 @@ static void test_corpus_ws(void **state) { (void)state; run_corpus("ws"); }
 static void test_corpus_laz(void **state) { (void)state; run_corpus("laz"); }
 static void test_corpus_copc(void **state) { (void)state; run_corpus("copc"); }
 static void test_corpus_cache(void **state) { (void)state; run_corpus("cache"); }
+static void test_corpus_splod(void **state) { (void)state; run_corpus("splod"); }
 static void test_corpus_frame(void **state) { (void)state; run_corpus("frame"); }
 static void test_corpus_dispatch(void **state) { (void)state; run_corpus("dispatch"); }
 
@@ -236,7 +238,7 @@ int main(void)
         cmocka_unit_test(test_corpus_ws),     cmocka_unit_test(test_corpus_laz),
         cmocka_unit_test(test_corpus_copc),
         cmocka_unit_test(test_corpus_cache),  cmocka_unit_test(test_corpus_frame),
-        cmocka_unit_test(test_corpus_dispatch),
+        cmocka_unit_test(test_corpus_dispatch), cmocka_unit_test(test_corpus_splod),
         cmocka_unit_test(test_crashes),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

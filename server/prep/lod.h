@@ -158,6 +158,12 @@ int lod_cache_path(const char *src, const char *dir, int k, char *buf, size_t le
 int lod_load_file(const char *path, const char *src, const lod_desc *d, lod_cloud *out,
                   char *why, size_t whylen);
 
+/* lod__seal: makes the LOD cache file at path describe the source src for the options of d
+ * (NULL: the defaults) and gives it valid checksums over what it holds (the node table's, the
+ * header's; not the nodes'), so that a fuzzer's bytes reach the checks behind them. Internal
+ * (tests/fuzz); returns 0 or -1. */
+int lod__seal(const char *path, const char *src, const lod_desc *d);
+
 /* lod_want: 1 when a cloud file of size bytes gets the LOD form under mode (LOD_AUTO: files
  * of LOD_AUTO_BYTES or more, about 4M points of binary PLY; LOD_ALWAYS; LOD_NEVER). */
 enum { LOD_AUTO = 0, LOD_ALWAYS = 1, LOD_NEVER = 2 };

@@ -227,6 +227,11 @@ int lod_load_file(const char *path, const char *src, const lod_desc *d, lod_clou
     return load(path, -1, src, d, out, why, whylen);
 }
 
+int lod__seal(const char *path, const char *src, const lod_desc *d)
+{
+    return cf__seal(path, src, CF_HASH_ENDS, 1, lod__options(d));
+}
+
 /* ---- the writer ---- */
 
 int lod__writer_open(lod_writer *w, const char *cpath, const lod_desc *d, sd_err *err)

@@ -187,7 +187,7 @@ static int check(const cf_kind *k, cf_file *f, const uint8_t *page, const cf_key
         char a[96] = "", b[96] = "";
         k->describe(h->options, a, sizeof a);
         k->describe(options, b, sizeof b);
-        snprintf(why, whylen, "%s built with %s, %s asked", k->what, a, b);
+        snprintf(why, whylen, "%s built with %s; %s asked", k->what, a, b);
         return 0;
     }
     if (h->src.size != src->size || h->src.mtime_ns != src->mtime_ns) {

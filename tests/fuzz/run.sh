@@ -3,7 +3,7 @@
 #
 #   sh tests/fuzz/run.sh [SECONDS] [TARGET...]      (from the repository root; make fuzz)
 #
-# Targets: proto ply pcd las xyz lzf params ws laz copc cache frame dispatch (default: all).
+# Targets: proto ply pcd las xyz lzf params ws laz copc cache splod frame dispatch (default: all).
 # dispatch links the whole server (its session, dispatch and render-thread code, on the real
 # renderer) and tests/common/fuzz_dispatch.c; it needs `make` to have generated
 # build/gen/shaders_gen.c and page_gen.c. Each fuzzer is
@@ -20,7 +20,7 @@ cd "$(dirname "$0")/../.." || exit 2
 
 secs=${1:-60}
 [ $# -gt 0 ] && shift
-targets=${*:-proto ply pcd las xyz lzf params ws laz copc cache frame dispatch}
+targets=${*:-proto ply pcd las xyz lzf params ws laz copc cache splod frame dispatch}
 CLANG=${CLANG:-clang}
 max_len=${FUZZ_MAX_LEN:-65536}
 out=build/fuzz
