@@ -145,10 +145,6 @@ static int try_load(const char *cpath, const char *src, const cf_key *key, int k
                  (unsigned long long)next, (unsigned long long)m.n);
         bad = 1;
     }
-    if (!bad && cf_map_changed(map)) {
-        snprintf(why, whylen, "it became shorter while it was being read");
-        bad = 1;
-    }
     if (bad) {
         cf_map_close(map);
         return -1;
