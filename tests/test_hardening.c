@@ -681,8 +681,8 @@ static void test_guarded_truncation(void **state)
 /* sd_hash64 is XXH3-64 (libxxhash): the values below were computed independently with the
  * xxhsum tool (`xxhsum -H3`, xxHash 0.8.1) over the same bytes, one length in each of XXH3's
  * code paths (0, 1-3, 4-8, 9-16, 17-128, 129-240, longer) and at their edges. A change of hash
- * must come with a new CACHE_VERSION (cache.c): else every cache would look stale, or worse,
- * collide. A seed changes the value. */
+ * must come with new cache versions (cache.c, lod_file.c): else every cache would look stale,
+ * or worse, collide. A seed changes the value. */
 static void test_hash_known_answers(void **state)
 {
     (void)state;
