@@ -10,7 +10,8 @@
  *  - files changing under the reader: a mapped file truncated during its parse is an error of
  *    that load (pc__guarded turns the SIGBUS into SD_EIO), also end to end while the daemon
  *    prepares it for a client, and the daemon goes on serving others; the streamed hash of a
- *    source file equals the one-shot hash.
+ *    source file equals the one-shot hash; a served .splod and .splc cut between two renders
+ *    give RENDER_FAILED naming the cache file, and the next OPEN rebuilds it.
  *  - cache files: symlinks planted at the cache's name and at the old predictable temporary
  *    name are never followed; `splatd prep` killed (SIGKILL) while it writes its cache leaves
  *    no temporary file, and a dead writer's leftover is swept at the next start; `splatd prep`
