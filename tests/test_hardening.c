@@ -998,14 +998,20 @@ static void test_cache_kill9(void **state)
     while (kill((pid_t)dead_pid, 0) == 0 || errno != ESRCH) dead_pid--;
     snprintf(dead, sizeof dead, "%s/big.ply.0.k24.splc.tmp.%ld.00112233aabb", cdir, dead_pid);
     snprintf(live, sizeof live, "%s/big.ply.0.k24.splc.tmp.%ld.00112233aabb", cdir, (long)getpid());
+    /* and a dead LOD writer's (the sweep is the cache module's, for both kinds) */
+    char dead_lod[800];
+    snprintf(dead_lod, sizeof dead_lod, "%s/big.ply.0.k24.splod.tmp.%ld.00112233aabb", cdir,
+             dead_pid);
     assert_int_equal(tu_write_file(dead, "x", 1), 0);
     assert_int_equal(tu_write_file(live, "x", 1), 0);
+    assert_int_equal(tu_write_file(dead_lod, "x", 1), 0);
     const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", cdir, NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
     struct stat st;
     assert_int_equal(stat(dead, &st), -1);
+    assert_int_equal(stat(dead_lod, &st), -1);
     assert_int_equal(stat(live, &st), 0);
-    assert_int_equal(tu_daemon_log_count(&f->d, "removed 1 temporary file(s) of interrupted cache writes"), 1);
+    assert_int_equal(tu_daemon_log_count(&f->d, "removed 2 temporary file(s) of interrupted cache writes"), 1);
     assert_int_equal(tu_daemon_stop(&f->d), 0);
     unlink(live);
 }
