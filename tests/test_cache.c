@@ -12,9 +12,11 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include "cache.h"
+#include "lod.h"
 #include "prep.h"
 #include "sd_hash.h"
 #include "testutil.h"
@@ -504,6 +506,240 @@ static void test_missing_source(void **state)
     assert_non_null(strstr(err.msg, "nope.ply"));
 }
 
+/* ---- caches of the previous formats, and caches cut or changed under a reader ---- */
+
+/* The flat cache header of version 5, as splatd wrote it before cachefile.h (kept here to
+ * write such a file: it must be rebuilt, never misread as a version 6 header). */
+typedef struct old5_header {
+    char magic[8];
+    uint32_t version, byte_order;
+    uint64_t src_size;
+    int64_t src_mtime_ns;
+    uint64_t src_hash;
+    uint32_t k, attrs;
+    uint64_t n, nbatches, block_len, block_hash;
+    double offset[3], bmin[3], bmax[3];
+    float sigma, F_raw_p99, F_pct[5], radius_median;
+    uint64_t n_dropped;
+    char format[64];
+    char scalar_name[32];
+    pc_prep_stats stats;
+    uint64_t header_hash;
+} old5_header;
+
+/* old_key: the source key the previous formats stored for path: size, mtime (ns) and the hash
+ * of the whole file, or (ends) of its first and last MiB: the whole file twice for a file
+ * under a MiB (its only use here). */
+static void old_key(const char *path, int ends, uint64_t *size, int64_t *mtime, uint64_t *hash)
+{
+    struct stat st;
+    assert_int_equal(stat(path, &st), 0);
+    *size = (uint64_t)st.st_size;
+    *mtime = (int64_t)st.st_mtim.tv_sec * 1000000000LL + st.st_mtim.tv_nsec;
+    size_t len;
+    uint8_t *b = tu_read_file(path, &len);
+    assert_non_null(b);
+    assert_true(!ends || len < (1u << 20));
+    sd_hash_state hs;
+    sd_hash64_init(&hs, 0);
+    for (int i = 0; i <= ends; i++) sd_hash64_update(&hs, b, len);
+    *hash = sd_hash64_final(&hs);
+    free(b);
+}
+
+/* A complete, valid cache of the previous format (version 5, its own header layout, every key
+ * and checksum right) is out of date: rebuilt without a warning, never loaded; the rebuilt
+ * cloud is the real one, and the new cache is used after. */
+static void test_old_version_rebuilt(void **state)
+{
+    fixture *f = *state;
+    pc_prepared p;
+    cache_result r;
+    assert_int_equal(open_cloud(f, 24, &p, &r), 0);
+    pc_prepared_free(&p);
+    assert_int_equal(open_cloud(f, 24, &p, &r), 0);
+    assert_int_equal(r.hit, 1);
+    old5_header h = {.magic = "SPLATDC", .version = 5, .byte_order = 0x01020304u, .k = p.k,
+                     .attrs = p.attrs, .n = p.n, .nbatches = p.nbatches,
+                     .block_len = p.block_len, .block_hash = sd_hash64(p.block, p.block_len, 0)};
+    old_key(f->src, 0, &h.src_size, &h.src_mtime_ns, &h.src_hash);
+    memcpy(h.offset, p.offset, sizeof h.offset);
+    memcpy(h.bmin, p.bmin, sizeof h.bmin);
+    memcpy(h.bmax, p.bmax, sizeof h.bmax);
+    h.sigma = p.sigma;
+    h.F_raw_p99 = p.F_raw_p99;
+    memcpy(h.F_pct, p.F_pct, sizeof h.F_pct);
+    h.radius_median = p.radius_median;
+    h.n_dropped = p.n_dropped;
+    memcpy(h.format, p.format, sizeof h.format);
+    memcpy(h.scalar_name, p.scalar_name, sizeof h.scalar_name);
+    h.stats = p.stats;
+    h.header_hash = sd_hash64(&h, offsetof(old5_header, header_hash), 0);
+    size_t flen = 4096 + (size_t)p.block_len;
+    uint8_t *file = calloc(1, flen);
+    assert_non_null(file);
+    memcpy(file, &h, sizeof h);
+    memcpy(file + 4096, p.block, p.block_len);
+    void *copy = malloc(p.block_len);
+    memcpy(copy, p.block, p.block_len);
+    pc_prepared good = {.block = copy, .block_len = p.block_len};
+    pc_prepared_free(&p);
+    assert_int_equal(tu_write_file(r.path, file, flen), 0);
+    free(file);
+    assert_int_equal(open_cloud(f, 24, &p, &r), 0);
+    assert_int_equal(r.hit, 0);
+    assert_string_equal(r.why, "cache version 5, this splatd writes 6");
+    assert_int_equal(f->warnings, 0);
+    assert_same_cloud(&good, &p);
+    pc_prepared_free(&p);
+    assert_int_equal(open_cloud(f, 24, &p, &r), 0);
+    assert_int_equal(r.hit, 1);
+    pc_prepared_free(&p);
+    free(copy);
+}
+
+/* The LOD cache header of version 3, as splatd wrote it before cachefile.h. */
+typedef struct old3_header {
+    char magic[8];
+    uint32_t version, byte_order;
+    uint64_t src_size, src_hash;
+    int64_t src_mtime_ns;
+    uint32_t k, attrs, grid_bits, leaf_max, depth, pad;
+    uint64_t n, nnodes, table_off, table_hash, file_len;
+    double offset[3], bmin[3], bmax[3], origin[3], side, centroid[3];
+    float sigma, F_raw_p99, F_pct[5], radius_median;
+    uint64_t n_dropped;
+    char format[64];
+    uint64_t header_hash;
+} old3_header;
+
+/* open_lod: the LOD form of f's source (a small grid, leaves of leaf_max points), r its
+ * result. */
+static void open_lod(fixture *f, uint32_t leaf_max, lod_cloud *c, lod_result *r)
+{
+    lod_desc d = {.dir = f->cdir, .grid_bits = 4, .leaf_max = leaf_max, .threads = 2,
+                  .warn = on_warn, .user = f};
+    sd_err err = {0};
+    if (lod_open_cloud(f->src, &d, c, r, &err) != 0) fail_msg("%s", err.msg);
+}
+
+/* The same for a LOD cache: a complete version 3 file (its header layout, node data and
+ * table, every key and checksum right) is rebuilt without a warning, never loaded. */
+static void test_old_lod_version_rebuilt(void **state)
+{
+    fixture *f = *state;
+    lod_cloud c;
+    lod_result r;
+    open_lod(f, 3000, &c, &r);
+    size_t flen;
+    uint8_t *file = tu_read_file(r.path, &flen);
+    assert_non_null(file);
+    old3_header h = {.magic = "SPLATDL", .version = 3, .byte_order = 0x01020304u, .k = c.k,
+                     .attrs = c.attrs, .grid_bits = c.grid_bits, .leaf_max = c.leaf_max,
+                     .depth = c.depth, .n = c.n, .nnodes = c.nnodes, .file_len = flen};
+    old_key(f->src, 1, &h.src_size, &h.src_mtime_ns, &h.src_hash);
+    h.table_off = flen - c.nnodes * sizeof(lod_node);
+    h.table_hash = sd_hash64(file + h.table_off, c.nnodes * sizeof(lod_node), 0);
+    memcpy(h.offset, c.offset, sizeof h.offset);
+    memcpy(h.bmin, c.bmin, sizeof h.bmin);
+    memcpy(h.bmax, c.bmax, sizeof h.bmax);
+    memcpy(h.origin, c.origin, sizeof h.origin);
+    h.side = c.side;
+    memcpy(h.centroid, c.centroid, sizeof h.centroid);
+    h.sigma = c.sigma;
+    h.radius_median = c.radius_median;
+    memcpy(h.format, c.format, sizeof h.format);
+    h.header_hash = sd_hash64(&h, offsetof(old3_header, header_hash), 0);
+    memset(file, 0, 4096);
+    memcpy(file, &h, sizeof h);
+    uint64_t nnodes = c.nnodes;
+    lod_cloud_free(&c);
+    assert_int_equal(tu_write_file(r.path, file, flen), 0);
+    free(file);
+    open_lod(f, 3000, &c, &r);
+    assert_int_equal(r.hit, 0);
+    assert_string_equal(r.why, "LOD cache version 3, this splatd writes 4");
+    assert_int_equal(f->warnings, 0);
+    assert_int_equal(c.nnodes, nnodes);
+    lod_cloud_free(&c);
+    /* a cache built with another leaf size is another key: rebuilt, without a warning */
+    open_lod(f, 2999, &c, &r);
+    assert_int_equal(r.hit, 0);
+    assert_non_null(strstr(r.why, "leaf size 3000; k = 24, grid bits 4, leaf size 2999 asked"));
+    assert_int_equal(f->warnings, 0);
+    lod_cloud_free(&c);
+}
+
+/* A mapped cache cut under its reader: the pages past the cut read as zeros (no SIGBUS), the
+ * pages before it keep their bytes, and pc_prepared_check then names the file; before the
+ * cut it says nothing. (The renderer checks after each upload: test_hardening.) */
+static void test_cut_under_reader(void **state)
+{
+    fixture *f = *state;
+    pc_prepared p;
+    cache_result r;
+    sd_err err = {0};
+    assert_int_equal(open_cloud(f, 24, &p, &r), 0);
+    pc_prepared_free(&p);
+    assert_int_equal(open_cloud(f, 24, &p, &r), 0);
+    assert_int_equal(r.hit, 1);
+    assert_non_null(p.file);
+    const uint8_t *b = p.block;
+    uint8_t head[4096];
+    memcpy(head, b, sizeof head);
+    uint64_t sum = 0;
+    for (uint64_t i = 0; i < p.block_len; i++) sum += b[i];
+    assert_true(sum > 0);
+    assert_int_equal(pc_prepared_check(&p, &err), 0);
+    assert_int_equal(truncate(r.path, 4096 + 4096), 0); /* the block's first page is kept */
+    uint64_t after = 0;
+    for (uint64_t i = 4096; i < p.block_len; i++) after += b[i];
+    assert_int_equal(after, 0);
+    assert_memory_equal(b, head, sizeof head);
+    assert_int_equal(pc_prepared_check(&p, &err), SD_ESTALE);
+    const char *base = strrchr(r.path, '/') + 1;
+    assert_non_null(strstr(err.msg, base));
+    assert_non_null(strstr(err.msg, "changed while splatd was reading it"));
+    pc_prepared_free(&p);
+}
+
+/* LOD node data cut, or changed in place, under its reader: lod_node_copy fails with SD_ESTALE
+ * naming the file and what happened, and never raises SIGBUS; the nodes before the change
+ * still copy. */
+static void test_lod_node_changed_under_reader(void **state)
+{
+    fixture *f = *state;
+    lod_cloud c;
+    lod_result r;
+    sd_err err = {0};
+    open_lod(f, 3000, &c, &r);
+    assert_true(c.nnodes >= 3);
+    uint64_t last = c.nnodes - 1;
+    void *buf = malloc(lod_node_bytes(c.nodes[0].count) + lod_node_bytes(c.nodes[last].count));
+    assert_int_equal(lod_node_copy(&c, last, buf, &err), 0);
+    /* in place: one byte of node 1's data */
+    int fd = open(r.path, O_RDWR);
+    assert_true(fd >= 0);
+    uint8_t x;
+    assert_int_equal(pread(fd, &x, 1, (off_t)c.nodes[1].offset + 5), 1);
+    x ^= 1;
+    assert_int_equal(pwrite(fd, &x, 1, (off_t)c.nodes[1].offset + 5), 1);
+    close(fd);
+    assert_int_equal(lod_node_copy(&c, 1, buf, &err), SD_ESTALE);
+    assert_non_null(strstr(err.msg, "node 1 does not match its checksum"));
+    assert_int_equal(lod_node_copy(&c, 0, buf, &err), 0);
+    /* cut: the file ends inside node 0's data; the table (in memory) is still walked */
+    assert_int_equal(truncate(r.path, (off_t)c.nodes[0].offset + 4096), 0);
+    assert_int_equal(lod_node_copy(&c, last, buf, &err), SD_ESTALE);
+    assert_non_null(strstr(err.msg, "became shorter"));
+    assert_non_null(strstr(err.msg, strrchr(r.path, '/') + 1));
+    uint64_t total = 0;
+    for (uint64_t i = 0; i < c.nnodes; i++) total += c.nodes[i].count;
+    assert_int_equal(total, c.n);
+    free(buf);
+    lod_cloud_free(&c);
+}
+
 int main(int argc, char **argv)
 {
     tu_args(argc, argv);
@@ -517,6 +753,10 @@ int main(int argc, char **argv)
         cmocka_unit_test_setup_teardown(test_every_header_byte, setup, teardown),
         cmocka_unit_test_setup_teardown(test_unwritable_cache_dir, setup, teardown),
         cmocka_unit_test_setup_teardown(test_missing_source, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_old_version_rebuilt, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_old_lod_version_rebuilt, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_cut_under_reader, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_lod_node_changed_under_reader, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -28,7 +28,7 @@
 
 static const char *const targets[] = {"proto", "ply", "pcd", "las", "xyz", "lzf", "params",
                                       "ws", "laz", "copc", "cache", "frame", "dispatch",
-                                      "e57", "e57xml", "e57bits"};
+                                      "e57", "e57xml", "e57bits", "splod"};
 
 /* find: fuzz_target_find, and the dispatch target, which only binaries linking the whole
  * server have (this one does). */
@@ -170,6 +170,7 @@ static void test_corpus_ws(void **state) { (void)state; run_corpus("ws"); }
 static void test_corpus_laz(void **state) { (void)state; run_corpus("laz"); }
 static void test_corpus_copc(void **state) { (void)state; run_corpus("copc"); }
 static void test_corpus_cache(void **state) { (void)state; run_corpus("cache"); }
+static void test_corpus_splod(void **state) { (void)state; run_corpus("splod"); }
 static void test_corpus_frame(void **state) { (void)state; run_corpus("frame"); }
 static void test_corpus_dispatch(void **state) { (void)state; run_corpus("dispatch"); }
 static void test_corpus_e57(void **state) { (void)state; run_corpus("e57"); }
@@ -244,6 +245,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_corpus_dispatch),
         cmocka_unit_test(test_corpus_e57),    cmocka_unit_test(test_corpus_e57xml),
         cmocka_unit_test(test_corpus_e57bits),
+        cmocka_unit_test(test_corpus_splod),
         cmocka_unit_test(test_crashes),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

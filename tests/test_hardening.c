@@ -10,7 +10,8 @@
  *  - files changing under the reader: a mapped file truncated during its parse is an error of
  *    that load (pc__guarded turns the SIGBUS into SD_EIO), also end to end while the daemon
  *    prepares it for a client, and the daemon goes on serving others; the streamed hash of a
- *    source file equals the one-shot hash.
+ *    source file equals the one-shot hash; a served .splod and .splc cut between two renders
+ *    give RENDER_FAILED naming the cache file, and the next OPEN rebuilds it.
  *  - cache files: symlinks planted at the cache's name and at the old predictable temporary
  *    name are never followed; `splatd prep` killed (SIGKILL) while it writes its cache leaves
  *    no temporary file, and a dead writer's leftover is swept at the next start; `splatd prep`
@@ -64,6 +65,7 @@
 #include "prep.h"
 #include "proto.h"
 #include "sd_hash.h"
+#include "splat_client.h"
 #include "testutil.h"
 
 static const char TOKEN[] = "correct horse battery staple";
@@ -681,8 +683,8 @@ static void test_guarded_truncation(void **state)
 /* sd_hash64 is XXH3-64 (libxxhash): the values below were computed independently with the
  * xxhsum tool (`xxhsum -H3`, xxHash 0.8.1) over the same bytes, one length in each of XXH3's
  * code paths (0, 1-3, 4-8, 9-16, 17-128, 129-240, longer) and at their edges. A change of hash
- * must come with a new CACHE_VERSION (cache.c): else every cache would look stale, or worse,
- * collide. A seed changes the value. */
+ * must come with new cache versions (cache.c, lod_file.c): else every cache would look stale,
+ * or worse, collide. A seed changes the value. */
 static void test_hash_known_answers(void **state)
 {
     (void)state;
@@ -997,14 +999,20 @@ static void test_cache_kill9(void **state)
     while (kill((pid_t)dead_pid, 0) == 0 || errno != ESRCH) dead_pid--;
     snprintf(dead, sizeof dead, "%s/big.ply.0.k24.splc.tmp.%ld.00112233aabb", cdir, dead_pid);
     snprintf(live, sizeof live, "%s/big.ply.0.k24.splc.tmp.%ld.00112233aabb", cdir, (long)getpid());
+    /* and a dead LOD writer's (the sweep is the cache module's, for both kinds) */
+    char dead_lod[800];
+    snprintf(dead_lod, sizeof dead_lod, "%s/big.ply.0.k24.splod.tmp.%ld.00112233aabb", cdir,
+             dead_pid);
     assert_int_equal(tu_write_file(dead, "x", 1), 0);
     assert_int_equal(tu_write_file(live, "x", 1), 0);
+    assert_int_equal(tu_write_file(dead_lod, "x", 1), 0);
     const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", cdir, NULL};
     assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
     struct stat st;
     assert_int_equal(stat(dead, &st), -1);
+    assert_int_equal(stat(dead_lod, &st), -1);
     assert_int_equal(stat(live, &st), 0);
-    assert_int_equal(tu_daemon_log_count(&f->d, "removed 1 temporary file(s) of interrupted cache writes"), 1);
+    assert_int_equal(tu_daemon_log_count(&f->d, "removed 2 temporary file(s) of interrupted cache writes"), 1);
     assert_int_equal(tu_daemon_stop(&f->d), 0);
     unlink(live);
 }
@@ -1432,6 +1440,166 @@ static void test_token_checks(void **state)
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
+/* ---- cache files changed under the daemon ---- */
+
+/* cache_file: the one file of dir whose name starts with prefix and ends with ext, into out.
+ * Returns 1 when there is exactly one. */
+static int cache_file(const char *dir, const char *prefix, const char *ext, char *out,
+                      size_t len)
+{
+    DIR *d = opendir(dir);
+    if (!d) return 0;
+    int n = 0;
+    struct dirent *e;
+    size_t pl = strlen(prefix), el = strlen(ext);
+    while ((e = readdir(d))) {
+        size_t nl = strlen(e->d_name);
+        if (nl < pl + el || strncmp(e->d_name, prefix, pl) || strcmp(e->d_name + nl - el, ext))
+            continue;
+        snprintf(out, len, "%s/%s", dir, e->d_name);
+        n++;
+    }
+    closedir(d);
+    return n == 1;
+}
+
+/* client_on: a client of the daemon on port, 160x120 lz4 frames. */
+static spc_client *client_on(int port)
+{
+    spc_options o = {.host = "127.0.0.1", .port = port, .client_name = "test_hardening"};
+    spc_client *c = NULL;
+    char err[256];
+    if (spc_connect(&o, &c, err, sizeof err) != 0) fail_msg("connect: %s", err);
+    assert_int_equal(spc_set_param(c, "format=lz4"), 0);
+    return c;
+}
+
+/* render_view: a 160x120 frame of the whole cloud (info) into f. Returns spc_render's code. */
+static int render_view(spc_client *c, const spc_info *info, spc_frame *f)
+{
+    spc_camera cam;
+    spc_camera_frame(info, 160, 120, &cam);
+    int rc = spc_set_camera(c, &cam, NULL);
+    return rc ? rc : spc_render(c, f, 1);
+}
+
+/* cut_then_render: the audit's crash (D1 of issue 27), for cloud name whose cache (ext) lies in
+ * f->cache: the cache file is cut to keep bytes after `first` rendered, then `second` renders
+ * what must read it. The daemon must answer RENDER_FAILED naming the cache file (never die of
+ * SIGBUS), serve another client at once, and load the cloud anew at the next OPEN (a rebuilt
+ * cache of the old size), which then renders. */
+static void cut_then_render(fx *f, spc_client *c, const char *name, const char *ext,
+                            const spc_info *info, off_t keep,
+                            int (*second)(spc_client *c, const spc_info *info, spc_frame *fr))
+{
+    char cpath[1200];
+    if (!cache_file(f->cache, name, ext, cpath, sizeof cpath))
+        fail_msg("no single %s*%s cache in %s", name, ext, f->cache);
+    struct stat st;
+    assert_int_equal(stat(cpath, &st), 0);
+    assert_true(st.st_size > keep);
+    assert_int_equal(truncate(cpath, keep), 0);
+    spc_frame fr;
+    int rc = second(c, info, &fr);
+    printf("%s cut to %lld bytes under the daemon: %s\n", ext, (long long)keep,
+           rc ? spc_errmsg(c) : "rendered");
+    assert_int_equal(rc, SPC_E_RENDER_FAILED);
+    const char *base = strrchr(cpath, '/') + 1;
+    assert_non_null(strstr(spc_errmsg(c), base));
+    assert_non_null(strstr(spc_errmsg(c), "changed"));
+    assert_null(strstr(spc_errmsg(c), f->cache)); /* the name, not where the server keeps it */
+    /* the daemon is alive and serves another client */
+    spc_client *other = client_on(f->d.port);
+    assert_int_equal(spc_ping(other, NULL), 0);
+    spc_close(other);
+    /* the next OPEN loads it anew: the damaged cache is reported and rebuilt */
+    int built = tu_daemon_log_count(&f->d, "rebuilding it");
+    spc_info again;
+    assert_int_equal(spc_open(c, name, &again, NULL, NULL), 0);
+    assert_int_equal(again.points, info->points);
+    assert_int_equal(tu_daemon_log_count(&f->d, "rebuilding it"), built + 1);
+    struct stat st2;
+    assert_int_equal(stat(cpath, &st2), 0);
+    assert_int_equal(st2.st_size, st.st_size);
+    assert_int_equal(render_view(c, &again, &fr), 0);
+    assert_true(fr.points_drawn > 0);
+}
+
+/* full_budget: a RENDER of the whole view with the pool's budget (every node). */
+static int full_budget(spc_client *c, const spc_info *info, spc_frame *fr)
+{
+    int rc = spc_set_param(c, "point_budget=0");
+    return rc ? rc : render_view(c, info, fr);
+}
+
+/* A served .splod cut under the daemon: the first frame drew the root alone (a budget of 1000
+ * points, within the root), so the second frame's nodes must be read from the cut file. The
+ * previous daemon died there with SIGBUS (the node table and the node data were read from the
+ * mapping on the render and loader threads). */
+static void test_lod_cache_cut_under_daemon(void **state)
+{
+    fx *f = *state;
+    char src[600], dst[700];
+    snprintf(dst, sizeof dst, "%s/guanyin.ply", f->data);
+    assert_int_equal(tu_copy_file(tu_data("Guanyin.ply", src, sizeof src), dst), 0);
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
+                          "--lod", "always", "--lod-inflight", "1", NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    spc_client *c = client_on(f->d.port);
+    spc_info info;
+    assert_int_equal(spc_open(c, "guanyin", &info, NULL, NULL), 0);
+    assert_int_equal(info.points, 238154);
+    assert_int_equal(spc_set_param(c, "point_budget=1000"), 0);
+    spc_frame fr;
+    assert_int_equal(render_view(c, &info, &fr), 0);
+    assert_int_equal(fr.points_drawn, 1000);
+    cut_then_render(f, c, "guanyin", ".splod", &info, 1 << 20, full_budget);
+    spc_close(c);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+}
+
+/* reopen_evicted: OPEN bunny (evicted from the GPU by the other cloud) and render it: the
+ * upload reads its cache's mapping again. */
+static int reopen_evicted(spc_client *c, const spc_info *info, spc_frame *fr)
+{
+    int rc = spc_open(c, "bunny", NULL, NULL, NULL);
+    return rc ? rc : render_view(c, info, fr);
+}
+
+/* A served .splc cut under the daemon: with room on the GPU for one cloud, bunny is evicted by
+ * another cloud, its cache cut to two pages, and its next frame uploads it again from the
+ * mapping (pages past the cut raised SIGBUS there): the frame fails naming the cache file, the
+ * zeros read are never drawn. */
+static void test_flat_cache_cut_under_daemon(void **state)
+{
+    fx *f = *state;
+    char src[700], dst[700];
+    snprintf(src, sizeof src, "%s/bunny.ply", f->data);
+    snprintf(dst, sizeof dst, "%s/other.ply", f->data);
+    assert_int_equal(tu_copy_file(src, dst), 0);
+    /* 40256 points of about 40 GPU bytes each: 2500K holds one of the two clouds */
+    const char *args[] = {"--listen", "127.0.0.1:0", "--data", f->data, "--cache", f->cache,
+                          "--lod", "never", "--gpu-memory", "2500K", NULL};
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    spc_client *c = client_on(f->d.port);
+    spc_info info, other;
+    spc_frame fr;
+    /* a first daemon run makes the cache; this one maps it (a hit), then evicts it */
+    assert_int_equal(spc_open(c, "bunny", &info, NULL, NULL), 0);
+    spc_close(c);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+    assert_int_equal(tu_daemon_start(&f->d, f->root, NULL, args), 0);
+    c = client_on(f->d.port);
+    assert_int_equal(spc_open(c, "bunny", &info, NULL, NULL), 0);
+    assert_int_equal(tu_daemon_log_count(&f->d, "from the cache"), 1);
+    assert_int_equal(render_view(c, &info, &fr), 0);
+    assert_int_equal(spc_open(c, "other", &other, NULL, NULL), 0);
+    assert_int_equal(render_view(c, &other, &fr), 0);
+    cut_then_render(f, c, "bunny", ".splc", &info, 8192, reopen_evicted);
+    spc_close(c);
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+}
+
 int main(int argc, char **argv)
 {
     tu_args(argc, argv);
@@ -1453,6 +1621,8 @@ int main(int argc, char **argv)
         cmocka_unit_test_setup_teardown(test_frame_budget, setup, teardown),
         cmocka_unit_test_setup_teardown(test_token_checks, setup, teardown),
         cmocka_unit_test_setup_teardown(test_budget_counts_sending, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_lod_cache_cut_under_daemon, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_flat_cache_cut_under_daemon, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -15,6 +15,8 @@
 #include <stdlib.h>
 #include <string.h>
 #include <dirent.h>
+#include <sched.h>
+#include <sys/mount.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <time.h>
@@ -814,7 +816,7 @@ static void test_kill9_never_leaves_a_loadable_cache(void **state)
         killed += WIFSIGNALED(st);
         char why[256];
         lod_cloud cc;
-        int got = lod_load_file(path, ply, PREP_DEFAULT_K, &cc, why, sizeof why);
+        int got = lod_load_file(path, ply, &d, &cc, why, sizeof why);
         if (got == 1) {
             loaded++;
             for (uint64_t j = 0; j < cc.nnodes; j++) assert_true(lod_node_verify(&cc, j));
@@ -828,6 +830,187 @@ static void test_kill9_never_leaves_a_loadable_cache(void **state)
     print_message("kill -9: %d of 8 killed during the build, %d caches complete\n", killed,
                   loaded);
     assert_true(killed >= 4);
+    tu_rm_rf(dir);
+}
+
+/* ---- the cache directory: read-only, full (issue 27 D4) ---- */
+
+typedef struct warned {
+    int n;
+    char last[1200];
+} warned;
+
+static void on_lod_warn(void *user, const char *msg)
+{
+    warned *w = user;
+    w->n++;
+    snprintf(w->last, sizeof w->last, "%s", msg);
+}
+
+/* private_mounts: moves this process into a mount namespace of its own whose mounts do not
+ * reach the host (they vanish with the process, even when a test fails). Returns 0, or -1 with
+ * why (no CAP_SYS_ADMIN: not root, or a sandbox forbidding it). */
+static int private_mounts(char *why, size_t len)
+{
+    if (unshare(CLONE_NEWNS) != 0 || mount("none", "/", NULL, MS_REC | MS_PRIVATE, NULL) != 0) {
+        snprintf(why, len, "cannot make a private mount namespace (%s): a read-only or full "
+                 "cache directory needs a tmpfs mounted here", strerror(errno));
+        return -1;
+    }
+    return 0;
+}
+
+/* all_nodes_verify: every node of c reads back whole through lod_node_copy. */
+static int all_nodes_verify(const lod_cloud *c)
+{
+    uint64_t total = 0;
+    for (uint64_t i = 0; i < c->nnodes; i++) {
+        void *buf = malloc(lod_node_bytes(c->nodes[i].count));
+        sd_err err = {0};
+        int rc = lod_node_copy(c, i, buf, &err);
+        free(buf);
+        if (rc != 0) return 0;
+        total += c->nodes[i].count;
+    }
+    return total == c->n;
+}
+
+/* LOD clouds with a cache directory on a 8 MiB tmpfs. Read-only: a valid cache loads (read
+ * only, no scratch); without one the build goes to an unnamed file in $TMPDIR (a warning says
+ * so), serves, and leaves nothing behind in either directory. Full: a valid cache loads; a
+ * build fails with an error naming the cache directory and the disk's reason. (The daemon's
+ * LOAD_FAILED "cannot write LOD cache" for every LOD cloud in a read-only cache directory.) */
+static void test_readonly_and_full_cache_dir(void **state)
+{
+    (void)state;
+    char why[300];
+    if (private_mounts(why, sizeof why) != 0) TU_SKIP("%s", why);
+    char dir[512], mnt[600], cache[700], tmp[600], ply[700], other[700], fill[700];
+    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    snprintf(mnt, sizeof mnt, "%s/mnt", dir);
+    snprintf(cache, sizeof cache, "%s/cache", mnt);
+    snprintf(tmp, sizeof tmp, "%s/tmp", dir);
+    snprintf(fill, sizeof fill, "%s/fill", mnt);
+    assert_int_equal(mkdir(mnt, 0700), 0);
+    assert_int_equal(mkdir(tmp, 0700), 0);
+    if (mount("tmpfs", mnt, "tmpfs", 0, "size=8m,mode=0700") != 0)
+        TU_SKIP("cannot mount a tmpfs (%s)", strerror(errno));
+    gen(dir, 20000, ply, sizeof ply);
+    snprintf(other, sizeof other, "%s/other.ply", dir);
+    assert_int_equal(tu_copy_file(ply, other), 0);
+    char *old_tmpdir = getenv("TMPDIR") ? strdup(getenv("TMPDIR")) : NULL;
+    setenv("TMPDIR", tmp, 1);
+    warned w = {0};
+    lod_desc d = small_desc(cache);
+    d.warn = on_lod_warn;
+    d.user = &w;
+    lod_cloud c;
+    lod_result res;
+    sd_err err = {0};
+    if (lod_open_cloud(ply, &d, &c, &res, &err) != 0) fail_msg("%s", err.msg);
+    assert_int_equal(res.hit, 0);
+    uint64_t nnodes = c.nnodes;
+    lod_cloud_free(&c);
+
+    /* read-only: the valid cache loads */
+    assert_int_equal(mount(NULL, mnt, NULL, MS_REMOUNT | MS_RDONLY, NULL), 0);
+    if (lod_open_cloud(ply, &d, &c, &res, &err) != 0) fail_msg("read-only, cached: %s", err.msg);
+    assert_int_equal(res.hit, 1);
+    assert_int_equal(c.nnodes, nnodes);
+    assert_true(all_nodes_verify(&c));
+    lod_cloud_free(&c);
+    assert_int_equal(w.n, 0);
+    /* read-only, no cache: built in $TMPDIR, unnamed */
+    if (lod_open_cloud(other, &d, &c, &res, &err) != 0) fail_msg("read-only, new: %s", err.msg);
+    print_message("read-only cache directory, no cache: %s\n", w.last);
+    assert_int_equal(res.hit, 0);
+    assert_int_equal(w.n, 1);
+    assert_non_null(strstr(w.last, cache));
+    assert_non_null(strstr(w.last, "Read-only file system"));
+    assert_non_null(strstr(w.last, tmp));
+    assert_int_equal(c.n, 20000);
+    assert_int_equal(c.nnodes, nnodes); /* the same points: the same tree */
+    assert_true(all_nodes_verify(&c));
+    assert_int_equal(count_files(tmp), 0);   /* unnamed: nothing to clean up */
+    assert_int_equal(count_files(cache), 1); /* the first cloud's cache alone */
+    lod_cloud_free(&c);
+
+    /* full: the valid cache loads; a build fails naming the directory */
+    assert_int_equal(mount(NULL, mnt, NULL, MS_REMOUNT, NULL), 0);
+    FILE *fp = fopen(fill, "w");
+    assert_non_null(fp);
+    static char zeros[1 << 16];
+    while (fwrite(zeros, 1, sizeof zeros, fp) == sizeof zeros) {}
+    fclose(fp);
+    if (lod_open_cloud(ply, &d, &c, &res, &err) != 0) fail_msg("full, cached: %s", err.msg);
+    assert_int_equal(res.hit, 1);
+    assert_true(all_nodes_verify(&c));
+    lod_cloud_free(&c);
+    int rc = lod_open_cloud(other, &d, &c, &res, &err);
+    print_message("full cache directory, no cache: %s\n", rc ? err.msg : "built");
+    assert_int_equal(rc, SD_EIO);
+    assert_non_null(strstr(err.msg, cache));
+    assert_non_null(strstr(err.msg, "No space left on device"));
+    assert_int_equal(count_files(cache), 1);
+
+    if (old_tmpdir) setenv("TMPDIR", old_tmpdir, 1);
+    else unsetenv("TMPDIR");
+    free(old_tmpdir);
+    assert_int_equal(umount(mnt), 0);
+    tu_rm_rf(dir);
+}
+
+/* ---- exact boundaries ---- */
+
+/* A node whose points number exactly leaf_max is a leaf holding them all; one more point and
+ * it samples and has children. Checked on a node below the root: the root's child with the
+ * largest subtree (s points, as passed down to it) of a first build, rebuilt with leaf_max = s
+ * and s - 1 (the nodes above it do not depend on leaf_max while their subtrees are larger). One
+ * chunk, so every node is inside the chunking and may be a leaf. */
+static void test_leaf_max_boundary(void **state)
+{
+    (void)state;
+    char dir[512], cache[600], ply[700];
+    assert_non_null(tu_tmpdir(dir, sizeof dir));
+    snprintf(cache, sizeof cache, "%s/cache", dir);
+    gen(dir, 40000, ply, sizeof ply);
+    lod_desc d = small_desc(cache);
+    d.chunk_max = 100000;
+    lod_cloud c;
+    sd_err err = {0};
+    if (lod_open_cloud(ply, &d, &c, NULL, &err) != 0) fail_msg("%s", err.msg);
+    assert_true(c.nodes[0].nchildren > 0);
+    uint64_t best = 0;
+    uint32_t s = 0;
+    for (uint32_t k = 0; k < c.nodes[0].nchildren; k++) {
+        const lod_node *ch = &c.nodes[c.nodes[0].first_child + k];
+        if (ch->subtree_points > s) s = (uint32_t)ch->subtree_points, best = ch->code;
+    }
+    lod_cloud_free(&c);
+    assert_true(s > 2 && s < 40000);
+    for (int less = 0; less < 2; less++) {
+        d.leaf_max = s - (uint32_t)less;
+        d.force = 1;
+        if (lod_open_cloud(ply, &d, &c, NULL, &err) != 0) fail_msg("%s", err.msg);
+        const lod_node *nd = NULL;
+        for (uint64_t i = 0; i < c.nnodes && !nd; i++)
+            if (c.nodes[i].level == 1 && c.nodes[i].code == best) nd = &c.nodes[i];
+        assert_non_null(nd);
+        assert_int_equal(nd->subtree_points, s);
+        print_message("leaf_max %u: the node of %u points has %u children, %u points of its "
+                      "own\n", d.leaf_max, s, nd->nchildren, nd->count);
+        if (!less) {
+            assert_int_equal(nd->nchildren, 0);
+            assert_int_equal(nd->count, s);
+        } else {
+            assert_true(nd->nchildren > 0);
+            assert_true(nd->count < s);
+        }
+        for (uint64_t i = 0; i < c.nnodes; i++) /* no leaf is over leaf_max */
+            if (!c.nodes[i].nchildren && c.nodes[i].level < LOD_MAX_LEVEL)
+                assert_true(c.nodes[i].count <= d.leaf_max);
+        lod_cloud_free(&c);
+    }
     tu_rm_rf(dir);
 }
 
@@ -988,6 +1171,63 @@ static void test_budget_and_full_equals_flat(void **state)
     }
     rnd_frame_free(&a);
     rnd_frame_free(&b);
+}
+
+/* budget_frame: the complete frame of budget b (a view of the whole cloud: every node in the
+ * frustum): its points drawn, and in *wanted the nodes it took. */
+static uint64_t budget_frame(rfix *f, const rnd_camera *cam, sp_params *p, int64_t b,
+                             uint32_t *wanted)
+{
+    rnd_frame a = {0};
+    p->point_budget = b;
+    render_complete(f, cam, p, &a);
+    uint64_t n = a.points_drawn;
+    *wanted = a.lod_wanted;
+    rnd_frame_free(&a);
+    return n;
+}
+
+/* The budget at its exact boundaries. The frame takes nodes by priority while the next fits:
+ * a budget equal to every point takes every node and draws every point; one less leaves out
+ * the last node taken, a leaf, whose points are then exactly the difference; a budget of
+ * exactly the root's points draws the root whole and takes nothing else, one less a prefix of
+ * the root of exactly the budget. */
+static void test_budget_boundaries(void **state)
+{
+    rfix *f = *state;
+    rnd_camera cam;
+    sp_params p;
+    cold_view(f, &cam, &p);
+    p.pipeline = SP_PIPE_POINTS;
+    lod_desc d = small_desc(f->cache);
+    lod_cloud c;
+    sd_err err = {0};
+    if (lod_open_cloud(f->ply, &d, &c, NULL, &err) != 0) fail_msg("%s", err.msg);
+    uint64_t n = c.n, root = c.nodes[0].count;
+    uint32_t w_all, w_less, w_root, w_below;
+    uint64_t all = budget_frame(f, &cam, &p, (int64_t)n, &w_all);
+    uint64_t less = budget_frame(f, &cam, &p, (int64_t)n - 1, &w_less);
+    uint64_t at_root = budget_frame(f, &cam, &p, (int64_t)root, &w_root);
+    uint64_t below_root = budget_frame(f, &cam, &p, (int64_t)root - 1, &w_below);
+    print_message("budget %llu (all): %llu points in %u nodes; %llu: %llu in %u; the root's "
+                  "%llu: %llu in %u; %llu: %llu in %u\n", (unsigned long long)n,
+                  (unsigned long long)all, w_all, (unsigned long long)n - 1,
+                  (unsigned long long)less, w_less, (unsigned long long)root,
+                  (unsigned long long)at_root, w_root, (unsigned long long)root - 1,
+                  (unsigned long long)below_root, w_below);
+    assert_int_equal(all, n);
+    assert_int_equal(w_all, c.nnodes);
+    assert_int_equal(w_less, c.nnodes - 1);
+    assert_true(less < n);
+    int found = 0; /* the node left out: a leaf (a parent comes before its children) */
+    for (uint64_t i = 0; i < c.nnodes; i++)
+        found += !c.nodes[i].nchildren && c.nodes[i].count == n - less;
+    assert_true(found > 0);
+    assert_int_equal(at_root, root);
+    assert_int_equal(w_root, 1);
+    assert_int_equal(below_root, root - 1);
+    assert_int_equal(w_below, 1);
+    lod_cloud_free(&c);
 }
 
 /* At a tenth of the points (inner nodes drawn with radius_lod) the splat image stays within
@@ -1381,11 +1621,14 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_ply_layouts),
         cmocka_unit_test(test_stream_file_shrinks),
         cmocka_unit_test(test_kill9_never_leaves_a_loadable_cache),
+        cmocka_unit_test(test_readonly_and_full_cache_dir),
+        cmocka_unit_test(test_leaf_max_boundary),
         cmocka_unit_test(test_daemon_progressive),
         cmocka_unit_test(test_daemon_prefetch),
     };
     const struct CMUnitTest render_tests[] = {
         cmocka_unit_test(test_budget_and_full_equals_flat),
+        cmocka_unit_test(test_budget_boundaries),
         cmocka_unit_test(test_tenth_budget_psnr),
         cmocka_unit_test(test_progressive_ends_complete),
         cmocka_unit_test(test_settle_then_one_frame),

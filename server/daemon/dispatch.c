@@ -730,10 +730,31 @@ static void on_cloud_provisional(srv *sv, const rt_event *ev)
     }
 }
 
+/* cloud_forget: s's cloud failed for good (its cache file changed under the daemon: the render
+ * thread released it): every session that has it open must OPEN again, and that OPEN loads it
+ * anew (rebuilding the cache). */
+static void cloud_forget(srv *sv, const sess *s)
+{
+    if (s->cloud < 0 || s->cloud >= sv->nclouds) return;
+    srv_cloud *c = &sv->clouds[s->cloud];
+    if (c->state != SRV_CLOUD_READY || c->cloud_id != s->cloud_id) return;
+    int idx = s->cloud;
+    srv_log(sv, NULL, "cloud %s dropped: its cache changed; the next OPEN loads it anew", c->name);
+    for (int i = 0; i < sv->nslots; i++) {
+        sess *o = sv->sessions[i];
+        if (!o || o->cloud != idx) continue;
+        o->cloud = -1;
+        o->cloud_id = 0;
+        o->have_camera = 0;
+    }
+    c->state = SRV_CLOUD_FREE;
+}
+
 static void on_frame_ev(srv *sv, rt_event *ev)
 {
     sess *s = srv_lookup(sv, ev->meta.client);
     if (!s) return; /* its slot was already cleared by rt_client_close */
+    if (ev->kind == RT_EV_FRAME_FAILED && ev->err.code == SD_ESTALE) cloud_forget(sv, s);
     if (ev->kind == RT_EV_FRAME_FAILED) {
         if (ev->meta.stream) {
             char clean[sizeof ev->err.msg * 4];

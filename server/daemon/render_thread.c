@@ -466,6 +466,13 @@ static void *render_main(void *arg)
         if (rc == 0) f->render_us = spent;
         pthread_mutex_lock(&rt->mu);
         rt->rendering = 0;
+        if (rc == SD_ESTALE) {
+            /* The cloud's cache file changed under the daemon: the cloud is gone (its data
+             * cannot be trusted); the loop forgets it, and the next OPEN rebuilds it. */
+            pthread_mutex_unlock(&rt->mu);
+            rnd_release(rnd, rq.cloud_id);
+            pthread_mutex_lock(&rt->mu);
+        }
         if (rc != 0) {
             rt->frame_busy[fi] = 0;
             rt_slot *s2 = slot_of(rt, job.meta.client);

@@ -3,14 +3,13 @@
 
 #include <errno.h>
 #include <fcntl.h>
-#include <pthread.h>
-#include <setjmp.h>
-#include <signal.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
+
+#include "sd_sigbus.h"
 
 int pc__file_open(const char *path, pc__file *f, sd_err *err)
 {
@@ -60,82 +59,25 @@ void pc__file_close(pc__file *f)
  *
  * A file truncated by someone else while it is parsed leaves the pages past its new end
  * without backing: reading them raises SIGBUS, which would kill the daemon. The parse runs
- * under a guard (one per thread, in thread-local storage) naming the mapping; the process's
- * SIGBUS handler (put back at every guarded parse if other code replaced it) jumps back to the
- * guard when the faulting address lies in the guarded mapping of the faulting thread, and
- * otherwise puts the previous disposition back and returns, so the access faults again and the
- * process dies as it would have.
+ * under sd_sigbus.h's jump guard over the mapping, which ends it early instead.
  *
- * Why not read the file into memory instead: measured on a 150 MB PLY (10M points) and a
- * 104 MB LAS (4M points), pread into a buffer adds about 100 ms per 150 MB (page faults on
- * the fresh buffer and a copy) to a load of ~300 ms, and doubles the memory held during the
- * parse; the mapping costs nothing of that (README "Security").
+ * Why not read the file into memory instead: pread into a buffer costs a copy and page faults
+ * on the fresh buffer, and doubles the memory held during the parse; the mapping costs nothing
+ * of that (README "Security" has the measurements).
  *
  * The jump leaves the parse mid-way: everything it allocates must be reachable from its
  * argument, so the caller frees it (pc__guarded's contract). A parse only reads the mapping
  * with plain loads and memchr/memcpy/memcmp, none of which holds a lock, so jumping out of
  * them is safe. */
-typedef struct pc__guard {
-    sigjmp_buf jb;
-    const uint8_t *lo, *hi;
-} pc__guard;
-
-static _Thread_local pc__guard *volatile tl_guard;
-static pthread_mutex_t sigbus_mu = PTHREAD_MUTEX_INITIALIZER;
-static struct sigaction sigbus_prev;
-
-static void on_sigbus(int sig, siginfo_t *si, void *uc)
-{
-    (void)sig;
-    (void)uc;
-    pc__guard *g = tl_guard;
-    const uint8_t *a = si->si_addr;
-    if (g && a >= g->lo && a < g->hi) {
-        tl_guard = NULL;
-        siglongjmp(g->jb, 1);
-    }
-    /* Not a guarded read: the disposition from before, and the access faults again. */
-    sigaction(SIGBUS, &sigbus_prev, NULL);
-}
-
-/* sigbus_install: makes on_sigbus the SIGBUS handler, keeping the one it replaces as the
- * disposition to go back to. Checked at every guarded parse, not only once: other code may
- * have replaced the handler since (a test harness that sets its own around each test did,
- * and a guarded read then killed the process). */
-static void sigbus_install(void)
-{
-    pthread_mutex_lock(&sigbus_mu);
-    struct sigaction cur;
-    if (sigaction(SIGBUS, NULL, &cur) != 0 || !(cur.sa_flags & SA_SIGINFO) ||
-        cur.sa_sigaction != on_sigbus) {
-        struct sigaction sa;
-        memset(&sa, 0, sizeof sa);
-        sa.sa_sigaction = on_sigbus;
-        sa.sa_flags = SA_SIGINFO;
-        sigemptyset(&sa.sa_mask);
-        sigaction(SIGBUS, &sa, &sigbus_prev);
-    }
-    pthread_mutex_unlock(&sigbus_mu);
-}
-
 int pc__guarded(const pc__file *f, const char *path, int (*parse)(void *arg), void *arg,
                 sd_err *err)
 {
     if (!f->map) return parse(arg); /* an empty file: nothing mapped, nothing to lose */
-    sigbus_install();
-    pc__guard g;
-    long page = sysconf(_SC_PAGESIZE);
-    size_t span = (f->size + (size_t)page - 1) / (size_t)page * (size_t)page;
-    g.lo = f->data;
-    g.hi = f->data + span;
-    if (sigsetjmp(g.jb, 1)) {
-        tl_guard = NULL;
+    int faulted = 0;
+    int rc = sd_sigbus_run(f->data, f->size, parse, arg, &faulted);
+    if (faulted)
         return sd_errf(err, SD_EIO, "%s: the file changed while it was being read (it became "
                        "shorter); try again once it is complete", path);
-    }
-    tl_guard = &g;
-    int rc = parse(arg);
-    tl_guard = NULL;
     return rc;
 }
 

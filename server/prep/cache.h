@@ -1,16 +1,20 @@
 /* cache.h — the prepared-cloud cache: one versioned binary file per source file.
  *
- * The cache file is a fixed header (magic, version, the source's size, mtime and content hash,
- * k, counts, summary) followed by the prepared array block of prepared.h, verbatim. It is
- * written to a temporary name, fsynced and renamed, and loaded with mmap: a cached load copies
- * nothing and redoes no kNN. A cache whose source, version or k changed is rebuilt; a truncated
- * or corrupt one gives a warning (through the warn callback) and is rebuilt, never loaded. */
+ * The cache file (cachefile.h: header, key, atomic write, guarded mapping) is a header page
+ * (the source's size, mtime and content hash, k, counts, summary) followed by the prepared
+ * array block of prepared.h, verbatim. It is loaded with a guarded mmap: a cached load copies
+ * nothing and redoes no kNN, and a cache file cut under the daemon reads as zeros and is
+ * reported (pc_prepared_check), never a SIGBUS. A cache whose source, version or k changed is
+ * rebuilt; a truncated or corrupt one gives a warning (through the warn callback) and is
+ * rebuilt, never loaded. */
 #pragma once
 #include <stdint.h>
 
 #include "prepared.h"
 #include "progress.h"
 #include "sd_err.h"
+
+#define CACHE_EXT ".splc"
 
 typedef struct cache_desc {
     const char *dir;   /* default NULL: $SPLATD_CACHE, else $XDG_CACHE_HOME/splatd, else
@@ -53,9 +57,9 @@ int cache_probe(const char *src, const char *dir, int k);
  * header) in *points when it returns 1 (points may be NULL). */
 int cache_probe_points(const char *src, const char *dir, int k, uint64_t *points);
 
-/* cache_sweep: removes from directory dir the temporary files of cache writers that died
- * (killed while writing, before their rename); a live writer's are kept. *removed (may be
- * NULL) gets their count. Returns 0 (a missing directory is nothing to sweep). */
+/* cache_sweep: removes from directory dir the temporary files of cache writers (flat and LOD)
+ * that died (killed while writing, before their rename); a live writer's are kept. *removed
+ * (may be NULL) gets their count. Returns 0 (a missing directory is nothing to sweep). */
 int cache_sweep(const char *dir, int *removed);
 /* cache_dir_for: the cache directory for dir (NULL: the default) in buf. Returns 0, or -1 when
  * the default depends on each source file's directory (no $SPLATD_CACHE, $XDG_CACHE_HOME,
@@ -79,20 +83,3 @@ int cache__seal(const char *cache_path, const char *src);
  * out of date, -1 when damaged; why says which. Internal (tests/fuzz). */
 int cache__load(const char *cache_path, const char *src, int k, pc_prepared *out, char *why,
                 size_t whylen);
-/* ---- shared with lod_file.c (the LOD cache writes its files the same way) ---- */
-/* cache__open_dir: creates dir (0700) when missing and opens it without following a symlink;
- * refuses one another user owns or others may write. Returns the fd or -1 with err. */
-int cache__open_dir(const char *dir, sd_err *err);
-/* cache__create_tmp: an unnamed O_TMPFILE file in dfd (else a random O_EXCL|O_NOFOLLOW name
- * in name, *named = 1). Returns the fd or -1 with errno. */
-int cache__create_tmp(int dfd, const char *base, char *name, size_t len, int *named);
-/* cache__link_tmp: gives an unnamed file a random name in dfd. Returns 0 or -1 with errno. */
-int cache__link_tmp(int fd, int dfd, const char *base, char *name, size_t len);
-/* cache__publish: finishes a file of cache__create_tmp: fsync, a name when it has none, close,
- * rename over base in dfd, fsync of the directory. failed: the writes before failed (errno
- * holds why): then only closes and removes. Returns 0, or -1 with errno (fd closed, nothing
- * left behind, base untouched). */
-int cache__publish(int fd, int dfd, const char *base, char *tmp, size_t tmplen, int named,
-                   int failed);
-/* cache__default_dir: the default cache directory for the source file src (a real path). */
-void cache__default_dir(const char *src, char *buf, size_t len);

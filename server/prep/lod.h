@@ -38,14 +38,22 @@
  *   [table_off, file_len)   nnodes lod_node records, breadth-first: root first, children of a
  *                           node consecutive; checksummed as a whole
  * Each node's data has its own checksum, checked when the node is loaded (not at open, so a
- * 10^9-point cache opens in milliseconds). The file is written unnamed (O_TMPFILE) or under a
- * random name, fsynced, then renamed: kill -9 at any moment leaves no file that loads. */
+ * 10^9-point cache opens in milliseconds). The header page, the key and the writing are
+ * cachefile.h's: written unnamed (O_TMPFILE) or under a random name, fsynced, then renamed:
+ * kill -9 at any moment leaves no file that loads. The node table is read into memory at open;
+ * node data is read through cachefile.h's guarded mapping, so a cache file cut or changed in
+ * place under the daemon makes the node's load fail (lod_node_copy: SD_ESTALE naming the
+ * file), never a SIGBUS. When the cache directory cannot be written, the build goes to an
+ * unnamed file in the temporary directory ($TMPDIR, else /tmp), served while the cloud is open
+ * and rebuilt at its next open. */
 #pragma once
 #include <stddef.h>
 #include <stdint.h>
 
 #include "progress.h"
 #include "sd_err.h"
+
+#define LOD_EXT ".splod"
 
 enum { LOD_MAX_LEVEL = 14 };          /* grid_bits + level <= 21 Morton bits */
 enum { LOD_DEFAULT_GRID_BITS = 7 };   /* 128^3 sampling grid per node */
@@ -84,19 +92,27 @@ typedef struct lod_cloud {
     float sigma, F_raw_p99, F_pct[5], radius_median;
     uint64_t n_dropped;
     char format[64];
-    const lod_node *nodes;    /* nnodes, breadth-first */
-    const uint8_t *map;
+    const lod_node *nodes;    /* nnodes, breadth-first (a copy in memory, owned) */
+    const uint8_t *map;       /* the file, mapped read-only (file) */
     size_t map_len;
+    struct cf_map *file;      /* cachefile.h: owns map; says whether the file became shorter */
 } lod_cloud;
 
 /* lod_node_bytes: bytes of a node of count points (before alignment). */
 uint64_t lod_node_bytes(uint32_t count);
 
-/* lod_node_get: the arrays of node i. */
+/* lod_node_get: the arrays of node i, in the mapping (unchecked: lod_node_copy checks). */
 void lod_node_get(const lod_cloud *c, uint64_t i, lod_node_data *d);
+/* lod_node_bind: the arrays of a node of count points stored at data (the layout above). */
+void lod_node_bind(const void *data, uint32_t count, lod_node_data *d);
 
-/* lod_node_verify: 1 when node i's data matches its checksum, 0 when not. */
+/* lod_node_verify: 1 when node i's data matches its checksum (and the file is whole), else 0. */
 int lod_node_verify(const lod_cloud *c, uint64_t i);
+
+/* lod_node_copy: copies node i's data (lod_node_bytes(count) bytes) into dst and checks it.
+ * Returns 0, or SD_ESTALE with err naming the cache file when the file became shorter or the
+ * node does not match its checksum (the file changed under the reader). */
+int lod_node_copy(const lod_cloud *c, uint64_t i, void *dst, sd_err *err);
 
 void lod_cloud_free(lod_cloud *c);
 
@@ -136,10 +152,17 @@ int lod_open_cloud(const char *src, const lod_desc *d, lod_cloud *out, lod_resul
 /* lod_cache_path: the LOD cache path of src under dir (NULL: default). */
 int lod_cache_path(const char *src, const char *dir, int k, char *buf, size_t len, sd_err *err);
 
-/* lod_load_file: maps and checks the LOD cache at path for source src (size, mtime, a hash of
- * its first and last MiB, version, k). Returns 1 loaded, 0 absent or stale, -1 damaged (why). */
-int lod_load_file(const char *path, const char *src, int k, lod_cloud *out, char *why,
-                  size_t whylen);
+/* lod_load_file: loads and checks the LOD cache at path for source src (size, mtime, a hash
+ * of its first and last MiB, version, and d's k, grid_bits and leaf_max with their defaults;
+ * d may be NULL). Returns 1 loaded, 0 absent or stale, -1 damaged (why). */
+int lod_load_file(const char *path, const char *src, const lod_desc *d, lod_cloud *out,
+                  char *why, size_t whylen);
+
+/* lod__seal: makes the LOD cache file at path describe the source src for the options of d
+ * (NULL: the defaults) and gives it valid checksums over what it holds (the node table's, the
+ * header's; not the nodes'), so that a fuzzer's bytes reach the checks behind them. Internal
+ * (tests/fuzz); returns 0 or -1. */
+int lod__seal(const char *path, const char *src, const lod_desc *d);
 
 /* lod_want: 1 when a cloud file of size bytes gets the LOD form under mode (LOD_AUTO: files
  * of LOD_AUTO_BYTES or more, about 4M points of binary PLY; LOD_ALWAYS; LOD_NEVER). */

@@ -381,7 +381,7 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
             r->rgba = rgba[i];
             r->gidx = gidx++;
             if (fill[c] == PER) {
-                if (lod__pwrite_all(b->chunks[c].fd_in, buf + (size_t)c * PER, PER * sizeof *buf, off[c]))
+                if (cf_pwrite_all(b->chunks[c].fd_in, buf + (size_t)c * PER, PER * sizeof *buf, off[c]))
                     rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
                 off[c] += PER * sizeof *buf;
                 fill[c] = 0;
@@ -391,7 +391,7 @@ static int count_and_distribute(build *b, lod_src *s, sd_err *err)
     if (ahead) lod_ahead_stop(&ah);
     if (rc == 0 && m < 0) rc = (int)m;
     for (size_t c = 0; rc == 0 && c < b->nchunks; c++)
-        if (fill[c] && lod__pwrite_all(b->chunks[c].fd_in, buf + c * PER, fill[c] * sizeof *buf, off[c]))
+        if (fill[c] && cf_pwrite_all(b->chunks[c].fd_in, buf + c * PER, fill[c] * sizeof *buf, off[c]))
             rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
     if (rc == 0) status(b, "distribute", 0.12, b->info.n, now_s() - t);
     free(buf);
@@ -486,14 +486,14 @@ static int chunk_sort(void *ctx, size_t ci, int tid, sd_err *err)
     uint32_t *perm = tkeep(b, tid, 3, n * sizeof *perm);
     int rc = 0;
     if (!in || !out || !key || !perm) rc = sd_errf(err, SD_ENOMEM, "lod: out of memory sorting a chunk");
-    if (rc == 0 && lod__pread_all(o->fd_in, in, n * sizeof *in, 0))
+    if (rc == 0 && cf_pread_all(o->fd_in, in, n * sizeof *in, 0))
         rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
     for (size_t i = 0; rc == 0 && i < n; i++)
         key[i] = prep_morton_code(&b->f, in[i].pos), perm[i] = (uint32_t)i;
     if (rc == 0) rc = prep_radix_sort64(key, perm, n, err);
     if (rc == 0) {
         for (size_t i = 0; i < n; i++) out[i] = in[perm[i]];
-        if (lod__pwrite_all(o->fd_in, out, n * sizeof *out, 0))
+        if (cf_pwrite_all(o->fd_in, out, n * sizeof *out, 0))
             rc = sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
     }
     return rc;
@@ -508,7 +508,7 @@ static int read_run(const build *b, const chunk *o, int own, uint64_t from, uint
 {
     for (uint64_t i0 = from; i0 < to; i0 += RBLOCK) {
         size_t nb = to - i0 < RBLOCK ? (size_t)(to - i0) : RBLOCK;
-        if (lod__pread_all(o->fd_in, tmp, nb * sizeof *tmp, i0 * sizeof *tmp))
+        if (cf_pread_all(o->fd_in, tmp, nb * sizeof *tmp, i0 * sizeof *tmp))
             return sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
         r->nread += nb;
         size_t m = r->m;
@@ -844,7 +844,7 @@ static int nj_own(void *ctx, size_t blk, int tid, sd_err *err)
         t->hist[1][fbits(o->Fraw) >> 16]++;
         t->hist[2][fbits(o->nnd) >> 16]++;
     }
-    if (lod__pwrite_all(j->fd_out, t->out, (e - a) * sizeof *t->out, a * sizeof *t->out))
+    if (cf_pwrite_all(j->fd_out, t->out, (e - a) * sizeof *t->out, a * sizeof *t->out))
         return sd_errf(err, SD_EIO, "lod: cannot write a scratch file: %s", strerror(errno));
     return 0;
 }
@@ -945,7 +945,7 @@ static int read_known(build *b, const region *r, njob *j, size_t nu, size_t ns, 
         size_t e = s + 1;
         while (e < ns && r->chk[j->list[e]] == ck && r->fidx[j->list[e]] - f0 < SPAN) e++;
         uint32_t f1 = r->fidx[j->list[e - 1]] + 1;
-        if (lod__pread_all(b->chunks[ck].fd_a, buf, (f1 - f0) * sizeof *buf, (uint64_t)f0 * sizeof *buf))
+        if (cf_pread_all(b->chunks[ck].fd_a, buf, (f1 - f0) * sizeof *buf, (uint64_t)f0 * sizeof *buf))
             return sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
         for (; s < e; s++) {
             const arec *a = &buf[r->fidx[j->list[s]] - f0];
@@ -1255,8 +1255,8 @@ static int each_arec_block(build *b, size_t ci, int with_rec, arec_fn fn, void *
     int rc = 0;
     for (size_t i = 0; i < c->count && rc == 0; i += blk) {
         size_t m = c->count - i < blk ? c->count - i : blk;
-        if (lod__pread_all(c->fd_a, a, m * sizeof *a, i * sizeof *a) ||
-            (r && lod__pread_all(c->fd_in, r, m * sizeof *r, i * sizeof *r)))
+        if (cf_pread_all(c->fd_a, a, m * sizeof *a, i * sizeof *a) ||
+            (r && cf_pread_all(c->fd_in, r, m * sizeof *r, i * sizeof *r)))
             rc = sd_errf(err, SD_EIO, "lod: cannot read a scratch file: %s", strerror(errno));
         else
             fn(ctx, a, r, m, i);
@@ -1898,22 +1898,12 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     double t0 = now_s();
     int rc = lod_cache_path(src, d.dir, d.k, rr.path, sizeof rr.path, err);
     if (rc < 0) return rc;
-    if (!d.force) {
-        int got = lod_load_file(rr.path, src, d.k, out, rr.why, sizeof rr.why);
-        if (got == 1) {
-            rr.hit = 1;
-            snprintf(rr.why, sizeof rr.why, "cache valid");
-            rr.t_total = now_s() - t0;
-            if (res) *res = rr;
-            return 0;
-        }
-        if (got < 0 && d.warn) {
-            char msg[4600];
-            snprintf(msg, sizeof msg, "LOD cache %s: %s; rebuilding it", rr.path, rr.why);
-            d.warn(d.user, msg);
-        }
-    } else {
-        snprintf(rr.why, sizeof rr.why, "rebuild forced");
+    int got = d.force ? 0 : lod_load_file(rr.path, src, &d, out, rr.why, sizeof rr.why);
+    if (cf_loaded(d.force, got, "LOD cache", rr.path, rr.why, sizeof rr.why, d.warn, d.user)) {
+        rr.hit = 1;
+        rr.t_total = now_s() - t0;
+        if (res) *res = rr;
+        return 0;
     }
     build b;
     memset(&b, 0, sizeof b);
@@ -1924,13 +1914,12 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     lod_src *s = NULL;
     prep_progress pr;
     prep_progress_begin(&pr, d.progress, d.user, PROTO_PHASE_LOAD);
-    rc = lod__writer_open(&b.w, rr.path, err);
+    rc = lod__writer_open(&b.w, rr.path, &d, err);
     if (rc == 0) rc = lod_src_open(src, &s, err);
     if (rc == 0) {
         prep_progress_end(&pr);
         rc = run_build(&b, src, s, &rr, err);
     }
-    lod__writer_abort(&b.w);
     lod_src_close(s);
     for (size_t i = 0; i < b.nchunks; i++) {
         if (b.chunks[i].fd_in >= 0) close(b.chunks[i].fd_in);
@@ -1950,11 +1939,13 @@ int lod_open_cloud(const char *src, const lod_desc *desc, lod_cloud *out, lod_re
     free(b.up);
     for (int i = 0; i < KB_N; i++) free(b.keep[i]);
     pthread_mutex_destroy(&b.mu);
-    if (rc < 0) return rc;
+    if (rc < 0) rc = lod__build_failed(&b.w, rc, err);
     char why[256];
-    if (lod_load_file(rr.path, src, d.k, out, why, sizeof why) != 1)
-        return sd_errf(err, SD_ESTALE, "LOD cache %s was written but does not load: %s",
-                       rr.path, why);
+    if (rc == 0 && lod__load_built(&b.w, src, &d, out, why, sizeof why) != 1)
+        rc = sd_errf(err, SD_ESTALE, "LOD cache %s was written but does not load: %s", rr.path,
+                     why);
+    lod__writer_abort(&b.w); /* after the load: a temporary file is read through its fd */
+    if (rc < 0) return rc;
     rr.t_total = now_s() - t0;
     if (res) *res = rr;
     return 0;

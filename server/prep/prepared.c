@@ -5,6 +5,8 @@
 #include <string.h>
 #include <sys/mman.h>
 
+#include "cachefile.h"
+
 #define ALIGN64(x) (((x) + 63u) & ~(uint64_t)63u)
 
 /* Walks the sections in block order; with block == NULL it only measures. */
@@ -78,9 +80,17 @@ void pc_prepared_make_batches(pc_prepared *p, uint32_t per)
     }
 }
 
+int pc_prepared_check(const pc_prepared *p, sd_err *err)
+{
+    if (!cf_map_changed(p->file)) return 0;
+    return cf_changed_error(err, "cache", p->file->path,
+                            "it became shorter: the cloud's data is gone");
+}
+
 void pc_prepared_free(pc_prepared *p)
 {
     if (p->heap) free(p->heap);
-    if (p->map) munmap(p->map, p->map_len);
+    if (p->file) cf_map_close(p->file);
+    else if (p->map) munmap(p->map, p->map_len);
     memset(p, 0, sizeof *p);
 }

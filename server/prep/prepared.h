@@ -7,6 +7,7 @@
 #pragma once
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 #include "cloud.h"
 
@@ -47,9 +48,32 @@ typedef struct pc_prepared {
     void *block;             /* the arrays' block (inside heap or map) */
     uint64_t block_len;
     void *heap;
-    void *map;
+    void *map;               /* a cache file's guarded mapping (file), or NULL */
     size_t map_len;
+    struct cf_map *file;     /* cachefile.h: owns map; says whether the file changed */
 } pc_prepared;
+
+/* The summary values both cache kinds store (cache.c, lod_file.c), copied between their header
+ * meta and the loaded cloud by PC_SUMMARY_COPY: any two structs with these fields. */
+typedef struct pc_summary {
+    double offset[3], bmin[3], bmax[3];
+    float sigma, F_raw_p99, F_pct[5], radius_median;
+    uint64_t n_dropped;
+    char format[64];
+} pc_summary;
+#define PC_SUMMARY_COPY(dst, src)                                     \
+    do {                                                              \
+        memcpy((dst)->offset, (src)->offset, sizeof (dst)->offset);   \
+        memcpy((dst)->bmin, (src)->bmin, sizeof (dst)->bmin);         \
+        memcpy((dst)->bmax, (src)->bmax, sizeof (dst)->bmax);         \
+        (dst)->sigma = (src)->sigma;                                  \
+        (dst)->F_raw_p99 = (src)->F_raw_p99;                          \
+        memcpy((dst)->F_pct, (src)->F_pct, sizeof (dst)->F_pct);      \
+        (dst)->radius_median = (src)->radius_median;                  \
+        (dst)->n_dropped = (src)->n_dropped;                          \
+        memcpy((dst)->format, (src)->format, sizeof (dst)->format);   \
+        (dst)->format[sizeof (dst)->format - 1] = 0;                  \
+    } while (0)
 
 /* pc_prepared_block_len: bytes of the array block for n points, attrs and nbatches. */
 uint64_t pc_prepared_block_len(uint64_t n, uint32_t attrs, uint64_t nbatches);
@@ -66,6 +90,12 @@ int pc_prepared_alloc(pc_prepared *p, sd_err *err);
  * points (the last one shorter; nbatches must be ceil(n / per)) and sets each batch's bounds
  * from pos. */
 void pc_prepared_make_batches(pc_prepared *p, uint32_t per);
+
+/* pc_prepared_check: 0 when every read of p's arrays so far saw what was loaded; SD_ESTALE with
+ * err naming the cache file when p is mapped from a cache file that became shorter under the
+ * reader (those reads gave zeros: what was made of them must be thrown away). Call it after
+ * reading p's arrays (an upload). */
+int pc_prepared_check(const pc_prepared *p, sd_err *err);
 
 /* pc_prepared_free: releases the heap block or the mapping; safe to call twice. */
 void pc_prepared_free(pc_prepared *p);

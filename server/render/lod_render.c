@@ -11,7 +11,6 @@
 
 #include "camera.h"
 #include "cloud.h"
-#include "sd_hash.h"
 
 enum { NBUF = RND_ATTR_COUNT + 1, B_RLOD = RND_ATTR_COUNT };
 #define NOT_RESIDENT UINT32_MAX
@@ -21,7 +20,9 @@ typedef struct alloc {
 } alloc;
 
 /* A loader slot: one node being read (page faults on the mapping, the checksum) into memory of
- * its own, off the render thread. */
+ * its own, off the render thread. A node that cannot be read as it was written (the cache file
+ * was cut or changed in place under the daemon: lod_node_copy) makes the cloud fail: every
+ * later frame returns that error. */
 enum { SLOT_FREE = 0, SLOT_ASKED, SLOT_READY, SLOT_BROKEN };
 typedef struct lslot {
     uint32_t node;
@@ -43,8 +44,9 @@ struct rnd_lod {
     int have_pool;
     uint32_t *first;          /* per node: pool position or NOT_RESIDENT */
     uint64_t *last;           /* per node: frame stamp when last wanted */
-    uint8_t *broken;          /* per node: failed its checksum, or larger than the pool: never
-                                 drawn (a frame without it can still be complete) */
+    uint8_t *broken;          /* per node: larger than the pool: never drawn (a frame without
+                                 it can still be complete) */
+    sd_err fail;              /* fail.code != 0: a node's read failed, the cloud with it (mu) */
     alloc *al;                /* resident ranges, by first */
     uint32_t nal;
     uint64_t stamp;
@@ -79,15 +81,14 @@ static void *loader_main(void *arg)
         const lod_node *nd = &l->c->nodes[node];
         size_t len = (size_t)lod_node_bytes(nd->count);
         void *d = malloc(len ? len : 1);
-        int ok = d != NULL;
-        if (ok) {
-            memcpy(d, l->c->map + nd->offset, len); /* the reads from disk happen here */
-            ok = sd_hash64(d, len, 0) == nd->hash;
-        }
+        sd_err e = {0};
+        int ok = d ? lod_node_copy(l->c, node, d, &e) == 0
+                   : sd_errf(&e, SD_ENOMEM, "out of memory loading a LOD node") == 0;
         pthread_mutex_lock(&l->mu);
         if (!ok) {
             free(d);
             d = NULL;
+            if (!l->fail.code) l->fail = e;
         }
         l->slots[k].data = d;
         l->slots[k].state = ok ? SLOT_READY : SLOT_BROKEN;
@@ -438,7 +439,6 @@ static void take_ready(rnd_lod *l, const gl_api *gl, rnd_lod_frame *out)
         uint32_t i = sl->node;
         int keep = l->last[i] == l->stamp || (l->pgen && l->pmark[i] == l->pgen);
         if (sl->state == SLOT_BROKEN) {
-            l->broken[i] = 1;
             out->broken++;
         } else if (keep && l->first[i] == NOT_RESIDENT) {
             if (l->c->nodes[i].count > l->cap) l->broken[i] = 1; /* larger than the pool */
@@ -462,6 +462,7 @@ static int ask(rnd_lod *l, const uint32_t *list, uint32_t n, uint32_t *from)
 {
     int asked = 0;
     uint32_t k = from ? *from : 0;
+    if (l->fail.code) return 0; /* the cloud failed: nothing more is read */
     for (uint32_t s = 0; k < n; k++) {
         uint32_t i = list[k];
         if (l->first[i] != NOT_RESIDENT || l->broken[i] || l->inflight[i]) continue;
@@ -482,18 +483,35 @@ static int ask(rnd_lod *l, const uint32_t *list, uint32_t n, uint32_t *from)
 static void load_root(rnd_lod *l, const gl_api *gl, uint32_t nw, rnd_lod_frame *out)
 {
     const lod_cloud *c = l->c;
-    if (!nw || l->want[0] != 0 || l->first[0] != NOT_RESIDENT || l->broken[0] || l->inflight[0])
+    if (!nw || l->want[0] != 0 || l->first[0] != NOT_RESIDENT || l->broken[0] ||
+        l->inflight[0] || l->fail.code)
         return;
-    if (!lod_node_verify(c, 0) || c->nodes[0].count > l->cap) {
+    if (c->nodes[0].count > l->cap) {
         l->broken[0] = 1;
         out->broken++;
         return;
     }
-    uint32_t pos = place(l, 0, &out->evicted);
-    if (pos != NOT_RESIDENT) {
-        upload(l, gl, 0, pos, c->map + c->nodes[0].offset);
-        out->uploaded++;
+    void *d = malloc((size_t)lod_node_bytes(c->nodes[0].count));
+    if (!d) {
+        sd_errf(&l->fail, SD_ENOMEM, "out of memory loading a LOD node");
+        return;
     }
+    if (lod_node_copy(c, 0, d, &l->fail) == 0) {
+        uint32_t pos = place(l, 0, &out->evicted);
+        if (pos != NOT_RESIDENT) {
+            upload(l, gl, 0, pos, d);
+            out->uploaded++;
+        }
+    }
+    free(d);
+}
+
+/* failed: 0, or the error of a node the cloud could not read (into err). l->mu held. */
+static int failed(const rnd_lod *l, sd_err *err)
+{
+    if (!l->fail.code) return 0;
+    if (err) *err = l->fail;
+    return l->fail.code;
 }
 
 int rnd__lod_settle(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_view *v,
@@ -519,7 +537,9 @@ int rnd__lod_settle(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_vi
         if (asked) pthread_cond_broadcast(&l->cv_work);
         int loading = 0;
         for (int k = 0; k < l->k; k++) loading += l->slots[k].state != SLOT_FREE;
+        rc = failed(l, err);
         pthread_mutex_unlock(&l->mu);
+        if (rc < 0) return rc;
         out->wanted = nw;
         out->complete = missing == 0;
         clock_gettime(CLOCK_MONOTONIC, &t);
@@ -587,7 +607,9 @@ int rnd__lod_frame(rnd_lod *l, const gl_api *gl, rnd_gpu_cloud *g, const rnd_vie
     asked += ask(l, l->pq, l->npq, &l->pqhead);
     if (asked) pthread_cond_broadcast(&l->cv_work);
     for (int k = 0; k < l->k; k++) out->loading += l->slots[k].state != SLOT_FREE;
+    rc = failed(l, err);
     pthread_mutex_unlock(&l->mu);
+    if (rc < 0) return rc;
     if ((rc = gl_check(gl, "uploading LOD nodes", err)) < 0) return rc;
     out->changed = out->uploaded || out->evicted;
     /* draw: wanted, resident, ancestors drawn (want is in an order where parents come first) */

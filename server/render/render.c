@@ -517,6 +517,9 @@ static int make_resident(rnd_ctx *r, cloud_slot *slot, const pc_prepared *pc, sd
                              err);
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
     if (rc == 0) rc = gl_check(gl, "uploading a cloud", err);
+    /* A cache file cut under the daemon read as zeros (the guarded mapping, prepared.h): what
+     * was uploaded from it, and the bounds and chunks add_cloud read before, are no cloud. */
+    if (rc == 0) rc = pc_prepared_check(pc, err);
     r->resident_bytes += slot->bytes;
     if (rc < 0) {
         evict(r, slot);

@@ -21,6 +21,7 @@
 #include "e57_xml.h"
 #include "e57test.h"
 #include "frame_decode.h"
+#include "lod.h"
 #include "lzf.h"
 #include "params.h"
 #include "prep.h"
@@ -662,21 +663,36 @@ static void write_file(const char *path, const void *data, size_t len)
     }
 }
 
-int fuzz_one_cache(const uint8_t *data, size_t len)
+/* cache_files: a new directory (tmpfs when there is one: a file system round trip per input
+ * is most of the cost) holding the source src (CACHE_SRC) and the cache file cpath named
+ * c.EXT with data. */
+static void cache_files(const char *ext, const uint8_t *data, size_t len, char *dir,
+                        char *src, char *cpath)
 {
-    /* tmpfs when there is one: a file system round trip per input is most of the cost. */
     const char *tmp = getenv("TMPDIR");
     if (access("/dev/shm", W_OK) == 0) tmp = "/dev/shm";
-    char dir[512], src[600], cpath[600];
-    snprintf(dir, sizeof dir, "%s/splatd-fuzz-cache.XXXXXX", tmp && *tmp ? tmp : "/tmp");
+    snprintf(dir, 512, "%s/splatd-fuzz-cache.XXXXXX", tmp && *tmp ? tmp : "/tmp");
     if (!mkdtemp(dir)) {
         perror("mkdtemp");
         abort();
     }
-    snprintf(src, sizeof src, "%s/s.xyz", dir);
-    snprintf(cpath, sizeof cpath, "%s/c.splc", dir);
+    snprintf(src, 600, "%s/s.xyz", dir);
+    snprintf(cpath, 600, "%s/c.%s", dir, ext);
     write_file(src, CACHE_SRC, sizeof CACHE_SRC - 1);
     write_file(cpath, data, len);
+}
+
+static void cache_files_rm(const char *dir, const char *src, const char *cpath)
+{
+    unlink(cpath);
+    unlink(src);
+    rmdir(dir);
+}
+
+int fuzz_one_cache(const uint8_t *data, size_t len)
+{
+    char dir[512], src[600], cpath[600];
+    cache_files("splc", data, len, dir, src, cpath);
     int sealed = cache__seal(cpath, src) == 0;
     if (!sealed && len >= 4096) fz_fail("cache", "cache__seal failed on a %zu-byte file", len);
     pc_prepared p;
@@ -713,9 +729,60 @@ int fuzz_one_cache(const uint8_t *data, size_t len)
         (void)t;
         pc_prepared_free(&p);
     }
-    unlink(cpath);
-    unlink(src);
-    rmdir(dir);
+    cache_files_rm(dir, src, cpath);
+    return rc == 1 ? 0 : rc < 0 ? SD_ESTALE : SD_EUNSUP;
+}
+
+/* ---- the LOD cache loader ------------------------------------------------------------------ */
+
+/* The options the splod seeds were built with (tests/fuzz/make_corpus.py). */
+static const lod_desc SPLOD_DESC = {.grid_bits = 2, .leaf_max = 64};
+
+int fuzz_one_splod(const uint8_t *data, size_t len)
+{
+    char dir[512], src[600], cpath[600];
+    cache_files("splod", data, len, dir, src, cpath);
+    int sealed = lod__seal(cpath, src, &SPLOD_DESC) == 0;
+    if (!sealed && len >= 4096) fz_fail("splod", "lod__seal failed on a %zu-byte file", len);
+    lod_cloud c;
+    char why[256] = "";
+    int rc = lod_load_file(cpath, src, &SPLOD_DESC, &c, why, sizeof why);
+    if (rc < -1 || rc > 1) fz_fail("splod", "lod_load_file returned %d", rc);
+    if (rc != 1 && !why[0]) fz_fail("splod", "refused (%d) without a reason", rc);
+    if (rc == 1) {
+        /* What the loader accepts is what the renderer trusts: a tree of nnodes nodes, parents
+         * before children, every node's data inside the file, the counts adding up to n. */
+        if (!sealed) fz_fail("splod", "an unsealed file was loaded");
+        if (!c.nnodes || !c.n || c.nodes[0].parent != UINT32_MAX || !c.file ||
+            c.map_len != (size_t)len)
+            fz_fail("splod", "loaded %llu nodes, %llu points, map %zu of %zu bytes",
+                    (unsigned long long)c.nnodes, (unsigned long long)c.n, c.map_len, len);
+        uint64_t total = 0;
+        for (uint64_t i = 0; i < c.nnodes; i++) {
+            const lod_node *nd = &c.nodes[i];
+            if (nd->offset + lod_node_bytes(nd->count) > c.map_len ||
+                (i && nd->parent >= i) ||
+                (nd->nchildren && nd->first_child + (uint64_t)nd->nchildren > c.nnodes))
+                fz_fail("splod", "node %llu is outside the file or the tree",
+                        (unsigned long long)i);
+            total += nd->count;
+            /* its data: copied and checked (a node that does not match fails, never more) */
+            void *buf = malloc(lod_node_bytes(nd->count));
+            if (!buf) abort();
+            sd_err err = {0};
+            int nrc = lod_node_copy(&c, i, buf, &err);
+            if (nrc != 0 && (nrc != SD_ESTALE || !err.msg[0]))
+                fz_fail("splod", "node %llu: code %d '%s'", (unsigned long long)i, nrc, err.msg);
+            if (nrc == 0 && lod_node_verify(&c, i) != 1)
+                fz_fail("splod", "node %llu copies but does not verify", (unsigned long long)i);
+            free(buf);
+        }
+        if (total != c.n) fz_fail("splod", "nodes hold %llu of %llu points",
+                                  (unsigned long long)total, (unsigned long long)c.n);
+        if (!memchr(c.format, 0, sizeof c.format)) fz_fail("splod", "format not terminated");
+        lod_cloud_free(&c);
+    }
+    cache_files_rm(dir, src, cpath);
     return rc == 1 ? 0 : rc < 0 ? SD_ESTALE : SD_EUNSUP;
 }
 
@@ -785,6 +852,7 @@ fuzz_fn fuzz_target_find(const char *name)
         {"laz", fuzz_one_laz},     {"copc", fuzz_one_copc},
         {"cache", fuzz_one_cache}, {"frame", fuzz_one_frame},
         {"e57", fuzz_one_e57},     {"e57xml", fuzz_one_e57xml}, {"e57bits", fuzz_one_e57bits},
+        {"splod", fuzz_one_splod},
     };
     for (size_t i = 0; i < sizeof targets / sizeof targets[0]; i++)
         if (!strcmp(targets[i].name, name)) return targets[i].fn;

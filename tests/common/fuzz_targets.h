@@ -60,6 +60,14 @@ int fuzz_one_copc(const uint8_t *data, size_t len);
  * loaded, SD_EUNSUP when out of date, SD_ESTALE when damaged. */
 int fuzz_one_cache(const uint8_t *data, size_t len);
 
+/* fuzz_one_splod: the bytes as a LOD cache file (lod_file.c) for a small source file, sealed
+ * (lod__seal: the source's key, the options of the seeds' build and the table and header
+ * checksums made to match) and loaded by lod_load_file. A loaded cache must be a tree whose
+ * nodes lie inside the file with counts adding up; every node's data is then copied and
+ * checked (lod_node_copy: 0 or SD_ESTALE with a message). Returns 0 when loaded, SD_EUNSUP
+ * when out of date, SD_ESTALE when damaged. */
+int fuzz_one_splod(const uint8_t *data, size_t len);
+
 /* fuzz_one_frame: byte 0 picks the format (bits 0-1: JPEG, LZ4, raw, PNG) and, with bit 2,
  * that the rest after bytes 1-2 is a whole FRAME payload (proto_parse_frame gives format and
  * size); else bytes 1-2 are the announced width and height (0: none) and the rest the image.
@@ -99,8 +107,8 @@ int fuzz_one_e57xml(const uint8_t *data, size_t len);
 int fuzz_one_e57bits(const uint8_t *data, size_t len);
 
 /* fuzz_target_find: the fuzz_one_* function of a target name ("proto", "ply", "pcd", "las",
- * "xyz", "lzf", "params", "laz", "copc", "ws", "cache", "frame", "e57", "e57xml", "e57bits";
- * "dispatch" where the server is linked), or NULL. */
+ * "xyz", "lzf", "params", "laz", "copc", "ws", "cache", "splod", "frame", "e57", "e57xml",
+ * "e57bits"; "dispatch" where the server is linked), or NULL. */
 typedef int (*fuzz_fn)(const uint8_t *data, size_t len);
 fuzz_fn fuzz_target_find(const char *name);
 

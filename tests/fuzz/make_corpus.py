@@ -7,7 +7,10 @@ Every seed is a small valid input, except those named bad_*, which each target m
 Two kinds of seed are made by splatd itself and kept as they are (this script leaves them): the
 frame target's jpeg_* (see frame_seeds) and the cache target's, which are prep caches of small
 clouds (`splatd prep FILE --cache DIR`: 30 and 64 points of xyz, 40 of PLY with colours), valid
-ones named after their cloud, damaged ones bad_*.
+ones named after their cloud, damaged ones bad_*; and the splod target's, LOD caches built by
+lod_open_cloud with grid_bits 2 and leaf_max 64 (fuzz_one_splod's options; k 24, one thread) of
+200 points on a sphere and 400 on a plane (xyz) and 600 on a sphere with colours (PLY), several
+levels each; bad_magic, bad_truncated (200 bytes cut) and bad_table (node 1's parent made 5).
 tests/test_fuzz_regress.c checks both: valid seeds give 0, bad_* seeds a negative code.
 The layouts follow the readers' and protocol/proto.h's descriptions of the formats.
 """

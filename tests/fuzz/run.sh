@@ -3,8 +3,8 @@
 #
 #   sh tests/fuzz/run.sh [SECONDS] [TARGET...]      (from the repository root; make fuzz)
 #
-# Targets: proto ply pcd las xyz lzf params ws laz copc cache frame e57 e57xml e57bits dispatch
-# (default: all).
+# Targets: proto ply pcd las xyz lzf params ws laz copc cache splod frame e57 e57xml e57bits
+# dispatch (default: all).
 # dispatch links the whole server (its session, dispatch and render-thread code, on the real
 # renderer) and tests/common/fuzz_dispatch.c; it needs `make` to have generated
 # build/gen/shaders_gen.c and page_gen.c. Each fuzzer is
@@ -21,7 +21,7 @@ cd "$(dirname "$0")/../.." || exit 2
 
 secs=${1:-60}
 [ $# -gt 0 ] && shift
-targets=${*:-proto ply pcd las xyz lzf params ws laz copc cache frame e57 e57xml e57bits dispatch}
+targets=${*:-proto ply pcd las xyz lzf params ws laz copc cache splod frame e57 e57xml e57bits dispatch}
 CLANG=${CLANG:-clang}
 max_len=${FUZZ_MAX_LEN:-65536}
 out=build/fuzz
@@ -35,7 +35,7 @@ fi
 CFLAGS="-std=c11 -D_GNU_SOURCE -g -O1 -fno-omit-frame-pointer -Wall -Wextra -Wno-unused-parameter
         -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=undefined
         -Iprotocol $(for d in util io prep render pipelines enc net daemon cmd; do printf -- "-Iserver/%s " $d; done)-Iclient -Itests -Itests/common -Ibuild/gen -I/usr/include/OpenEXR"
-SRCS="$(ls protocol/*.c) $(ls server/io/*.c) server/util/sd_err.c server/util/sd_hash.c
+SRCS="$(ls protocol/*.c) $(ls server/io/*.c) server/util/sd_err.c server/util/sd_hash.c server/util/sd_sigbus.c server/util/cachefile.c
       server/net/ws.c server/net/http.c tests/common/fuzz_copc.c
       $(ls server/prep/*.c) client/frame_decode.c tests/common/fuzz_targets.c tests/common/e57test.c"
 LIBS="-lflann -lturbojpeg -llz4 -lxxhash -llzf -lcrypto -lexpat -lpthread -lm"
