@@ -42,6 +42,8 @@ typedef struct pc_prepared {
     uint64_t n_dropped;
     char format[64];
     char scalar_name[32];
+    int has_sensor_q;        /* the file gave the sensor's rotation (PCD VIEWPOINT) */
+    double sensor_q[4];      /* that rotation, w x y z: the default view looks as the sensor */
     pc_prep_stats stats;
     /* storage: exactly one of heap or map is set */
     void *block;             /* the arrays' block (inside heap or map) */
