@@ -86,6 +86,38 @@ static void info_from(const proto_info *in, spc_info *info)
     info->sigma = in->sigma;
     info->k = in->k;
     snprintf(info->format, sizeof info->format, "%s", in->format);
+    memcpy(info->up, in->view.up, sizeof info->up);
+    memcpy(info->view_dir, in->view.dir, sizeof info->view_dir);
+    memcpy(info->view_bmin, in->view.bmin, sizeof info->view_bmin);
+    memcpy(info->view_bmax, in->view.bmax, sizeof info->view_bmax);
+    info->view_npts = in->view.npts;
+    memcpy(info->view_pts, in->view.pts, sizeof info->view_pts);
+}
+
+/* view_of: the default view of info; an info filled by hand with bounds only (no view) gets
+ * the rule's view of its bounds (z up). */
+_Static_assert(sizeof(((spc_info *)0)->view_pts) == sizeof(((sp_view *)0)->pts),
+               "spc_info.view_pts holds SP_VIEW_PTS points");
+
+static void view_of(const spc_info *info, sp_view *v)
+{
+    memset(v, 0, sizeof *v);
+    double uu = 0, dd = 0;
+    for (int i = 0; i < 3; i++) uu += info->up[i] * info->up[i], dd += info->view_dir[i] * info->view_dir[i];
+    if (!(uu > 0 && dd > 0)) {
+        sp_view_default(info->bmin, info->bmax, SP_UP_Z, NULL, v);
+        return;
+    }
+    memcpy(v->up, info->up, sizeof v->up);
+    memcpy(v->dir, info->view_dir, sizeof v->dir);
+    int box = 0;
+    for (int i = 0; i < 3; i++) box |= info->view_bmax[i] != 0 || info->view_bmin[i] != 0;
+    memcpy(v->bmin, box ? info->view_bmin : info->bmin, sizeof v->bmin);
+    memcpy(v->bmax, box ? info->view_bmax : info->bmax, sizeof v->bmax);
+    if (box && info->view_npts <= SP_VIEW_PTS) {
+        v->npts = info->view_npts;
+        memcpy(v->pts, info->view_pts, sizeof v->pts);
+    }
 }
 
 void spc__note(spc_client *c, const proto_msg *m)
@@ -250,9 +282,10 @@ void spc_camera_frame(const spc_info *info, uint32_t width, uint32_t height, spc
     memset(cam, 0, sizeof *cam);
     cam->width = width;
     cam->height = height;
-    cam->fov_deg = 45.0f;
-    sp_frame_box(info->bmin, info->bmax, (int)width, (int)height, cam->fov_deg, cam->eye,
-                 cam->target, cam->up);
+    cam->fov_deg = (float)SP_DEFAULT_FOV;
+    sp_view v;
+    view_of(info, &v);
+    sp_frame_fit(&v, (int)width, (int)height, cam->fov_deg, cam->eye, cam->target, cam->up);
 }
 
 void spc_camera_orbit(const spc_info *info, const double up_in[3], int i, int n, float fov_deg,
@@ -261,9 +294,11 @@ void spc_camera_orbit(const spc_info *info, const double up_in[3], int i, int n,
     memset(cam, 0, sizeof *cam);
     cam->width = width;
     cam->height = height;
-    cam->fov_deg = fov_deg > 0 && fov_deg < 180 ? fov_deg : 45.0f;
-    sp_frame_orbit(info->bmin, info->bmax, up_in, i, n, (int)width, (int)height, cam->fov_deg,
-                   cam->eye, cam->target, cam->up);
+    cam->fov_deg = fov_deg > 0 && fov_deg < 180 ? fov_deg : (float)SP_DEFAULT_FOV;
+    sp_view v;
+    view_of(info, &v);
+    sp_frame_orbit(&v, up_in, i, n, (int)width, (int)height, cam->fov_deg, cam->eye, cam->target,
+                   cam->up);
 }
 
 /* ---- parameters ------------------------------------------------------------------------- */

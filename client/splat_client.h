@@ -145,6 +145,14 @@ typedef struct spc_info {
     float sigma;                 /* median nearest-neighbour distance */
     uint32_t k;                  /* neighbours used by preprocessing */
     char format[256];            /* "PLY binary_little_endian 1.0" */
+    /* The default view, the same in every client (the server's rule, protocol/framing.h):
+     * world up (z for LAS/LAZ/COPC/E57 and georeferenced clouds, a PCD's sensor orientation,
+     * else the flat axis or +y), the direction the first view looks along, and the box it
+     * frames (the bounds without their farthest outliers). Orbits and drags turn about up. */
+    double up[3], view_dir[3];
+    double view_bmin[3], view_bmax[3];
+    uint32_t view_npts;          /* 0-26: the cloud's extreme points, which the default camera */
+    double view_pts[26][3];      /*   fits instead of the box's corners (PROTOCOL.md, INFO) */
 } spc_info;
 
 /* Progress of a first OPEN (loading, kNN, ...): phase name, fraction [0,1] of that phase. */
@@ -180,14 +188,15 @@ typedef struct spc_camera {
     uint32_t width, height;          /* pixels, 1..16384 (the server may allow less) */
 } spc_camera;
 
-/* spc_camera_frame: a camera that frames info's bounding box at width x height (fov 45; the
- * same rule as the server's default camera: from the +y diagonal with up +z, or from above
- * when the box is flat in z). */
+/* spc_camera_frame: the cloud's default camera at width x height (fov 45), the same as the
+ * server's frame without a camera: looking along info's view direction with its up, from
+ * where the view's box fills the frame (its projection centred, 4 % of the frame left free). */
 void spc_camera_frame(const spc_info *info, uint32_t width, uint32_t height, spc_camera *cam);
 
-/* spc_camera_orbit: camera i of n on a circle around the box centre, about the axis up
- * (NULL: +z), 25 degrees above the circle's plane, at the distance that fits the bounding
- * sphere into the view; i = 0 lies towards +x (or the axis most perpendicular to up). */
+/* spc_camera_orbit: camera i of n on a circle around the view box's centre, about the axis up
+ * (NULL: info's world up), 30 degrees above the horizon, starting at the default view's
+ * azimuth and turning counter-clockwise seen from above, every camera at the distance where
+ * the box fits from all n of them (fov_deg <= 0: 45). */
 void spc_camera_orbit(const spc_info *info, const double up[3], int i, int n, float fov_deg,
                       uint32_t width, uint32_t height, spc_camera *cam);
 

@@ -1091,7 +1091,32 @@ int proto_enc_info(proto_buf *b, uint32_t seq, const proto_info *m)
     w_f32(&w, m->sigma);
     w_u32(&w, m->k);
     w_str8(&w, m->format, PROTO_MAX_NAME);
+    for (int i = 0; i < 3; i++) w_f64(&w, m->view.up[i]);
+    for (int i = 0; i < 3; i++) w_f64(&w, m->view.dir[i]);
+    for (int i = 0; i < 3; i++) w_f64(&w, m->view.bmin[i]);
+    for (int i = 0; i < 3; i++) w_f64(&w, m->view.bmax[i]);
+    uint32_t np = m->view.npts <= SP_VIEW_PTS ? m->view.npts : SP_VIEW_PTS;
+    w_u8(&w, (uint8_t)np);
+    for (uint32_t k = 0; k < np; k++)
+        for (int i = 0; i < 3; i++) w_f64(&w, m->view.pts[k][i]);
     return w_end(&w, PROTO_MSG_INFO, seq);
+}
+
+/* view_ok: 1 when v can frame a camera (proto_parse_info's check of INFO's view). */
+static int view_ok(const sp_view *v)
+{
+    double uu = 0, dd = 0, ud = 0;
+    for (int i = 0; i < 3; i++) {
+        if (!isfinite(v->up[i]) || !isfinite(v->dir[i]) || !isfinite(v->bmin[i]) ||
+            !isfinite(v->bmax[i]) || !(v->bmin[i] <= v->bmax[i]) ||
+            fabs(v->bmin[i]) > PROTO_MAX_COORD || fabs(v->bmax[i]) > PROTO_MAX_COORD)
+            return 0;
+        uu += v->up[i] * v->up[i], dd += v->dir[i] * v->dir[i], ud += v->up[i] * v->dir[i];
+    }
+    for (uint32_t k = 0; k < v->npts; k++)
+        for (int i = 0; i < 3; i++)
+            if (!isfinite(v->pts[k][i]) || fabs(v->pts[k][i]) > PROTO_MAX_COORD) return 0;
+    return uu > 1e-12 && dd > 1e-12 && uu * dd - ud * ud > 1e-12 * uu * dd;
 }
 
 int proto_parse_info(const uint8_t *pl, uint32_t len, proto_info *m, proto_error *e)
@@ -1109,6 +1134,22 @@ int proto_parse_info(const uint8_t *pl, uint32_t len, proto_info *m, proto_error
     m->sigma = r_f32(&r, "sigma");
     m->k = r_u32(&r, "k");
     r_str8(&r, m->format, PROTO_MAX_NAME, "format");
+    uint32_t at = r.off;
+    for (int i = 0; i < 3; i++) m->view.up[i] = r_f64(&r, "view_up");
+    for (int i = 0; i < 3; i++) m->view.dir[i] = r_f64(&r, "view_dir");
+    for (int i = 0; i < 3; i++) m->view.bmin[i] = r_f64(&r, "view_bmin");
+    for (int i = 0; i < 3; i++) m->view.bmax[i] = r_f64(&r, "view_bmax");
+    uint32_t at_n = r.off;
+    m->view.npts = r_u8(&r, "view_npts");
+    if (!r.rc && m->view.npts > SP_VIEW_PTS)
+        r_fail(&r, PROTO_E_MALFORMED, "INFO view_npts at offset %u is %u; the limit is %u", at_n,
+               m->view.npts, (unsigned)SP_VIEW_PTS);
+    for (uint32_t k = 0; k < m->view.npts && !r.rc; k++)
+        for (int i = 0; i < 3; i++) m->view.pts[k][i] = r_f64(&r, "view_pts");
+    if (!r.rc && !view_ok(&m->view))
+        r_fail(&r, PROTO_E_MALFORMED, "INFO view at offset %u is not a view: up and dir must be "
+               "finite, non-zero and not parallel, the box and points finite with bmin <= bmax",
+               at);
     return r_end(&r);
 }
 

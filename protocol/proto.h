@@ -23,6 +23,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "framing.h"
 #include "params.h"
 
 /* ---- constants ------------------------------------------------------------------------- */
@@ -284,6 +285,8 @@ typedef struct proto_info {           /* INFO, server -> client */
     float sigma;                        /* median nearest-neighbour distance, file units */
     uint32_t k;                         /* neighbours used by preprocessing */
     char format[PROTO_MAX_NAME + 1];    /* "PLY binary_little_endian 1.0" */
+    sp_view view;                       /* the default view (framing.h): world up, the look
+                                           direction and the box it frames */
 } proto_info;
 
 /* The phases of a first OPEN, in wire order (append only): id, name. The daemon's preprocessing

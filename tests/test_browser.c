@@ -33,6 +33,7 @@
 #include "daemonproc.h"
 #include "imgtest.h"
 #include "proto.h"
+#include "splat_client.h"
 #include "testutil.h"
 #include "tlscert.h"
 #include "webdriver.h"
@@ -833,6 +834,40 @@ static void test_chromium_https(void **state)
     tu_wd_stop(wdp);
 }
 
+/* home_matches_library: the page's first camera (web/viewer.js frameFit on INFO's view) is the
+ * library's spc_camera_frame of the same INFO at the same size (protocol/framing.c): the same
+ * numbers to rounding. */
+static void home_matches_library(const fx *f, tu_wd *wdp)
+{
+    char cam[1024];
+    page_text(wdp, "camera", cam, sizeof cam);
+    double e[3], t[3], u[3], fov;
+    unsigned w, h;
+    assert_int_equal(sscanf(cam, "{\"eye\":[%lf,%lf,%lf],\"target\":[%lf,%lf,%lf],\"up\":[%lf,"
+                            "%lf,%lf],\"fov\":%lf,\"width\":%u,\"height\":%u}", &e[0], &e[1],
+                            &e[2], &t[0], &t[1], &t[2], &u[0], &u[1], &u[2], &fov, &w, &h), 12);
+    spc_options o = {.port = f->d.port, .token_file = f->tok, .timeout_ms = 20000};
+    spc_client *c;
+    char err[512];
+    assert_int_equal(spc_connect(&o, &c, err, sizeof err), 0);
+    spc_info info;
+    assert_int_equal(spc_open(c, "bun", &info, NULL, NULL), 0);
+    spc_camera lib;
+    spc_camera_frame(&info, w, h, &lib);
+    spc_close(c);
+    double dist = 0;
+    for (int i = 0; i < 3; i++) dist += (lib.eye[i] - lib.target[i]) * (lib.eye[i] - lib.target[i]);
+    dist = sqrt(dist);
+    for (int i = 0; i < 3; i++)
+        if (fabs(e[i] - lib.eye[i]) > 1e-9 * dist || fabs(t[i] - lib.target[i]) > 1e-9 * dist ||
+            fabs(u[i] - lib.up[i]) > 1e-9)
+            fail_msg("the page's first camera %s is not the library's eye (%.9g %.9g %.9g) "
+                     "target (%.9g %.9g %.9g) up (%g %g %g)", cam, lib.eye[0], lib.eye[1],
+                     lib.eye[2], lib.target[0], lib.target[1], lib.target[2], lib.up[0],
+                     lib.up[1], lib.up[2]);
+    assert_true(fov == lib.fov_deg);
+}
+
 static void test_chromium_page(void **state)
 {
     fx *f = *state;
@@ -853,6 +888,7 @@ static void test_chromium_page(void **state)
     page_token(wdp);
     wait_page(wdp, "nframes", at_least, 1, "a first frame");
     wait_page(wdp, "idle", is_one, 0, "rest after the first frame");
+    home_matches_library(f, wdp);
 
     /* Key 1: the points pipeline, as in splat view; the frame says which pipeline drew it. */
     assert_int_equal(tu_wd_element(wdp, "#canvas", id, sizeof id), 0);

@@ -338,7 +338,8 @@ static int data_differs(const pc_prepared *p, const loaded *g)
            memcmp(&p->radius_median, &q->radius_median, sizeof p->radius_median) ||
            p->n_dropped != q->n_dropped || memcmp(p->format, q->format, sizeof p->format) ||
            memcmp(p->scalar_name, q->scalar_name, sizeof p->scalar_name) ||
-           memcmp(&p->stats, &q->stats, sizeof p->stats);
+           memcmp(&p->stats, &q->stats, sizeof p->stats) || p->has_sensor_q != q->has_sensor_q ||
+           memcmp(p->sensor_q, q->sensor_q, sizeof p->sensor_q);
 }
 
 /* header_hash_offset: the offset of the header's checksum (see above), 0 when none is found. */
@@ -588,7 +589,7 @@ static void test_old_version_rebuilt(void **state)
     free(file);
     assert_int_equal(open_cloud(f, 24, &p, &r), 0);
     assert_int_equal(r.hit, 0);
-    assert_string_equal(r.why, "cache version 5, this splatd writes 6");
+    assert_string_equal(r.why, "cache version 5, this splatd writes 7");
     assert_int_equal(f->warnings, 0);
     assert_same_cloud(&good, &p);
     pc_prepared_free(&p);
@@ -658,7 +659,7 @@ static void test_old_lod_version_rebuilt(void **state)
     free(file);
     open_lod(f, 3000, &c, &r);
     assert_int_equal(r.hit, 0);
-    assert_string_equal(r.why, "LOD cache version 3, this splatd writes 4");
+    assert_string_equal(r.why, "LOD cache version 3, this splatd writes 5");
     assert_int_equal(f->warnings, 0);
     assert_int_equal(c.nnodes, nnodes);
     lod_cloud_free(&c);

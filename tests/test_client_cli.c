@@ -18,6 +18,7 @@
 #include "cli.h"
 #include "spc_internal.h"
 #include "splat_client.h"
+#include "framing.h"
 #include "testutil.h"
 
 static int parse(cli_args *a, char *err, ...)
@@ -266,46 +267,50 @@ static void test_progress_line(void **state)
     assert_string_equal(buf, "[####] 0/0  0.0 frames/s  ETA --:--");
 }
 
+/* The library's cameras are framing.h's on INFO's view: spc_camera_frame = sp_frame_fit and
+ * spc_camera_orbit = sp_frame_orbit, at fov 45; an info filled by hand with bounds only gets
+ * the z-up view of its bounds. */
 static void test_cameras(void **state)
 {
     (void)state;
     spc_info in = {.bmin = {-1, -2, -3}, .bmax = {1, 2, 3}};
-    double r = sqrt(1 + 4 + 9); /* bounding-sphere radius */
+    sp_view v;
+    const double q[4] = {0, 1, 0, 0};
+    sp_view_default(in.bmin, in.bmax, SP_UP_SENSOR, q, &v);
+    const double hull[3][3] = {{-1, -2, 0}, {1, 0.5, 3}, {0, 2, -3}};
+    sp_view_hull(&v, &hull[0][0], 3);
+    in.view_npts = v.npts;
+    memcpy(in.view_pts, v.pts, sizeof in.view_pts);
+    memcpy(in.up, v.up, sizeof in.up);
+    memcpy(in.view_dir, v.dir, sizeof in.view_dir);
+    memcpy(in.view_bmin, v.bmin, sizeof in.view_bmin);
+    memcpy(in.view_bmax, v.bmax, sizeof in.view_bmax);
     spc_camera cam;
+    double eye[3], target[3], up[3];
+    spc_camera_frame(&in, 1000, 500, &cam);
+    sp_frame_fit(&v, 1000, 500, 45, eye, target, up);
+    assert_memory_equal(cam.eye, eye, sizeof eye);
+    assert_memory_equal(cam.target, target, sizeof target);
+    assert_memory_equal(cam.up, up, sizeof up);
+    assert_true(cam.fov_deg == 45.0f && cam.width == 1000 && cam.height == 500);
     for (int i = 0; i < 8; i++) {
-        spc_camera_orbit(&in, NULL, i, 8, 45, 1000, 500, &cam);
-        double d[3], dist = 0;
-        for (int k = 0; k < 3; k++) {
-            assert_true(cam.target[k] == 0);
-            d[k] = cam.eye[k] - cam.target[k];
-            dist += d[k] * d[k];
-        }
-        dist = sqrt(dist);
-        /* fits the sphere: dist = r / sin(fov/2) * 1.02 (fov 45 vertical < horizontal) */
-        assert_true(fabs(dist - r / sin(22.5 * M_PI / 180) * 1.02) < 1e-9 * dist);
-        /* 25 degrees above the plane perpendicular to +z */
-        assert_true(fabs(asin(d[2] / dist) - 25 * M_PI / 180) < 1e-12);
-        /* azimuth advances by 45 degrees per camera, starting at +x */
-        double az = atan2(d[1], d[0]);
-        double want = i * M_PI / 4;
-        double diff = remainder(az - want, 2 * M_PI);
-        assert_true(fabs(diff) < 1e-12);
-        assert_true(cam.up[2] == 1 && cam.width == 1000 && cam.height == 500);
+        spc_camera_orbit(&in, NULL, i, 8, 0, 1000, 500, &cam);
+        sp_frame_orbit(&v, NULL, i, 8, 1000, 500, 45, eye, target, up);
+        assert_memory_equal(cam.eye, eye, sizeof eye);
+        assert_memory_equal(cam.up, up, sizeof up);
     }
-    /* orbit about y */
-    double upy[3] = {0, 5, 0};
-    spc_camera_orbit(&in, upy, 0, 4, 45, 100, 100, &cam);
-    assert_true(cam.up[1] == 1);
-    double dist = sqrt(cam.eye[0] * cam.eye[0] + cam.eye[1] * cam.eye[1] + cam.eye[2] * cam.eye[2]);
-    assert_true(fabs(cam.eye[1] / dist - sin(25 * M_PI / 180)) < 1e-12);
-    /* framing camera: looks at the centre from the diagonal, sphere fits */
-    spc_info in2 = {.bmin = {10, 20, 30}, .bmax = {12, 24, 36}};
-    spc_camera_frame(&in2, 1280, 720, &cam);
-    assert_true(cam.target[0] == 11 && cam.target[1] == 22 && cam.target[2] == 33);
-    assert_true(cam.fov_deg == 45.0f && cam.up[2] == 1);
-    dist = 0;
-    for (int k = 0; k < 3; k++) dist += (cam.eye[k] - cam.target[k]) * (cam.eye[k] - cam.target[k]);
-    assert_true(fabs(sqrt(dist) - r / sin(22.5 * M_PI / 180) * 1.02) < 1e-9 * sqrt(dist));
+    const double upx[3] = {3, 0, 0};
+    spc_camera_orbit(&in, upx, 1, 4, 30, 100, 100, &cam);
+    sp_frame_orbit(&v, upx, 1, 4, 100, 100, 30, eye, target, up);
+    assert_memory_equal(cam.eye, eye, sizeof eye);
+    assert_true(cam.fov_deg == 30.0f);
+    /* bounds only: z up */
+    spc_info bare = {.bmin = {10, 20, 30}, .bmax = {12, 24, 36}};
+    spc_camera_frame(&bare, 1280, 720, &cam);
+    sp_view_default(bare.bmin, bare.bmax, SP_UP_Z, NULL, &v);
+    sp_frame_fit(&v, 1280, 720, 45, eye, target, up);
+    assert_memory_equal(cam.eye, eye, sizeof eye);
+    assert_true(cam.up[2] == 1);
 }
 
 static void test_token_file(void **state)

@@ -137,7 +137,9 @@ static void *serve(void *arg)
                     proto_info in = {.name = "bun000.ply", .points = 40256, .dropped = 2,
                                      .bmin = {-1, -2, -3}, .bmax = {1, 2, 3},
                                      .offset = {0.5, 0, 0}, .attrs = 3, .sigma = 0.001f,
-                                     .k = 24, .format = "PLY ascii 1.0"};
+                                     .k = 24, .format = "PLY ascii 1.0",
+                                     .view = {.up = {0, 0, 1}, .dir = {0.5, 0.8, -0.3},
+                                              .bmin = {-1, -2, -3}, .bmax = {1, 2, 2}}};
                     proto_enc_info(&out, seq, &in);
                 }
                 break;

@@ -38,6 +38,7 @@
 #include "pipelines.h"
 #include "render.h"
 #include "splat_client.h"
+#include "rndtest.h"
 #include "testutil.h"
 
 static void gen(const char *dir, int n, char *out, size_t len)
@@ -1094,7 +1095,7 @@ static void camera(const rfix *f, rnd_camera *cam)
 {
     double lo[3], hi[3];
     for (int a = 0; a < 3; a++) lo[a] = f->flat.bmin[a], hi[a] = f->flat.bmax[a];
-    rnd_camera_frame(lo, hi, 320, 200, cam);
+    tu_camera_box(lo, hi, 320, 200, cam);
 }
 
 /* cold_view: an empty pool (rfix_cold), the default camera and default parameters. */

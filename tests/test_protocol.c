@@ -258,7 +258,9 @@ static void test_roundtrip_server_messages(void **state)
 
     proto_info in = {.points = 40256, .dropped = 3, .bmin = {637000.25, 851000.5, 400.125},
                      .bmax = {639000.75, 853000, 500}, .offset = {638000.5, 852000.25, 450.0625},
-                     .attrs = 0x53, .sigma = 0.00125f, .k = 24};
+                     .attrs = 0x53, .sigma = 0.00125f, .k = 24,
+                     .view = {.up = {0, 0, 1}, .dir = {0.25, 0.5, -0.5},
+                              .bmin = {637000.25, 851000.5, 400.125}, .bmax = {639000, 853000, 480}}};
     strcpy(in.name, "autzen_trim.las");
     strcpy(in.format, "LAS 1.2 format 3");
     assert_int_equal(proto_enc_info(&b, 3, &in), 0);
@@ -277,8 +279,25 @@ static void test_roundtrip_server_messages(void **state)
     assert_int_equal(in2.attrs, 0x53);
     assert_true(in2.sigma == in.sigma);
     assert_int_equal(in2.k, 24);
+    assert_memory_equal(&in2.view, &in.view, sizeof in.view);
     free(pl);
     b.len = 0;
+    /* a view that cannot frame a camera is refused naming the view and its offset: up parallel
+     * to dir, a zero or non-finite vector, a box with bmin > bmax */
+    for (int k = 0; k < 5; k++) {
+        proto_info bad = in;
+        if (k == 0) bad.view.dir[0] = 0, bad.view.dir[1] = 0, bad.view.dir[2] = -3;
+        if (k == 1) bad.view.up[0] = bad.view.up[1] = bad.view.up[2] = 0;
+        if (k == 2) bad.view.dir[1] = NAN;
+        if (k == 3) bad.view.bmin[2] = bad.view.bmax[2] + 1;
+        if (k == 4) bad.view.bmax[0] = INFINITY;
+        assert_int_equal(proto_enc_info(&b, 3, &bad), 0);
+        decode_one(&b, PROTO_S2C, &m, &pl);
+        assert_int_equal(proto_parse_info(m.payload, m.len, &in2, &e), -PROTO_E_MALFORMED);
+        if (!strstr(e.msg, "INFO view at offset")) fail_msg("case %d: %s", k, e.msg);
+        free(pl);
+        b.len = 0;
+    }
 
     proto_progress pr = {PROTO_PHASE_KNN, 0.375f, "kNN 37%"};
     assert_int_equal(proto_enc_progress(&b, 3, &pr), 0);
@@ -666,7 +685,8 @@ static void test_truncated_payloads(void **state)
     proto_enc_clouds(&b, 1, items, 2);
     check_cuts(&b, p_clouds, 0, 0);
     b.len = 0;
-    proto_info in = {.name = "a.ply", .points = 3, .format = "PLY ascii 1.0"};
+    proto_info in = {.name = "a.ply", .points = 3, .format = "PLY ascii 1.0",
+                     .view = {.up = {0, 0, 1}, .dir = {0, 1, 0}}};
     proto_enc_info(&b, 1, &in);
     check_cuts(&b, p_info, 0, 0);
     b.len = 0;
@@ -1207,7 +1227,8 @@ static void test_fuzz(void **state)
     proto_enc_welcome(&seeds, 6, &w);
     proto_cloud_entry items[2] = {{"a.ply", 1, 2, 0}, {"bb.las", 3, 4, 1}};
     proto_enc_clouds(&seeds, 7, items, 2);
-    proto_info in = {.name = "a.ply", .points = 3, .format = "PLY ascii 1.0"};
+    proto_info in = {.name = "a.ply", .points = 3, .format = "PLY ascii 1.0",
+                     .view = {.up = {0, 0, 1}, .dir = {0, 1, 0}}};
     proto_enc_info(&seeds, 8, &in);
     proto_progress pr = {1, 0.5f, "half"};
     proto_enc_progress(&seeds, 9, &pr);

@@ -451,7 +451,7 @@ static void test_bunny(void **state)
     assert_true(pc.sigma > 0);
     uint32_t id = tu_upload(r, &pc);
     rnd_camera cam;
-    rnd_camera_frame(pc.bmin, pc.bmax, BW, BH, &cam);
+    tu_camera_box(pc.bmin, pc.bmax, BW, BH, &cam);
     pc_prepared_free(&pc);
     sp_params p;
     params_of(kf, &p);
@@ -821,7 +821,7 @@ static void test_edl_passes_agree(void **state)
     tu_prep_data("bunnyData.pts", &pc);
     uint32_t id = tu_upload(r, &pc);
     rnd_camera cam;
-    rnd_camera_frame(pc.bmin, pc.bmax, BW, BH, &cam);
+    tu_camera_box(pc.bmin, pc.bmax, BW, BH, &cam);
     pc_prepared_free(&pc);
     const int pipes[3] = {SP_PIPE_POINTS, SP_PIPE_SPLAT, SP_PIPE_KAWATA};
     for (int pi = 0; pi < 3; pi++)

@@ -392,7 +392,7 @@ static void test_backends_agree(void **state)
     p.pipeline = SP_PIPE_POINTS;
     p.point_size = 2;
     rnd_camera cam;
-    rnd_camera_frame(pc.bmin, pc.bmax, W, H, &cam);
+    tu_camera_box(pc.bmin, pc.bmax, W, H, &cam);
     rnd_frame f[NR];
     memset(f, 0, sizeof f);
     for (int ri = 0; ri < NR; ri++) {
@@ -596,7 +596,7 @@ static void test_camera_frame(void **state)
     for (int pass = 0; pass < 2; pass++) {
         rnd_camera cam;
         double top[3] = {bmax[0], bmax[1], pass ? bmin[2] + 1 : bmax[2]}; /* pass 1: flat */
-        rnd_camera_frame(bmin, top, 320, 200, &cam);
+        tu_camera_box(bmin, top, 320, 200, &cam);
         assert_int_equal(cam.width, 320);
         double f[3], len = 0;
         for (int k = 0; k < 3; k++) f[k] = cam.target[k] - cam.eye[k], len += f[k] * f[k];

@@ -462,7 +462,7 @@ static void test_field_height(void **state)
     }
     tu_finish_cloud(&solid, pc.offset);
     rnd_camera cam;
-    rnd_camera_frame(pc.bmin, pc.bmax, 256, 256, &cam);
+    tu_camera_box(pc.bmin, pc.bmax, 256, 256, &cam);
     cam.znear = 0.01f, cam.zfar = 10.0f;
     printf("bun000: %llu points, %llu with F <= t = 0.8 in z\n", (unsigned long long)pc.n,
            (unsigned long long)m);

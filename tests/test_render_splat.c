@@ -1145,7 +1145,7 @@ static void test_guanyin(void **state)
         {"close-up, ewa=exact", "golden_guanyin_closeup_exact.png", 320, 240, 2, SP_EWA_EXACT,
          0.6}};
     rnd_camera cams[2];
-    rnd_camera_frame(pc.bmin, pc.bmax, 640, 480, &cams[0]);
+    tu_camera_box(pc.bmin, pc.bmax, 640, 480, &cams[0]);
     cams[1] = (rnd_camera){{0.05, 1.0, 0.27}, {0.0, 0.95, 0.0}, {0, 1, 0}, 70, 0, 0, 320, 240};
     pc_prepared_free(&pc);
     /* Per view: 8-bit frames (rendered straight into RGBA8), then float frames; the second

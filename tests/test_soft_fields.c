@@ -122,7 +122,7 @@ static void test_las_sources(void **state)
     assert_true(pc.attrs & PC_ATTR_INTENSITY);
     uint32_t id = tu_upload(tu_ctx, &pc);
     rnd_camera cam;
-    rnd_camera_frame(pc.bmin, pc.bmax, S, S, &cam);
+    tu_camera_box(pc.bmin, pc.bmax, S, S, &cam);
     float *f = malloc(pc.n * sizeof *f);
     assert_non_null(f);
     sp_params p;
@@ -208,7 +208,7 @@ static void test_ply_quality(void **state)
     assert_string_equal(pc.scalar_name, "quality");
     uint32_t id = tu_upload(tu_ctx, &pc);
     rnd_camera cam;
-    rnd_camera_frame(pc.bmin, pc.bmax, S, S, &cam);
+    tu_camera_box(pc.bmin, pc.bmax, S, S, &cam);
     float *f = malloc(pc.n * sizeof *f);
     assert_non_null(f);
     sp_params p;
@@ -262,7 +262,7 @@ static void test_e57_scan(void **state)
     assert_true(pc.attrs & PC_ATTR_SCAN);
     uint32_t id = tu_upload(tu_ctx, &pc);
     rnd_camera cam;
-    rnd_camera_frame(pc.bmin, pc.bmax, S, S, &cam);
+    tu_camera_box(pc.bmin, pc.bmax, S, S, &cam);
     float *f = malloc(pc.n * sizeof *f);
     assert_non_null(f);
     for (uint64_t i = 0; i < pc.n; i++) f[i] = pc.scan[i] / 2.0f;

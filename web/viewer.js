@@ -115,19 +115,39 @@ function rotate(v, k, ang) {
   for (let i = 0; i < 3; i++) v[i] = v[i] * c + kxv[i] * s + k[i] * kv * (1 - c);
 }
 
-/* frameBox: protocol/framing.c sp_frame_box (fov 45). */
-function frameBox(bmin, bmax, w, h, fov) {
-  const ext = sub(bmax, bmin), ctr = [0, 1, 2].map((i) => 0.5 * (bmin[i] + bmax[i]));
-  const flat = ext[2] < 0.1 * Math.max(ext[0], ext[1]);
-  const yUp = flat || (ext[1] > ext[0] && ext[1] > ext[2]);
-  const up = [0, yUp ? 1 : 0, yUp ? 0 : 1];
-  let r = 0.5 * Math.sqrt(dot(ext, ext));
-  if (!(r > 0)) r = 1;
-  const dir = flat ? [0, -0.35, 1] : up[1] === 1 ? [0.55, 0.45, 1] : [0.55, 1, 0.45];
-  norm(dir);
-  const fy = fov * Math.PI / 180, fx = 2 * Math.atan(Math.tan(fy / 2) * (h > 0 ? w / h : 1));
-  const dist = r / Math.sin(0.5 * Math.min(fx, fy)) * 1.02;
-  return {target: ctr, offset: dir.map((d) => d * dist), up, fov};
+/* frameFit: protocol/framing.c sp_frame_fit on INFO's view (tests/test_browser.c checks that
+ * both give the same camera): looking along view.dir with world up, from where the view's
+ * points (its box's corners when it has none) fill the frame up to a 4 % margin, their
+ * projection centred. */
+const FILL_MARGIN = 0.04;
+function frameFit(view, w, h, fov) {
+  const d = view.dir.slice(); norm(d);
+  const u = view.up.slice(), k = dot(u, d);
+  for (let i = 0; i < 3; i++) u[i] -= k * d[i];
+  norm(u);
+  const r = cross(d, u);
+  const t = Math.tan(fov * Math.PI / 360), ty = t * (1 - FILL_MARGIN);
+  const tx = t * (h > 0 ? w / h : 1) * (1 - FILL_MARGIN);
+  const c = [0, 1, 2].map((i) => 0.5 * (view.bmin[i] + view.bmax[i]));
+  let loR = Infinity, hiR = -Infinity, loU = Infinity, hiU = -Infinity, diag = 0;
+  const pd = [], n = view.pts.length || 8;
+  for (let m = 0; m < n; m++) {
+    const p = [0, 1, 2].map((i) => (view.pts.length ? view.pts[m][i] :
+                                    (m >> i) & 1 ? view.bmax[i] : view.bmin[i]) - c[i]);
+    const pr = dot(p, r), pu = dot(p, u);
+    pd.push(dot(p, d));
+    hiR = Math.max(hiR, pr - tx * pd[m]); loR = Math.min(loR, pr + tx * pd[m]);
+    hiU = Math.max(hiU, pu - ty * pd[m]); loU = Math.min(loU, pu + ty * pd[m]);
+  }
+  for (let i = 0; i < 3; i++) diag += (view.bmax[i] - view.bmin[i]) ** 2;
+  diag = Math.sqrt(diag);
+  let dist = Math.max((hiR - loR) / (2 * tx), (hiU - loU) / (2 * ty));
+  if (!(diag > 0)) dist = Math.max(dist, 1);
+  else for (const z of pd) dist = Math.max(dist, -z + 1e-3 * diag);
+  const sr = 0.5 * (hiR + loR), su = 0.5 * (hiU + loU);
+  const target = [0, 1, 2].map((i) => c[i] + sr * r[i] + su * u[i]);
+  const up = view.up.slice(); norm(up);
+  return {target, offset: d.map((x) => -x * dist), up, fov};
 }
 
 function orbitDrag(o, dx, dy) {
@@ -321,11 +341,15 @@ function onInfo(r) {
   const bmin = [r.f64(), r.f64(), r.f64()], bmax = [r.f64(), r.f64(), r.f64()];
   r.f64(); r.f64(); r.f64(); /* offset */
   const provisional = (r.u32() & 0x80000000) !== 0; /* a second INFO follows (PROTOCOL.md) */
-  S.info = {name, points, dropped, bmin, bmax};
+  r.f32(); r.u32(); r.str8(); /* sigma, k, format */
+  const v3 = () => [r.f64(), r.f64(), r.f64()];
+  const view = {up: v3(), dir: v3(), bmin: v3(), bmax: v3(), pts: []};
+  for (let k = r.u8(); k > 0; k--) view.pts.push(v3());
+  S.info = {name, points, dropped, bmin, bmax, view};
   S.opened = true;
   const [w, h] = fullSize();
   const keep = S.orbit && S.home && S.lastOpened === name; /* a reconnection keeps the view */
-  S.home = frameBox(bmin, bmax, w, h, 45);
+  S.home = frameFit(view, w, h, 45);
   if (!keep) S.orbit = cloneOrbit(S.home);
   S.lastOpened = name;
   $('clouds').value = name;

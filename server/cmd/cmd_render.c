@@ -13,6 +13,7 @@
 #include "prep.h"
 #include "progress.h"
 #include "render.h"
+#include "view.h"
 
 enum { MAX_SIDE = 8192 };
 
@@ -212,7 +213,9 @@ static int parse_args(int argc, char **argv, render_opts *o, sp_params *p)
 /* The camera: framing the cloud, then whatever the options set. */
 static void make_camera(const render_opts *o, const pc_prepared *pc, rnd_camera *cam)
 {
-    rnd_camera_frame(pc->bmin, pc->bmax, o->width, o->height, cam);
+    sp_view v;
+    view_of_prepared(pc, &v);
+    rnd_camera_frame(&v, o->width, o->height, o->fov, cam);
     for (int k = 0; k < 3; k++) {
         if (o->have_eye) cam->eye[k] = o->eye[k];
         if (o->have_target) cam->target[k] = o->target[k];

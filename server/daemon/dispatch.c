@@ -238,8 +238,8 @@ static void make_request(srv *sv, sess *s, rt_request *rq, uint32_t req_seq)
         rq->camera_seq = s->camera_seq;
     } else {
         const srv_cloud *c = &sv->clouds[s->cloud];
-        rnd_camera_frame(c->info.summary.bmin, c->info.summary.bmax, RND_DEFAULT_WIDTH,
-                         RND_DEFAULT_HEIGHT, &rq->cam);
+        rnd_camera_frame(&c->info.summary.view, RND_DEFAULT_WIDTH, RND_DEFAULT_HEIGHT, 0,
+                         &rq->cam);
         rq->camera_seq = 0;
     }
 }

@@ -4,6 +4,7 @@
  * (prep, upload, render, encode, pack) runs outside it. Three condition variables wake the
  * three threads. Frames: a pool of RT_NFRAMES rnd_frames; the render thread fills a free one,
  * the encoder thread encodes it and returns it, so render of frame k+1 overlaps encode of k. */
+#include "view.h"
 #include "render_thread.h"
 
 #include <pthread.h>
@@ -656,6 +657,7 @@ static void prep_provisional(rt_ctx *rt, rt_prepjob *j, int use_lod)
     }
     info_fill(&pj->info.summary, p->n, p->n_dropped, p->bmin, p->bmax, p->offset,
               p->attrs | PROTO_INFO_PROVISIONAL, 0, 0.0f, p->format);
+    view_of_prepared(p, &pj->info.summary.view);
     srv_log(NULL, NULL, "first image of %s: COPC levels 0-%d, %llu points, read in %.3f s",
             j->path, level, (unsigned long long)p->n, (double)(now_us() - t0) / 1e6);
     pj->job = j->job;
@@ -706,6 +708,7 @@ static void *prep_main(void *arg)
             if (rc == 0) {
                 info_fill(&j->info.summary, lc->n, lc->n_dropped, lc->bmin, lc->bmax, lc->offset,
                           lc->attrs, lc->k, lc->sigma, lc->format);
+                view_of_lod(lc, &j->info.summary.view);
                 j->info.cache_hit = lr.hit;
                 j->lod = lc;
                 on_progress(&pp, PROTO_PHASE_UPLOAD, 0.0);
@@ -718,6 +721,7 @@ static void *prep_main(void *arg)
         if (rc == 0 && !use_lod) {
             info_fill(&j->info.summary, p->n, p->n_dropped, p->bmin, p->bmax, p->offset, p->attrs,
                       p->k, p->sigma, p->format);
+            view_of_prepared(p, &j->info.summary.view);
             j->info.cache_hit = res.hit;
             j->prep = p;
             on_progress(&pp, PROTO_PHASE_UPLOAD, 0.0);

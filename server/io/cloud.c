@@ -135,6 +135,7 @@ int pc_finalize(pc_raw *raw, pc_cloud *out, const char *path, sd_err *err)
     memcpy(out->format, raw->format, sizeof out->format);
     out->has_viewpoint = raw->has_viewpoint;
     memcpy(out->viewpoint, raw->viewpoint, sizeof out->viewpoint);
+    memcpy(out->viewpoint_q, raw->viewpoint_q, sizeof out->viewpoint_q);
     pc_raw_free(raw);
     return 0;
 }

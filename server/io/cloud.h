@@ -68,8 +68,9 @@ typedef struct pc_raw {
     PC_ATTR_ARRAYS           /* rgba, normal, intensity, cls, radius, scalar, scan: cap */
     char scalar_name[32];    /* which file property scalar holds */
     char format[64];         /* "PLY binary_little_endian 1.0", "LAS 1.2 format 3", ... */
-    int has_viewpoint;       /* the file gives the sensor's position (PCD VIEWPOINT) */
-    double viewpoint[3];     /* that position, file coordinates */
+    int has_viewpoint;       /* the file gives the sensor's pose (PCD VIEWPOINT) */
+    double viewpoint[3];     /* its position, file coordinates */
+    double viewpoint_q[4];   /* its rotation, w x y z (framing.h's sensor rule) */
 } pc_raw;
 
 /* pc_raw_reserve: grows every array named in raw->attrs (and xyz) to hold cap points.
@@ -89,8 +90,9 @@ typedef struct pc_cloud {
     uint64_t n_dropped;      /* non-finite points removed */
     char scalar_name[32];
     char format[64];
-    int has_viewpoint;       /* the sensor's position is known (prep orients normals to it) */
-    double viewpoint[3];     /* that position, file coordinates */
+    int has_viewpoint;       /* the sensor's pose is known (prep orients normals to it) */
+    double viewpoint[3];     /* its position, file coordinates */
+    double viewpoint_q[4];   /* its rotation, w x y z */
 } pc_cloud;
 
 /* pc_finalize: moves raw into out: drops points with a non-finite coordinate (counted in

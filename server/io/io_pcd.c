@@ -844,6 +844,7 @@ static void pcd_describe(const pcd_header *h, pc_raw *raw)
     if (h->ln_viewpoint && posed) {
         raw->has_viewpoint = 1;
         memcpy(raw->viewpoint, h->viewpoint, sizeof raw->viewpoint);
+        memcpy(raw->viewpoint_q, h->viewpoint + 3, sizeof raw->viewpoint_q);
     }
 }
 
@@ -1075,9 +1076,10 @@ int pc_pcd_stream_has_rgb(const pc_pcd_stream *s)
     return (s->win.attrs & PC_ATTR_RGB) != 0;
 }
 
-int pc_pcd_stream_viewpoint(const pc_pcd_stream *s, double xyz[3])
+int pc_pcd_stream_viewpoint(const pc_pcd_stream *s, double xyz[3], double q[4])
 {
     if (!s->win.has_viewpoint) return 0;
     memcpy(xyz, s->win.viewpoint, 3 * sizeof *xyz);
+    memcpy(q, s->win.viewpoint_q, 4 * sizeof *q);
     return 1;
 }

@@ -36,6 +36,6 @@ int64_t pc_pcd_stream_next(pc_pcd_stream *s, double *xyz, uint8_t *rgba, size_t 
 uint64_t pc_pcd_stream_count(const pc_pcd_stream *s);    /* points the header declares */
 const char *pc_pcd_stream_format(const pc_pcd_stream *s); /* "PCD 0.7 binary", as pc_read_pcd */
 int pc_pcd_stream_has_rgb(const pc_pcd_stream *s);
-/* pc_pcd_stream_viewpoint: 1 and the sensor's position (file coordinates) when the header
- * gives a pose other than PCL's identity default, as pc_read_pcd. */
-int pc_pcd_stream_viewpoint(const pc_pcd_stream *s, double xyz[3]);
+/* pc_pcd_stream_viewpoint: 1 and the sensor's position (file coordinates) and rotation (w x y
+ * z) when the header gives a pose other than PCL's identity default, as pc_read_pcd. */
+int pc_pcd_stream_viewpoint(const pc_pcd_stream *s, double xyz[3], double q[4]);

@@ -26,7 +26,7 @@ typedef struct flat_meta {
     char scalar_name[32];
     pc_prep_stats stats;
 } flat_meta;
-_Static_assert(sizeof(flat_meta) == 280, "flat_meta is stored verbatim, without padding");
+_Static_assert(sizeof(flat_meta) == 320, "flat_meta is stored verbatim, without padding");
 
 static void describe_k(uint64_t options, char *buf, size_t len)
 {
@@ -34,8 +34,8 @@ static void describe_k(uint64_t options, char *buf, size_t len)
 }
 
 /* Bump the version when the layout of prepared.h or the meaning of any prepared value changes,
- * or the header's (6: the header of cachefile.h). */
-static const cf_kind FLAT = {.what = "cache", .magic = "SPLATDC", .version = 6,
+ * or the header's (6: the header of cachefile.h; 7: the sensor's rotation). */
+static const cf_kind FLAT = {.what = "cache", .magic = "SPLATDC", .version = 7,
                              .meta_len = sizeof(flat_meta), .hash_how = CF_HASH_ALL,
                              .describe = describe_k};
 

@@ -92,6 +92,8 @@ typedef struct lod_cloud {
     float sigma, F_raw_p99, F_pct[5], radius_median;
     uint64_t n_dropped;
     char format[64];
+    int has_sensor_q;         /* as pc_prepared's: the sensor's rotation, w x y z */
+    double sensor_q[4];
     const lod_node *nodes;    /* nnodes, breadth-first (a copy in memory, owned) */
     const uint8_t *map;       /* the file, mapped read-only (file) */
     size_t map_len;

@@ -1869,6 +1869,8 @@ static int run_build(build *b, const char *src, lod_src *s, lod_result *res, sd_
     c.radius_median = pick_value(b, NQ);
     c.n_dropped = b->info.n_dropped;
     memcpy(c.format, b->info.format, sizeof c.format);
+    c.has_sensor_q = b->info.has_viewpoint;
+    memcpy(c.sensor_q, b->info.viewpoint_q, sizeof c.sensor_q);
     lod_src_key key;
     rc = lod__src_key(src, &key, err);
     if (rc == 0) rc = lod__writer_commit(&b->w, &c, &key, err);

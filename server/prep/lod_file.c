@@ -30,7 +30,7 @@ typedef struct lod_meta {
     double origin[3], side, centroid[3];
     pc_summary sum;
 } lod_meta;
-_Static_assert(sizeof(lod_meta) == 256, "lod_meta is stored verbatim, without padding");
+_Static_assert(sizeof(lod_meta) == 296, "lod_meta is stored verbatim, without padding");
 _Static_assert(sizeof(lod_node) == 104, "lod_node is stored verbatim");
 
 static void describe(uint64_t o, char *buf, size_t len)
@@ -40,8 +40,8 @@ static void describe(uint64_t o, char *buf, size_t len)
 }
 
 /* Bump the version when the layout or the meaning of any value changes (4: the header of
- * cachefile.h, the grid and leaf size in the key). */
-static const cf_kind LOD = {.what = "LOD cache", .magic = "SPLATDL", .version = 4,
+ * cachefile.h, the grid and leaf size in the key; 5: the sensor's rotation). */
+static const cf_kind LOD = {.what = "LOD cache", .magic = "SPLATDL", .version = 5,
                             .meta_len = sizeof(lod_meta), .hash_how = CF_HASH_ENDS,
                             .describe = describe};
 

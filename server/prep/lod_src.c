@@ -446,7 +446,8 @@ static int rows_bounds_pass(lod_src *s, sd_err *err)
     snprintf(s->info.format, sizeof s->info.format, "%s",
              s->e57 ? pc_e57_stream_format(s->e57)
              : s->xyz ? pc_xyz_stream_format(s->xyz) : pc_pcd_stream_format(s->pcd));
-    if (s->pcd) s->info.has_viewpoint = pc_pcd_stream_viewpoint(s->pcd, s->info.viewpoint);
+    if (s->pcd)
+        s->info.has_viewpoint = pc_pcd_stream_viewpoint(s->pcd, s->info.viewpoint, s->info.viewpoint_q);
     s->info.streamed = 1;
     return 0;
 }
@@ -516,6 +517,7 @@ int lod_src_open(const char *path, lod_src **out, sd_err *err)
             in->attrs = s->cloud.attrs & PC_ATTR_RGB;
             in->has_viewpoint = s->cloud.has_viewpoint;
             memcpy(in->viewpoint, s->cloud.viewpoint, sizeof in->viewpoint);
+            memcpy(in->viewpoint_q, s->cloud.viewpoint_q, sizeof in->viewpoint_q);
             memcpy(in->format, s->cloud.format, sizeof in->format);
             in->format[sizeof in->format - 1] = 0;
         }

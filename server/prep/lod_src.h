@@ -34,6 +34,7 @@ typedef struct lod_src_info {
     uint32_t attrs;             /* PC_ATTR_RGB when the file has colours */
     int has_viewpoint;
     double viewpoint[3];        /* file coordinates */
+    double viewpoint_q[4];      /* the sensor's rotation, w x y z */
     char format[64];
     int streamed;               /* 1: read in blocks; 0: read whole (another format) */
 } lod_src_info;

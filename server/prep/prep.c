@@ -354,6 +354,8 @@ static int reorder(const pc_cloud *in, int K, int threads, pc_prepared *out, dou
     out->n_dropped = in->n_dropped;
     memcpy(out->format, in->format, sizeof out->format);
     memcpy(out->scalar_name, in->scalar_name, sizeof out->scalar_name);
+    out->has_sensor_q = in->has_viewpoint;
+    memcpy(out->sensor_q, in->viewpoint_q, sizeof out->sensor_q);
     out->format[sizeof out->format - 1] = 0;
     out->scalar_name[sizeof out->scalar_name - 1] = 0;
     return 0;

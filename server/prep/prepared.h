@@ -43,6 +43,8 @@ typedef struct pc_prepared {
     uint64_t n_dropped;
     char format[64];
     char scalar_name[32];
+    int has_sensor_q;        /* the file gave the sensor's rotation (PCD VIEWPOINT) */
+    double sensor_q[4];      /* that rotation, w x y z: the default view looks as the sensor */
     pc_prep_stats stats;
     /* storage: exactly one of heap or map is set */
     void *block;             /* the arrays' block (inside heap or map) */
@@ -60,6 +62,8 @@ typedef struct pc_summary {
     float sigma, F_raw_p99, F_pct[5], radius_median;
     uint64_t n_dropped;
     char format[64];
+    double sensor_q[4];      /* the sensor's rotation, w x y z (view.h), when has_sensor_q */
+    uint64_t has_sensor_q;
 } pc_summary;
 #define PC_SUMMARY_COPY(dst, src)                                     \
     do {                                                              \
@@ -73,6 +77,8 @@ typedef struct pc_summary {
         (dst)->n_dropped = (src)->n_dropped;                          \
         memcpy((dst)->format, (src)->format, sizeof (dst)->format);   \
         (dst)->format[sizeof (dst)->format - 1] = 0;                  \
+        memcpy((dst)->sensor_q, (src)->sensor_q, sizeof (dst)->sensor_q); \
+        (dst)->has_sensor_q = (src)->has_sensor_q != 0;               \
     } while (0)
 
 /* pc_prepared_block_len: bytes of the array block for n points, attrs and nbatches. */

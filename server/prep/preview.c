@@ -32,5 +32,7 @@ int prep_preview(const pc_cloud *in, pc_prepared *out, sd_err *err)
     out->n_dropped = in->n_dropped;
     snprintf(out->format, sizeof out->format, "%s", in->format);
     snprintf(out->scalar_name, sizeof out->scalar_name, "%s", in->scalar_name);
+    out->has_sensor_q = in->has_viewpoint;
+    memcpy(out->sensor_q, in->viewpoint_q, sizeof out->sensor_q);
     return 0;
 }

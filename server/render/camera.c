@@ -30,14 +30,13 @@ static double dnorm(double a[3])
     return l;
 }
 
-void rnd_camera_frame(const double bmin[3], const double bmax[3], int width, int height,
-                      rnd_camera *cam)
+void rnd_camera_frame(const sp_view *v, int width, int height, double fov_deg, rnd_camera *cam)
 {
     memset(cam, 0, sizeof *cam);
     cam->width = width;
     cam->height = height;
-    cam->fov_deg = 45.0f;
-    sp_frame_box(bmin, bmax, width, height, cam->fov_deg, cam->eye, cam->target, cam->up);
+    cam->fov_deg = (float)(fov_deg > 0 && fov_deg < 180 ? fov_deg : SP_DEFAULT_FOV);
+    sp_frame_fit(v, width, height, cam->fov_deg, cam->eye, cam->target, cam->up);
 }
 
 /* Column-major 4x4 product o = a * b. */

@@ -62,10 +62,10 @@ typedef struct rnd_camera {
     int width, height;
 } rnd_camera;
 
-/* rnd_camera_frame: a camera that frames the bounding box [bmin, bmax] (file coordinates):
- * by the rule of protocol/framing.h (sp_frame_box), shared with the client. */
-void rnd_camera_frame(const double bmin[3], const double bmax[3], int width, int height,
-                      rnd_camera *cam);
+/* rnd_camera_frame: the default camera of a cloud whose default view is v (INFO's; the rule of
+ * protocol/framing.h, sp_frame_fit, shared with the clients) for a width x height frame of
+ * vertical field of view fov_deg (0: SP_DEFAULT_FOV). */
+void rnd_camera_frame(const sp_view *v, int width, int height, double fov_deg, rnd_camera *cam);
 
 typedef struct rnd_frame {
     int width, height;

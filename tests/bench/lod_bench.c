@@ -23,6 +23,7 @@
 
 #include "lod.h"
 #include "render.h"
+#include "rndtest.h"
 
 static double now_ms(void)
 {
@@ -123,7 +124,7 @@ int main(int argc, char **argv)
         return 2;
     }
     rnd_camera cam;
-    rnd_camera_frame(lo, hi, w, h, &cam);
+    tu_camera_box(lo, hi, w, h, &cam);
     rnd_frame f = {0};
     double *ms = calloc((size_t)frames, sizeof *ms), *pts = calloc((size_t)frames, sizeof *pts);
     double *nfr = calloc((size_t)frames, sizeof *nfr);

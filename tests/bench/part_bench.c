@@ -37,6 +37,7 @@
 #include "common/testutil.h"
 #include "partition.h"
 #include "render.h"
+#include "rndtest.h"
 
 static double now_ms(void)
 {
@@ -135,7 +136,7 @@ static int render_parts(rnd_ctx *r, const pc_prepared *pc, const uint16_t *part,
         sp_params_defaults(&prm);
         sp_param_set_text(&prm, "pipeline", pipes[q], NULL, 0);
         rnd_camera cam;
-        rnd_camera_frame(pc->bmin, pc->bmax, 1280, 720, &cam);
+        tu_camera_box(pc->bmin, pc->bmax, 1280, 720, &cam);
         double slow[VIEWS], mean[VIEWS], ratio[VIEWS];
         rnd_frame f = {0};
         for (int v = 0; v < VIEWS && rc == 0; v++, quarter_turn(&cam)) {

@@ -13,7 +13,7 @@
  *
  * Loads FILE (pc_load) and preprocesses it (prep_run, default k, T threads: 0 = every core),
  * timing both; uploads the prepared cloud and renders, per pipeline, 1 + N frames of the
- * default framing camera (rnd_camera_frame) turned 0.5 degrees further about its up axis each
+ * framing camera of the rendering tests (tu_camera_box) turned 0.5 degrees further about its up axis each
  * frame, so that no two frames are identical. The first frame of each pipeline is a warm-up
  * (shader compile, first-touch of buffers) and is not counted. Reported per pipeline, medians of
  * the N counted frames:
@@ -50,6 +50,7 @@
 #include "prep.h"
 #include "prepared.h"
 #include "render.h"
+#include "rndtest.h"
 #include "sd_err.h"
 
 enum { MAX_FRAMES = 1000, MAX_PIPES = 12 };
@@ -444,7 +445,7 @@ int main(int argc, char **argv)
     if (!(enc = enc_create(&err))) goto fail;
     uint64_t npts = pc.n;
     rnd_camera cam0;
-    rnd_camera_frame(pc.bmin, pc.bmax, o.width, o.height, &cam0);
+    tu_camera_box(pc.bmin, pc.bmax, o.width, o.height, &cam0);
     if (o.zoom > 1)
         for (int i = 0; i < 3; i++)
             cam0.eye[i] = cam0.target[i] + (cam0.eye[i] - cam0.target[i]) / o.zoom;

@@ -376,7 +376,7 @@ int main(int argc, char **argv)
     /* A warm-up frame each, then the orbit; TCP first on even steps, WebSocket first on odd. */
     for (int i = -1; i < n; i++) {
         proto_camera cam = {.fov_deg = 45, .width = (uint32_t)w, .height = (uint32_t)h};
-        sp_frame_orbit(info.bmin, info.bmax, NULL, i < 0 ? 0 : i, n, w, h, 45, cam.eye,
+        sp_frame_orbit(&info.view, NULL, i < 0 ? 0 : i, n, w, h, 45, cam.eye,
                        cam.target, cam.up);
         double a, b, wa, wb;
         conn *first = (i & 1) ? &ws : &tcp, *second = (i & 1) ? &tcp : &ws;

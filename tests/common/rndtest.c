@@ -47,8 +47,8 @@ void tu_scans_load(tu_scans *s, int w, int h)
 {
     tu_prep_data("Guanyin.ply", &s->g);
     tu_prep_data("bunnyData.pts", &s->b);
-    rnd_camera_frame(s->g.bmin, s->g.bmax, w, h, &s->cg);
-    rnd_camera_frame(s->b.bmin, s->b.bmax, w, h, &s->cb);
+    tu_camera_box(s->g.bmin, s->g.bmax, w, h, &s->cg);
+    tu_camera_box(s->b.bmin, s->b.bmax, w, h, &s->cb);
     s->close = s->cg;
     for (int a = 0; a < 3; a++)
         s->close.eye[a] = s->cg.target[a] + 0.3 * (s->cg.eye[a] - s->cg.target[a]);
@@ -120,4 +120,31 @@ void tu_prep_data(const char *name, pc_prepared *pc)
     int rc = prep_run(&cl, &pd, pc, &err);
     pc_cloud_free(&cl);
     if (rc < 0) fail_msg("%s: %s", name, err.msg);
+}
+
+void tu_camera_box(const double bmin[3], const double bmax[3], int w, int h, rnd_camera *cam)
+{
+    memset(cam, 0, sizeof *cam);
+    cam->width = w;
+    cam->height = h;
+    cam->fov_deg = 45.0f;
+    double ctr[3], ext[3];
+    for (int i = 0; i < 3; i++) ctr[i] = 0.5 * (bmin[i] + bmax[i]), ext[i] = bmax[i] - bmin[i];
+    double r = 0.5 * sqrt(ext[0] * ext[0] + ext[1] * ext[1] + ext[2] * ext[2]);
+    if (!(r > 0)) r = 1.0;
+    int flat = ext[2] < 0.1 * fmax(ext[0], ext[1]);
+    int y_up = flat || (ext[1] > ext[0] && ext[1] > ext[2]);
+    double dir[3] = {0.55, 1, 0.45};
+    if (flat) dir[0] = 0, dir[1] = -0.35, dir[2] = 1;
+    else if (y_up) dir[0] = 0.55, dir[1] = 0.45, dir[2] = 1;
+    cam->up[1] = y_up ? 1 : 0;
+    cam->up[2] = y_up ? 0 : 1;
+    double l = sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
+    double fy = 45.0 * M_PI / 180, aspect = h > 0 ? (double)w / h : 1.0;
+    double fx = 2 * atan(tan(fy / 2) * aspect);
+    double dist = r / sin(0.5 * fmin(fx, fy)) * 1.02;
+    for (int i = 0; i < 3; i++) {
+        cam->target[i] = ctr[i];
+        cam->eye[i] = ctr[i] + dir[i] / l * dist;
+    }
 }

@@ -46,3 +46,10 @@ void tu_new_cloud(pc_prepared *pc, uint64_t n, uint64_t nb);
 /* tu_finish_cloud: batches of consecutive points of equal size (the last may be shorter) with
  * their bounds, the cloud's bounds in file coordinates, and its offset off. */
 void tu_finish_cloud(pc_prepared *pc, const double off[3]);
+
+/* tu_camera_box: the framing the rendering tests' expectations were computed with (fixed here
+ * so that a change of the default view does not move them): fov 45 at w x h, looking at the
+ * box's centre from the direction (0.55, 1, 0.45) with up +z (or, for a box flat in z, from
+ * (0, -0.35, 1) with up +y; for a box tallest in y, from (0.55, 0.45, 1) with up +y), at the
+ * distance where the box's bounding sphere fits with 2 % to spare. */
+void tu_camera_box(const double bmin[3], const double bmax[3], int w, int h, rnd_camera *cam);

@@ -90,7 +90,10 @@ def clouds():
 def info():
     return (s8("bun000.ply") + struct.pack("<QQ", 40256, 0)
             + struct.pack("<9d", -0.09, 0.03, -0.06, 0.06, 0.18, 0.06, -0.015, 0.105, 0.0)
-            + struct.pack("<IfI", 3, 0.0005, 16) + s8("PLY binary_little_endian 1.0"))
+            + struct.pack("<IfI", 3, 0.0005, 16) + s8("PLY binary_little_endian 1.0")
+            + struct.pack("<12d", 0, 1, 0, -0.17, -0.5, -0.85,  # view: up, dir
+                          -0.09, 0.03, -0.06, 0.06, 0.18, 0.06)  # and the box it frames
+            + struct.pack("<B6d", 2, -0.09, 0.03, 0.0, 0.06, 0.18, 0.05))  # two hull points
 
 
 def frame(fmt, w, h, data):
