@@ -391,6 +391,33 @@ static void test_malformed(void **state)
     raw_expect_error(&r, PROTO_E_UNKNOWN_TYPE, 0);
     raw_close(&r);
 
+    /* BYE carries no payload: one trailing byte is MALFORMED (answered, then closed), not a
+     * goodbye that skips the check every other empty message gets. */
+    assert_int_equal(raw_connect(&r, t->d.port), 0);
+    raw_hello(&r);
+    {
+        uint8_t one = 0;
+        uint32_t s = raw_send_hdr(&r, PROTO_MAGIC, 1, PROTO_MSG_BYE, 1, &one, 1);
+        raw_expect_error(&r, PROTO_E_MALFORMED, s);
+        raw_expect_closed(&r);
+    }
+    raw_close(&r);
+
+    /* A second HELLO after the handshake is a protocol error (the connection has had its one
+     * handshake), answered with ERROR UNKNOWN_TYPE and a close, never another WELCOME. */
+    assert_int_equal(raw_connect(&r, t->d.port), 0);
+    raw_hello(&r);
+    {
+        proto_buf b = {0};
+        proto_hello h = {.min_version = 1, .max_version = 1};
+        uint32_t s = ++r.seq;
+        assert_int_equal(proto_enc_hello(&b, s, &h), 0);
+        raw_send_buf(&r, &b);
+        raw_expect_error(&r, PROTO_E_UNKNOWN_TYPE, s);
+        raw_expect_closed(&r);
+    }
+    raw_close(&r);
+
     /* wrong version after negotiating version 1 */
     assert_int_equal(raw_connect(&r, t->d.port), 0);
     raw_hello(&r);
@@ -1618,5 +1645,7 @@ int main(void)
         cmocka_unit_test(test_kill_mid_frame),
         cmocka_unit_test(test_sigterm),
     };
+    const char *only = getenv("SPLATD_TEST_FILTER"); /* e.g. "test_stream*" */
+    if (only && *only) cmocka_set_test_filter(only);
     return cmocka_run_group_tests(tests, group_setup, group_teardown);
 }

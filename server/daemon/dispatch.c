@@ -322,7 +322,13 @@ static void on_hello(srv *sv, sess *s, const proto_msg *m)
     proto_error pe = {0};
     int rc = proto_parse_hello(m->payload, m->len, &h, &pe);
     if (rc < 0) { send_error(sv, s, m->h.seq, -rc, pe.msg); return; }
-    if (s->authed) { send_welcome(sv, s, m->h.seq); return; } /* harmless repeat */
+    if (s->authed) {
+        /* A connection has one handshake (PROTOCOL.md 4): a client sending HELLO again has lost
+         * track of the connection's state, and another WELCOME would hide that. */
+        send_error(sv, s, m->h.seq, PROTO_E_UNKNOWN_TYPE,
+                   "HELLO after the handshake: a connection has one handshake");
+        return;
+    }
     int v = proto_pick_version(h.min_version, h.max_version, &pe);
     if (v < 0) { send_error(sv, s, m->h.seq, -v, pe.msg); return; }
     srv_clean_text(h.client, s->client_name, sizeof s->client_name); /* for the log */
@@ -576,10 +582,14 @@ void srv_handle(void *owner, sess *s, const proto_msg *m)
     case PROTO_MSG_STREAM: on_stream(sv, s, m); break;
     case PROTO_MSG_PREFETCH: on_prefetch(sv, s, m); break;
     case PROTO_MSG_PING: on_ping(sv, s, m); break;
-    case PROTO_MSG_BYE:
+    case PROTO_MSG_BYE: {
+        proto_error pe;
+        int prc = proto_parse_empty(m->h.type, m->len, &pe);
+        if (prc < 0) { send_error(sv, s, m->h.seq, -prc, pe.msg); break; }
         s->close_after = 1;
         snprintf(s->close_reason, sizeof s->close_reason, "BYE");
         break;
+    }
     default:
         send_error(sv, s, m->h.seq, PROTO_E_UNKNOWN_TYPE, "unexpected message type");
         break;
