@@ -18,6 +18,7 @@
 #include "datadir.h"
 #include "ev.h"
 #include "net.h"
+#include "srv.h"
 #include "common/testutil.h"
 
 typedef struct dd_fixture {
@@ -435,6 +436,19 @@ static void test_hostport(void **state)
     assert_false(net_host_is_loopback("128.0.0.1"));
 }
 
+/* --max-per-addr's default at each edge of its rule: half of --max-clients, at least 1, at
+ * most 32. */
+static void test_per_addr_default(void **state)
+{
+    (void)state;
+    static const int in[][2] = {{1, 1}, {2, 1}, {3, 1}, {4, 2}, {5, 2}, {16, 8}, {63, 31},
+                                {64, 32}, {65, 32}, {66, 32}, {4096, 32}};
+    for (size_t i = 0; i < sizeof in / sizeof in[0]; i++)
+        if (srv_per_addr_default(in[i][0]) != in[i][1])
+            fail_msg("--max-clients %d: --max-per-addr %d, expected %d", in[i][0],
+                     srv_per_addr_default(in[i][0]), in[i][1]);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -448,6 +462,7 @@ int main(void)
         cmocka_unit_test(test_theap_order),
         cmocka_unit_test(test_loop_timers),
         cmocka_unit_test(test_hostport),
+        cmocka_unit_test(test_per_addr_default),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -938,8 +938,11 @@ static void test_max_clients(void **state)
 {
     e2e *t = *state;
     daemon_proc *d = &t->aux;
+    /* Every client here comes from 127.0.0.1: --max-per-addr (by default half of
+     * --max-clients) is raised so that --max-clients is the limit reached. */
     assert_int_equal(daemon_start(t, d, NULL, "--listen", "127.0.0.1:0", "--data", t->data,
-                                  "--cache", t->cache, "--max-clients", "2", (char *)NULL), 0);
+                                  "--cache", t->cache, "--max-clients", "2", "--max-per-addr",
+                                  "4", (char *)NULL), 0);
     raw a, b, c;
     assert_int_equal(raw_connect(&a, d->port), 0);
     raw_hello(&a);
