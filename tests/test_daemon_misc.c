@@ -449,6 +449,28 @@ static void test_per_addr_default(void **state)
                      srv_per_addr_default(in[i][0]), in[i][1]);
 }
 
+/* srv_pack_frame (the encoder thread's packing of a FRAME): image data one byte over the
+ * protocol's limit is refused as SD_ELIMIT before anything is allocated or read; below it the
+ * message is the header, the 48 fixed bytes and the data. */
+static void test_pack_frame_limit(void **state)
+{
+    (void)state;
+    rt_frame_meta m = {.width = 2, .height = 1, .format = SP_FMT_RAW};
+    uint8_t data[8] = {1, 2, 3, 4, 5, 6, 7, 8}, *msg = NULL;
+    size_t len = 0;
+    assert_int_equal(srv_pack_frame(NULL, &m, data, (size_t)PROTO_MAX_FRAME - PROTO_FRAME_FIXED + 1,
+                                    &msg, &len), SD_ELIMIT);
+    assert_null(msg);
+    assert_int_equal(srv_pack_frame(NULL, &m, data, sizeof data, &msg, &len), 0);
+    assert_int_equal(len, PROTO_FRAME_HEAD_LEN + sizeof data);
+    proto_header h;
+    proto_get_header(msg, &h);
+    assert_int_equal(h.type, PROTO_MSG_FRAME);
+    assert_int_equal(h.len, PROTO_FRAME_FIXED + sizeof data);
+    assert_memory_equal(msg + PROTO_FRAME_HEAD_LEN, data, sizeof data);
+    free(msg);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -463,6 +485,7 @@ int main(void)
         cmocka_unit_test(test_loop_timers),
         cmocka_unit_test(test_hostport),
         cmocka_unit_test(test_per_addr_default),
+        cmocka_unit_test(test_pack_frame_limit),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
