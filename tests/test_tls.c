@@ -2,7 +2,10 @@
  * trip with a self-signed certificate made here, with and without a token; the certificate
  * checks of the client (wrong CA, wrong name, the system store); a plaintext client on a TLS
  * listener and a TLS client on a plaintext one, each told what is wrong while the daemon keeps
- * serving; TLS required beyond loopback. The daemon runs as a child (daemonproc). */
+ * serving; TLS required beyond loopback; the protocol floor of both sides (TLS 1.0 and 1.1
+ * refused, 1.2 and 1.3 accepted, with OpenSSL's own security level out of the way); a flood of
+ * bare connections from 1000 addresses while TLS clients connect. The daemon runs as a child
+ * (daemonproc). */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -23,6 +26,9 @@
 #include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
+
+#include <openssl/err.h>
+#include <openssl/ssl.h>
 
 #include "common/daemonproc.h"
 #include "common/testutil.h"
@@ -409,6 +415,145 @@ static void test_tls_flood_keeps_handshakes(void **state)
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
+/* ---- the protocol floor ---- */
+
+/* tls_client_ctx: a client context speaking exactly TLS version v (TLS1_VERSION ...), at
+ * security level 0 so that OpenSSL itself does not refuse the old versions, verifying nothing
+ * (the peer's version is the question here). */
+static SSL_CTX *tls_client_ctx(int v)
+{
+    SSL_CTX *ctx = SSL_CTX_new(TLS_client_method());
+    assert_non_null(ctx);
+    SSL_CTX_set_security_level(ctx, 0);
+    SSL_CTX_set_cipher_list(ctx, "DEFAULT:@SECLEVEL=0");
+    SSL_CTX_set_min_proto_version(ctx, v);
+    SSL_CTX_set_max_proto_version(ctx, v);
+    SSL_CTX_set_verify(ctx, SSL_VERIFY_NONE, NULL);
+    return ctx;
+}
+
+/* tls_handshake: a TLS handshake over fd with ctx; the negotiated version, or -1 (the reason
+ * in why). The socket is closed. */
+static int tls_handshake(SSL_CTX *ctx, int fd, int server, char *why, size_t len)
+{
+    SSL *ssl = SSL_new(ctx);
+    SSL_set_fd(ssl, fd);
+    ERR_clear_error();
+    int rc = server ? SSL_accept(ssl) : SSL_connect(ssl);
+    int v = rc == 1 ? SSL_version(ssl) : -1;
+    snprintf(why, len, "%s", rc == 1 ? "" : ERR_reason_error_string(ERR_peek_last_error())
+                                                 ? ERR_reason_error_string(ERR_peek_last_error())
+                                                 : "closed");
+    if (rc == 1) SSL_shutdown(ssl);
+    SSL_free(ssl);
+    close(fd);
+    return v;
+}
+
+typedef struct control_srv {
+    SSL_CTX *ctx;
+    int fd, version;
+    char why[200];
+} control_srv;
+
+static void *control_main(void *p)
+{
+    control_srv *c = p;
+    c->version = tls_handshake(c->ctx, c->fd, 1, c->why, sizeof c->why);
+    return NULL;
+}
+
+/* The daemon's floor is TLS 1.2 (tls.c): clients speaking exactly TLS 1.0 or 1.1 are refused,
+ * 1.2 and 1.3 accepted. OpenSSL's own security level (1 by default) refuses 1.0 and 1.1 too,
+ * which would hide a missing floor: the daemon runs here with a configuration at security
+ * level 0 allowing TLS 1.0 (OPENSSL_CONF), so that only its own floor stands. A control server
+ * made here at level 0 without a floor shows that this OpenSSL can speak TLS 1.1 at all. */
+static void test_tls_version_floor(void **state)
+{
+    fx *f = *state;
+    /* The control: TLS 1.1 between two contexts of this process, no floor. */
+    int sv[2];
+    assert_int_equal(socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
+    control_srv cs = {.ctx = SSL_CTX_new(TLS_server_method()), .fd = sv[0]};
+    assert_non_null(cs.ctx);
+    SSL_CTX_set_security_level(cs.ctx, 0);
+    SSL_CTX_set_cipher_list(cs.ctx, "DEFAULT:@SECLEVEL=0");
+    SSL_CTX_set_min_proto_version(cs.ctx, TLS1_VERSION);
+    assert_int_equal(SSL_CTX_use_certificate_chain_file(cs.ctx, f->cert), 1);
+    assert_int_equal(SSL_CTX_use_PrivateKey_file(cs.ctx, f->key, SSL_FILETYPE_PEM), 1);
+    pthread_t th;
+    assert_int_equal(pthread_create(&th, NULL, control_main, &cs), 0);
+    SSL_CTX *c11 = tls_client_ctx(TLS1_1_VERSION);
+    char why[200];
+    int cv = tls_handshake(c11, sv[1], 0, why, sizeof why);
+    pthread_join(th, NULL);
+    SSL_CTX_free(cs.ctx);
+    SSL_CTX_free(c11);
+    if (cv != TLS1_1_VERSION) {
+        TU_SKIP("this OpenSSL cannot speak TLS 1.1 even at security level 0 (%s / %s): nothing "
+                "to refuse", why, cs.why);
+        return;
+    }
+    char conf[700];
+    snprintf(conf, sizeof conf, "%s/openssl-level0.cnf", f->root);
+    static const char text[] = "openssl_conf = openssl_init\n[openssl_init]\nssl_conf = ssl_sect\n"
+                               "[ssl_sect]\nsystem_default = system_default_sect\n"
+                               "[system_default_sect]\nCipherString = DEFAULT@SECLEVEL=0\n"
+                               "MinProtocol = TLSv1\n";
+    assert_int_equal(tu_write_file(conf, text, sizeof text - 1), 0);
+    setenv("OPENSSL_CONF", conf, 1);
+    start_tls(f, 0);
+    unsetenv("OPENSSL_CONF");
+    static const struct { int v; const char *name; int ok; } vers[] = {
+        {TLS1_VERSION, "TLS 1.0", 0}, {TLS1_1_VERSION, "TLS 1.1", 0},
+        {TLS1_2_VERSION, "TLS 1.2", 1}, {TLS1_3_VERSION, "TLS 1.3", 1}};
+    for (size_t i = 0; i < sizeof vers / sizeof vers[0]; i++) {
+        SSL_CTX *ctx = tls_client_ctx(vers[i].v);
+        int fd = tu_connect_from(0x7f000001u, f->d.port, 0);
+        assert_true(fd >= 0);
+        int got = tls_handshake(ctx, fd, 0, why, sizeof why);
+        SSL_CTX_free(ctx);
+        printf("a %s client: %s%s\n", vers[i].name, got == vers[i].v ? "accepted" : "refused: ",
+               got == vers[i].v ? "" : why);
+        if ((got == vers[i].v) != vers[i].ok)
+            fail_msg("a %s client was %s", vers[i].name, vers[i].ok ? "refused" : "accepted");
+    }
+    assert_int_equal(tu_daemon_stop(&f->d), 0);
+
+    /* The client's floor (spc_tls.c): `splat`, under the same level-0 configuration, refuses a
+     * server that speaks TLS 1.1 at most. */
+    int lfd = socket(AF_INET, SOCK_STREAM, 0);
+    struct sockaddr_in a = {.sin_family = AF_INET};
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t al = sizeof a;
+    assert_int_equal(bind(lfd, (struct sockaddr *)&a, sizeof a), 0);
+    assert_int_equal(listen(lfd, 1), 0);
+    assert_int_equal(getsockname(lfd, (struct sockaddr *)&a, &al), 0);
+    cs = (control_srv){.ctx = SSL_CTX_new(TLS_server_method())};
+    SSL_CTX_set_security_level(cs.ctx, 0);
+    SSL_CTX_set_cipher_list(cs.ctx, "DEFAULT:@SECLEVEL=0");
+    SSL_CTX_set_max_proto_version(cs.ctx, TLS1_1_VERSION);
+    assert_int_equal(SSL_CTX_use_certificate_chain_file(cs.ctx, f->cert), 1);
+    assert_int_equal(SSL_CTX_use_PrivateKey_file(cs.ctx, f->key, SSL_FILETYPE_PEM), 1);
+    char cmd[2400], out[4096];
+    snprintf(cmd, sizeof cmd, "OPENSSL_CONF='%s' '%s' --port %d --tls-ca '%s' list 2>&1", conf,
+             tu_splat_bin(), ntohs(a.sin_port), f->cert);
+    FILE *p = popen(cmd, "r");
+    assert_non_null(p);
+    cs.fd = accept(lfd, NULL, NULL);
+    assert_true(cs.fd >= 0);
+    control_main(&cs);
+    size_t n = fread(out, 1, sizeof out - 1, p);
+    out[n] = 0;
+    int st = pclose(p);
+    close(lfd);
+    SSL_CTX_free(cs.ctx);
+    printf("splat against a TLS 1.1 server (%s): %s", cs.version < 0 ? "refused" : "accepted", out);
+    assert_int_equal(cs.version, -1);
+    if (st == 0 || !strstr(out, "TLS handshake with the server failed"))
+        fail_msg("splat against a TLS 1.1 server: %s", out);
+}
+
 /* Beyond loopback TLS is required; the key must be private; cert and key go together. */
 static void test_tls_required(void **state)
 {
@@ -452,6 +597,7 @@ int main(void)
         cmocka_unit_test_setup_teardown(test_tls_required, setup, teardown),
         cmocka_unit_test_setup_teardown(test_tls_handshake_deadline, setup, teardown),
         cmocka_unit_test_setup_teardown(test_tls_flood_keeps_handshakes, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_tls_version_floor, setup, teardown),
     };
     const char *only = getenv("SPLATD_TEST_FILTER"); /* e.g. "test_tls_flood*" */
     if (only && *only) cmocka_set_test_filter(only);
