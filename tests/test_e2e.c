@@ -3,7 +3,9 @@
  * JPEG frames, authentication (and forged proofs, wrong in each byte in turn), isolation of a
  * client that stops reading, latest-wins streaming to a client whose socket is full, pipelined
  * RENDERs answered in order, the output limit of a client that does not read, 20 concurrent
- * clients with a memory check, a client killed mid-frame, and SIGTERM.
+ * clients with a memory check, a client killed mid-frame, and SIGTERM; a stream that goes on
+ * after dropped frames with the render thread's count back to zero; BYE with a payload and a
+ * second HELLO refused.
  *
  * The data directory is a temporary directory holding a copy of tests/data/Guanyin.ply and a
  * symlink that points outside it. Frames are small (160x120, `points` pipeline, ~15 ms each on
@@ -1368,6 +1370,82 @@ static void test_stream_slow_reader(void **state)
     raw_close(&r);
 }
 
+/* A stream goes on after dropped frames, however often (issue 27): three times, the client
+ * stops reading behind a filler frame larger than the socket holds, a large camera starts
+ * rendering and a small one follows, so that the large frame, waiting in the session's
+ * one-frame slot, is replaced by the small one (a drop); then the client reads again and the
+ * small camera's frame must come. Each replaced frame must be given back to the render
+ * thread, which allows RT_MAX_OUTSTANDING (2) frames in flight per client: one never released
+ * stays counted for good (two stop the stream). At the end, with nothing in flight, the
+ * daemon's close line must say 0 pending: the outstanding count is back to zero. (No test kept
+ * streaming after a drop before, and a replaced frame never released passed them all.) */
+static void test_stream_after_drops(void **state)
+{
+    e2e *t = *state;
+    raw r;
+    raw_connect_small(&r, t->d.port);
+    raw_hello(&r);
+    proto_welcome w;
+    assert_int_equal(proto_parse_welcome(r.pl, r.h.len, &w, NULL), 0);
+    raw_open(&r, "Guanyin");
+    assert_int_equal(raw_recv_skip(&r), PROTO_MSG_INFO);
+    const char *kv[] = {"pipeline=points", "format=raw"};
+    raw_params(&r, kv, 2);
+    assert_int_equal(raw_recv(&r), PROTO_MSG_OK);
+    long need = tcp_wmem_max() + (1L << 20);
+    int fw = 2048, fh = (int)(need / (fw * 4L)) + 1;
+    if ((uint32_t)fw > w.max_width || (uint32_t)fh > w.max_height)
+        TU_SKIP("a %dx%d filler frame (tcp_wmem max %ld) is over the daemon's maximum %ux%u",
+                fw, fh, tcp_wmem_max(), w.max_width, w.max_height);
+    /* A small camera first, so the stream starts with its frame rather than the default
+     * camera's. */
+    uint32_t small = raw_camera(&r, 64, 64, 0.5);
+    proto_buf b = {0};
+    assert_int_equal(proto_enc_stream(&b, ++r.seq, &(proto_stream){.on = 1, .max_fps = 0}), 0);
+    raw_send_buf(&r, &b);
+    assert_int_equal(raw_recv(&r), PROTO_MSG_OK);
+    enum { ROUNDS = 3, KEEP = 16 };
+    uint32_t cams[KEEP];
+    assert_true(drain_stream(&r, small, cams, KEEP, 20.0) >= 1);
+    for (int round = 0; round < ROUNDS; round++) {
+        uint32_t filler = raw_camera(&r, fw, fh, 0.01 * round);
+        if (!readable(&r, 20000)) fail_msg("round %d: the filler frame did not come", round);
+        raw_camera(&r, fw, fh, 0.1 + 0.01 * round); /* renders while the filler is written */
+        usleep(3000);
+        uint32_t last = raw_camera(&r, 64, 64, 0.2 + 0.01 * round);
+        usleep(250000); /* not reading: the large frame waits in the slot, the small replaces it */
+        int n = drain_stream(&r, last, cams, KEEP, 20.0);
+        print_message("after drops, round %d: %d frames, the first answering camera %u (filler "
+                      "%u), the last %u (last camera %u)\n", round, n, n ? cams[0] : 0, filler,
+                      n ? cams[n < KEEP ? n - 1 : KEEP - 1] : 0, last);
+        if (n < 1 || cams[(n < KEEP ? n : KEEP) - 1] != last)
+            fail_msg("round %d: the stream stopped: the last camera's frame never came", round);
+    }
+    /* Nothing in flight now: BYE, and the close line counts the drops and 0 pending. */
+    raw_simple(&r, PROTO_MSG_BYE);
+    raw_expect_closed(&r);
+    raw_close(&r);
+    char needle[96];
+    unsigned long sent = 0, dropped = 0, pending = 99;
+    for (int i = 0; i < 100 && pending == 99; i++) {
+        size_t len;
+        char *log = (char *)tu_read_file(t->d.log, &len);
+        assert_non_null(log);
+        /* the last "closed: BYE" line of the log is this client's */
+        for (char *l = strtok(log, "\n"); l; l = strtok(NULL, "\n")) {
+            const char *c = strstr(l, "closed: BYE (");
+            if (c) sscanf(c, "closed: BYE (%lu frames sent, %lu dropped, %lu pending", &sent,
+                          &dropped, &pending);
+        }
+        free(log);
+        if (pending == 99) usleep(20000);
+    }
+    snprintf(needle, sizeof needle, "%lu sent, %lu dropped, %lu pending", sent, dropped, pending);
+    print_message("after drops: closed with %s\n", needle);
+    assert_int_equal(pending, 0);
+    assert_true(dropped >= 1); /* frames were replaced (one a round, as a rule) */
+}
+
 /* ---- pipelined RENDERs are answered in order, each with the camera it was sent after ---- */
 
 /* Eight CAMERA + RENDER pairs in one write (camera i is 40 + i pixels wide): the FRAMEs come back
@@ -1642,6 +1720,7 @@ int main(void)
         cmocka_unit_test(test_isolation),
         cmocka_unit_test(test_stream),
         cmocka_unit_test(test_stream_slow_reader),
+        cmocka_unit_test(test_stream_after_drops),
         cmocka_unit_test(test_pipelined_renders),
         cmocka_unit_test_teardown(test_output_limit, stop_aux),
         cmocka_unit_test(test_load),

@@ -329,9 +329,12 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
 static void on_sess_close(void *owner, sess *s, const char *reason)
 {
     srv *sv = owner;
-    srv_log(sv, s, "closed: %s (%llu frames sent, %llu dropped, %llu bytes, %.1f s)", reason,
-            (unsigned long long)s->frames_sent, (unsigned long long)s->frames_dropped,
-            (unsigned long long)s->bytes_out, (double)(ev_now_ms() - s->t_connect_ms) / 1000.0);
+    /* pending: its requests and frames the render thread still counts (rt_pending); a client
+     * that closes with nothing in flight has 0, so the line shows a frame never given back. */
+    srv_log(sv, s, "closed: %s (%llu frames sent, %llu dropped, %d pending, %llu bytes, %.1f s)",
+            reason, (unsigned long long)s->frames_sent, (unsigned long long)s->frames_dropped,
+            sv->rt ? rt_pending(sv->rt, s->id) : 0, (unsigned long long)s->bytes_out,
+            (double)(ev_now_ms() - s->t_connect_ms) / 1000.0);
     if (sv->rt) rt_client_close(sv->rt, s->id);
     s->next_dead = sv->dead;
     sv->dead = s;
