@@ -1309,27 +1309,40 @@ static void check_round(const char *what, const uint32_t *cams, int n, uint32_t 
  * Round 2 (bounded): with the socket full again, 60 cameras arrive over ~250 ms while the client
  * still does not read: the daemon renders at most the frames already under way plus the last
  * camera once the client reads (a queue of streamed frames would give one frame per camera). */
+/* slow_reader: a client with a small receive buffer, Guanyin open, raw frames of `points`;
+ * *fw x *fh is a filler frame: more bytes than the daemon's send buffer and the client's
+ * receive buffer can hold. Returns 0, or -1 when that size is over the daemon's maximum (the
+ * test is skipped). */
+static int slow_reader(e2e *t, raw *r, int *fw, int *fh)
+{
+    raw_connect_small(r, t->d.port);
+    raw_hello(r);
+    proto_welcome w;
+    assert_int_equal(proto_parse_welcome(r->pl, r->h.len, &w, NULL), 0);
+    raw_open(r, "Guanyin");
+    assert_int_equal(raw_recv_skip(r), PROTO_MSG_INFO);
+    const char *kv[] = {"pipeline=points", "format=raw"};
+    uint32_t s = raw_params(r, kv, 2);
+    assert_int_equal(raw_recv(r), PROTO_MSG_OK);
+    assert_int_equal(r->h.seq, s);
+    long need = tcp_wmem_max() + (1L << 20);
+    *fw = 2048;
+    *fh = (int)(need / (*fw * 4L)) + 1;
+    if ((uint32_t)*fw > w.max_width || (uint32_t)*fh > w.max_height) {
+        TU_SKIP("a %dx%d filler frame (tcp_wmem max %ld) is over the daemon's maximum %ux%u",
+                *fw, *fh, tcp_wmem_max(), w.max_width, w.max_height);
+        return -1;
+    }
+    return 0;
+}
+
 static void test_stream_slow_reader(void **state)
 {
     e2e *t = *state;
     raw r;
-    raw_connect_small(&r, t->d.port);
-    raw_hello(&r);
-    proto_welcome w;
-    assert_int_equal(proto_parse_welcome(r.pl, r.h.len, &w, NULL), 0);
-    uint32_t s = raw_open(&r, "Guanyin");
-    assert_int_equal(raw_recv_skip(&r), PROTO_MSG_INFO);
-    const char *kv[] = {"pipeline=points", "format=raw"};
-    s = raw_params(&r, kv, 2);
-    assert_int_equal(raw_recv(&r), PROTO_MSG_OK);
-    assert_int_equal(r.h.seq, s);
-
-    /* The filler: more bytes than the daemon's send buffer and our receive buffer can hold. */
-    long need = tcp_wmem_max() + (1L << 20);
-    int fw = 2048, fh = (int)(need / (fw * 4L)) + 1;
-    if ((uint32_t)fw > w.max_width || (uint32_t)fh > w.max_height)
-        TU_SKIP("a %dx%d filler frame (tcp_wmem max %ld) is over the daemon's maximum %ux%u",
-                fw, fh, tcp_wmem_max(), w.max_width, w.max_height);
+    int fw, fh;
+    if (slow_reader(t, &r, &fw, &fh) != 0) return;
+    uint32_t s;
     enum { BURST = 200, SPREAD = 60, MOST = 4, KEEP = 64 };
     uint32_t cams[KEEP];
 
@@ -1383,20 +1396,8 @@ static void test_stream_after_drops(void **state)
 {
     e2e *t = *state;
     raw r;
-    raw_connect_small(&r, t->d.port);
-    raw_hello(&r);
-    proto_welcome w;
-    assert_int_equal(proto_parse_welcome(r.pl, r.h.len, &w, NULL), 0);
-    raw_open(&r, "Guanyin");
-    assert_int_equal(raw_recv_skip(&r), PROTO_MSG_INFO);
-    const char *kv[] = {"pipeline=points", "format=raw"};
-    raw_params(&r, kv, 2);
-    assert_int_equal(raw_recv(&r), PROTO_MSG_OK);
-    long need = tcp_wmem_max() + (1L << 20);
-    int fw = 2048, fh = (int)(need / (fw * 4L)) + 1;
-    if ((uint32_t)fw > w.max_width || (uint32_t)fh > w.max_height)
-        TU_SKIP("a %dx%d filler frame (tcp_wmem max %ld) is over the daemon's maximum %ux%u",
-                fw, fh, tcp_wmem_max(), w.max_width, w.max_height);
+    int fw, fh;
+    if (slow_reader(t, &r, &fw, &fh) != 0) return;
     /* A small camera first, so the stream starts with its frame rather than the default
      * camera's. */
     uint32_t small = raw_camera(&r, 64, 64, 0.5);
