@@ -829,8 +829,8 @@ static double cam_distance(const char *cam)
                 (e[2] - t[2]) * (e[2] - t[2]));
 }
 
-/* page_token: waits for the page's token box, types the token and submits it. */
-static void page_token(tu_wd *wdp)
+/* page_token_text: waits for the page's token box, types text into it and submits it. */
+static void page_token_text(tu_wd *wdp, const char *text)
 {
     char js[200], tid[160], v[64], path[400];
     for (int i = 0; i < 300; i++) {
@@ -841,12 +841,26 @@ static void page_token(tu_wd *wdp)
     }
     assert_string_equal(v, "yes");
     assert_int_equal(tu_wd_element(wdp, "#token", tid, sizeof tid), 0);
-    snprintf(js, sizeof js, "{\"text\":\"%s\"}", token);
+    snprintf(path, sizeof path, "element/%s/clear", tid);
+    assert_int_equal(tu_wd_post(wdp, path, "{}"), 0);
+    snprintf(js, sizeof js, "{\"text\":\"%s\"}", text);
     snprintf(path, sizeof path, "element/%s/value", tid);
     assert_int_equal(tu_wd_post(wdp, path, js), 0);
     assert_int_equal(tu_wd_element(wdp, "#token-go", tid, sizeof tid), 0);
     snprintf(path, sizeof path, "element/%s/click", tid);
     assert_int_equal(tu_wd_post(wdp, path, "{}"), 0);
+}
+
+/* page_token: page_token_text with the daemon's token. */
+static void page_token(tu_wd *wdp)
+{
+    page_token_text(wdp, token);
+}
+
+static int says_wrong_token(const char *v, long n)
+{
+    (void)n;
+    return strstr(v, "wrong token (wrong authentication proof): enter the right one") != NULL;
 }
 
 /* The page over https from a non-loopback address (where a browser offers WebCrypto only to
@@ -917,11 +931,18 @@ static void test_chromium_page(void **state)
     char url[256], id[160], tid[160], v[4096];
     snprintf(url, sizeof url, "http://127.0.0.1:%d/?cloud=bun&size=320x240", f->http_port);
     assert_int_equal(tu_wd_go(wdp, url), 0);
-    /* The server has a token: the page asks for it and answers the challenge with WebCrypto. */
+    /* The server has a token: the page asks for it and answers the challenge with WebCrypto. A
+     * wrong one first: the page says the token was wrong (the server's reason) and asks again,
+     * rather than only that it was disconnected. */
     char path[400];
+    page_token_text(wdp, "not the token");
+    wait_page(wdp, "status", says_wrong_token, 0, "that the token was wrong");
     page_token(wdp);
     wait_page(wdp, "nframes", at_least, 1, "a first frame");
     wait_page(wdp, "idle", is_one, 0, "rest after the first frame");
+    /* No input yet: no latency on the heads-up line (there is nothing it would measure). */
+    page_text(wdp, "hudline", v, sizeof v);
+    if (strstr(v, "latency")) fail_msg("a latency before any input: '%s'", v);
 
     /* Key 1: the points pipeline, as in splat view; the frame says which pipeline drew it. */
     assert_int_equal(tu_wd_element(wdp, "#canvas", id, sizeof id), 0);
@@ -936,6 +957,9 @@ static void test_chromium_page(void **state)
     wait_page(wdp, "idle", is_one, 0, "rest after the key");
     page_text(wdp, "hudline", v, sizeof v);
     if (!strstr(v, " points ")) fail_msg("the key did not switch to points: '%s'", v);
+    /* The key was an input: its frame gives the latency (key to frame drawn). */
+    const char *lat = strstr(v, "latency ");
+    if (!lat || atof(lat + 8) <= 0 || atof(lat + 8) > 5000) fail_msg("no latency after the key: '%s'", v);
 
     /* Touch: one finger orbits (a frame follows); two fingers spreading apart zoom in. */
     char cam0[1024], cam1[1024];
