@@ -471,6 +471,27 @@ static void test_pack_frame_limit(void **state)
     free(msg);
 }
 
+/* A session's queued output (SESS_OUT_MAX) at exactly its limit and one byte past it: answers
+ * totalling SESS_OUT_MAX are queued, one more byte is SD_ELIMIT (the daemon then drops the
+ * client that does not read). */
+static void test_output_bound(void **state)
+{
+    (void)state;
+    sess *s = sess_new(1, -1, "127.0.0.1:1", NULL, NULL, NULL);
+    assert_non_null(s);
+    size_t chunk = SESS_OUT_MAX / 4;
+    for (int i = 0; i < 4; i++) {
+        proto_buf b = {.data = calloc(1, chunk), .len = chunk, .cap = chunk};
+        assert_non_null(b.data);
+        assert_int_equal(sess_push(s, &b), 0);
+    }
+    assert_int_equal(s->out_bytes, SESS_OUT_MAX);
+    proto_buf one = {.data = calloc(1, 1), .len = 1, .cap = 1};
+    assert_int_equal(sess_push(s, &one), SD_ELIMIT);
+    assert_int_equal(s->out_bytes, SESS_OUT_MAX);
+    sess_free(s, NULL, NULL);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -486,6 +507,7 @@ int main(void)
         cmocka_unit_test(test_hostport),
         cmocka_unit_test(test_per_addr_default),
         cmocka_unit_test(test_pack_frame_limit),
+        cmocka_unit_test(test_output_bound),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

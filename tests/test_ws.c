@@ -255,6 +255,44 @@ static void test_close_frames(void **st)
     }
 }
 
+/* Control frames at their limits: a PING of exactly 125 bytes is one (126 is refused:
+ * test_malformed), a close reason of exactly WS_REASON_MAX (123) bytes is kept whole and one
+ * byte more is cut to it, and such a close frame (125 bytes of payload) decodes. */
+static void test_control_bounds(void **st)
+{
+    (void)st;
+    uint8_t m[WS_MAX_HEADER + WS_CONTROL_MAX], pay[WS_CONTROL_MAX], out[8];
+    for (size_t i = 0; i < sizeof pay; i++) pay[i] = (uint8_t)(i * 7 + 1);
+    size_t h = ws_frame_header(m, 1, WS_OP_PING, WS_CONTROL_MAX, rfc_mask);
+    memcpy(m + h, pay, sizeof pay);
+    ws_mask(m + h, sizeof pay, rfc_mask, 0);
+    ws_decoder d = {.require_mask = 1};
+    ws_event ev;
+    size_t used, prod;
+    assert_int_equal(ws_decode(&d, m, h + sizeof pay, &used, out, sizeof out, &prod, &ev),
+                     WS_EV_PING);
+    assert_int_equal(ev.len, WS_CONTROL_MAX);
+    assert_memory_equal(ev.payload, pay, WS_CONTROL_MAX);
+    char reason[WS_REASON_MAX + 2];
+    uint8_t f[4 + WS_REASON_MAX];
+    for (int extra = 0; extra < 2; extra++) {
+        memset(reason, 'r', sizeof reason);
+        reason[WS_REASON_MAX + extra] = 0;
+        assert_int_equal(ws_close_frame(f, 1000, reason), 4 + WS_REASON_MAX);
+        assert_int_equal(f[1], 2 + WS_REASON_MAX);
+        assert_memory_equal(f + 4, reason, WS_REASON_MAX);
+    }
+    h = ws_frame_header(m, 1, WS_OP_CLOSE, 2 + WS_REASON_MAX, rfc_mask);
+    memcpy(m + h, f + 2, 2 + WS_REASON_MAX);
+    ws_mask(m + h, 2 + WS_REASON_MAX, rfc_mask, 0);
+    memset(&d, 0, sizeof d);
+    d.require_mask = 1;
+    assert_int_equal(ws_decode(&d, m, h + 2 + WS_REASON_MAX, &used, out, sizeof out, &prod, &ev),
+                     WS_EV_CLOSE);
+    assert_int_equal(ev.code, 1000);
+    assert_int_equal(ev.len, WS_REASON_MAX);
+}
+
 /* expect_error: hdr (a frame's first bytes) must fail with code, the message naming what. */
 static void expect_error(const uint8_t *in, size_t n, uint16_t code, const char *words,
                          uint64_t max_message)
@@ -527,6 +565,7 @@ int main(void)
         cmocka_unit_test(test_lengths),
         cmocka_unit_test(test_fragments_and_control_between),
         cmocka_unit_test(test_close_frames),
+        cmocka_unit_test(test_control_bounds),
         cmocka_unit_test(test_malformed),
         cmocka_unit_test(test_random_input),
         cmocka_unit_test(test_http_parse),
