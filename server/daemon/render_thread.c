@@ -234,24 +234,33 @@ static int render_once(rt_ctx *rt, rnd_ctx *rnd, const rt_request *rq, rnd_frame
 static int prov_resolve(const rt_ctx *rt, rt_request *rq);
 
 /* trim: gives a large frame's memory back (RT_TRIM_PX): the pool's buffers, the renderer's
- * targets and the pipelines' scratch here (render thread, mu held, workers idle), the
- * encoder's in its own thread. last: the last request rendered, drawn again at 1x1 so that the
- * driver lets go of what the large frame had bound (rnd_release_targets). */
+ * targets and the pipelines' scratch here (render thread, workers idle), the encoder's in its
+ * own thread. last: the last request rendered, drawn again at 1x1 so that the driver lets go
+ * of what the large frame had bound (rnd_release_targets). Called with mu held; the work runs
+ * without it (only this thread touches the pool frames while none is busy). */
 static void trim(rt_ctx *rt, rnd_ctx *rnd, const rt_request *last)
 {
-    for (int i = 0; i < RT_NFRAMES; i++) rnd_frame_free(&rt->frames[i]);
-    rnd_release_targets(rnd);
-    if (last && !(rt->d.hooks && rt->d.hooks->render)) { /* a local renderer's state only */
-        rt_request one = *last;
+    rt_request one = {0};
+    int redraw = last && !(rt->d.hooks && rt->d.hooks->render); /* a local renderer's state */
+    if (redraw) {
+        one = *last;
         one.cam.width = one.cam.height = 1;
         one.refine = 0;
         prov_resolve(rt, &one);
+    }
+    rt->rendering = 1;
+    pthread_mutex_unlock(&rt->mu);
+    for (int i = 0; i < RT_NFRAMES; i++) rnd_frame_free(&rt->frames[i]);
+    rnd_release_targets(rnd);
+    if (redraw) {
         rnd_frame f = {0};
         sd_err err = {0};
         render_once(rt, rnd, &one, &f, &err); /* a cloud gone since: nothing to let go */
         rnd_frame_free(&f);
     }
     malloc_trim(0);
+    pthread_mutex_lock(&rt->mu);
+    rt->rendering = 0;
     rt->enc_trim = 1;
     pthread_cond_signal(&rt->cv_enc);
 }
