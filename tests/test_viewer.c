@@ -221,93 +221,6 @@ static void skip_without_x(void)
                 "(deploy/deps.sh installs the package xvfb)");
 }
 
-/* An orbit, a pipeline change (key 1: points), keys for things this server may lack, E
- * (shading=edl) and a save: the saved PNG equals `splat render` of the final camera with
- * pipeline=points and shading=edl. */
-static void test_view_save_matches_render(void **state)
-{
-    skip_without_x();
-    fx *f = *state;
-    start_daemon(f);
-    char png[800], ref[800], script[2400];
-    snprintf(png, sizeof png, "%s/view.png", f->root);
-    snprintf(ref, sizeof ref, "%s/ref.png", f->root);
-    snprintf(script, sizeof script,
-             "# orbit a little, switch to points, press keys that may be unavailable\n"
-             "wait 200\n"
-             "drag 40 0\n"
-             "wait 50\n"
-             "drag 30 -20   # and up\n"
-             "wheel 2\n"
-             "wait 300\n"
-             "key 1\n"
-             "wait 300\n"
-             "key 9\n"
-             "wait 100\n"
-             "key U\n"
-             "wait 100\n"
-             "key J\n"
-             "wait 100\n"
-             "key E   # shading=edl\n"
-             "wait 300\n"
-             "save %s\n"
-             "quit\n", png);
-    char *out = run_view(f, script, "save");
-    /* The pipeline key reached the server: a frame rendered by `points` came back. */
-    if (!strstr(out, "pipeline=points")) fail_msg("no frame from pipeline points:\n%s", out);
-    if (!strstr(out, "pipeline=splat")) fail_msg("no frame before the key (splat):\n%s", out);
-    /* A digit past the server's pipelines is a status line, not an error. */
-    if (!strstr(out, "status no pipeline 9")) fail_msg("key 9 gave no status:\n%s", out);
-    const char *cam = strstr(out, "\ncamera --eye ");
-    if (!cam) fail_msg("no final camera in the output:\n%s", out);
-    double e[3], t[3], u[3], fov;
-    unsigned w, h;
-    assert_int_equal(sscanf(cam, "\ncamera --eye %lf,%lf,%lf --target %lf,%lf,%lf --up %lf,%lf,%lf "
-                            "--fov %lf --size %ux%u", &e[0], &e[1], &e[2], &t[0], &t[1], &t[2],
-                            &u[0], &u[1], &u[2], &fov, &w, &h), 12);
-    assert_int_equal(w, 320);
-    assert_int_equal(h, 240);
-
-    /* The same camera through `splat render`. */
-    char eye[200], target[200], up[200], fovs[40], size[40], port[16];
-    snprintf(eye, sizeof eye, "%.17g,%.17g,%.17g", e[0], e[1], e[2]);
-    snprintf(target, sizeof target, "%.17g,%.17g,%.17g", t[0], t[1], t[2]);
-    snprintf(up, sizeof up, "%.17g,%.17g,%.17g", u[0], u[1], u[2]);
-    snprintf(fovs, sizeof fovs, "%.9g", fov);
-    snprintf(size, sizeof size, "%ux%u", w, h);
-    snprintf(port, sizeof port, "%d", f->d.port);
-    char rout[800], rerr[800];
-    snprintf(rout, sizeof rout, "%s/render.out", f->root);
-    snprintf(rerr, sizeof rerr, "%s/render.err", f->root);
-    /* At rest the viewer asks for what `splat render` gets by default but for the pipeline
-     * and the shading (U then J leave lambda where it was, and lambda does not touch
-     * `points`): the E key must have reached the server too. */
-    const char *argv[] = {tu_splat_bin(), "--port", port, "render", "bun", "-o", ref, "--eye",
-                          eye, "--target", target, "--up", up, "--fov", fovs, "--size", size,
-                          "--set", "pipeline=points", "--set", "shading=edl", NULL};
-    int rc = run_cmd(argv, rout, rerr, 30);
-    if (rc != 0) {
-        char *m = slurp(rerr);
-        fail_msg("splat render exited %d: %s", rc, m);
-    }
-
-    uint32_t vw, vh, rw, rh;
-    uint8_t *a = read_png(png, &vw, &vh), *b = read_png(ref, &rw, &rh);
-    assert_int_equal(vw, 320);
-    assert_int_equal(vh, 240);
-    assert_int_equal(rw, vw);
-    assert_int_equal(rh, vh);
-    size_t n = (size_t)vw * vh, lit;
-    double psnr = tu_psnr_all(a, b, n, &lit);
-    printf("saved view: %zu of %zu pixels lit; PSNR against splat render %.2f dB (bound %.0f)\n",
-           lit, n, psnr, MIN_PSNR_DB);
-    if (lit < n / 50) fail_msg("the saved view is blank: %zu of %zu pixels lit", lit, n);
-    if (psnr < MIN_PSNR_DB) fail_msg("PSNR %.2f dB < %.0f dB", psnr, MIN_PSNR_DB);
-    free(a);
-    free(b);
-    free(out);
-}
-
 /* render_ref_png: `splat render` of bun at the camera line cam (the viewer's "camera --eye ..."
  * output) with the --set options sets (NULL-terminated), into path. */
 static void render_ref_png(fx *f, const char *cam, const char *const *sets, const char *path)
@@ -347,6 +260,74 @@ static double png_psnr(const char *a_path, const char *b_path)
     free(a);
     free(b);
     return p;
+}
+
+/* An orbit, a pipeline change (key 1: points), keys for things this server may lack, E
+ * (shading=edl) and a save: the saved PNG equals `splat render` of the final camera with
+ * pipeline=points and shading=edl. */
+static void test_view_save_matches_render(void **state)
+{
+    skip_without_x();
+    fx *f = *state;
+    start_daemon(f);
+    char png[800], ref[800], script[2400];
+    snprintf(png, sizeof png, "%s/view.png", f->root);
+    snprintf(ref, sizeof ref, "%s/ref.png", f->root);
+    snprintf(script, sizeof script,
+             "# orbit a little, switch to points, press keys that may be unavailable\n"
+             "wait 200\n"
+             "drag 40 0\n"
+             "wait 50\n"
+             "drag 30 -20   # and up\n"
+             "wheel 2\n"
+             "wait 300\n"
+             "key 1\n"
+             "wait 300\n"
+             "key 9\n"
+             "wait 100\n"
+             "key U\n"
+             "wait 100\n"
+             "key J\n"
+             "wait 100\n"
+             "key E   # shading=edl\n"
+             "wait 300\n"
+             "save %s\n"
+             "quit\n", png);
+    char *out = run_view(f, script, "save");
+    /* The pipeline key reached the server: a frame rendered by `points` came back. */
+    if (!strstr(out, "pipeline=points")) fail_msg("no frame from pipeline points:\n%s", out);
+    if (!strstr(out, "pipeline=splat")) fail_msg("no frame before the key (splat):\n%s", out);
+    /* A digit past the server's pipelines is a status line, not an error. */
+    if (!strstr(out, "status no pipeline 9")) fail_msg("key 9 gave no status:\n%s", out);
+    const char *cam = strstr(out, "\ncamera --eye ");
+    if (!cam) fail_msg("no final camera in the output:\n%s", out);
+    unsigned w, h;
+    const char *sz = strstr(cam, " --size ");
+    assert_non_null(sz);
+    assert_int_equal(sscanf(sz, " --size %ux%u", &w, &h), 2);
+    assert_int_equal(w, 320);
+    assert_int_equal(h, 240);
+    /* The same camera through `splat render`. At rest the viewer asks for what `splat render`
+     * gets by default but for the pipeline and the shading (U then J leave lambda where it
+     * was, and lambda does not touch `points`): the E key must have reached the server too. */
+    const char *sets[] = {"pipeline=points", "shading=edl", NULL};
+    render_ref_png(f, cam, sets, ref);
+
+    uint32_t vw, vh, rw, rh;
+    uint8_t *a = read_png(png, &vw, &vh), *b = read_png(ref, &rw, &rh);
+    assert_int_equal(vw, 320);
+    assert_int_equal(vh, 240);
+    assert_int_equal(rw, vw);
+    assert_int_equal(rh, vh);
+    size_t n = (size_t)vw * vh, lit;
+    double psnr = tu_psnr_all(a, b, n, &lit);
+    printf("saved view: %zu of %zu pixels lit; PSNR against splat render %.2f dB (bound %.0f)\n",
+           lit, n, psnr, MIN_PSNR_DB);
+    if (lit < n / 50) fail_msg("the saved view is blank: %zu of %zu pixels lit", lit, n);
+    if (psnr < MIN_PSNR_DB) fail_msg("PSNR %.2f dB < %.0f dB", psnr, MIN_PSNR_DB);
+    free(a);
+    free(b);
+    free(out);
 }
 
 /* `save` then at once a parameter key (issue 27 D8): the save is of the view as it was at
