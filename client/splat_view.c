@@ -185,7 +185,8 @@ static void orbit_zoom(orbit *o, double n)
 
 typedef struct save_req {
     char path[1024];
-    spc_camera cam;
+    spc_camera cam;              /* the view when `save` was asked for: its camera */
+    sp_params want;              /* and its parameters (a key right after must not change it) */
 } save_req;
 
 typedef struct shared {
@@ -200,7 +201,8 @@ typedef struct shared {
     int quit;
     spc_camera cam;              /* the camera to show */
     uint64_t cam_gen;            /* +1 per change */
-    double cam_t;                /* when the input that made it happened */
+    double cam_t;                /* when the input that made it happened; < 0: no input (the
+                                  * first camera, a reconnection, the full frame after a drag) */
     int cam_first;               /* send the camera before the parameters (a drag began) */
     sp_params want;              /* the parameters to show */
     uint64_t want_gen;
@@ -223,11 +225,13 @@ typedef struct shared {
     uint8_t unavail[SP_PARAM_COUNT];     /* the server refused the parameter */
     uint8_t pipe_unavail[SP_PIPE_COUNT]; /* the server refused the pipeline */
     int saves_done;
-    /* latency: cameras sent and the time of the input behind each */
+    /* latency: cameras sent and the time of the input behind each (< 0: none); a sample is the
+     * time from a camera input to the first frame drawn from that camera or a later one */
     struct { uint32_t seq; double t; } sent[64];
     int nsent;
     double lat[4096];
     int nlat;
+    double lat_last_ms;          /* the latest sample, for the title */
     uint32_t server_event;       /* SDL user event: a frame or a status arrived */
 } shared;
 
@@ -349,11 +353,13 @@ static void publish_frame(shared *s, const spc_frame *f)
     s->fpoints = f->points_drawn;
     s->ft = t;
     /* The input behind every camera up to this one is now visible: its latency is the time
-     * from that input to this frame. */
+     * from that input to this frame. Cameras no input made (the first one, a reconnection's,
+     * the full frame after a drag) have none; a frame that shows no new input has none. */
     double lat = -1;
     int k = 0;
     for (int j = 0; j < s->nsent; j++) {
         if (s->sent[j].seq <= f->camera_seq) {
+            if (s->sent[j].t < 0) continue;
             lat = (t - s->sent[j].t) * 1e3;
             if (s->nlat < (int)(sizeof s->lat / sizeof s->lat[0])) s->lat[s->nlat++] = lat;
         } else {
@@ -362,6 +368,7 @@ static void publish_frame(shared *s, const spc_frame *f)
     }
     s->nsent = k;
     s->flatency_ms = lat;
+    if (lat >= 0) s->lat_last_ms = lat;
     s->frame_gen++;
     pthread_mutex_unlock(&s->mu);
     push_event(s);
@@ -374,9 +381,7 @@ static int do_save(shared *s, spc_client *c, sp_params *applied, const save_req 
 {
     int rc = streaming ? spc_stream(c, 0, 0) : 0;
     if (rc < 0) return rc;
-    pthread_mutex_lock(&s->mu);
-    sp_params want = s->want;
-    pthread_mutex_unlock(&s->mu);
+    sp_params want = r->want; /* the view as it was when `save` was asked for */
     want.quality = REST_QUALITY;
     if ((rc = apply_params(s, c, applied, &want, "format=png")) < 0) return rc;
     uint32_t seq;
@@ -716,7 +721,8 @@ typedef struct view {
     long drag_frames, rest_frames, frames;
 } view;
 
-/* update_camera: sends the orbit camera at the size the state asks for. */
+/* update_camera: sends the orbit camera at the size the state asks for; t_input: when the
+ * input that moved it happened, < 0 when no input did (no latency is measured for it). */
 static void update_camera(view *v, double t_input)
 {
     if (!v->have_cam) return;
@@ -777,7 +783,7 @@ static void settle(view *v, double t)
         v->interacting = 0;
         v->drag_time += t - v->drag_since;
         set_quality(v);
-        update_camera(v, t);
+        update_camera(v, -1); /* the full frame of the view the drag's frames showed */
     }
 }
 
@@ -819,6 +825,7 @@ static void request_save(view *v, const char *path)
         save_req *r = &s->saves[s->nsaves++];
         snprintf(r->path, sizeof r->path, "%s", path);
         orbit_camera(&v->cam, v->ww, v->wh, &r->cam);
+        r->want = s->want;
         snprintf(s->status, sizeof s->status, "saving %s", path);
     }
     pthread_mutex_unlock(&s->mu);
@@ -930,11 +937,13 @@ static void update_title(view *v)
         snprintf(title, sizeof title, "splat view %s — %s", s->name,
                  s->status[0] ? s->status : "connecting");
     } else {
+        char lat[48] = "";
+        if (s->nlat) /* the last input's, kept until the next input's */
+            snprintf(lat, sizeof lat, " | latency %.0f ms", s->lat_last_ms);
         snprintf(title, sizeof title,
-                 "%s%s%s | %d fps | render %.1f ms, encode %.1f ms | latency %.0f ms | %s %ux%u "
-                 "| %s |%s%s%s",
+                 "%s%s%s | %d fps | render %.1f ms, encode %.1f ms%s | %s %ux%u | %s |%s%s%s",
                  s->connected ? "" : "DISCONNECTED | ", s->name, "", n, s->frender_ms,
-                 s->fencode_ms, s->flatency_ms, s->fpipe, s->fw, s->fh, pipes, params,
+                 s->fencode_ms, lat, s->fpipe, s->fw, s->fh, pipes, params,
                  s->status[0] ? " | " : "", s->status);
     }
     pthread_mutex_unlock(&s->mu);
@@ -969,11 +978,12 @@ static void show_frame(view *v)
         if (v->interacting) v->drag_frames++;
         else v->rest_frames++;
         if (s->verbose) {
+            char lat[32] = "-"; /* this frame shows no new input */
+            if (s->flatency_ms >= 0) snprintf(lat, sizeof lat, "%.1f", s->flatency_ms);
             snprintf(line, sizeof line, "frame %ux%u pipeline=%s camera_seq=%u render_ms=%.1f "
-                     "encode_ms=%.1f bytes=%zu points=%llu latency_ms=%.1f quality=%d moving=%d",
+                     "encode_ms=%.1f bytes=%zu points=%llu latency_ms=%s quality=%d moving=%d",
                      s->fw, s->fh, s->fpipe, s->fcamseq, s->frender_ms, s->fencode_ms, s->fbytes,
-                     (unsigned long long)s->fpoints, s->flatency_ms, (int)s->want.quality,
-                     v->interacting);
+                     (unsigned long long)s->fpoints, lat, (int)s->want.quality, v->interacting);
             verbose_line = 1;
         }
     }
@@ -1008,14 +1018,15 @@ static void print_summary(view *v)
     }
     pthread_mutex_lock(&s->mu);
     qsort(s->lat, (size_t)s->nlat, sizeof s->lat[0], cmp_double);
-    double p50 = s->nlat ? s->lat[s->nlat / 2] : -1;
-    double p90 = s->nlat ? s->lat[(s->nlat * 9) / 10] : -1;
+    char lat[96] = ""; /* no camera input, no latency */
+    if (s->nlat)
+        snprintf(lat, sizeof lat, " latency_p50_ms=%.1f latency_p90_ms=%.1f",
+                 s->lat[s->nlat / 2], s->lat[(s->nlat * 9) / 10]);
     int nlat = s->nlat;
     pthread_mutex_unlock(&s->mu);
     printf("stats frames=%ld moving_frames=%ld moving_s=%.2f moving_fps=%.2f rest_frames=%ld "
-           "latency_n=%d latency_p50_ms=%.1f latency_p90_ms=%.1f\n", v->frames, v->drag_frames,
-           v->drag_time, v->drag_time > 0 ? v->drag_frames / v->drag_time : 0.0, v->rest_frames,
-           nlat, p50, p90);
+           "latency_n=%d%s\n", v->frames, v->drag_frames, v->drag_time,
+           v->drag_time > 0 ? v->drag_frames / v->drag_time : 0.0, v->rest_frames, nlat, lat);
     fflush(stdout);
 }
 
@@ -1279,7 +1290,7 @@ int main(int argc, char **argv)
                 v.have_cam = 1;
                 script_due = t;
             }
-            update_camera(&v, t); /* a new session needs the camera again */
+            update_camera(&v, -1); /* a new session needs the camera again (no input) */
         }
         if (new_frame) show_frame(&v);
         if (verbose) {

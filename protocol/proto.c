@@ -1196,6 +1196,11 @@ static void frame_fixed(uint8_t *p, const proto_frame *m)
     proto_put_u64(p + 40, m->points_drawn);
 }
 
+int proto_frame_fits(uint64_t data_len)
+{
+    return data_len <= (uint64_t)PROTO_MAX_FRAME - PROTO_FRAME_FIXED;
+}
+
 void proto_frame_head(uint8_t out[PROTO_FRAME_HEAD_LEN], uint16_t version, uint32_t seq,
                       const proto_frame *m)
 {

@@ -351,6 +351,11 @@ typedef struct proto_pong {           /* PONG, server -> client */
 enum { PROTO_FRAME_FIXED = 48 };      /* FRAME payload bytes before the image data */
 enum { PROTO_FRAME_HEAD_LEN = PROTO_HEADER_LEN + PROTO_FRAME_FIXED };
 
+/* proto_frame_fits: 1 when a FRAME carrying data_len bytes of image data fits the server ->
+ * client payload limit PROTO_MAX_FRAME (PROTOCOL.md section 3): PROTO_FRAME_FIXED + data_len
+ * <= PROTO_MAX_FRAME. A server sends no larger FRAME. */
+int proto_frame_fits(uint64_t data_len);
+
 /* FRAME flags: COMPLETE = every node the view wants was drawn (always for a flat cloud); a
  * frame without it is a step of progressive refinement of a LOD cloud, and a refined frame of
  * the same camera follows while streaming. */

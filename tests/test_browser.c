@@ -196,6 +196,18 @@ static void hello(tu_ws *w, uint32_t seq, const uint8_t *proof, proto_welcome *w
     assert_int_equal(h.seq, seq);
 }
 
+/* send_frame: one masked frame (fin, opcode op) carrying p[0..n), for fragments. */
+static void send_frame(tu_ws *w, int fin, int op, const void *p, size_t n)
+{
+    uint8_t f[WS_MAX_HEADER + 256];
+    const uint8_t mask[4] = {9, 8, 7, 6};
+    assert_true(n <= 256);
+    size_t h = ws_frame_header(f, fin, op, n, mask);
+    if (n) memcpy(f + h, p, n);
+    ws_mask(f + h, n, mask, 0);
+    assert_int_equal(tu_send_all(w->fd, f, h + n), 0);
+}
+
 /* expect_close: the next frame must be a close with code, then the connection ends. */
 static void expect_close(tu_ws *w, uint16_t code)
 {
@@ -257,6 +269,12 @@ static void test_http_answers(void **state)
     assert_int_equal(strncmp(out, "HTTP/1.1 200 OK\r\n", 17), 0);
     assert_non_null(strstr(out, "Content-Type: text/javascript"));
     assert_non_null(strstr(out, "createImageBitmap"));
+    /* LF-only line endings (RFC 9112 2.2 lets a server take a bare LF as a line end): the page,
+     * answered as for CR LF. */
+    snprintf(req, sizeof req, "GET / HTTP/1.1\nHost: 127.0.0.1:%d\n\n", p);
+    assert_true(tu_http_request(p, req, out, sizeof out) > 0);
+    if (strncmp(out, "HTTP/1.1 200 OK\r\n", 17) != 0 || !strstr(out, "<script src=\"/viewer.js\""))
+        fail_msg("an LF-only request got:\n%.300s", out);
     /* Whatever else: the status and the reason in the body. */
     struct { const char *req; const char *status; const char *words; } cases[] = {
         {"GET /etc/passwd HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n", "404", "no such page"},
@@ -387,31 +405,82 @@ static void test_websocket_session(void **state)
     assert_int_equal(em.code, PROTO_E_BAD_MAGIC);
     expect_close(&w, 1000);
     tu_ws_close(&w);
-    /* One protocol message per WebSocket message: two PINGs in one message are answered (the
-     * bytes reached the session in order), then the connection is closed with 1007; so is half
-     * a message. */
+    /* One protocol message per WebSocket message, checked before the session acts on any of
+     * it: two PINGs in one message get no PONG, only the close 1007; so does a PING with one
+     * byte more, a PING whose extra byte comes in a continuation frame, half a header, and a
+     * PING header with half its payload. */
+    proto_ping pg = {.token = 42};
+    for (int kind = 0; kind < 5; kind++) {
+        assert_int_equal(tu_ws_open(&w, p, NULL, NULL, resp, sizeof resp), 0);
+        hello(&w, 1, NULL, &wel);
+        proto_enc_ping(&b, 2, &pg);
+        if (kind == 0) proto_enc_ping(&b, 3, &pg);
+        if (kind == 0) assert_int_equal(b.len, 2 * (PROTO_HEADER_LEN + 8));
+        if (kind == 1 || kind == 2) { /* one byte more than the header's length */
+            b.data = realloc(b.data, b.len + 1);
+            b.data[b.len++] = 0;
+        }
+        if (kind == 2) { /* the PING whole in a first fragment, the extra byte after it */
+            send_frame(&w, 0, WS_OP_BINARY, b.data, b.len - 1);
+            send_frame(&w, 1, WS_OP_CONT, b.data + b.len - 1, 1);
+        } else {
+            size_t len = kind == 3 ? 10 : kind == 4 ? PROTO_HEADER_LEN + 4 : b.len;
+            assert_int_equal(tu_ws_send(&w, WS_OP_BINARY, b.data, len), 0);
+        }
+        proto_buf_free(&b);
+        int rc = tu_ws_recv(&w, 5000);
+        if (rc == WS_EV_END) {
+            proto_get_header(w.msg, &h);
+            fail_msg("case %d: %s (seq %u) before the close 1007", kind, proto_msg_name(h.type),
+                     h.seq);
+        }
+        assert_int_equal(rc, WS_EV_CLOSE);
+        assert_int_equal(w.ev.code, 1007);
+        assert_int_equal(tu_ws_recv(&w, 5000), -2);
+        tu_ws_close(&w);
+    }
+    assert_true(log_has(f, "a WebSocket message of more than 24 bytes is not one protocol "
+                           "message (its header gives 24)"));
+    assert_true(log_has(f, "a WebSocket message of 10 bytes is not one protocol message (it "
+                           "ends inside the 16-byte header)"));
+    assert_true(log_has(f, "a WebSocket message of 20 bytes is not one protocol message (its "
+                           "header gives 24)"));
+    /* A whole PING in a first fragment and an empty last one is one message: answered. */
     assert_int_equal(tu_ws_open(&w, p, NULL, NULL, resp, sizeof resp), 0);
     hello(&w, 1, NULL, &wel);
-    proto_ping pg = {.token = 42};
     proto_enc_ping(&b, 2, &pg);
-    proto_enc_ping(&b, 3, &pg);
-    assert_int_equal(b.len, 2 * (PROTO_HEADER_LEN + 8));
-    ws_send_msg(&w, &b);
+    send_frame(&w, 0, WS_OP_BINARY, b.data, b.len);
+    send_frame(&w, 1, WS_OP_CONT, NULL, 0);
+    proto_buf_free(&b);
     ws_expect(&w, PROTO_MSG_PONG, &h, NULL, 0);
     assert_int_equal(h.seq, 2);
-    ws_expect(&w, PROTO_MSG_PONG, &h, NULL, 0);
-    assert_int_equal(h.seq, 3);
-    expect_close(&w, 1007);
     tu_ws_close(&w);
-    assert_true(log_has(f, "a WebSocket message of 48 bytes is not one protocol message (its "
-                           "header gives 24)"));
-    assert_int_equal(tu_ws_open(&w, p, NULL, NULL, resp, sizeof resp), 0);
-    hello(&w, 1, NULL, &wel);
-    proto_enc_ping(&b, 2, &pg);
-    assert_int_equal(tu_ws_send(&w, WS_OP_BINARY, b.data, 10), 0);
-    proto_buf_free(&b);
-    expect_close(&w, 1007);
-    tu_ws_close(&w);
+
+    /* The message cap (16 + 65536: a header and the largest request) at exactly its size: the
+     * WebSocket layer passes it on and the protocol judges it (a PARAMS of 65536 zero bytes is
+     * MALFORMED); one byte more is the WebSocket's 1009, and the session never sees it. */
+    for (int extra = 0; extra < 2; extra++) {
+        size_t n = PROTO_HEADER_LEN + PROTO_MAX_REQUEST + (size_t)extra;
+        uint8_t *big = calloc(1, n);
+        assert_non_null(big);
+        proto_header ph = {PROTO_MAGIC, 1, PROTO_MSG_PARAMS, 2, PROTO_MAX_REQUEST};
+        proto_put_header(big, &ph);
+        assert_int_equal(tu_ws_open(&w, p, NULL, NULL, resp, sizeof resp), 0);
+        hello(&w, 1, NULL, &wel);
+        assert_int_equal(tu_ws_send(&w, WS_OP_BINARY, big, n), 0);
+        free(big);
+        if (!extra) {
+            ws_expect(&w, PROTO_MSG_ERROR, &h, pl, sizeof pl);
+            assert_int_equal(proto_parse_error(pl, h.len, &em, &e), 0);
+            assert_int_equal(em.code, PROTO_E_MALFORMED);
+            assert_int_equal(h.seq, 2);
+            expect_close(&w, 1000);
+        } else {
+            expect_close(&w, 1009);
+        }
+        tu_ws_close(&w);
+    }
+    assert_true(log_has(f, "message of 65553 bytes or more; the limit is 65552"));
 
     /* Requests before HELLO: AUTH_REQUIRED, as over TCP. */
     assert_int_equal(tu_ws_open(&w, p, NULL, NULL, resp, sizeof resp), 0);
@@ -761,8 +830,8 @@ static double cam_distance(const char *cam)
                 (e[2] - t[2]) * (e[2] - t[2]));
 }
 
-/* page_token: waits for the page's token box, types the token and submits it. */
-static void page_token(tu_wd *wdp)
+/* page_token_text: waits for the page's token box, types text into it and submits it. */
+static void page_token_text(tu_wd *wdp, const char *text)
 {
     char js[200], tid[160], v[64], path[400];
     for (int i = 0; i < 300; i++) {
@@ -773,12 +842,26 @@ static void page_token(tu_wd *wdp)
     }
     assert_string_equal(v, "yes");
     assert_int_equal(tu_wd_element(wdp, "#token", tid, sizeof tid), 0);
-    snprintf(js, sizeof js, "{\"text\":\"%s\"}", token);
+    snprintf(path, sizeof path, "element/%s/clear", tid);
+    assert_int_equal(tu_wd_post(wdp, path, "{}"), 0);
+    snprintf(js, sizeof js, "{\"text\":\"%s\"}", text);
     snprintf(path, sizeof path, "element/%s/value", tid);
     assert_int_equal(tu_wd_post(wdp, path, js), 0);
     assert_int_equal(tu_wd_element(wdp, "#token-go", tid, sizeof tid), 0);
     snprintf(path, sizeof path, "element/%s/click", tid);
     assert_int_equal(tu_wd_post(wdp, path, "{}"), 0);
+}
+
+/* page_token: page_token_text with the daemon's token. */
+static void page_token(tu_wd *wdp)
+{
+    page_token_text(wdp, token);
+}
+
+static int says_wrong_token(const char *v, long n)
+{
+    (void)n;
+    return strstr(v, "wrong token (wrong authentication proof): enter the right one") != NULL;
 }
 
 /* The page over https from a non-loopback address (where a browser offers WebCrypto only to
@@ -883,12 +966,19 @@ static void test_chromium_page(void **state)
     char url[256], id[160], tid[160], v[4096];
     snprintf(url, sizeof url, "http://127.0.0.1:%d/?cloud=bun&size=320x240", f->http_port);
     assert_int_equal(tu_wd_go(wdp, url), 0);
-    /* The server has a token: the page asks for it and answers the challenge with WebCrypto. */
+    /* The server has a token: the page asks for it and answers the challenge with WebCrypto. A
+     * wrong one first: the page says the token was wrong (the server's reason) and asks again,
+     * rather than only that it was disconnected. */
     char path[400];
+    page_token_text(wdp, "not the token");
+    wait_page(wdp, "status", says_wrong_token, 0, "that the token was wrong");
     page_token(wdp);
     wait_page(wdp, "nframes", at_least, 1, "a first frame");
     wait_page(wdp, "idle", is_one, 0, "rest after the first frame");
     home_matches_library(f, wdp);
+    /* No input yet: no latency on the heads-up line (there is nothing it would measure). */
+    page_text(wdp, "hudline", v, sizeof v);
+    if (strstr(v, "latency")) fail_msg("a latency before any input: '%s'", v);
 
     /* Key 1: the points pipeline, as in splat view; the frame says which pipeline drew it. */
     assert_int_equal(tu_wd_element(wdp, "#canvas", id, sizeof id), 0);
@@ -903,6 +993,9 @@ static void test_chromium_page(void **state)
     wait_page(wdp, "idle", is_one, 0, "rest after the key");
     page_text(wdp, "hudline", v, sizeof v);
     if (!strstr(v, " points ")) fail_msg("the key did not switch to points: '%s'", v);
+    /* The key was an input: its frame gives the latency (key to frame drawn). */
+    const char *lat = strstr(v, "latency ");
+    if (!lat || atof(lat + 8) <= 0 || atof(lat + 8) > 5000) fail_msg("no latency after the key: '%s'", v);
 
     /* Touch: one finger orbits (a frame follows); two fingers spreading apart zoom in. */
     char cam0[1024], cam1[1024];

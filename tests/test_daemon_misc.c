@@ -18,6 +18,7 @@
 #include "datadir.h"
 #include "ev.h"
 #include "net.h"
+#include "srv.h"
 #include "common/testutil.h"
 #include "testutil.h"
 
@@ -436,6 +437,62 @@ static void test_hostport(void **state)
     assert_false(net_host_is_loopback("128.0.0.1"));
 }
 
+/* --max-per-addr's default at each edge of its rule: half of --max-clients, at least 1, at
+ * most 32. */
+static void test_per_addr_default(void **state)
+{
+    (void)state;
+    static const int in[][2] = {{1, 1}, {2, 1}, {3, 1}, {4, 2}, {5, 2}, {16, 8}, {63, 31},
+                                {64, 32}, {65, 32}, {66, 32}, {4096, 32}};
+    for (size_t i = 0; i < sizeof in / sizeof in[0]; i++)
+        if (srv_per_addr_default(in[i][0]) != in[i][1])
+            fail_msg("--max-clients %d: --max-per-addr %d, expected %d", in[i][0],
+                     srv_per_addr_default(in[i][0]), in[i][1]);
+}
+
+/* srv_pack_frame (the encoder thread's packing of a FRAME): image data one byte over the
+ * protocol's limit is refused as SD_ELIMIT before anything is allocated or read; below it the
+ * message is the header, the 48 fixed bytes and the data. */
+static void test_pack_frame_limit(void **state)
+{
+    (void)state;
+    rt_frame_meta m = {.width = 2, .height = 1, .format = SP_FMT_RAW};
+    uint8_t data[8] = {1, 2, 3, 4, 5, 6, 7, 8}, *msg = NULL;
+    size_t len = 0;
+    assert_int_equal(srv_pack_frame(NULL, &m, data, (size_t)PROTO_MAX_FRAME - PROTO_FRAME_FIXED + 1,
+                                    &msg, &len), SD_ELIMIT);
+    assert_null(msg);
+    assert_int_equal(srv_pack_frame(NULL, &m, data, sizeof data, &msg, &len), 0);
+    assert_int_equal(len, PROTO_FRAME_HEAD_LEN + sizeof data);
+    proto_header h;
+    proto_get_header(msg, &h);
+    assert_int_equal(h.type, PROTO_MSG_FRAME);
+    assert_int_equal(h.len, PROTO_FRAME_FIXED + sizeof data);
+    assert_memory_equal(msg + PROTO_FRAME_HEAD_LEN, data, sizeof data);
+    free(msg);
+}
+
+/* A session's queued output (SESS_OUT_MAX) at exactly its limit and one byte past it: answers
+ * totalling SESS_OUT_MAX are queued, one more byte is SD_ELIMIT (the daemon then drops the
+ * client that does not read). */
+static void test_output_bound(void **state)
+{
+    (void)state;
+    sess *s = sess_new(1, -1, "127.0.0.1:1", NULL, NULL, NULL);
+    assert_non_null(s);
+    size_t chunk = SESS_OUT_MAX / 4;
+    for (int i = 0; i < 4; i++) {
+        proto_buf b = {.data = calloc(1, chunk), .len = chunk, .cap = chunk};
+        assert_non_null(b.data);
+        assert_int_equal(sess_push(s, &b), 0);
+    }
+    assert_int_equal(s->out_bytes, SESS_OUT_MAX);
+    proto_buf one = {.data = calloc(1, 1), .len = 1, .cap = 1};
+    assert_int_equal(sess_push(s, &one), SD_ELIMIT);
+    assert_int_equal(s->out_bytes, SESS_OUT_MAX);
+    sess_free(s, NULL, NULL);
+}
+
 int main(int argc, char **argv)
 {
     tu_args(argc, argv);
@@ -450,6 +507,9 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_theap_order),
         cmocka_unit_test(test_loop_timers),
         cmocka_unit_test(test_hostport),
+        cmocka_unit_test(test_per_addr_default),
+        cmocka_unit_test(test_pack_frame_limit),
+        cmocka_unit_test(test_output_bound),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

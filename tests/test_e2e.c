@@ -3,7 +3,9 @@
  * JPEG frames, authentication (and forged proofs, wrong in each byte in turn), isolation of a
  * client that stops reading, latest-wins streaming to a client whose socket is full, pipelined
  * RENDERs answered in order, the output limit of a client that does not read, 20 concurrent
- * clients with a memory check, a client killed mid-frame, and SIGTERM.
+ * clients with a memory check, a client killed mid-frame, and SIGTERM; a stream that goes on
+ * after dropped frames with the render thread's count back to zero; BYE with a payload and a
+ * second HELLO refused.
  *
  * The data directory is a temporary directory holding a copy of tests/data/Guanyin.ply and a
  * symlink that points outside it. Frames are small (160x120, `points` pipeline, ~15 ms each on
@@ -390,6 +392,33 @@ static void test_malformed(void **state)
     raw_hello(&r);
     raw_send_hdr(&r, PROTO_MAGIC, 1, PROTO_MSG_FRAME, 0, NULL, 0);
     raw_expect_error(&r, PROTO_E_UNKNOWN_TYPE, 0);
+    raw_close(&r);
+
+    /* BYE carries no payload: one trailing byte is MALFORMED (answered, then closed), not a
+     * goodbye that skips the check every other empty message gets. */
+    assert_int_equal(raw_connect(&r, t->d.port), 0);
+    raw_hello(&r);
+    {
+        uint8_t one = 0;
+        uint32_t s = raw_send_hdr(&r, PROTO_MAGIC, 1, PROTO_MSG_BYE, 1, &one, 1);
+        raw_expect_error(&r, PROTO_E_MALFORMED, s);
+        raw_expect_closed(&r);
+    }
+    raw_close(&r);
+
+    /* A second HELLO after the handshake is a protocol error (the connection has had its one
+     * handshake), answered with ERROR UNKNOWN_TYPE and a close, never another WELCOME. */
+    assert_int_equal(raw_connect(&r, t->d.port), 0);
+    raw_hello(&r);
+    {
+        proto_buf b = {0};
+        proto_hello h = {.min_version = 1, .max_version = 1};
+        uint32_t s = ++r.seq;
+        assert_int_equal(proto_enc_hello(&b, s, &h), 0);
+        raw_send_buf(&r, &b);
+        raw_expect_error(&r, PROTO_E_UNKNOWN_TYPE, s);
+        raw_expect_closed(&r);
+    }
     raw_close(&r);
 
     /* wrong version after negotiating version 1 */
@@ -912,8 +941,11 @@ static void test_max_clients(void **state)
 {
     e2e *t = *state;
     daemon_proc *d = &t->aux;
+    /* Every client here comes from 127.0.0.1: --max-per-addr (by default half of
+     * --max-clients) is raised so that --max-clients is the limit reached. */
     assert_int_equal(daemon_start(t, d, NULL, "--listen", "127.0.0.1:0", "--data", t->data,
-                                  "--cache", t->cache, "--max-clients", "2", (char *)NULL), 0);
+                                  "--cache", t->cache, "--max-clients", "2", "--max-per-addr",
+                                  "4", (char *)NULL), 0);
     raw a, b, c;
     assert_int_equal(raw_connect(&a, d->port), 0);
     raw_hello(&a);
@@ -1278,27 +1310,40 @@ static void check_round(const char *what, const uint32_t *cams, int n, uint32_t 
  * Round 2 (bounded): with the socket full again, 60 cameras arrive over ~250 ms while the client
  * still does not read: the daemon renders at most the frames already under way plus the last
  * camera once the client reads (a queue of streamed frames would give one frame per camera). */
+/* slow_reader: a client with a small receive buffer, Guanyin open, raw frames of `points`;
+ * *fw x *fh is a filler frame: more bytes than the daemon's send buffer and the client's
+ * receive buffer can hold. Returns 0, or -1 when that size is over the daemon's maximum (the
+ * test is skipped). */
+static int slow_reader(e2e *t, raw *r, int *fw, int *fh)
+{
+    raw_connect_small(r, t->d.port);
+    raw_hello(r);
+    proto_welcome w;
+    assert_int_equal(proto_parse_welcome(r->pl, r->h.len, &w, NULL), 0);
+    raw_open(r, "Guanyin");
+    assert_int_equal(raw_recv_skip(r), PROTO_MSG_INFO);
+    const char *kv[] = {"pipeline=points", "format=raw"};
+    uint32_t s = raw_params(r, kv, 2);
+    assert_int_equal(raw_recv(r), PROTO_MSG_OK);
+    assert_int_equal(r->h.seq, s);
+    long need = tcp_wmem_max() + (1L << 20);
+    *fw = 2048;
+    *fh = (int)(need / (*fw * 4L)) + 1;
+    if ((uint32_t)*fw > w.max_width || (uint32_t)*fh > w.max_height) {
+        TU_SKIP("a %dx%d filler frame (tcp_wmem max %ld) is over the daemon's maximum %ux%u",
+                *fw, *fh, tcp_wmem_max(), w.max_width, w.max_height);
+        return -1;
+    }
+    return 0;
+}
+
 static void test_stream_slow_reader(void **state)
 {
     e2e *t = *state;
     raw r;
-    raw_connect_small(&r, t->d.port);
-    raw_hello(&r);
-    proto_welcome w;
-    assert_int_equal(proto_parse_welcome(r.pl, r.h.len, &w, NULL), 0);
-    uint32_t s = raw_open(&r, "Guanyin");
-    assert_int_equal(raw_recv_skip(&r), PROTO_MSG_INFO);
-    const char *kv[] = {"pipeline=points", "format=raw"};
-    s = raw_params(&r, kv, 2);
-    assert_int_equal(raw_recv(&r), PROTO_MSG_OK);
-    assert_int_equal(r.h.seq, s);
-
-    /* The filler: more bytes than the daemon's send buffer and our receive buffer can hold. */
-    long need = tcp_wmem_max() + (1L << 20);
-    int fw = 2048, fh = (int)(need / (fw * 4L)) + 1;
-    if ((uint32_t)fw > w.max_width || (uint32_t)fh > w.max_height)
-        TU_SKIP("a %dx%d filler frame (tcp_wmem max %ld) is over the daemon's maximum %ux%u",
-                fw, fh, tcp_wmem_max(), w.max_width, w.max_height);
+    int fw, fh;
+    if (slow_reader(t, &r, &fw, &fh) != 0) return;
+    uint32_t s;
     enum { BURST = 200, SPREAD = 60, MOST = 4, KEEP = 64 };
     uint32_t cams[KEEP];
 
@@ -1337,6 +1382,70 @@ static void test_stream_slow_reader(void **state)
     n = drain_stream(&r, last, cams, KEEP, 10.0);
     check_round("spread", cams, n, filler, last, MOST);
     raw_close(&r);
+}
+
+/* A stream goes on after dropped frames, however often (issue 27): three times, the client
+ * stops reading behind a filler frame larger than the socket holds, a large camera starts
+ * rendering and a small one follows, so that the large frame, waiting in the session's
+ * one-frame slot, is replaced by the small one (a drop); then the client reads again and the
+ * small camera's frame must come. Each replaced frame must be given back to the render
+ * thread, which allows RT_MAX_OUTSTANDING (2) frames in flight per client: one never released
+ * stays counted for good (two stop the stream). At the end, with nothing in flight, the
+ * daemon's close line must say 0 pending: the outstanding count is back to zero. (No test kept
+ * streaming after a drop before, and a replaced frame never released passed them all.) */
+static void test_stream_after_drops(void **state)
+{
+    e2e *t = *state;
+    raw r;
+    int fw, fh;
+    if (slow_reader(t, &r, &fw, &fh) != 0) return;
+    /* A small camera first, so the stream starts with its frame rather than the default
+     * camera's. */
+    uint32_t small = raw_camera(&r, 64, 64, 0.5);
+    proto_buf b = {0};
+    assert_int_equal(proto_enc_stream(&b, ++r.seq, &(proto_stream){.on = 1, .max_fps = 0}), 0);
+    raw_send_buf(&r, &b);
+    assert_int_equal(raw_recv(&r), PROTO_MSG_OK);
+    enum { ROUNDS = 3, KEEP = 16 };
+    uint32_t cams[KEEP];
+    assert_true(drain_stream(&r, small, cams, KEEP, 20.0) >= 1);
+    for (int round = 0; round < ROUNDS; round++) {
+        uint32_t filler = raw_camera(&r, fw, fh, 0.01 * round);
+        if (!readable(&r, 20000)) fail_msg("round %d: the filler frame did not come", round);
+        raw_camera(&r, fw, fh, 0.1 + 0.01 * round); /* renders while the filler is written */
+        usleep(3000);
+        uint32_t last = raw_camera(&r, 64, 64, 0.2 + 0.01 * round);
+        usleep(250000); /* not reading: the large frame waits in the slot, the small replaces it */
+        int n = drain_stream(&r, last, cams, KEEP, 20.0);
+        print_message("after drops, round %d: %d frames, the first answering camera %u (filler "
+                      "%u), the last %u (last camera %u)\n", round, n, n ? cams[0] : 0, filler,
+                      n ? cams[n < KEEP ? n - 1 : KEEP - 1] : 0, last);
+        if (n < 1 || cams[(n < KEEP ? n : KEEP) - 1] != last)
+            fail_msg("round %d: the stream stopped: the last camera's frame never came", round);
+    }
+    /* Nothing in flight now: BYE, and the close line counts the drops and 0 pending. */
+    raw_simple(&r, PROTO_MSG_BYE);
+    raw_expect_closed(&r);
+    raw_close(&r);
+    char needle[96];
+    unsigned long sent = 0, dropped = 0, pending = 99;
+    for (int i = 0; i < 100 && pending == 99; i++) {
+        size_t len;
+        char *log = (char *)tu_read_file(t->d.log, &len);
+        assert_non_null(log);
+        /* the last "closed: BYE" line of the log is this client's */
+        for (char *l = strtok(log, "\n"); l; l = strtok(NULL, "\n")) {
+            const char *c = strstr(l, "closed: BYE (");
+            if (c) sscanf(c, "closed: BYE (%lu frames sent, %lu dropped, %lu pending", &sent,
+                          &dropped, &pending);
+        }
+        free(log);
+        if (pending == 99) usleep(20000);
+    }
+    snprintf(needle, sizeof needle, "%lu sent, %lu dropped, %lu pending", sent, dropped, pending);
+    print_message("after drops: closed with %s\n", needle);
+    assert_int_equal(pending, 0);
+    assert_true(dropped >= 1); /* frames were replaced (one a round, as a rule) */
 }
 
 /* ---- pipelined RENDERs are answered in order, each with the camera it was sent after ---- */
@@ -1614,6 +1723,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_isolation),
         cmocka_unit_test(test_stream),
         cmocka_unit_test(test_stream_slow_reader),
+        cmocka_unit_test(test_stream_after_drops),
         cmocka_unit_test(test_pipelined_renders),
         cmocka_unit_test_teardown(test_output_limit, stop_aux),
         cmocka_unit_test(test_load),

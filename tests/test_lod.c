@@ -1638,8 +1638,6 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_every_pipeline),
         cmocka_unit_test(test_kawata_host_equals_gpu),
     };
-    const char *only = getenv("SPLATD_TEST_FILTER");
-    if (only && *only) cmocka_set_test_filter(only);
     int failed = cmocka_run_group_tests_name("lod_build", prep_tests, NULL, NULL);
     failed += cmocka_run_group_tests_name("lod_render", render_tests, rfix_setup, rfix_teardown);
     return failed;

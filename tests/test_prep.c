@@ -1487,7 +1487,5 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_small_and_bad_input),
         cmocka_unit_test(test_gen_cloud_tool),
     };
-    const char *only = getenv("SPLATD_TEST_FILTER"); /* e.g. "test_knn*" */
-    if (only && *only) cmocka_set_test_filter(only);
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -889,6 +889,15 @@ static void test_limits_at_the_boundary(void **state)
     proto_error e = {0};
     uint8_t pl[2048];
 
+    /* A FRAME's image data: up to PROTO_MAX_FRAME less the 48 fixed bytes fits, a byte more
+     * does not (what the server checks before sending one, and a raw frame before rendering). */
+    assert_true(proto_frame_fits(0));
+    assert_true(proto_frame_fits((uint64_t)PROTO_MAX_FRAME - PROTO_FRAME_FIXED));
+    assert_false(proto_frame_fits((uint64_t)PROTO_MAX_FRAME - PROTO_FRAME_FIXED + 1));
+    assert_false(proto_frame_fits((uint64_t)8192 * 8192 * 4));
+    assert_true(proto_frame_fits((uint64_t)8192 * 8191 * 4));
+    assert_false(proto_frame_fits(UINT64_MAX));
+
     /* HELLO client name: 64 bytes parse, 65 are MALFORMED (written by hand: the struct cannot
      * hold a longer name for the encoder). */
     for (unsigned n = PROTO_MAX_CLIENT; n <= PROTO_MAX_CLIENT + 1; n++) {

@@ -221,6 +221,47 @@ static void skip_without_x(void)
                 "(deploy/deps.sh installs the package xvfb)");
 }
 
+/* render_ref_png: `splat render` of bun at the camera line cam (the viewer's "camera --eye ..."
+ * output) with the --set options sets (NULL-terminated), into path. */
+static void render_ref_png(fx *f, const char *cam, const char *const *sets, const char *path)
+{
+    double e[3], t[3], u[3], fov;
+    unsigned w, h;
+    assert_int_equal(sscanf(cam, "\ncamera --eye %lf,%lf,%lf --target %lf,%lf,%lf --up %lf,%lf,%lf "
+                            "--fov %lf --size %ux%u", &e[0], &e[1], &e[2], &t[0], &t[1], &t[2],
+                            &u[0], &u[1], &u[2], &fov, &w, &h), 12);
+    char eye[200], target[200], up[200], fovs[40], size[40], port[16], rout[800], rerr[800];
+    snprintf(eye, sizeof eye, "%.17g,%.17g,%.17g", e[0], e[1], e[2]);
+    snprintf(target, sizeof target, "%.17g,%.17g,%.17g", t[0], t[1], t[2]);
+    snprintf(up, sizeof up, "%.17g,%.17g,%.17g", u[0], u[1], u[2]);
+    snprintf(fovs, sizeof fovs, "%.9g", fov);
+    snprintf(size, sizeof size, "%ux%u", w, h);
+    snprintf(port, sizeof port, "%d", f->d.port);
+    snprintf(rout, sizeof rout, "%s/ref.out", f->root);
+    snprintf(rerr, sizeof rerr, "%s/ref.err", f->root);
+    const char *argv[32] = {tu_splat_bin(), "--port", port, "render", "bun", "-o", path, "--eye",
+                            eye, "--target", target, "--up", up, "--fov", fovs, "--size", size};
+    int n = 17;
+    for (; sets && *sets && n < 30; sets++) argv[n++] = "--set", argv[n++] = *sets;
+    argv[n] = NULL;
+    int rc = run_cmd(argv, rout, rerr, 30);
+    if (rc != 0) fail_msg("splat render exited %d: %s", rc, slurp(rerr));
+}
+
+/* png_psnr: PSNR (dB) between two PNG files of the same size. */
+static double png_psnr(const char *a_path, const char *b_path)
+{
+    uint32_t aw, ah, bw, bh;
+    uint8_t *a = read_png(a_path, &aw, &ah), *b = read_png(b_path, &bw, &bh);
+    assert_int_equal(aw, bw);
+    assert_int_equal(ah, bh);
+    size_t lit;
+    double p = tu_psnr_all(a, b, (size_t)aw * ah, &lit);
+    free(a);
+    free(b);
+    return p;
+}
+
 /* An orbit, a pipeline change (key 1: points), keys for things this server may lack, E
  * (shading=edl) and a save: the saved PNG equals `splat render` of the final camera with
  * pipeline=points and shading=edl. */
@@ -260,36 +301,17 @@ static void test_view_save_matches_render(void **state)
     if (!strstr(out, "status no pipeline 9")) fail_msg("key 9 gave no status:\n%s", out);
     const char *cam = strstr(out, "\ncamera --eye ");
     if (!cam) fail_msg("no final camera in the output:\n%s", out);
-    double e[3], t[3], u[3], fov;
     unsigned w, h;
-    assert_int_equal(sscanf(cam, "\ncamera --eye %lf,%lf,%lf --target %lf,%lf,%lf --up %lf,%lf,%lf "
-                            "--fov %lf --size %ux%u", &e[0], &e[1], &e[2], &t[0], &t[1], &t[2],
-                            &u[0], &u[1], &u[2], &fov, &w, &h), 12);
+    const char *sz = strstr(cam, " --size ");
+    assert_non_null(sz);
+    assert_int_equal(sscanf(sz, " --size %ux%u", &w, &h), 2);
     assert_int_equal(w, 320);
     assert_int_equal(h, 240);
-
-    /* The same camera through `splat render`. */
-    char eye[200], target[200], up[200], fovs[40], size[40], port[16];
-    snprintf(eye, sizeof eye, "%.17g,%.17g,%.17g", e[0], e[1], e[2]);
-    snprintf(target, sizeof target, "%.17g,%.17g,%.17g", t[0], t[1], t[2]);
-    snprintf(up, sizeof up, "%.17g,%.17g,%.17g", u[0], u[1], u[2]);
-    snprintf(fovs, sizeof fovs, "%.9g", fov);
-    snprintf(size, sizeof size, "%ux%u", w, h);
-    snprintf(port, sizeof port, "%d", f->d.port);
-    char rout[800], rerr[800];
-    snprintf(rout, sizeof rout, "%s/render.out", f->root);
-    snprintf(rerr, sizeof rerr, "%s/render.err", f->root);
-    /* At rest the viewer asks for what `splat render` gets by default but for the pipeline
-     * and the shading (U then J leave lambda where it was, and lambda does not touch
-     * `points`): the E key must have reached the server too. */
-    const char *argv[] = {tu_splat_bin(), "--port", port, "render", "bun", "-o", ref, "--eye",
-                          eye, "--target", target, "--up", up, "--fov", fovs, "--size", size,
-                          "--set", "pipeline=points", "--set", "shading=edl", NULL};
-    int rc = run_cmd(argv, rout, rerr, 30);
-    if (rc != 0) {
-        char *m = slurp(rerr);
-        fail_msg("splat render exited %d: %s", rc, m);
-    }
+    /* The same camera through `splat render`. At rest the viewer asks for what `splat render`
+     * gets by default but for the pipeline and the shading (U then J leave lambda where it
+     * was, and lambda does not touch `points`): the E key must have reached the server too. */
+    const char *sets[] = {"pipeline=points", "shading=edl", NULL};
+    render_ref_png(f, cam, sets, ref);
 
     uint32_t vw, vh, rw, rh;
     uint8_t *a = read_png(png, &vw, &vh), *b = read_png(ref, &rw, &rh);
@@ -305,6 +327,75 @@ static void test_view_save_matches_render(void **state)
     if (psnr < MIN_PSNR_DB) fail_msg("PSNR %.2f dB < %.0f dB", psnr, MIN_PSNR_DB);
     free(a);
     free(b);
+    free(out);
+}
+
+/* `save` then at once a parameter key (issue 27 D8): the save is of the view as it was at
+ * `save` (the default pipeline, splat), not with the key's pipeline (points), although the
+ * key reaches the server before the save is rendered. The saved PNG equals `splat render` of
+ * that camera with the splat pipeline, and differs from it with points. */
+static void test_view_save_then_key(void **state)
+{
+    skip_without_x();
+    fx *f = *state;
+    start_daemon(f);
+    char png[800], ref_splat[800], ref_points[800], script[1200];
+    snprintf(png, sizeof png, "%s/saved.png", f->root);
+    snprintf(ref_splat, sizeof ref_splat, "%s/ref_splat.png", f->root);
+    snprintf(ref_points, sizeof ref_points, "%s/ref_points.png", f->root);
+    snprintf(script, sizeof script, "wait 500\nsave %s\nkey 1\nwait 500\nquit\n", png);
+    char *out = run_view(f, script, "savekey");
+    if (!strstr(out, "pipeline=points")) fail_msg("the key did not reach the server:\n%s", out);
+    const char *cam = strstr(out, "\ncamera --eye ");
+    if (!cam) fail_msg("no final camera in the output:\n%s", out);
+    const char *splat[] = {"pipeline=splat", NULL}, *points[] = {"pipeline=points", NULL};
+    render_ref_png(f, cam, splat, ref_splat);
+    render_ref_png(f, cam, points, ref_points);
+    double ps = png_psnr(png, ref_splat), pp = png_psnr(png, ref_points);
+    printf("save then key 1: the saved view against splat render with splat %.2f dB, with points "
+           "%.2f dB\n", ps, pp);
+    if (ps < MIN_PSNR_DB || pp >= MIN_PSNR_DB)
+        fail_msg("the save shows the view after the key (splat %.2f dB, points %.2f dB)", ps, pp);
+    free(out);
+}
+
+/* stat_field: the value of name=VALUE in the "stats" line of out, or NULL. */
+static const char *stat_field(const char *out, const char *name)
+{
+    const char *st = strstr(out, "\nstats ");
+    if (!st) return NULL;
+    const char *end = strchr(st + 1, '\n');
+    char key[64];
+    snprintf(key, sizeof key, " %s=", name);
+    const char *p = strstr(st, key);
+    return p && (!end || p < end) ? p + strlen(key) : NULL;
+}
+
+/* Latency is the time from an input to the first frame that shows it (issue 27 D8): a script
+ * with no input reports none (before: the wait for the first frame, seconds, as latency); one
+ * with drags reports one sample per camera sent for an input that a frame showed, each shorter
+ * than the script's run. */
+static void test_view_latency(void **state)
+{
+    skip_without_x();
+    fx *f = *state;
+    start_daemon(f);
+    char *out = run_view(f, "wait 1500\nquit\n", "nolat");
+    const char *n = stat_field(out, "latency_n");
+    if (!n || atoi(n) != 0 || stat_field(out, "latency_p50_ms"))
+        fail_msg("latency reported without input:\n%s", out);
+    if (!strstr(out, "latency_ms=-")) fail_msg("a frame without input shows a latency:\n%s", out);
+    free(out);
+    char script[2048] = "wait 300\n";
+    for (int i = 0; i < 10; i++) strcat(script, "drag 8 0\nwait 120\n");
+    strcat(script, "wait 500\nquit\n");
+    out = run_view(f, script, "lat");
+    n = stat_field(out, "latency_n");
+    const char *p50 = stat_field(out, "latency_p50_ms"), *p90 = stat_field(out, "latency_p90_ms");
+    printf("latency with 10 drags: n=%d p50=%s", n ? atoi(n) : -1, p50 ? p50 : "-\n");
+    if (!n || atoi(n) < 1 || atoi(n) > 10 || !p50 || !p90)
+        fail_msg("no latency for 10 drags:\n%s", out);
+    assert_true(atof(p50) > 0 && atof(p90) >= atof(p50) && atof(p90) < 2000);
     free(out);
 }
 
@@ -605,6 +696,8 @@ int main(int argc, char **argv)
         cmocka_unit_test_setup_teardown(test_view_keepalive, setup, teardown),
         cmocka_unit_test_setup_teardown(test_view_window_shows_frames, setup, teardown),
         cmocka_unit_test_setup_teardown(test_view_script_errors, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_view_save_then_key, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_view_latency, setup, teardown),
     };
     return cmocka_run_group_tests(tests, group_setup, group_teardown);
 }

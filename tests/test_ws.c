@@ -256,6 +256,44 @@ static void test_close_frames(void **st)
     }
 }
 
+/* Control frames at their limits: a PING of exactly 125 bytes is one (126 is refused:
+ * test_malformed), a close reason of exactly WS_REASON_MAX (123) bytes is kept whole and one
+ * byte more is cut to it, and such a close frame (125 bytes of payload) decodes. */
+static void test_control_bounds(void **st)
+{
+    (void)st;
+    uint8_t m[WS_MAX_HEADER + WS_CONTROL_MAX], pay[WS_CONTROL_MAX], out[8];
+    for (size_t i = 0; i < sizeof pay; i++) pay[i] = (uint8_t)(i * 7 + 1);
+    size_t h = ws_frame_header(m, 1, WS_OP_PING, WS_CONTROL_MAX, rfc_mask);
+    memcpy(m + h, pay, sizeof pay);
+    ws_mask(m + h, sizeof pay, rfc_mask, 0);
+    ws_decoder d = {.require_mask = 1};
+    ws_event ev;
+    size_t used, prod;
+    assert_int_equal(ws_decode(&d, m, h + sizeof pay, &used, out, sizeof out, &prod, &ev),
+                     WS_EV_PING);
+    assert_int_equal(ev.len, WS_CONTROL_MAX);
+    assert_memory_equal(ev.payload, pay, WS_CONTROL_MAX);
+    char reason[WS_REASON_MAX + 2];
+    uint8_t f[4 + WS_REASON_MAX];
+    for (int extra = 0; extra < 2; extra++) {
+        memset(reason, 'r', sizeof reason);
+        reason[WS_REASON_MAX + extra] = 0;
+        assert_int_equal(ws_close_frame(f, 1000, reason), 4 + WS_REASON_MAX);
+        assert_int_equal(f[1], 2 + WS_REASON_MAX);
+        assert_memory_equal(f + 4, reason, WS_REASON_MAX);
+    }
+    h = ws_frame_header(m, 1, WS_OP_CLOSE, 2 + WS_REASON_MAX, rfc_mask);
+    memcpy(m + h, f + 2, 2 + WS_REASON_MAX);
+    ws_mask(m + h, 2 + WS_REASON_MAX, rfc_mask, 0);
+    memset(&d, 0, sizeof d);
+    d.require_mask = 1;
+    assert_int_equal(ws_decode(&d, m, h + 2 + WS_REASON_MAX, &used, out, sizeof out, &prod, &ev),
+                     WS_EV_CLOSE);
+    assert_int_equal(ev.code, 1000);
+    assert_int_equal(ev.len, WS_REASON_MAX);
+}
+
 /* expect_error: hdr (a frame's first bytes) must fail with code, the message naming what. */
 static void expect_error(const uint8_t *in, size_t n, uint16_t code, const char *words,
                          uint64_t max_message)
@@ -411,6 +449,115 @@ static void test_http_parse(void **st)
     assert_int_equal(http_response_head(out, 20, 404, "Not Found", "text/plain", 12, NULL), 0);
 }
 
+/* Line endings (RFC 9112 2.2): a bare LF ends a line as CR LF does, in the request line and
+ * the headers, mixed freely; the empty line ends the head either way; a CR that is not right
+ * before an LF is a control character, never a line end. */
+static void test_http_lf_lines(void **st)
+{
+    (void)st;
+    http_req r;
+    char err[200];
+    const char *lf = "GET /ws?x=1 HTTP/1.1\nHost: 127.0.0.1:8080\nUpgrade: websocket\n"
+                     "Connection: Upgrade\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\n"
+                     "Sec-WebSocket-Version: 13\n\nXYZ";
+    size_t n = strlen(lf);
+    for (size_t k = 0; k < n - 3; k++)
+        assert_int_equal(http_parse_request(lf, k, &r, err, sizeof err), 0);
+    assert_int_equal(http_parse_request(lf, n, &r, err, sizeof err), (int)(n - 3));
+    assert_string_equal(r.method, "GET");
+    assert_string_equal(r.target, "/ws?x=1");
+    assert_string_equal(r.host, "127.0.0.1:8080");
+    assert_string_equal(r.ws_key, "dGhlIHNhbXBsZSBub25jZQ==");
+    assert_string_equal(r.ws_version, "13");
+    assert_true(http_has_token(r.upgrade, "websocket"));
+    /* Mixed: CR LF and LF lines, and an empty line of either kind. */
+    const char *mix1 = "GET / HTTP/1.1\r\nHost: a\n\r\n";
+    assert_int_equal(http_parse_request(mix1, strlen(mix1), &r, err, sizeof err),
+                     (int)strlen(mix1));
+    assert_string_equal(r.host, "a");
+    const char *mix2 = "GET / HTTP/1.0\nHost: b\r\n\n";
+    assert_int_equal(http_parse_request(mix2, strlen(mix2), &r, err, sizeof err),
+                     (int)strlen(mix2));
+    assert_string_equal(r.host, "b");
+    assert_int_equal(r.minor, 0);
+    /* A bare CR inside a value or the request line is refused. */
+    const char *cr = "GET / HTTP/1.1\nHost: a\rb\n\n";
+    assert_int_equal(http_parse_request(cr, strlen(cr), &r, err, sizeof err), -400);
+    assert_non_null(strstr(err, "line 2: control character"));
+    const char *cr2 = "GET /\r HTTP/1.1\n\n";
+    assert_int_equal(http_parse_request(cr2, strlen(cr2), &r, err, sizeof err), -400);
+}
+
+/* head_with: "GET TARGET HTTP/1.1" + the header "NAME: " + vlen bytes 'v' + the empty line, into
+ * buf (cap bytes); returns its length. */
+static size_t head_with(char *buf, size_t cap, const char *name, size_t vlen)
+{
+    int n = snprintf(buf, cap, "GET / HTTP/1.1\r\n%s: ", name);
+    assert_true(n > 0 && (size_t)n + vlen + 4 < cap);
+    memset(buf + n, 'v', vlen);
+    memcpy(buf + n + vlen, "\r\n\r\n", 4);
+    return (size_t)n + vlen + 4;
+}
+
+/* Every field the parser keeps, at exactly its buffer's capacity (cap - 1 bytes and the NUL:
+ * kept whole) and one byte more (refused with the status for that field, nothing written past
+ * it); the request head at exactly HTTP_HEAD_MAX bytes and one more. */
+static void test_http_field_bounds(void **st)
+{
+    (void)st;
+    http_req r;
+    char err[200], buf[HTTP_HEAD_MAX + 64];
+    struct { const char *name; size_t off, cap; } f[] = {
+        {"Host", offsetof(http_req, host), sizeof r.host},
+        {"Origin", offsetof(http_req, origin), sizeof r.origin},
+        {"Upgrade", offsetof(http_req, upgrade), sizeof r.upgrade},
+        {"Connection", offsetof(http_req, connection), sizeof r.connection},
+        {"Sec-WebSocket-Key", offsetof(http_req, ws_key), sizeof r.ws_key},
+        {"Sec-WebSocket-Version", offsetof(http_req, ws_version), sizeof r.ws_version},
+    };
+    for (size_t k = 0; k < sizeof f / sizeof f[0]; k++) {
+        size_t n = head_with(buf, sizeof buf, f[k].name, f[k].cap - 1);
+        /* The struct is filled with a marker first: the bytes after the field stay as the
+         * parser's memset left them, and the field holds exactly cap - 1 bytes. */
+        assert_int_equal(http_parse_request(buf, n, &r, err, sizeof err), (int)n);
+        const char *v = (const char *)&r + f[k].off;
+        if (strlen(v) != f[k].cap - 1)
+            fail_msg("%s of %zu bytes kept as %zu", f[k].name, f[k].cap - 1, strlen(v));
+        assert_int_equal(v[f[k].cap - 1], 0);
+        n = head_with(buf, sizeof buf, f[k].name, f[k].cap);
+        assert_int_equal(http_parse_request(buf, n, &r, err, sizeof err), -431);
+        char words[96];
+        snprintf(words, sizeof words, "%s value over %zu bytes", f[k].name, f[k].cap - 1);
+        if (!strstr(err, words)) fail_msg("'%s', expected '%s'", err, words);
+    }
+    /* The request target (255 bytes kept, 256: 414) and the method (15, 16: 400). */
+    char t[300];
+    memset(t, 'a', sizeof t);
+    for (int extra = 0; extra < 2; extra++) {
+        size_t tl = sizeof r.target - 1 + (size_t)extra;
+        int n = snprintf(buf, sizeof buf, "GET /%.*s HTTP/1.1\r\n\r\n", (int)tl - 1, t);
+        assert_int_equal(http_parse_request(buf, (size_t)n, &r, err, sizeof err),
+                         extra ? -414 : n);
+        if (!extra) assert_int_equal(strlen(r.target), tl);
+        size_t ml = sizeof r.method - 1 + (size_t)extra;
+        n = snprintf(buf, sizeof buf, "%.*s / HTTP/1.1\r\n\r\n", (int)ml, "ABCDEFGHIJKLMNOPQRS");
+        assert_int_equal(http_parse_request(buf, (size_t)n, &r, err, sizeof err),
+                         extra ? -400 : n);
+        if (!extra) assert_int_equal(strlen(r.method), ml);
+    }
+    /* A head of exactly HTTP_HEAD_MAX bytes (an ignored header pads it) is read; one byte more
+     * is 431, as is any head whose empty line is not within the first HTTP_HEAD_MAX bytes. */
+    for (int extra = 0; extra < 2; extra++) {
+        const char *pre = "GET / HTTP/1.1\r\nX-Pad: ";
+        size_t pl = strlen(pre), total = HTTP_HEAD_MAX + (size_t)extra;
+        memcpy(buf, pre, pl);
+        memset(buf + pl, 'p', total - pl - 4);
+        memcpy(buf + total - 4, "\r\n\r\n", 4);
+        int rc = http_parse_request(buf, total, &r, err, sizeof err);
+        assert_int_equal(rc, extra ? -431 : (int)total);
+    }
+}
+
 int main(int argc, char **argv)
 {
     tu_args(argc, argv);
@@ -420,9 +567,12 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_lengths),
         cmocka_unit_test(test_fragments_and_control_between),
         cmocka_unit_test(test_close_frames),
+        cmocka_unit_test(test_control_bounds),
         cmocka_unit_test(test_malformed),
         cmocka_unit_test(test_random_input),
         cmocka_unit_test(test_http_parse),
+        cmocka_unit_test(test_http_lf_lines),
+        cmocka_unit_test(test_http_field_bounds),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -189,11 +189,14 @@ const S = {
   want: {}, applied: {},     /* parameter values wanted by the page / in force on the server */
   unavail: new Set(), pipeUnavail: new Set(),
   interacting: false, lastInput: 0, settleTimer: 0,
-  dirty: false, dirtyT: 0,   /* a request is due; the time of the oldest input not yet sent */
+  dirty: false,              /* a request is due */
+  inputT: null,              /* the time of the oldest input not yet sent; null: none */
   inflight: null,            /* the RENDER awaiting its FRAME: {seq, t} */
   decoding: false,           /* a frame is being decoded */
   waiting: null,             /* the newest frame that arrived meanwhile */
-  frames: 0, spoiled: 0, lastSeq: 0, lastCamSeq: 0, fpsT: [], lat: 0, render: 0, encode: 0,
+  frames: 0, spoiled: 0, lastSeq: 0, lastCamSeq: 0, fpsT: [], render: 0, encode: 0,
+  lat: null,                 /* ms from the last input shown to its frame; null: no input yet */
+  authError: '',             /* the server's text when it refused the token (asked again) */
   fw: 0, fh: 0, fpipe: '', lastCam: null, nsave: 0, status: '', closedByUser: false,
   stats: [], token: null,
   outstanding: 0, maxOutstanding: 0, inputs: 0, /* RENDERs without their FRAME; input events */
@@ -234,7 +237,10 @@ function connect() {
     S.applied = {}; for (const k of Object.keys(PARAMS)) S.applied[k] = PARAMS[k].def;
     if (S.closedByUser) { setStatus('disconnected (reload to connect again)'); return; }
     const why = `${ev.code}${ev.reason ? ' ' + ev.reason : ''}`;
-    setStatus(`DISCONNECTED (${why}); retrying in ${S.backoff / 1000} s`);
+    /* A refused token closes the connection too: the reason to show is the token, and the
+     * page connects again to ask for it (onWelcome). */
+    if (S.authError) setStatus(`wrong token (${S.authError}); connecting again to ask for it`);
+    else setStatus(`DISCONNECTED (${why}); retrying in ${S.backoff / 1000} s`);
     setTimeout(connect, S.backoff);
     S.backoff = Math.min(S.backoff * 2, 5000);
   };
@@ -296,7 +302,8 @@ function onWelcome(r) {
   if (authRequired && !authenticated) {
     if (S.token) { answerChallenge(S.token); return; }
     $('token-box').hidden = false;
-    setStatus('this server needs its token');
+    setStatus(S.authError ? `wrong token (${S.authError}): enter the right one`
+                          : 'this server needs its token');
     const go = () => answerChallenge($('token').value);
     $('token-go').onclick = go;
     $('token').onkeydown = (e) => { if (e.key === 'Enter') go(); e.stopPropagation(); };
@@ -304,6 +311,7 @@ function onWelcome(r) {
   }
   $('token-box').hidden = true;
   S.authed = true;
+  S.authError = '';
   setStatus(`connected to ${S.welcome.server} (${S.welcome.backend}: ${S.welcome.renderer})`);
   send(P.LIST, null, {kind: 'list'});
   if (S.cloud) openCloud(S.cloud);
@@ -355,13 +363,16 @@ function onInfo(r) {
   $('clouds').value = name;
   setStatus(provisional ? `${name}: first image, ${points} points of its top levels ` +
             '(drawn with points); preparing the full cloud' : `${name}: ${points} points`);
-  touchRequest(performance.now());
+  touchRequest(null);
 }
 
 function onError(r, seq, pend) {
   const code = r.u32(), text = r.str16();
   $('error').textContent = `${code} ${text}`;
-  if (code === E_AUTH_FAILED) S.token = null; /* ask again after the reconnection */
+  if (code === E_AUTH_FAILED) { /* ask again after the reconnection, saying why */
+    S.token = null;
+    S.authError = text;
+  }
   if (pend && pend.kind === 'params' && (code === E_BAD_PARAM_NAME || code === E_BAD_PARAM_VALUE)) {
     /* A parameter this server lacks: marked n/a and put back, never an error loop. */
     for (const [k, v] of Object.entries(pend.values)) {
@@ -389,9 +400,11 @@ function fullSize() {
           Math.max(1, Math.round(c.clientHeight * dpr))];
 }
 
-/* touchRequest: something the frame shows changed (t: when the input happened). */
+/* touchRequest: something the frame shows changed; t: when the input behind it happened, null
+ * when no input did (a cloud opened, the full frame after a drag): latency is measured from an
+ * input to the first frame that shows it, and only then. */
 function touchRequest(t) {
-  if (!S.dirty) S.dirtyT = t;
+  if (t !== null && S.inputT === null) S.inputT = t;
   S.dirty = true;
   hud();
   pump();
@@ -442,7 +455,8 @@ function pump() {
   const cseq = send(P.CAMERA, cameraPayload(S.orbit, w, h), null);
   const rseq = send(P.RENDER, null, {kind: 'render', cam, cseq, quality: want.quality,
                                      sent: performance.now()});
-  S.inflight = {seq: rseq, t: S.dirtyT};
+  S.inflight = {seq: rseq, t: S.inputT};
+  S.inputT = null;
   S.outstanding++;
   S.maxOutstanding = Math.max(S.maxOutstanding, S.outstanding);
   S.dirty = false;
@@ -457,7 +471,7 @@ function onFrame(r, seq, pend) {
   const type = format === 1 ? 'image/png' : 'image/jpeg';
   if (pend && pend.kind === 'save') { saveBlob(new Blob([data], {type}), pend.name); return; }
   const f = {seq, camSeq, pipe, w, h, renderUs, encodeUs, blob: new Blob([data], {type}),
-             t: S.inflight && S.inflight.seq === seq ? S.inflight.t : performance.now(),
+             t: S.inflight && S.inflight.seq === seq ? S.inflight.t : null,
              cam: pend ? pend.cam : null, sent: pend ? pend.sent : 0, recv: performance.now(),
              work: (renderUs + readbackUs + encodeUs) / 1000, quality: pend ? pend.quality : 0};
   if (S.inflight && S.inflight.seq === seq) S.inflight = null;
@@ -483,7 +497,8 @@ async function show(f) {
     const now = performance.now();
     S.frames++; S.lastSeq = f.seq; S.lastCamSeq = f.camSeq;
     S.fw = f.w; S.fh = f.h; S.fpipe = PIPELINES[f.pipe] || String(f.pipe);
-    S.render = f.renderUs / 1000; S.encode = f.encodeUs / 1000; S.lat = now - f.t;
+    S.render = f.renderUs / 1000; S.encode = f.encodeUs / 1000;
+    if (f.t !== null) S.lat = now - f.t; /* the frame shows an input: its latency */
     S.fpsT.push(now); while (S.fpsT.length && now - S.fpsT[0] > 1000) S.fpsT.shift();
     if (f.cam) S.lastCam = f.cam;
     if (f.cam && f.sent && S.stats.length < 4096) {
@@ -550,7 +565,7 @@ function settle() {
     return;
   }
   S.interacting = false;
-  touchRequest(performance.now());
+  touchRequest(null); /* the full frame of what the drag's frames showed */
 }
 
 const pointers = new Map();
@@ -661,7 +676,8 @@ function hud() {
   $('idle').textContent = rest && S.frames ? '1' : '0';
   const fmt = (x) => (Math.round(x * 100) / 100).toString();
   const parts = [`${S.fpsT.length} fps`, `render ${S.render.toFixed(1)} ms`,
-                 `encode ${S.encode.toFixed(1)} ms`, `latency ${S.lat.toFixed(0)} ms`,
+                 `encode ${S.encode.toFixed(1)} ms`,
+                 S.lat === null ? '' : `latency ${S.lat.toFixed(0)} ms`,
                  S.fpipe || PIPELINES[S.want.pipeline], `${S.fw}x${S.fh}`,
                  `λ ${fmt(S.want.lambda)} t ${fmt(S.want.t)} l_m ${fmt(S.want.l_m)}`,
                  `field ${FIELDS[S.want.field]}`, S.want.shading ? 'EDL' : '',

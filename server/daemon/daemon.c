@@ -58,9 +58,12 @@ static void usage(FILE *f)
             "                       option; --preload may also be repeated)\n"
             "  --max-clients N      authenticated connections served at once (default 64)\n"
             "  --max-unauth N       connections not yet authenticated, counted apart from\n"
-            "                       --max-clients (default 64); when full, a new connection replaces\n"
-            "                       the oldest of them\n"
-            "  --max-per-addr N     connections from one client address (default 32)\n"
+            "                       --max-clients (default 64); when full, a new connection waits\n"
+            "                       until it sends its first bytes, then takes the place of one\n"
+            "                       that has sent nothing for 2 s, else nothing yet, else of the\n"
+            "                       one connected the longest\n"
+            "  --max-per-addr N     connections from one client address (default: half of\n"
+            "                       --max-clients, at least 1, at most 32)\n"
             "  --handshake-timeout S  seconds a client has to authenticate (default 10)\n"
             "  --idle-timeout S     close an authenticated client silent this long with nothing of\n"
             "                       its own in progress (default 300; 0: never)\n"
@@ -112,6 +115,12 @@ int srv_parse_size(const char *s, uint64_t *out)
     return 0;
 }
 
+int srv_per_addr_default(int max_clients)
+{
+    int half = max_clients / 2;
+    return half < 1 ? 1 : half > 32 ? 32 : half;
+}
+
 void srv_opts_defaults(srv_opts *o)
 {
     memset(o, 0, sizeof *o);
@@ -123,7 +132,6 @@ void srv_opts_defaults(srv_opts *o)
     o->read_ms = 30000;
     o->write_ms = 30000;
     o->max_unauth = 64;
-    o->max_per_addr = 32;
     o->auth_delay_ms = 250;
     o->shutdown_ms = 5000;
     o->preview_points = 500000;
@@ -321,9 +329,12 @@ static int parse_opts(int argc, char **argv, srv_opts *o)
 static void on_sess_close(void *owner, sess *s, const char *reason)
 {
     srv *sv = owner;
-    srv_log(sv, s, "closed: %s (%llu frames sent, %llu dropped, %llu bytes, %.1f s)", reason,
-            (unsigned long long)s->frames_sent, (unsigned long long)s->frames_dropped,
-            (unsigned long long)s->bytes_out, (double)(ev_now_ms() - s->t_connect_ms) / 1000.0);
+    /* pending: its requests and frames the render thread still counts (rt_pending); a client
+     * that closes with nothing in flight has 0, so the line shows a frame never given back. */
+    srv_log(sv, s, "closed: %s (%llu frames sent, %llu dropped, %d pending, %llu bytes, %.1f s)",
+            reason, (unsigned long long)s->frames_sent, (unsigned long long)s->frames_dropped,
+            sv->rt ? rt_pending(sv->rt, s->id) : 0, (unsigned long long)s->bytes_out,
+            (double)(ev_now_ms() - s->t_connect_ms) / 1000.0);
     if (sv->rt) rt_client_close(sv->rt, s->id);
     s->next_dead = sv->dead;
     sv->dead = s;
@@ -406,66 +417,7 @@ static void refuse(const srv *sv, int fd, int http, int code, const char *text)
     close(fd);
 }
 
-/* addr_host: the address of "HOST:PORT" or "[V6]:PORT" without its port (and brackets), for
- * per-address counting: a client's reconnections differ only in the port. */
-static void addr_host(const char *addr, char *out, size_t len)
-{
-    const char *colon = strrchr(addr, ':');
-    size_t n = colon ? (size_t)(colon - addr) : strlen(addr);
-    if (n >= 2 && addr[0] == '[' && addr[n - 1] == ']') {
-        addr++;
-        n -= 2;
-    }
-    if (n >= len) n = len - 1;
-    memcpy(out, addr, n);
-    out[n] = 0;
-}
-
-static int same_host(const sess *s, const char *host)
-{
-    char h[NET_ADDR_LEN];
-    addr_host(s->addr, h, sizeof h);
-    return strcmp(h, host) == 0;
-}
-
-/* srv_census: what the session table holds, for admitting a connection from host. */
-typedef struct srv_census {
-    int authed, unauth;   /* live sessions past / before authentication */
-    int from_host;        /* live sessions from host */
-    sess *oldest_unauth;  /* the unauthenticated session connected first, or NULL */
-    sess *oldest_unauth_host; /* the same among those from host */
-} srv_census;
-
-/* older: whether a connected before b (ids break ties of the millisecond clock). */
-static int older(const sess *a, const sess *b)
-{
-    return !b || a->t_connect_ms < b->t_connect_ms ||
-           (a->t_connect_ms == b->t_connect_ms && a->id < b->id);
-}
-
-/* census: one pass over the table (O(slots) per accepted connection, bounded by
- * --max-clients + --max-unauth; simpler than keeping counts in step with every state change). */
-static void census(const srv *sv, const char *host, srv_census *c)
-{
-    memset(c, 0, sizeof *c);
-    for (int i = 0; i < sv->nslots; i++) {
-        sess *s = sv->sessions[i];
-        if (!s || s->dead) continue;
-        if (s->authed) {
-            c->authed++;
-        } else {
-            c->unauth++;
-            if (older(s, c->oldest_unauth)) c->oldest_unauth = s;
-        }
-        if (host && same_host(s, host)) {
-            c->from_host++;
-            if (!s->authed && older(s, c->oldest_unauth_host)) c->oldest_unauth_host = s;
-        }
-    }
-}
-
-/* answer_and_close: queues ERROR code (request seq) on s and closes it once written. */
-static void answer_and_close(srv *sv, sess *s, uint32_t seq, int code, const char *text)
+void srv_answer_and_close(srv *sv, sess *s, uint32_t seq, int code, const char *text)
 {
     srv_log(sv, s, "error %s (seq %u): %s", proto_err_name(code), seq, text);
     proto_buf b = {.version = s->version};
@@ -475,19 +427,6 @@ static void answer_and_close(srv *sv, sess *s, uint32_t seq, int code, const cha
     s->close_after = 1;
     snprintf(s->close_reason, sizeof s->close_reason, "after error %s", proto_err_name(code));
     sess_kick(s);
-}
-
-int srv_admit(srv *sv, sess *s, uint32_t seq)
-{
-    srv_census c;
-    census(sv, NULL, &c);
-    if (c.authed >= sv->o.max_clients) {
-        srv_log(sv, s, "refused: %d clients already connected (--max-clients)", c.authed);
-        answer_and_close(sv, s, seq, PROTO_E_BUSY, "too many clients; retry later");
-        return 0;
-    }
-    sess_set_authed(s);
-    return 1;
 }
 
 /* authfail_entry: the failure record of host, made (replacing the stalest) when missing. */
@@ -512,7 +451,7 @@ static void on_auth_fail_due(ev_loop *l, ev_timer *t, void *data)
 {
     (void)l; (void)t;
     sess *s = data;
-    answer_and_close(s->owner, s, s->fail_seq, PROTO_E_AUTH_FAILED,
+    srv_answer_and_close(s->owner, s, s->fail_seq, PROTO_E_AUTH_FAILED,
                      s->fail_noproof ? "no authentication proof; the server needs one"
                                      : "wrong authentication proof");
 }
@@ -520,7 +459,7 @@ static void on_auth_fail_due(ev_loop *l, ev_timer *t, void *data)
 void srv_auth_failed(srv *sv, sess *s, uint32_t seq, int noproof)
 {
     char host[NET_ADDR_LEN];
-    addr_host(s->addr, host, sizeof host);
+    srv_addr_host(s->addr, host, sizeof host);
     uint64_t now = ev_now_ms();
     srv_authfail *a = authfail_entry(sv, host, now);
     a->fails++;
@@ -538,40 +477,29 @@ void srv_auth_failed(srv *sv, sess *s, uint32_t seq, int noproof)
      * than its connections allow. The handshake timer becomes the delay. */
     s->fail_seq = seq;
     s->fail_noproof = noproof;
+    s->auth_failing = 1;
     s->paused = 1;
     ev_timer_start(sv->loop, &s->hs_timer, delay, on_auth_fail_due, s);
 }
 
-/* adopt: serves the accepted socket c from addr as a session under the caps; http: the
- * browser listener's, whose sessions speak through ws_conn. */
-static int adopt(srv *sv, int c, const char *addr, int http)
+/* srv_adopt_conn (srv.h): serves the accepted socket c from addr as a session under the caps;
+ * http: the browser listener's, whose sessions speak through ws_conn. */
+int srv_adopt_conn(srv *sv, int c, const char *addr, int http)
 {
-    char host[NET_ADDR_LEN];
-    addr_host(addr, host, sizeof host);
-    srv_census cs;
-    census(sv, host, &cs);
-    if (cs.from_host >= sv->o.max_per_addr) {
-        srv_log(sv, NULL, "%s refused: %d connections from %s already (--max-per-addr)", addr,
-                cs.from_host, host);
-        refuse(sv, c, http, PROTO_E_BUSY, "too many connections from your address; retry later");
+    char host[NET_ADDR_LEN], why[200];
+    const char *text = NULL;
+    srv_addr_host(addr, host, sizeof host);
+    int room = srv_room(sv, c, host, why, sizeof why, &text);
+    if (room == SRV_ROOM_LOBBY) {
+        srv_lobby_hold(sv, c, addr, http);
+        return 0;
+    }
+    if (room != 0) {
+        srv_log(sv, NULL, "%s refused: %s", addr, why);
+        refuse(sv, c, http, PROTO_E_BUSY, text);
         return SD_ELIMIT;
     }
-    if (cs.authed >= sv->o.max_clients) {
-        srv_log(sv, NULL, "%s refused: %d clients already connected (--max-clients)", addr, cs.authed);
-        refuse(sv, c, http, PROTO_E_BUSY, "too many clients; retry later");
-        return SD_ELIMIT;
-    }
-    if (cs.unauth >= sv->o.max_unauth && cs.oldest_unauth) {
-        /* The unauthenticated pool is full: one of it makes room (refusing the newcomer, as
-         * a plain cap would, lets a flood of idle sockets lock everyone out). An address
-         * competes with itself first: its own oldest unauthenticated connection goes, so a
-         * reconnecting flood from one address churns through its own sockets and never
-         * evicts another client mid-handshake; a newcomer from an address with none takes
-         * the oldest of the pool. Its slot is freed at once for the newcomer. */
-        sess *victim = cs.oldest_unauth_host ? cs.oldest_unauth_host : cs.oldest_unauth;
-        sess_close(victim, "unauthenticated, dropped for a newer connection (--max-unauth)");
-        free_dead(sv);
-    }
+    free_dead(sv); /* the slot of a connection closed to make room */
     int idx = -1;
     for (int i = 0; i < sv->nslots; i++)
         if (!sv->sessions[i]) { idx = i; break; }
@@ -620,7 +548,7 @@ static int adopt(srv *sv, int c, const char *addr, int http)
 
 int srv_adopt(srv *sv, int c, const char *addr)
 {
-    return adopt(sv, c, addr, 0);
+    return srv_adopt_conn(sv, c, addr, 0);
 }
 
 /* accept_from: takes the pending connections of listener fd (at most 16 a wakeup). */
@@ -634,7 +562,7 @@ static void accept_from(srv *sv, int fd, int http)
             srv_log(sv, NULL, "accept failed: %s", strerror(-c));
             return;
         }
-        (void)adopt(sv, c, addr, http);
+        (void)srv_adopt_conn(sv, c, addr, http);
     }
 }
 
@@ -676,6 +604,7 @@ static void begin_shutdown(srv *sv, const char *why)
         sv->http_lfd = -1;
     }
     rt_drop_requests(sv->rt);
+    srv_lobby_free(sv); /* silent connections have nothing in flight */
     for (int i = 0; i < sv->nslots; i++) {
         sess *s = sv->sessions[i];
         if (!s || s->dead) continue;
@@ -683,7 +612,7 @@ static void begin_shutdown(srv *sv, const char *why)
         ev_timer_stop(sv->loop, &s->fps_timer);
         /* SHUTTING_DOWN goes after the answers already queued (the frames in flight are
          * finished and sent first), then the connection closes. */
-        answer_and_close(sv, s, 0, PROTO_E_SHUTTING_DOWN,
+        srv_answer_and_close(sv, s, 0, PROTO_E_SHUTTING_DOWN,
                          "the server is shutting down; reconnect later");
         if (!s->dead) snprintf(s->close_reason, sizeof s->close_reason, "server shutting down");
     }
@@ -804,11 +733,19 @@ int srv_core_start(srv *sv, sd_err *err)
     /* Authenticated and unauthenticated connections have separate caps, so the table holds
      * both; ids keep the slot in 16 bits (8192 at most here). */
     sv->nslots = sv->o.max_clients + sv->o.max_unauth;
+    if (!sv->o.max_per_addr) sv->o.max_per_addr = srv_per_addr_default(sv->o.max_clients);
     sv->lim = (sess_limits){.idle_ms = (uint32_t)sv->o.idle_ms, .read_ms = (uint32_t)sv->o.read_ms,
                             .write_ms = (uint32_t)sv->o.write_ms};
     sv->sessions = calloc((size_t)sv->nslots, sizeof *sv->sessions);
     sv->gens = calloc((size_t)sv->nslots, sizeof *sv->gens);
-    if (!sv->sessions || !sv->gens) return sd_errf(err, SD_ENOMEM, "out of memory");
+    sv->pre = calloc((size_t)sv->nslots, sizeof *sv->pre);
+    long lc = (long)sv->o.max_unauth * SRV_LOBBY_PER_UNAUTH;
+    sv->nlobby_cap = lc < 64 ? 64 : lc > 4096 ? 4096 : (int)lc;
+    sv->lobby = calloc((size_t)sv->nlobby_cap, sizeof *sv->lobby);
+    if (!sv->sessions || !sv->gens || !sv->pre || !sv->lobby)
+        return sd_errf(err, SD_ENOMEM, "out of memory");
+    for (int i = 0; i < sv->nlobby_cap; i++) sv->lobby[i].fd = -1;
+    ev_timer_init(&sv->lobby_timer);
     if (!sv->max_w) sv->max_w = 8192;
     if (!sv->max_h) sv->max_h = 8192;
     rt_desc rd = {
@@ -933,6 +870,9 @@ static int start(srv *sv)
         fprintf(stderr, "splatd: cannot write the port file %s: %s\n", sv->o.port_file, strerror(errno));
         return 1;
     }
+    srv_log(sv, NULL, "at most %d clients (--max-clients), %d connections not yet authenticated "
+            "(--max-unauth), %d connections from one address (--max-per-addr)",
+            sv->o.max_clients, sv->o.max_unauth, sv->o.max_per_addr);
     if (sv->token.len) srv_log(sv, NULL, "clients must authenticate (token from %s)", sv->o.token_file);
     if (sv->tls) srv_log(sv, NULL, "TLS only, certificate %s", tls_server_subject(sv->tls));
     return 0;
@@ -950,6 +890,7 @@ int srv_teardown(srv *sv)
         srv_log(sv, NULL, "a cloud is still being prepared; exiting without waiting for it");
         return 1;
     }
+    if (sv->loop) srv_lobby_free(sv);
     if (sv->lfd >= 0) close(sv->lfd);
     if (sv->http_lfd >= 0) close(sv->http_lfd);
     if (sv->sigfd >= 0) close(sv->sigfd);
@@ -958,6 +899,7 @@ int srv_teardown(srv *sv)
     free(sv->clouds);
     free(sv->sessions);
     free(sv->gens);
+    free(sv->pre);
     memset(&sv->token, 0, sizeof sv->token);
     tls_server_free(sv->tls);
     sv->tls = NULL;

@@ -123,7 +123,7 @@ int srv_pack_frame(void *user, const rt_frame_meta *m, const uint8_t *data, size
                    uint8_t **msg, size_t *msglen)
 {
     (void)user;
-    if (len > PROTO_MAX_FRAME - PROTO_FRAME_FIXED) return SD_ELIMIT;
+    if (!proto_frame_fits(len)) return SD_ELIMIT;
     uint8_t *p = malloc(PROTO_FRAME_HEAD_LEN + len);
     if (!p) return SD_ENOMEM;
     proto_frame f = {
@@ -246,15 +246,25 @@ static void make_request(srv *sv, sess *s, rt_request *rq, uint32_t req_seq)
 
 static void on_fps_timer(ev_loop *l, ev_timer *t, void *data);
 
-/* frame_fits: 1 when a frame of rq is within --max-frame-bytes on its own; else answers
- * BAD_CAMERA to request seq (its size and format ask for more than the server may hold) and
- * returns 0. */
+/* frame_fits: 1 when a frame of rq can be sent (a raw frame's size is known before it is
+ * rendered: it must fit the protocol's frame limit) and is within --max-frame-bytes on its own;
+ * else answers BAD_CAMERA to request seq, naming the limit its size and format ask too much of,
+ * and returns 0. Nothing is rendered for a frame that could not be sent. */
 static int frame_fits(srv *sv, sess *s, const rt_request *rq, uint32_t seq)
 {
+    char t[320], fmt[32];
+    const char *fname = sp_enum_name(SP_FORMAT, rq->params.format, fmt, sizeof fmt);
+    uint64_t raw = (uint64_t)rq->cam.width * (uint64_t)rq->cam.height * 4;
+    if (rq->params.format == SP_FMT_RAW && !proto_frame_fits(raw)) {
+        snprintf(t, sizeof t, "a %dx%d frame in format raw is %llu bytes of FRAME payload, over "
+                 "the protocol's frame limit of %u bytes (PROTOCOL.md section 3): ask for a "
+                 "smaller size or a compressed format", rq->cam.width, rq->cam.height,
+                 (unsigned long long)(raw + PROTO_FRAME_FIXED), (unsigned)PROTO_MAX_FRAME);
+        send_error(sv, s, seq, PROTO_E_BAD_CAMERA, t);
+        return 0;
+    }
     uint64_t c = rt_frame_cost(rq), b = rt_frame_budget(sv->rt);
     if (c <= b) return 1;
-    char t[240], fmt[32];
-    const char *fname = sp_enum_name(SP_FORMAT, rq->params.format, fmt, sizeof fmt);
     snprintf(t, sizeof t, "a %dx%d frame in format %s needs up to %llu MiB, over this server's "
              "%llu MiB for frames (--max-frame-bytes): ask for a smaller size or format",
              rq->cam.width, rq->cam.height, fname ? fname : "?",
@@ -322,7 +332,13 @@ static void on_hello(srv *sv, sess *s, const proto_msg *m)
     proto_error pe = {0};
     int rc = proto_parse_hello(m->payload, m->len, &h, &pe);
     if (rc < 0) { send_error(sv, s, m->h.seq, -rc, pe.msg); return; }
-    if (s->authed) { send_welcome(sv, s, m->h.seq); return; } /* harmless repeat */
+    if (s->authed) {
+        /* A connection has one handshake (PROTOCOL.md 4): a client sending HELLO again has lost
+         * track of the connection's state, and another WELCOME would hide that. */
+        send_error(sv, s, m->h.seq, PROTO_E_UNKNOWN_TYPE,
+                   "HELLO after the handshake: a connection has one handshake");
+        return;
+    }
     int v = proto_pick_version(h.min_version, h.max_version, &pe);
     if (v < 0) { send_error(sv, s, m->h.seq, -v, pe.msg); return; }
     srv_clean_text(h.client, s->client_name, sizeof s->client_name); /* for the log */
@@ -576,10 +592,14 @@ void srv_handle(void *owner, sess *s, const proto_msg *m)
     case PROTO_MSG_STREAM: on_stream(sv, s, m); break;
     case PROTO_MSG_PREFETCH: on_prefetch(sv, s, m); break;
     case PROTO_MSG_PING: on_ping(sv, s, m); break;
-    case PROTO_MSG_BYE:
+    case PROTO_MSG_BYE: {
+        proto_error pe;
+        int prc = proto_parse_empty(m->h.type, m->len, &pe);
+        if (prc < 0) { send_error(sv, s, m->h.seq, -prc, pe.msg); break; }
         s->close_after = 1;
         snprintf(s->close_reason, sizeof s->close_reason, "BYE");
         break;
+    }
     default:
         send_error(sv, s, m->h.seq, PROTO_E_UNKNOWN_TYPE, "unexpected message type");
         break;

@@ -7,6 +7,8 @@
 #include "view.h"
 #include "render_thread.h"
 
+#include <errno.h>
+#include <malloc.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -22,6 +24,13 @@
 #include "srv.h"
 
 enum { RT_NFRAMES = 2, RT_MAX_PROV = 64 };
+
+/* Large frames' memory is given back when the workers are idle: once a frame of more than
+ * RT_TRIM_PX pixels has been made, RT_TRIM_IDLE_MS with nothing to render or encode frees the
+ * frame pool's buffers, the renderer's output framebuffers and the encoder's buffers (each made
+ * again at the next frame's size), then malloc_trim returns the heap's free pages. Frames up to
+ * 4K UHD keep theirs, so an interactive client never pays for it. */
+enum { RT_TRIM_PX = 3840 * 2160, RT_TRIM_IDLE_MS = 1000 };
 
 /* A provisional cloud and the full cloud that replaced it (0 until then): requests still
  * naming the provisional id are drawn from the replacement. Render thread, mu held. */
@@ -90,6 +99,7 @@ struct rt_ctx {
     rt_prov prov[RT_MAX_PROV];          /* the latest provisional clouds, oldest dropped */
     int nprov;
     int stop, render_done;
+    int enc_trim;               /* the encoder gives its buffers back (set by the render thread) */
     int init_state;                      /* 0 pending, 1 ok, -1 failed */
     sd_err init_err;
     char renderer[256], backend[32];
@@ -206,6 +216,54 @@ static int free_frame(rt_ctx *rt)
     for (int i = 0; i < RT_NFRAMES; i++)
         if (!rt->frame_busy[i]) return i;
     return -1;
+}
+
+/* big_idle: whether the workers are idle (no frame rendering, queued or encoding) while the
+ * frame pool holds a frame of more than RT_TRIM_PX pixels. mu held. */
+static int big_idle(const rt_ctx *rt)
+{
+    if (rt->enc_n || rt->encoding) return 0;
+    int big = 0;
+    for (int i = 0; i < RT_NFRAMES; i++) {
+        if (rt->frame_busy[i]) return 0;
+        big |= (uint64_t)rt->frames[i].width * (uint64_t)rt->frames[i].height > RT_TRIM_PX;
+    }
+    return big;
+}
+
+static int render_once(rt_ctx *rt, rnd_ctx *rnd, const rt_request *rq, rnd_frame *f, sd_err *err);
+static int prov_resolve(const rt_ctx *rt, rt_request *rq);
+
+/* trim: gives a large frame's memory back (RT_TRIM_PX): the pool's buffers, the renderer's
+ * targets and the pipelines' scratch here (render thread, workers idle), the encoder's in its
+ * own thread. last: the last request rendered, drawn again at 1x1 so that the driver lets go
+ * of what the large frame had bound (rnd_release_targets). Called with mu held; the work runs
+ * without it (only this thread touches the pool frames while none is busy). */
+static void trim(rt_ctx *rt, rnd_ctx *rnd, const rt_request *last)
+{
+    rt_request one = {0};
+    int redraw = last && !(rt->d.hooks && rt->d.hooks->render); /* a local renderer's state */
+    if (redraw) {
+        one = *last;
+        one.cam.width = one.cam.height = 1;
+        one.refine = 0;
+        prov_resolve(rt, &one);
+    }
+    rt->rendering = 1;
+    pthread_mutex_unlock(&rt->mu);
+    for (int i = 0; i < RT_NFRAMES; i++) rnd_frame_free(&rt->frames[i]);
+    rnd_release_targets(rnd);
+    if (redraw) {
+        rnd_frame f = {0};
+        sd_err err = {0};
+        render_once(rt, rnd, &one, &f, &err); /* a cloud gone since: nothing to let go */
+        rnd_frame_free(&f);
+    }
+    malloc_trim(0);
+    pthread_mutex_lock(&rt->mu);
+    rt->rendering = 0;
+    rt->enc_trim = 1;
+    pthread_cond_signal(&rt->cv_enc);
 }
 
 static int has_work(rt_ctx *rt)
@@ -367,8 +425,22 @@ static void *render_main(void *arg)
     rt->init_state = 1;
     pthread_cond_broadcast(&rt->cv_init);
     int prefetching = 0; /* a LOD cloud's prefetch has nodes left to load and upload */
+    rt_request last_rq;  /* the last request rendered (trim draws it again at 1x1) */
+    int have_last = 0;
     for (;;) {
         while (!rt->stop && !has_work(rt)) {
+            if (!prefetching && big_idle(rt)) {
+                /* A large frame's buffers wait RT_TRIM_IDLE_MS for another frame, then go. */
+                struct timespec ts;
+                clock_gettime(CLOCK_REALTIME, &ts);
+                ts.tv_sec += RT_TRIM_IDLE_MS / 1000;
+                ts.tv_nsec += (long)(RT_TRIM_IDLE_MS % 1000) * 1000000L;
+                if (ts.tv_nsec >= 1000000000L) ts.tv_sec++, ts.tv_nsec -= 1000000000L;
+                if (pthread_cond_timedwait(&rt->cv_render, &rt->mu, &ts) == ETIMEDOUT &&
+                    !rt->stop && !has_work(rt) && big_idle(rt))
+                    trim(rt, rnd, have_last ? &last_rq : NULL);
+                continue;
+            }
             if (!prefetching) {
                 pthread_cond_wait(&rt->cv_render, &rt->mu);
                 continue;
@@ -487,6 +559,8 @@ static void *render_main(void *arg)
             }
             continue;
         }
+        last_rq = rq;
+        have_last = 1;
         job.meta.width = f->width;
         job.meta.height = f->height;
         job.meta.render_us = f->render_us;
@@ -521,7 +595,18 @@ static void *enc_main(void *arg)
     enc_ctx *enc = enc_create(&err);
     pthread_mutex_lock(&rt->mu);
     for (;;) {
-        while (!rt->enc_n && !rt->render_done) pthread_cond_wait(&rt->cv_enc, &rt->mu);
+        while (!rt->enc_n && !rt->render_done && !rt->enc_trim)
+            pthread_cond_wait(&rt->cv_enc, &rt->mu);
+        if (rt->enc_trim && !rt->enc_n) {
+            /* Idle after a large frame: a fresh encoder, without the large buffers. */
+            rt->enc_trim = 0;
+            pthread_mutex_unlock(&rt->mu);
+            enc_destroy(enc);
+            enc = enc_create(&err);
+            malloc_trim(0);
+            pthread_mutex_lock(&rt->mu);
+            continue;
+        }
         if (!rt->enc_n) break; /* render thread gone and nothing left */
         rt_encjob job = rt->encq[0];
         memmove(rt->encq, rt->encq + 1, (size_t)(--rt->enc_n) * sizeof rt->encq[0]);
@@ -535,8 +620,17 @@ static void *enc_main(void *arg)
         uint64_t t0 = now_us();
         int rc = enc ? enc_encode(enc, &rt->frames[job.frame], &job.params, &out, &len, &err) : SD_ENOMEM;
         job.meta.encode_us = now_us() - t0;
-        if (rc == 0 && rt->d.pack(rt->d.pack_user, &job.meta, out, len, &msg, &msglen) != 0) {
-            rc = sd_errf(&err, SD_ENOMEM, "out of memory packing a %zu-byte frame", len);
+        if (rc == 0 && (rc = rt->d.pack(rt->d.pack_user, &job.meta, out, len, &msg, &msglen))) {
+            char fmt[32];
+            const char *fname = sp_enum_name(SP_FORMAT, job.params.format, fmt, sizeof fmt);
+            if (rc == SD_ELIMIT)
+                sd_errf(&err, SD_ELIMIT, "the %dx%d frame encoded as %s is %zu bytes of image "
+                        "data, over the protocol's frame limit of %u bytes of FRAME payload "
+                        "(PROTOCOL.md section 3): ask for a smaller size or a format that "
+                        "compresses it more", job.meta.width, job.meta.height,
+                        fname ? fname : "?", len, (unsigned)PROTO_MAX_FRAME);
+            else
+                sd_errf(&err, SD_ENOMEM, "out of memory packing a %zu-byte frame", len);
         }
         rt_event *ev = calloc(1, sizeof *ev);
 

@@ -39,7 +39,8 @@ typedef struct srv_opts {
     int read_ms;                 /* --read-timeout; default 30000; 0: none */
     int write_ms;                /* --write-timeout; default 30000; 0: none */
     int max_unauth;              /* --max-unauth: connections not yet authenticated; default 64 */
-    int max_per_addr;            /* --max-per-addr: connections from one address; default 32 */
+    int max_per_addr;            /* --max-per-addr: connections from one address; default 0:
+                                  * srv_per_addr_default(max_clients), set at start */
     int auth_delay_ms;           /* --auth-fail-delay: first failure's delay; default 250 */
     int auth_delay_local;        /* --auth-fail-delay given: loopback clients are delayed too */
     int shutdown_ms;             /* default 5000: how long SIGTERM waits for frames in flight */
@@ -95,6 +96,34 @@ enum {
     SRV_AUTHFAIL_MAX_SHIFT = 6,              /* the delay doubles up to 64x the first one */
 };
 
+/* A connection of the unauthenticated pool, as admit.c weighs it for eviction. */
+typedef struct srv_pre {
+    sess *s;
+    char host[NET_ADDR_LEN];     /* its address without the port */
+    int count;                   /* connections of the pool (and the newcomer) from that address */
+    int kind;                    /* admit.c's PRE_* */
+    uint64_t quiet;              /* ms since its last bytes, or since it connected */
+} srv_pre;
+
+/* A silent newcomer waiting in the lobby for its first bytes while the pool is full (admit.c). */
+typedef struct srv_lobby_ent {
+    struct srv *sv;
+    int fd;                      /* -1: a free entry */
+    int http;                    /* from the browser listener */
+    uint64_t t_ms;               /* accepted then */
+    char addr[NET_ADDR_LEN];
+} srv_lobby_ent;
+
+enum {
+    SRV_QUIET_MS = 2000,         /* a pre-auth connection that sent nothing for this long (since
+                                  * it connected, or since its last bytes) is quiet: the first
+                                  * to make room for a newcomer (admit.c) */
+    SRV_LOBBY_PER_UNAUTH = 16,   /* lobby places per --max-unauth place (at least 64, at most
+                                  * 4096) */
+    SRV_LOBBY_SWEEP_MS = 250,    /* how often the lobby is swept for --handshake-timeout */
+    SRV_ROOM_LOBBY = 1,          /* srv_room: the newcomer waits in the lobby */
+};
+
 typedef struct srv {
     srv_opts o;
     ev_loop *loop;
@@ -114,6 +143,11 @@ typedef struct srv {
     sess_limits lim;             /* the deadlines every session gets (from o) */
     srv_authfail authfail[SRV_AUTHFAIL_SLOTS];
     uint16_t *gens;
+    srv_pre *pre;                /* nslots entries: admit.c's scratch for choosing who makes
+                                  * room */
+    srv_lobby_ent *lobby;        /* nlobby_cap entries, nlobby of them in use */
+    int nlobby, nlobby_cap;
+    ev_timer lobby_timer;        /* sweeps the lobby while it holds any */
     int nsess;
     sess *dead;                  /* closed sessions, freed before the loop sleeps */
     srv_cloud *clouds;
@@ -133,6 +167,13 @@ void srv_log(const srv *sv, const sess *s, const char *fmt, ...) __attribute__((
  * else 0. What on_accept does with each accepted socket; the dispatch fuzzer's way in. */
 int srv_adopt(srv *sv, int c, const char *addr);
 
+/* srv_per_addr_default: --max-per-addr when it is not given: half of --max-clients (at least
+ * 1), at most 32. One address then never holds more than half of the slots, so a client from
+ * another address always finds room (with --max-clients 1 the one slot is everybody's), while
+ * the default --max-clients 64 keeps 32 for one busy machine (a render farm's head, a test
+ * run). */
+int srv_per_addr_default(int max_clients);
+
 /* srv_opts_defaults: o with every default (as `splatd` with no option). */
 void srv_opts_defaults(srv_opts *o);
 /* srv_core_start: the parts of start-up the sessions need (event loop, session table,
@@ -142,6 +183,26 @@ void srv_opts_defaults(srv_opts *o);
  * when a cloud preparation was left running (the process should exit without waiting). */
 int srv_core_start(srv *sv, sd_err *err);
 int srv_teardown(srv *sv);
+
+/* srv_addr_host: the address of "HOST:PORT" or "[V6]:PORT" without its port (and brackets),
+ * for per-address counting: a client's reconnections differ only in the port. */
+void srv_addr_host(const char *addr, char *out, size_t len);
+/* srv_room: whether a new connection (socket fd) from host (an address without port) may be
+ * served now, under --max-per-addr, --max-clients and --max-unauth; when the unauthenticated
+ * pool is full, one of it is closed to make room for a newcomer that has spoken (the policy is
+ * admit.c's). Returns 0 (serve it), SRV_ROOM_LOBBY (it has not spoken: srv_lobby_hold), or
+ * SD_ELIMIT with why (for the log) and *client_text (for the refusal) set. */
+int srv_room(srv *sv, int fd, const char *host, char *why, size_t whylen,
+             const char **client_text);
+/* srv_lobby_hold: socket fd from addr (http: the browser listener's) waits in the lobby for
+ * its first bytes, then goes through srv_adopt_conn again (admit.c). srv_lobby_free: closes
+ * every lobby socket and frees the lobby. */
+void srv_lobby_hold(srv *sv, int fd, const char *addr, int http);
+void srv_lobby_free(srv *sv);
+/* srv_adopt_conn: srv_adopt for either listener (http: the browser listener). */
+int srv_adopt_conn(srv *sv, int c, const char *addr, int http);
+/* srv_answer_and_close: queues ERROR code (request seq) on s and closes it once written. */
+void srv_answer_and_close(srv *sv, sess *s, uint32_t seq, int code, const char *text);
 
 /* srv_admit: s has just authenticated (a HELLO without a token, or with the right proof):
  * admits it under --max-clients (sess_set_authed) and returns 1; or answers BUSY to request

@@ -20,25 +20,33 @@ static int keep(char *dst, size_t cap, const char *v, size_t n)
     return 0;
 }
 
+/* line_end: the end of the line that starts at p, its terminator excluded, given nl, the LF
+ * that ends it: a CR right before the LF belongs to the terminator (RFC 9112 2.2: a recipient
+ * may take a bare LF as the line terminator and ignore a CR before it). */
+static const char *line_end(const char *p, const char *nl)
+{
+    return nl > p && nl[-1] == '\r' ? nl - 1 : nl;
+}
+
 int http_parse_request(const char *buf, size_t len, http_req *r, char *err, size_t errlen)
 {
     memset(r, 0, sizeof *r);
+    /* The head ends at its first empty line: CR LF CR LF, or the same with bare LFs. */
     size_t scan = len < HTTP_HEAD_MAX ? len : HTTP_HEAD_MAX;
-    const char *end = NULL;
-    for (size_t i = 0; i + 3 < scan && !end; i++)
-        if (buf[i] == '\r' && buf[i + 1] == '\n' && buf[i + 2] == '\r' && buf[i + 3] == '\n')
-            end = buf + i;
-    if (!end) {
+    const char *head_end = NULL; /* just past the empty line's LF */
+    for (const char *p = buf, *nl; !head_end && (nl = memchr(p, '\n', scan - (size_t)(p - buf)));
+         p = nl + 1)
+        if (line_end(p, nl) == p) head_end = nl + 1;
+    if (!head_end) {
         if (len >= HTTP_HEAD_MAX) {
             snprintf(err, errlen, "request head over %d bytes", HTTP_HEAD_MAX);
             return -431;
         }
         return 0;
     }
-    size_t head_len = (size_t)(end - buf) + 4;
+    size_t head_len = (size_t)(head_end - buf);
     /* Request line: METHOD SP TARGET SP HTTP/1.x */
-    const char *p = buf, *eol = memchr(p, '\r', (size_t)(end - p) + 1);
-    if (!eol || eol[1] != '\n') return bad(err, errlen, 400, "request line without CRLF");
+    const char *p = buf, *nl = memchr(p, '\n', head_len), *eol = line_end(p, nl);
     const char *sp1 = memchr(p, ' ', (size_t)(eol - p));
     const char *sp2 = sp1 ? memchr(sp1 + 1, ' ', (size_t)(eol - sp1 - 1)) : NULL;
     if (!sp1 || !sp2) return bad(err, errlen, 400, "request line is not 'METHOD TARGET VERSION'");
@@ -53,13 +61,12 @@ int http_parse_request(const char *buf, size_t len, http_req *r, char *err, size
     for (const char *c = buf; c < eol; c++)
         if ((unsigned char)*c < 0x21 && *c != ' ')
             return bad(err, errlen, 400, "control character in the request line");
-    /* Headers: NAME ":" OWS VALUE OWS CRLF */
-    p = eol + 2;
+    /* Headers: NAME ":" OWS VALUE OWS, each ending in CR LF or LF, up to the empty line. A CR
+     * anywhere else is a control character: refused, never read as a line end. */
     int line = 2;
-    while (p < end + 2) {
-        eol = memchr(p, '\r', (size_t)(end + 2 - p));
-        if (!eol || eol[1] != '\n') return bad(err, errlen, 400, "header line without CRLF");
-        if (eol == p) break;
+    for (p = nl + 1; (nl = memchr(p, '\n', (size_t)(head_end - p))) && line_end(p, nl) != p;
+         p = nl + 1, line++) {
+        eol = line_end(p, nl);
         const char *colon = memchr(p, ':', (size_t)(eol - p));
         if (!colon || colon == p) {
             snprintf(err, errlen, "header line %d has no 'name:'", line);
@@ -78,12 +85,12 @@ int http_parse_request(const char *buf, size_t len, http_req *r, char *err, size
                 snprintf(err, errlen, "header line %d: control character in its value", line);
                 return -400;
             }
-        size_t nl = (size_t)(colon - p), vlen = (size_t)(ve - v);
+        size_t nlen = (size_t)(colon - p), vlen = (size_t)(ve - v);
         char *dst = NULL;
         size_t cap = 0;
         int *flag = NULL;
 #define HDR_(lit, field, fl)                                               \
-        if (nl == sizeof lit - 1 && !strncasecmp(p, lit, nl)) {            \
+        if (nlen == sizeof lit - 1 && !strncasecmp(p, lit, nlen)) {        \
             dst = r->field;                                                \
             cap = sizeof r->field;                                         \
             flag = fl;                                                     \
@@ -96,23 +103,21 @@ int http_parse_request(const char *buf, size_t len, http_req *r, char *err, size
         HDR_("Sec-WebSocket-Version", ws_version, NULL)
         { /* another header: ignored, except those announcing a body */ }
 #undef HDR_
-        if ((nl == 14 && !strncasecmp(p, "Content-Length", nl) && !(vlen == 1 && *v == '0')) ||
-            (nl == 17 && !strncasecmp(p, "Transfer-Encoding", nl)))
+        if ((nlen == 14 && !strncasecmp(p, "Content-Length", nlen) && !(vlen == 1 && *v == '0')) ||
+            (nlen == 17 && !strncasecmp(p, "Transfer-Encoding", nlen)))
             r->has_body = 1;
         if (dst) {
             if (flag && *flag) {
-                snprintf(err, errlen, "header line %d: a second %.*s header", line, (int)nl, p);
+                snprintf(err, errlen, "header line %d: a second %.*s header", line, (int)nlen, p);
                 return -400;
             }
             if (keep(dst, cap, v, vlen) != 0) {
-                snprintf(err, errlen, "header line %d: %.*s value over %zu bytes", line, (int)nl,
-                         p, cap - 1);
+                snprintf(err, errlen, "header line %d: %.*s value over %zu bytes", line,
+                         (int)nlen, p, cap - 1);
                 return -431;
             }
             if (flag) *flag = 1;
         }
-        p = eol + 2;
-        line++;
     }
     return (int)head_len;
 }

@@ -474,6 +474,7 @@ static void on_io(ev_loop *l, int fd, int mask, void *data)
     (void)fd;
     sess *s = data;
     if (s->dead) return;
+    if (mask & EV_READ) s->last_in_ms = ev_now_ms(); /* bytes (or the end) arrived */
     if ((mask & EV_HUP) && !(mask & EV_READ)) {
         /* A hang-up while its input is not being read: the answers have nobody to go to. */
         sess_close(s, "closed by the client while its requests waited");

@@ -118,6 +118,9 @@ struct sess {
     ev_timer rd_timer;          /* armed while a message is partly received */
     ev_timer wr_timer;          /* armed while output waits on a full socket */
     uint64_t last_io_ms;        /* the last byte read or written, for the idle deadline */
+    uint64_t last_in_ms;        /* when bytes last came from the client (0: none yet); the
+                                 * daemon's pre-auth eviction weighs it (admit.c) */
+    int auth_failing;           /* a wrong proof waits for its delayed answer */
     uint32_t fail_seq;          /* the HELLO whose wrong proof is answered after the delay */
     int fail_noproof;           /* that HELLO carried no proof at all */
     int close_after;            /* BYE or a fatal error: flush, then close */

@@ -52,6 +52,8 @@ struct ws_conn {
     uint64_t msg_got;
     uint8_t msg_hdr[PROTO_HEADER_LEN];
     size_t msg_hdr_have;
+    uint8_t held;              /* the protocol message's last byte, held until the WebSocket
+                                * message ends there (one_message) */
     char bad_msg[160];         /* a message that was not one protocol message: fails the next
                                 * read */
 };
@@ -300,29 +302,69 @@ static void flush_control(ws_conn *c)
     }
 }
 
-/* one_message: follows the data message being received (n more bytes at p; end: it ended)
- * and, at its end, checks that it held exactly one protocol message: a header and the payload
- * length the header gives. A mismatch is kept in bad_msg for the next read. */
-static void one_message(ws_conn *c, const uint8_t *p, size_t n, int end)
+/* not_one: records in bad_msg why the data message being received is not one protocol message
+ * (got: its bytes so far, or more than that when over); it fails the next read. */
+static void not_one(ws_conn *c, uint64_t want, int over)
+{
+    if (over)
+        snprintf(c->bad_msg, sizeof c->bad_msg, "a WebSocket message of more than %llu bytes is "
+                 "not one protocol message (its header gives %llu)", (unsigned long long)want,
+                 (unsigned long long)want);
+    else if (c->msg_hdr_have < PROTO_HEADER_LEN)
+        snprintf(c->bad_msg, sizeof c->bad_msg, "a WebSocket message of %llu bytes is not one "
+                 "protocol message (it ends inside the %d-byte header)",
+                 (unsigned long long)c->msg_got, PROTO_HEADER_LEN);
+    else
+        snprintf(c->bad_msg, sizeof c->bad_msg, "a WebSocket message of %llu bytes is not one "
+                 "protocol message (its header gives %llu)", (unsigned long long)c->msg_got,
+                 (unsigned long long)want);
+}
+
+/* one_message: checks the data message being received, buf[0..n) its next bytes (end: the
+ * message ended with them), and returns how many of them the session may have now: they stay
+ * at the start of buf.
+ *
+ * The message must hold exactly one protocol message: a header and the payload length the
+ * header gives. That is known only at the message's end, and the session acts on a protocol
+ * message as soon as its last byte arrives; so the last byte of the protocol message (the
+ * header's length says which) is held back until the WebSocket message ends there. A message
+ * that turns out longer (two PINGs in one) or shorter is then refused before the session has
+ * seen a complete protocol message in it: nothing of it is acted on. The bytes before the
+ * held one go on at once, so a large message needs no buffer of its own. A mismatch is kept
+ * in bad_msg and fails the next read, after the bytes returned now (a header the session
+ * itself refuses, e.g. a wrong magic, is answered with the protocol's error first). */
+static size_t one_message(ws_conn *c, uint8_t *buf, size_t n, int end)
 {
     size_t k = PROTO_HEADER_LEN - c->msg_hdr_have;
     if (k > n) k = n;
-    memcpy(c->msg_hdr + c->msg_hdr_have, p, k);
+    memcpy(c->msg_hdr + c->msg_hdr_have, buf, k);
     c->msg_hdr_have += k;
+    uint64_t before = c->msg_got, want = 0;
     c->msg_got += n;
-    if (!end) return;
-    uint64_t want = 0;
     if (c->msg_hdr_have == PROTO_HEADER_LEN) {
         proto_header h;
         proto_get_header(c->msg_hdr, &h);
         want = PROTO_HEADER_LEN + (uint64_t)h.len;
     }
-    if (c->msg_got != want || want == 0)
-        snprintf(c->bad_msg, sizeof c->bad_msg, "a WebSocket message of %llu bytes is not one "
-                 "protocol message (its header gives %llu)", (unsigned long long)c->msg_got,
-                 (unsigned long long)want);
+    /* Bytes at offsets below lim may go now: all of an incomplete header but its last byte
+     * (the header alone may be the whole message), else all but the protocol message's last. */
+    uint64_t lim = want ? want - 1 : PROTO_HEADER_LEN - 1;
+    uint64_t top = c->msg_got < lim ? c->msg_got : lim;
+    size_t pass = top > before ? (size_t)(top - before) : 0;
+    if (want && c->msg_got > want) {
+        not_one(c, want, 1);
+        return pass;
+    }
+    if (want && c->msg_got == want && n > 0) c->held = buf[n - 1]; /* offset want - 1 */
+    if (!end) return pass;
+    if (!want || c->msg_got != want) {
+        not_one(c, want, 0);
+        return pass;
+    }
+    buf[pass++] = c->held; /* the message ends where its protocol message does */
     c->msg_got = 0;
     c->msg_hdr_have = 0;
+    return pass;
 }
 
 static ssize_t read_open(ws_conn *c, void *buf, size_t len, int *want, char *err, size_t errlen)
@@ -347,8 +389,7 @@ static ssize_t read_open(ws_conn *c, void *buf, size_t len, int *want, char *err
     int e = ws_decode(&c->dec, c->rin + c->rin_off, c->rin_len - c->rin_off, &used, buf, len,
                       &produced, &ev);
     c->rin_off += used;
-    if (produced) one_message(c, (const uint8_t *)buf, produced, e == WS_EV_END);
-    else if (e == WS_EV_END) one_message(c, buf, 0, 1);
+    size_t pass = produced || e == WS_EV_END ? one_message(c, buf, produced, e == WS_EV_END) : 0;
     if (e == WS_EV_ERROR) {
         /* The close frame can go only at a frame boundary of the output; mid-frame the
          * connection just ends. */
@@ -367,7 +408,7 @@ static ssize_t read_open(ws_conn *c, void *buf, size_t len, int *want, char *err
         c->why_error = 0;
         snprintf(c->why, sizeof c->why, "closed by the client (WebSocket close %u)", ev.code);
     }
-    if (produced) return (ssize_t)produced;
+    if (pass) return (ssize_t)pass;
     return WSC_GO_ON;
 }
 

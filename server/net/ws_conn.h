@@ -2,7 +2,7 @@
  * HTTP/1.1 and either gets one of the embedded files (then closes) or upgrades to a WebSocket
  * on cfg->ws_path, after which every binary message carries one protocol message both ways:
  * input frames are unmasked into the session's input (a message that is not exactly one
- * protocol message closes the connection with 1007), and each protocol message the session
+ * protocol message closes the connection with 1007, before the session acts on any of it), and each protocol message the session
  * writes goes out as one unfragmented binary message (its length taken from its header). Pings are answered, a close is answered and
  * ends the connection, malformed frames end it with a close code (ws.c does the framing).
  *

@@ -352,6 +352,17 @@ static int points_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     return render_compute(k, s, c, v, d->params, mode == RND_RASTER_PACKED ? ibits : 0, err);
 }
 
+/* points_trim: the per-pixel buffers go (bind_pixel_buffer makes them again and rebinds their
+ * buffer textures). */
+static void points_trim(rnd_kit *k, void *state)
+{
+    points_state *s = state;
+    GLuint b[2] = {s->depth_buf, s->index_buf};
+    if (b[0] || b[1]) k->gl->DeleteBuffers(2, b);
+    s->depth_buf = s->index_buf = 0;
+    s->depth_bytes = s->index_bytes = 0;
+}
+
 const rnd_pipeline pipe_points = {
     .name = "points",
     .needs = 1u << RND_ATTR_POS | 1u << RND_ATTR_NORMAL | 1u << RND_ATTR_RGBA |
@@ -359,4 +370,5 @@ const rnd_pipeline pipe_points = {
     .create = points_create,
     .destroy = points_destroy,
     .render = points_render,
+    .trim = points_trim,
 };

@@ -621,6 +621,18 @@ void splat__destroy(rnd_kit *k, void *state)
     splat_destroy(k, state);
 }
 
+/* splat_trim: the stripe's accumulation and key buffers go (the next render makes them again:
+ * frame_buf 0 is a new size). */
+static void splat_trim(rnd_kit *k, void *state)
+{
+    splat_state *s = state;
+    GLuint b[2] = {s->frame_buf, s->key_buf};
+    if (b[0] || b[1]) k->gl->DeleteBuffers(2, b);
+    s->frame_buf = s->key_buf = 0;
+    s->frame_bytes = s->key_bytes = 0;
+    s->frame_w = s->frame_rows = 0;
+}
+
 const rnd_pipeline pipe_splat = {
     .name = "splat",
     .needs = 1u << RND_ATTR_POS | 1u << RND_ATTR_NORMAL | 1u << RND_ATTR_RADIUS |
@@ -629,4 +641,5 @@ const rnd_pipeline pipe_splat = {
     .create = splat_create,
     .destroy = splat_destroy,
     .render = splat_render,
+    .trim = splat_trim,
 };

@@ -229,6 +229,10 @@ typedef struct rnd_pipeline {
      * its read-back pixels rgba8 (width * height RGBA, row y at 4 width y: window rows, as
      * glReadPixels gives them), before the host Eye-Dome Lighting pass. Returns 0 or SD_E*. */
     int (*after)(rnd_kit *k, void *state, const rnd_draw *d, uint8_t *rgba8, sd_err *err);
+    /* trim (may be NULL): frees the scratch buffers sized by the frames drawn so far, which its
+     * next render makes again at that frame's size (rnd_release_targets: an idle daemon gives a
+     * large frame's memory back). */
+    void (*trim)(rnd_kit *k, void *state);
 } rnd_pipeline;
 
 /* pipe_<name> for every row of protocol/pipelines.h. */

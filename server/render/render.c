@@ -1038,6 +1038,15 @@ void rnd_set_kawata_probe(rnd_ctx *r, int on)
     r->kit.kawata_probe = on != 0;
 }
 
+void rnd_release_targets(rnd_ctx *r)
+{
+    target_free(&r->gl, &r->target[TARGET_8]);
+    target_free(&r->gl, &r->target[TARGET_F]);
+    for (int i = 0; i < SP_PIPE_COUNT; i++)
+        if (r->pcreated[i] && pipelines[i]->trim) pipelines[i]->trim(&r->kit, r->pstate[i]);
+    r->gl.Finish();
+}
+
 void rnd_frame_free(rnd_frame *f)
 {
     if (!f) return;

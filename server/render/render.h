@@ -216,3 +216,10 @@ void rnd_set_kawata_probe(rnd_ctx *r, int on);
 int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_params *params,
                int want_float, rnd_frame *frame, sd_err *err);
 void rnd_frame_free(rnd_frame *f);
+
+/* rnd_release_targets: frees the output framebuffers and the pipelines' per-pixel scratch
+ * (their trim hooks), all made again at the size asked for by the next rnd_render: after a
+ * large frame, an idle daemon gives their memory back (on a software renderer they are host
+ * memory). The driver may hold what the last frame had bound until another frame binds
+ * something else: a 1x1 frame after this call lets it go too. */
+void rnd_release_targets(rnd_ctx *r);

@@ -46,6 +46,12 @@ void tu_skip_reason(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 int tu_send_all(int fd, const void *p, size_t n);
 int tu_recv_all(int fd, void *p, size_t n);
 
+/* tu_connect_from: a TCP connection from the IPv4 address src (host order, e.g. 0x7f000002
+ * for 127.0.0.2: Linux routes all of 127/8 to the loopback device, so tests can stand for
+ * many client addresses) to 127.0.0.1:port, with TCP_NODELAY and a 10 s receive timeout;
+ * blocking unless nonblock (then the connect may still be in progress). Returns the fd or -1. */
+int tu_connect_from(uint32_t src, int port, int nonblock);
+
 /* tu_run: runs a shell command (printf-style), its stdout and stderr (as the command redirects
  * them) into out, NUL-terminated and truncated to len. Returns the exit status, or -1 when it
  * did not exit normally or could not start. */
