@@ -165,7 +165,8 @@ rnd_ctx *rnd_create(const rnd_desc *desc, sd_err *err)
     r->sh = rnd_shaders_create(d.shader_dir, err);
     if (!r->sh) goto fail;
     /* the back end's capability, unless the description forces it (pipe.h: the host paths) */
-    int software = d.software == RND_CAP_AUTO ? r->ops->software(r->be) : d.software == RND_CAP_ON;
+    int software = d.software == RND_CAP_AUTO ? r->ops->software(r->be)
+                                              : d.software == RND_CAP_ON;
     int host = d.host_paths == RND_CAP_AUTO ? software : d.host_paths == RND_CAP_ON;
     if ((rc = rnd_kit_init(&r->kit, &r->gl, r->sh, &d.pipe, software, host, err)) < 0) goto fail;
     /* EDL is optional: a driver that cannot build it refuses only frames that ask for it. */

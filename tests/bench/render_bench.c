@@ -41,7 +41,7 @@
  *   wall-clock (as ms/frame) and of the per-pair differences, wall and process CPU. Pairs of
  *   adjacent frames cancel most of a shared machine's drifting load, which the difference of
  *   two separate runs does not (a few ms against a 3 ms target).
- * --interleave: for A/B comparisons of two forms of one pipeline (soft:order=cpu against
+ * --interleave: for A/B comparisons of two forms of one pipeline (soft:order=tile against
  *   soft:order=axis) on a shared machine: each round renders every pipeline once at the round's
  *   camera, so that a drifting load falls on all of them alike; after the table, per pipeline,
  *   "ab: | cloud | pipeline | ms/frame | CPU ms | ratio to the first |", the ratio being the
