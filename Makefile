@@ -2,6 +2,7 @@
 #
 #   make            build bin/splatd, bin/splat, bin/splat-view, libsplatclient.{a,so}
 #   make test       unit, rendering, protocol and end-to-end tests, then the same under ASan+UBSan
+#                   (T='test_lod:test_octree* test_params' runs those programs and tests only)
 #   make asan       only the AddressSanitizer + UBSan test run
 #   make bench      measured numbers (see README.md)
 #   make run        start the daemon on a bundled scan and render an orbit into ./out/
@@ -245,19 +246,21 @@ TEST_ENV = SPLATD_BIN=$(abspath $(1)/bin/splatd) SPLAT_BIN=$(abspath $(1)/bin/sp
 ASAN_ENV = ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
            LSAN_OPTIONS=suppressions=$(abspath tests/lsan.supp)
 
-# make test: the plain run, the sanitizer run, and one closing line counting the tests of both.
+# make test: the plain run, the sanitizer run, and one closing line counting the tests of both
+# with the wall time. tests/list names every program and its time limit; T selects programs
+# and, after a colon, tests inside one: make test T='test_lod:test_octree* test_params'.
+TEST_RUN = TEST_TOTALS=$(abspath $(BUILD)/test-totals) bash tests/run.sh
 test: all $(TESTS) $(ASAN_TESTS) $(BUILD)/asan/bin/splatd $(BUILD)/asan/bin/splat \
       $(BUILD)/asan/bin/splat-view $(ASAN_TOOLS) $(MPI_ASAN_BIN)
-	@rm -f $(BUILD)/test-totals
-	@$(call TEST_ENV,$(BUILD)) TEST_TOTALS=$(abspath $(BUILD)/test-totals) sh tests/run.sh "plain" $(TESTS)
-	@$(call TEST_ENV,$(BUILD)/asan) $(ASAN_ENV) TEST_TOTALS=$(abspath $(BUILD)/test-totals) \
-	  sh tests/run.sh "asan" $(ASAN_TESTS)
-	@awk '{p += $$1; f += $$2; s += $$3} END {printf "total: %d passed, %d failed, %d skipped\n", p, f, s}' \
-	  $(BUILD)/test-totals
+	@rm -f $(BUILD)/test-totals; date +%s > $(BUILD)/test-start
+	@$(call TEST_ENV,$(BUILD)) $(TEST_RUN) "plain" $(BUILD)/tests $(T)
+	@$(call TEST_ENV,$(BUILD)/asan) $(ASAN_ENV) TEST_TIMEOUT_SCALE=3 $(TEST_RUN) "asan" $(BUILD)/asan/tests $(T)
+	@awk -v t0=$$(cat $(BUILD)/test-start) -v t1=$$(date +%s) '{p += $$1; f += $$2; s += $$3} \
+	  END {printf "total: %d passed, %d failed, %d skipped in %d s\n", p, f, s, t1 - t0}' $(BUILD)/test-totals
 
 asan: $(ASAN_TESTS) $(BUILD)/asan/bin/splatd $(BUILD)/asan/bin/splat $(BUILD)/asan/bin/splat-view \
       $(ASAN_TOOLS) $(MPI_ASAN_BIN)
-	@$(call TEST_ENV,$(BUILD)/asan) $(ASAN_ENV) sh tests/run.sh "asan" $(ASAN_TESTS)
+	@$(call TEST_ENV,$(BUILD)/asan) $(ASAN_ENV) TEST_TIMEOUT_SCALE=3 bash tests/run.sh "asan" $(BUILD)/asan/tests $(T)
 
 bench: all $(BENCHES)
 	@$(call TEST_ENV,$(BUILD)) SPLATD_BENCH=$(abspath $(BUILD)/bench) sh tests/bench/bench.sh

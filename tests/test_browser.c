@@ -991,8 +991,9 @@ static void test_chromium_page(void **state)
     printf("browser test took %.1f s\n", now_s() - t0);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test_setup_teardown(test_start_rule, setup, teardown),
         cmocka_unit_test_setup_teardown(test_http_answers, setup, teardown),

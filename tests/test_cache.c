@@ -504,8 +504,9 @@ static void test_missing_source(void **state)
     assert_non_null(strstr(err.msg, "nope.ply"));
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test_setup_teardown(test_miss_then_hit, setup, teardown),
         cmocka_unit_test_setup_teardown(test_source_changes_rebuild, setup, teardown),

@@ -340,8 +340,9 @@ static void test_token_file(void **state)
     tu_rm_rf(dir);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_cli_parse),
         cmocka_unit_test(test_path_lines),

@@ -461,8 +461,9 @@ static void test_timeout_and_refused(void **state)
     assert_int_equal(spc_error_fatal(SPC_E_BAD_PARAM_VALUE), 0);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_session),
         cmocka_unit_test(test_auth),

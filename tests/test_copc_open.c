@@ -470,8 +470,9 @@ static void test_budget_levels_of_many_nodes(void **state)
     tu_rm_rf(dir);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_budget_rule),
         cmocka_unit_test(test_budget_levels_of_many_nodes),

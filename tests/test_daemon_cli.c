@@ -21,6 +21,7 @@
 #include "common/imgtest.h"
 #include "common/testutil.h"
 #include "splat_client.h"
+#include "testutil.h"
 
 enum { BUNNY_POINTS = 40256 }; /* "element vertex 40256" in tests/data/bun000.ply */
 
@@ -454,8 +455,9 @@ static void test_daemon_lists_and_opens_laz(void **state)
     spc_close(c);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test_setup_teardown(test_preload_several_names, setup, teardown),
         cmocka_unit_test_setup_teardown(test_list_prepared_counts, setup, teardown),

@@ -19,6 +19,7 @@
 #include "ev.h"
 #include "net.h"
 #include "common/testutil.h"
+#include "testutil.h"
 
 typedef struct dd_fixture {
     char root[512];   /* tmp root: data/ and outside/ below it */
@@ -435,8 +436,9 @@ static void test_hostport(void **state)
     assert_false(net_host_is_loopback("128.0.0.1"));
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test_setup_teardown(test_resolve_accepts, dd_setup, dd_teardown),
         cmocka_unit_test_setup_teardown(test_resolve_refuses, dd_setup, dd_teardown),

@@ -40,6 +40,7 @@
 #include "common/testutil.h"
 #include "proto.h"
 #include "splat_client.h"
+#include "testutil.h"
 
 typedef tu_daemon daemon_proc;
 
@@ -1598,8 +1599,9 @@ static void test_sigterm(void **state)
     raw_close(&r);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_malformed),
         cmocka_unit_test(test_open_progress),

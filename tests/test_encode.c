@@ -23,6 +23,7 @@
 #include "frame_lz4.h"
 #include "half.h"
 #include "common/testutil.h"
+#include "testutil.h"
 
 /* ---- synthetic frames ---- */
 
@@ -701,8 +702,9 @@ static void test_write_file_formats_and_errors(void **state)
     tu_rm_rf(dir);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_half_conversion),
         cmocka_unit_test(test_jpeg_1280x720),

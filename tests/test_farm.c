@@ -24,6 +24,7 @@
 #include "common/daemonproc.h"
 #include "common/testutil.h"
 #include "shard.h"
+#include "testutil.h"
 
 typedef struct fx {
     char root[512];
@@ -413,8 +414,9 @@ static void test_k8s_manifests(void **state)
     }
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_shard_parse_and_env),
         cmocka_unit_test_setup_teardown(test_three_shards_two_daemons, setup, teardown),

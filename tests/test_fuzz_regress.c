@@ -226,8 +226,9 @@ static void test_known_answers(void **state)
     assert_true(fuzz_one_proto(zeros, sizeof zeros) < 0);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_known_answers), cmocka_unit_test(test_corpus_proto),
         cmocka_unit_test(test_corpus_ply),    cmocka_unit_test(test_corpus_pcd),

@@ -231,8 +231,9 @@ static void test_shader_dir_override(void **state)
     rmdir(dir);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_error_names),
         cmocka_unit_test(test_shader_stage_names),

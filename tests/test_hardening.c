@@ -64,6 +64,7 @@
 #include "prep.h"
 #include "proto.h"
 #include "sd_hash.h"
+#include "testutil.h"
 
 static const char TOKEN[] = "correct horse battery staple";
 
@@ -1431,11 +1432,9 @@ static void test_token_checks(void **state)
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
-    setvbuf(stdout, NULL, _IOLBF, 0);
-    /* HARDENING_ONLY=test_name runs one test (cmocka's filter, * allowed). */
-    if (getenv("HARDENING_ONLY")) cmocka_set_test_filter(getenv("HARDENING_ONLY"));
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test_setup_teardown(test_slow_clients, setup, teardown),
         cmocka_unit_test_setup_teardown(test_unauth_flood, setup, teardown),

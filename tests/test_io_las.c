@@ -27,6 +27,7 @@
 #include "cloudtest.h"
 #include "iotest.h"
 #include "rng.h"
+#include "testutil.h"
 
 static char g_tmp[512];
 
@@ -741,8 +742,9 @@ static void test_las14_every_point(void **state)
     check_real_las("file_with_both_wkt_and_geotiff_vlrs.las", 25408);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_autzen_trim),
         cmocka_unit_test(test_las14_format6),

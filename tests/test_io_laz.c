@@ -22,6 +22,7 @@
 #include "copc.h"
 #include "laz.h"
 #include "laz_arith.h"
+#include "testutil.h"
 
 static char g_tmp[512];
 
@@ -642,8 +643,9 @@ static void test_copc_top_levels(void **state)
     free(d);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_twins_formats_0_to_3),
         cmocka_unit_test(test_twin_extra_bytes),

@@ -28,6 +28,7 @@
 #include "cloudtest.h"
 #include "iotest.h"
 #include "rng.h"
+#include "testutil.h"
 
 static char g_tmp[512];
 
@@ -1258,8 +1259,9 @@ static void test_autzen_every_point(void **state)
     free(b);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_lzf_literal),
         cmocka_unit_test(test_lzf_back_reference),

@@ -24,6 +24,7 @@
 #include "cloudtest.h"
 #include "iotest.h"
 #include "rng.h"
+#include "testutil.h"
 
 /* ------------------------------------------------------------------ helpers */
 
@@ -1216,8 +1217,9 @@ static void bun000_every_point(void **state)
     free(d);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
 #define TMP_TEST(f) cmocka_unit_test_setup_teardown(f, tu_tmpdir_setup, tu_tmpdir_teardown)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(guanyin),

@@ -23,6 +23,7 @@
 #include "cloudtest.h"
 #include "iotest.h"
 #include "rng.h"
+#include "testutil.h"
 
 /* ------------------------------------------------------------------ helpers */
 
@@ -589,8 +590,9 @@ static void layout_matrix(void **state)
         }
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
 #define TMP_TEST(f) cmocka_unit_test_setup_teardown(f, tu_tmpdir_setup, tu_tmpdir_teardown)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(bunny_pts),

@@ -27,6 +27,7 @@
 
 #include "kawata_cpu.h"
 #include "rng.h"
+#include "testutil.h"
 
 enum { BW = 97, BH = 61, X0 = 6, X1 = 90, Y0 = 9, Y1 = 55, NA = 12000, NB = 8000 };
 
@@ -160,8 +161,9 @@ static void test_against_reference(void **state)
     free(pb);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_against_reference),
     };

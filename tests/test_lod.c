@@ -1386,8 +1386,9 @@ static void test_kawata_host_vs_gl(void **state)
     rnd_destroy(g[1].r);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest prep_tests[] = {
         cmocka_unit_test(test_octree_invariants),
         cmocka_unit_test(test_equals_in_memory_prep),

@@ -40,6 +40,7 @@
 #include "cloud.h"
 #include "morton.h"
 #include "prep.h"
+#include "testutil.h"
 
 enum { BUNNY_POINTS = 40256 }; /* "element vertex 40256" in tests/data/bun000.ply */
 
@@ -855,8 +856,9 @@ static void test_over(void **state)
     assert_int_equal(sd_float_to_half(ldexpf(3.0f, -25)), 2);                /* 1.5 -> 2 */
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_partition_cells_bunny),
         cmocka_unit_test(test_partition_cells_uneven),

@@ -10,6 +10,7 @@
 
 #include "params.h"
 #include "render.h"
+#include "testutil.h"
 
 static void test_defaults_valid_and_round_trip(void **state)
 {
@@ -195,8 +196,9 @@ static void test_enum_exact_names(void **state)
     assert_int_equal(p.subsampling, SP_SUB_444);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_defaults_valid_and_round_trip),
         cmocka_unit_test(test_set_and_errors),

@@ -1453,8 +1453,9 @@ static void test_gen_cloud_tool(void **state)
     tu_rm_rf(dir);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_morton_roundtrip_and_sort),
         cmocka_unit_test(test_morton_clamps_outside_points),

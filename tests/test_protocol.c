@@ -14,6 +14,7 @@
 
 #include "params.h"
 #include "proto.h"
+#include "testutil.h"
 
 /* decode_one: runs buf through a fresh decoder of direction dir; expects exactly one message
  * that uses all len bytes; copies the payload into *pl (malloc'd). */
@@ -1284,8 +1285,9 @@ static void test_fuzz(void **state)
     proto_buf_free(&seeds);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_le_helpers),
         cmocka_unit_test(test_names_and_codes),

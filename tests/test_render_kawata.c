@@ -911,8 +911,9 @@ static void test_edl_branches(void **state)
     pc_prepared_free(&pc);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_outliers),
         cmocka_unit_test(test_tilted_normals),

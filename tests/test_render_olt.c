@@ -222,8 +222,9 @@ static void test_buffer_sets(void **state)
     rnd_destroy(r5);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_two_soft_layers),
         cmocka_unit_test(test_solid_in_front),

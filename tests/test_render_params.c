@@ -34,6 +34,7 @@
 #include "render.h"
 #include "rndtest.h"
 #include "rng.h"
+#include "testutil.h"
 
 enum { W = 64, H = 64, NX = 60, NBASE = 3 };
 static const double OFF[3] = {500000.0, 4100000.0, 120.0};
@@ -248,8 +249,9 @@ static void test_every_parameter(void **state)
     assert_int_equal(unseen, 0);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_every_parameter),
     };

@@ -976,8 +976,9 @@ static void test_residency_evicts_least_recently_rendered(void **state)
     rnd_destroy(r);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_camera_frame),
         cmocka_unit_test(test_projection_and_depth),

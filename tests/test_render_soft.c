@@ -882,8 +882,9 @@ static void test_many_soft_points(void **state)
     rnd_release(tu_ctx, id);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_t1_equals_splat),
         cmocka_unit_test(test_lambda0_is_solid_splat),

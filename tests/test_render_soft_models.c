@@ -504,8 +504,9 @@ static void test_layer_count(void **state)
     rnd_release(tu_ctx, id);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_base_one_sphere),
         cmocka_unit_test(test_base_two_spheres),

@@ -1217,8 +1217,9 @@ static void test_guanyin(void **state)
                  "the bound %.0f dB", worst, GOLDEN_MIN_DB);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_hole_filling),
         cmocka_unit_test(test_constant_colour),

@@ -16,6 +16,7 @@
 #include <cmocka.h>
 
 #include "soft_cpu.h"
+#include "testutil.h"
 
 enum { W = 301, ROWS = 150, Y0 = 37, KB = 36, NK = ROWS + 2, N1 = 2500, N2 = 1500 };
 
@@ -284,8 +285,9 @@ static void test_rounding_hand_values(void **state)
     }
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_matches_reference),
         cmocka_unit_test(test_nothing),

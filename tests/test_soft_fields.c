@@ -230,8 +230,9 @@ static void test_ply_quality(void **state)
     pc_prepared_free(&pc);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_las_sources),
         cmocka_unit_test(test_ply_quality),

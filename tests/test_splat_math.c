@@ -11,6 +11,7 @@
 #include <string.h>
 
 #include "splat_math.h"
+#include "testutil.h"
 
 enum { W = 640, H = 480 };
 
@@ -155,8 +156,9 @@ static void test_ray_coeffs(void **state)
     }
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_axis_disc),
         cmocka_unit_test(test_off_axis_against_differences),

@@ -25,6 +25,7 @@
 #include "common/testutil.h"
 #include "common/tlscert.h"
 #include "splat_client.h"
+#include "testutil.h"
 
 static const char TOKEN[] = "correct horse battery staple";
 
@@ -328,9 +329,9 @@ static void test_tls_required(void **state)
     assert_int_equal(tu_daemon_stop(&f->d), 0);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
-    setvbuf(stdout, NULL, _IOLBF, 0);
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test_setup_teardown(test_tls_round_trip, setup, teardown),
         cmocka_unit_test_setup_teardown(test_tls_verification, setup, teardown),

@@ -595,8 +595,9 @@ static void test_view_script_errors(void **state)
     }
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test_setup_teardown(test_view_save_matches_render, setup, teardown),
         cmocka_unit_test_setup_teardown(test_view_progressive_drag, setup, teardown),

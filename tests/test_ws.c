@@ -14,6 +14,7 @@
 
 #include "http.h"
 #include "ws.h"
+#include "testutil.h"
 
 static const uint8_t rfc_mask[4] = {0x37, 0xfa, 0x21, 0x3d};
 #define OUTCAP sizeof out
@@ -410,8 +411,9 @@ static void test_http_parse(void **st)
     assert_int_equal(http_response_head(out, 20, 404, "Not Found", "text/plain", 12, NULL), 0);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    tu_args(argc, argv);
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_accept_key),
         cmocka_unit_test(test_rfc_examples),

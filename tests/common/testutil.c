@@ -2,7 +2,10 @@
 #include "testutil.h"
 
 #include <errno.h>
+#include <setjmp.h>
 #include <stdarg.h>
+#include <stddef.h>
+#include <cmocka.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -172,4 +175,15 @@ double tu_median(double *v, int n)
     if (n <= 0) return 0;
     qsort(v, (size_t)n, sizeof *v, cmp_double);
     return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+void tu_args(int argc, char **argv)
+{
+    setvbuf(stdout, NULL, _IOLBF, 0);
+    if (argc > 2 || (argc == 2 && (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")))) {
+        fprintf(stderr, "usage: %s [PATTERN]   run the tests whose names match PATTERN "
+                        "('*' and '?' wildcards); all of them without one\n", argv[0]);
+        exit(argc == 2 ? 0 : 2);
+    }
+    if (argc == 2 && argv[1][0]) cmocka_set_test_filter(argv[1]);
 }

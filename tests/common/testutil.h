@@ -60,3 +60,9 @@ double tu_now_us(void);
 /* tu_median: the median of the n values v (reordered in place); the mean of the middle two
  * for even n; 0 when n is 0. */
 double tu_median(double *v, int n);
+
+/* tu_args: the command line every test program takes, called first in main:
+ *   test_x [PATTERN]    runs the tests whose names match PATTERN (cmocka's filter: '*' and '?'
+ *                       wildcards), all of them without one; --help prints this.
+ * tests/run.sh passes a pattern given as PROGRAM:PATTERN (make test T=test_x:pattern). */
+void tu_args(int argc, char **argv);
