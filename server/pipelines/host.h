@@ -4,18 +4,20 @@
  * a GPU; rnd_desc.host_paths forces either), so a pipeline holds one test, `k->host`, and calls
  * the pass through the table; none of them asks what the renderer is.
  *
- * What is here is what measured faster by a clear margin on real scans (docs/performance.md,
- * "Host paths": kawata's passes 1-3 1.3-2.1x a frame, soft's compositor 1.3-4x); host copies
- * of kawata's plane fit, soft's disc projection and Eye-Dome Lighting were measured too and
- * removed (under 1.3x a frame, or only under a non-default setting). Each host pass computes
+ * What is here is what measured faster on real scans in the default settings
+ * (docs/performance.md, "Host paths": kawata's passes 1-3 1.3-2.2x a frame, soft's compositor
+ * 1.2-3.6x, soft's projection 1.2-1.4x); host copies of kawata's plane fit and of Eye-Dome
+ * Lighting were measured too and removed (under 1.15x a frame, or only under a non-default
+ * setting). Each host pass computes
  * what its shader computes; tests compare both within the precision the GLSL specification
- * allows the shader (test_render_kawata, test_render_soft), not bit for bit. */
+ * allows the shader (test_render_kawata, test_render_soft, test_soft_proj), not bit for bit. */
 #pragma once
 #include <stdint.h>
 
 #include "kawata_cpu.h"
 #include "pipe.h"
 #include "soft_cpu.h"
+#include "soft_proj.h"
 
 struct rnd_host {
     const char *name;
@@ -27,4 +29,7 @@ struct rnd_host {
     int (*soft_composite)(soft_cpu_job *job);
     int (*soft_bin)(soft_cpu_job *job);
     int (*soft_blend)(soft_cpu_job *job);
+    /* soft: the compositor's discs projected (soft_bin.comp PASS 0; soft_proj.h), but for
+     * color=field */
+    void (*soft_project)(const soft_proj_job *job);
 };

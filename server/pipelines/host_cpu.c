@@ -8,4 +8,5 @@ const rnd_host rnd_host_cpu = {
     .soft_composite = soft_cpu_composite,
     .soft_bin = soft_cpu_bin,
     .soft_blend = soft_cpu_blend,
+    .soft_project = soft_proj_run,
 };

@@ -58,7 +58,8 @@
  *         the discs binned into 64x64 tiles in draw order and blended in float by every core
  *         over only the pixels they cover, the rows they reached uploaded as the layer
  *         soft_resolve puts over the target; clouds of more than 64 buffer sets take the
- *         sprites. On an opaque 8-bit frame with nothing after the pipeline in the GL
+ *         sprites. The host paths project the discs too (soft_proj.h: no dispatch, no
+ *         read-back), but for color=field. On an opaque 8-bit frame with nothing after the pipeline in the GL
  *         (rnd_draw.host_after: no Eye-Dome Lighting) there is no layer: the stripes' keys are
  *         kept and, after the read-back, soft__after blends each tile's discs into a float tile
  *         of its thread's and puts it over the frame's pixels (rnd_pipeline.after); the binning

@@ -1,6 +1,7 @@
 /* soft_host.c — the `soft` pipeline's host compositor (the host paths, host.h; see pipe_soft.c's
- * file comment): the soft discs projected by the GL and read back, composited by the host
- * paths' compositor (soft_cpu.h) either into a layer that soft_resolve puts over the target,
+ * file comment): the soft discs projected through the host paths (soft_proj.h) or by the GL and
+ * read back, composited by the host paths' compositor (soft_cpu.h) either into a layer that
+ * soft_resolve puts over the target,
  * or, on an opaque 8-bit frame with no GL pass after the pipeline (rnd_draw.host_after), over
  * the read-back pixels in the pipeline's `after` hook, tested against the visibility keys the
  * stripes kept; and the binning on a thread of its own while the GL makes those keys. */
@@ -10,6 +11,7 @@
 
 #include "host.h"
 #include "soft_pipe.h"
+#include "soft_proj.h"
 #include "splat_passes.h"
 
 /* The host compositor composites at most this many bytes of float layer at a time (rows of a
@@ -37,13 +39,60 @@ int soft__bin_join(soft_state *s)
     return s->bin_rc;
 }
 
-/* soft__cpu_project: the host compositor's discs: soft_bin.comp PASS 0 over every set (as for
- * the sprites), read back into s->h_proj, one segment per set in the sets' order. Returns 0 or
- * SD_E*. */
+/* host_project_set: soft_bin.comp PASS 0 through the host paths (soft_proj.h) for set si into out (8 floats
+ * a disc): the set's positions, normals, radii and colour source mapped for reading (on a
+ * software renderer the GL's own memory), then unmapped. Returns 0 or SD_EGL. */
+static int host_project_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
+                            uint32_t si, float *out, sd_err *err)
+{
+    const gl_api *gl = k->gl;
+    const rnd_view *v = d->view;
+    const sp_params *p = d->params;
+    const rnd_bufset *bs = &d->cloud->sets[si];
+    const int attr[4] = {RND_ATTR_POS, RND_ATTR_NORMAL, RND_ATTR_RADIUS,
+                         rnd_kit_color_source(p->color)};
+    const void *m[4] = {NULL, NULL, NULL, NULL};
+    int rc = 0;
+    for (int a = 0; a < 4 && rc == 0; a++) {
+        uint64_t bytes = (uint64_t)bs->n * (uint64_t)rnd_attrs[attr[a]].components * 4;
+        gl->BindBuffer(GL_COPY_READ_BUFFER, bs->buf[attr[a]]);
+        m[a] = gl->MapBufferRange(GL_COPY_READ_BUFFER, 0, (GLsizeiptr)(bytes ? bytes : 4),
+                                  GL_MAP_READ_BIT);
+        if (!m[a] && (rc = gl_check(gl, "soft: mapping a buffer set", err)) == 0)
+            rc = sd_errf(err, SD_EGL, "soft: mapping buffer set %u's %s failed", si,
+                         rnd_attrs[attr[a]].name);
+    }
+    if (rc == 0) {
+        soft_proj_job job = {.pos = m[0], .nrm = m[1], .rad = m[2], .src = m[3],
+                             .f = sc->fields.sets[si].f, .idx = sc->sets[si].idx,
+                             .n = sc->sets[si].nsoft, .width = v->width, .height = v->height,
+                             .scale = p->splat_scale, .znear = v->znear, .zfar = v->zfar,
+                             .t = p->t, .lm = p->l_m, .color = p->color, .out = out,
+                             .threads = s->threads};
+        memcpy(job.view, v->view, sizeof job.view);
+        memcpy(job.proj, v->proj, sizeof job.proj);
+        soft_light(p, job.light);
+        k->host->soft_project(&job);
+    }
+    for (int a = 0; a < 4; a++)
+        if (m[a]) {
+            gl->BindBuffer(GL_COPY_READ_BUFFER, bs->buf[attr[a]]);
+            gl->UnmapBuffer(GL_COPY_READ_BUFFER);
+        }
+    gl->BindBuffer(GL_COPY_READ_BUFFER, 0);
+    return rc;
+}
+
+/* soft__cpu_project: the host compositor's discs, one segment per set in the sets' order, into
+ * s->h_proj: projected through the host paths (not for color=field, whose colour map is a
+ * shader polynomial, nor under rnd_pipe_opts.soft_proj_gl), or by the GL (soft_bin.comp PASS 0,
+ * as for the sprites) and read back. Returns 0 or SD_E*. */
 int soft__cpu_project(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
                       const soft_order *o, sd_err *err)
 {
     const gl_api *gl = k->gl;
+    int host = k->host->soft_project && d->params->color != SP_COLOR_FIELD &&
+               !k->opts.soft_proj_gl;
     uint32_t nsets = sc->nsets < 64 ? sc->nsets : 64;
     size_t total = 0;
     for (uint32_t si = 0; si < nsets; si++) total += sc->sets[si].nsoft;
@@ -55,12 +104,15 @@ int soft__cpu_project(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_c
         uint32_t si = o->set_order[oi];
         const soft_set *ss = &sc->sets[si];
         if (ss->nsoft == 0) continue;
-        int rc = soft__project_set(k, s, d, sc, o, si, err);
+        int rc = host ? host_project_set(k, s, d, sc, si, s->h_proj + at, err)
+                      : soft__project_set(k, s, d, sc, o, si, err);
         if (rc < 0) return rc;
-        gl->MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-        gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->proj_buf);
-        gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)ss->nsoft * 32,
-                             s->h_proj + at);
+        if (!host) {
+            gl->MemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+            gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->proj_buf);
+            gl->GetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, (GLsizeiptr)ss->nsoft * 32,
+                                 s->h_proj + at);
+        }
         s->segs[s->nsegs++] = (soft_cpu_seg){s->h_proj + at, ss->idx + (size_t)(1 + o->axis) *
                                              ss->nsoft, ss->nsoft, o->rev};
         at += 8 * (size_t)ss->nsoft;

@@ -19,6 +19,8 @@ typedef struct rnd_pipe_opts {
     int points_raster;        /* RND_RASTER_*: the points pipeline's form (default auto) */
     int splat_fixed;          /* 1: fixed-point accumulation even with float atomics */
     int splat_stripe_rows;    /* rows per accumulation stripe, 0 = as many as fit */
+    int soft_proj_gl;         /* 1: with the host paths, soft's discs still projected by the GL
+                                 (test_soft_proj compares the two) */
 } rnd_pipe_opts;
 
 enum { RND_RASTER_AUTO = 0, RND_RASTER_PACKED, RND_RASTER_EXACT, RND_RASTER_GL };
