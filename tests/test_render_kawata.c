@@ -516,6 +516,85 @@ static void test_bunny(void **state)
         fail_msg("bunny: %.2f dB from the golden, under %.0f dB", db, GOLDEN_MIN_DB);
 }
 
+/* ---- pass 2's step clamp ---- */
+
+/* Pass 2 quantises a point's depth step behind the nearest into levels (pipe_kawata.c: uint(step
+ * qscale), qscale = (qmax - 1) / gamma) and clamps the level to qtop - 1 = qmax - 2, so that a
+ * step of exactly gamma, whose product may round to qmax - 1, saturates with the rest; among
+ * equal levels the greater index wins. A scene that reaches the clamp: 2^19 + 3 points (20 index
+ * bits, qmax = 4095), the filler off the view axis, and on it, seen from the local origin down
+ * -z so that a point's eye depth is exactly -z: F at depth gamma (the nearest), A at 2 gamma (a
+ * step of exactly gamma) and B, of a greater index, a step gamma - delta with delta half a level
+ * (level qtop - 1 without any clamp). gamma is chosen among a few kawata_gamma values so that
+ * gamma qscale rounds to qmax - 1 (the clamp's branch taken; computed here with the pipeline's
+ * float operations, each correctly rounded on any GL). With the clamp A and B tie and B wins;
+ * without it A would. The probe must show near = F and far = B at level qtop - 1. */
+static void test_far_step_clamp(void **state)
+{
+    const kfix *kf = *state;
+    rnd_ctx *r = kf->r;
+    enum { N = (1 << 19) + 3 };
+    const uint32_t ibits = 20, qmax = (1u << (32 - ibits)) - 1u, qtop = qmax - 1u;
+    /* the filler's box and an anchor at the eye set the bounds: (-0.5, -0.5, -1) to (0.5, 0.5, 0) */
+    const float lo[3] = {-0.5f, -0.5f, -1.0f}, hi[3] = {0.5f, 0.5f, 0.0f};
+    double diag = 0;
+    for (int i = 0; i < 3; i++) diag += ((double)hi[i] - lo[i]) * (hi[i] - lo[i]);
+    float gfrac = 0, gamma = 0, qscale = 0;
+    for (int k = 0; k < 200 && !gfrac; k++) {
+        float g = 0.0075f + 1e-6f * (float)k;
+        float gm = (float)(g * sqrt(diag)), qs = (float)(qmax - 1) / gm;
+        if ((uint32_t)(gm * qs) >= qtop) gfrac = g, gamma = gm, qscale = qs;
+    }
+    assert_true(gfrac > 0);
+    const float delta = 0.5f / qscale;
+    pc_prepared pc;
+    tu_new_cloud(&pc, N, 0);
+    rng g;
+    g.s = 99;
+    for (uint64_t i = 0; i < N - 3; i++) {
+        float *q = pc.pos + 3 * i;
+        q[0] = (float)(0.2 + 0.3 * uniform(&g)) * (i % 2 ? 1 : -1);
+        q[1] = (float)(uniform(&g) - 0.5);
+        q[2] = (float)(-0.5 - 0.5 * uniform(&g));
+    }
+    float *q0 = pc.pos; /* the filler's corners, and the anchor at the eye */
+    q0[0] = lo[0], q0[1] = lo[1], q0[2] = lo[2];
+    q0[3] = hi[0], q0[4] = hi[1], q0[5] = -0.5f;
+    q0[6] = 0.4f, q0[7] = 0.4f, q0[8] = 0.0f;
+    const uint32_t iF = N - 3, iA = N - 2, iB = N - 1;
+    pc.pos[3 * iF + 2] = -gamma;
+    pc.pos[3 * iA + 2] = -2.0f * gamma;
+    pc.pos[3 * iB + 2] = -(2.0f * gamma - delta);
+    for (uint32_t i = iF; i <= iB; i++) pc.pos[3 * i] = pc.pos[3 * i + 1] = 0.0f;
+    tu_finish_cloud(&pc, OFF);
+    uint32_t id = tu_upload(r, &pc);
+    pc_prepared_free(&pc);
+    rnd_camera cam = {{OFF[0], OFF[1], OFF[2]}, {OFF[0], OFF[1], OFF[2] - 1.0}, {0, 1, 0},
+                      40, 0.5f * gamma, 2.0f, 64, 64};
+    sp_params p;
+    params_of(kf, &p);
+    p.pipeline = SP_PIPE_KAWATA;
+    p.kawata_gamma = gfrac;
+    rnd_frame f = {0};
+    rnd_set_kawata_probe(r, 1);
+    tu_render(r, id, &cam, &p, 0, &f);
+    rnd_set_kawata_probe(r, 0);
+    assert_non_null(f.kawata_arrays);
+    size_t nb = (size_t)f.buffer_w * f.buffer_h, q = nb;
+    for (size_t i = 0; i < nb; i++)
+        if (f.kawata_arrays[nb + i] == iF) q = i;
+    assert_true(q < nb);
+    uint32_t far = f.kawata_arrays[2 * nb + q];
+    printf("far step clamp: gamma %.7g (kawata_gamma %.7g), gamma qscale %.3f; near %u, far "
+           "index %u level %u (want %u and %u: B %u, A %u)\n", (double)gamma, (double)gfrac,
+           (double)(gamma * qscale), f.kawata_arrays[nb + q], far & ((1u << ibits) - 1u),
+           far >> ibits, iB, qtop, iB, iA);
+    assert_int_equal(far & ((1u << ibits) - 1u), iB);
+    assert_int_equal(far >> ibits, qtop);
+    rnd_frame_free(&f);
+    rnd_release(r, id);
+}
+
 /* ---- the two places of passes 1 and 2 ---- */
 
 /* host_vs_gl: cloud pc, uploaded as idg to gl (no host paths) and idh to host (host paths),
@@ -925,6 +1004,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_edl_step),
         cmocka_unit_test(test_edl_flat),
         cmocka_unit_test(test_edl_branches),
+        cmocka_unit_test(test_far_step_clamp),
     };
     /* once: the two places of passes 1-3 compared (each with a renderer of its own) */
     const struct CMUnitTest once[] = {
