@@ -35,16 +35,13 @@ typedef enum { SP_T_ENUM = 1, SP_T_FLOAT = 2, SP_T_INT = 3, SP_T_VEC3 = 4 } sp_t
     X(T,            "t",            SP_T_FLOAT, t,            0,    1,        "0.5",    NULL)     \
     X(L_M,          "l_m",          SP_T_FLOAT, l_m,          0,    1,        "0",      NULL)     \
     X(FIELD,        "field",        SP_T_ENUM,  field,        0,    0,        "uncertainty", "uncertainty|height|intensity|scalar|quality|confidence|class|axis-distance|scan") \
-    X(ORDER,        "order",        SP_T_ENUM,  order,        0,    0,        "auto",   "axis|tile|auto|cpu") \
+    X(ORDER,        "order",        SP_T_ENUM,  order,        0,    0,        "auto",   "axis|tile|auto") \
     X(CLASSES,      "classes",      SP_T_INT,   classes,      0,    4294967295, "0",    NULL)     \
     X(AXIS_A,       "axis_a",       SP_T_VEC3,  axis_a,       -1e9, 1e9,      "0,0,0",  NULL)     \
     X(AXIS_B,       "axis_b",       SP_T_VEC3,  axis_b,       -1e9, 1e9,      "0,0,1",  NULL)     \
     X(SOFT_FRAG_MIB, "soft_frag_mib", SP_T_INT, soft_frag_mib, 1,   65536,    "512",    NULL) \
     X(LOD_FIRST,    "lod_first",    SP_T_INT,   lod_first,    0,    1,        "0",      NULL) \
-    X(PROVISIONAL,  "provisional",  SP_T_INT,   provisional,  0,    1,        "0",      NULL) \
-    X(EDL_PASS,     "edl_pass",     SP_T_ENUM,  edl_pass,     0,    0,        "auto",   "auto|gpu|cpu") \
-    X(KAWATA_RASTER, "kawata_raster", SP_T_ENUM, kawata_raster, 0,   0,        "auto",   "auto|gpu|cpu") \
-    X(SOFT_PROJ,    "soft_proj",    SP_T_ENUM,  soft_proj,    0,    0,        "auto",   "auto|gpu|cpu")
+    X(PROVISIONAL,  "provisional",  SP_T_INT,   provisional,  0,    1,        "0",      NULL)
 
 enum {
 #define SP_ID_(id, name, type, field, lo, hi, def, vals) SP_##id,
@@ -70,11 +67,6 @@ enum { SP_SUB_444 = 0, SP_SUB_422, SP_SUB_420, SP_SUB_GRAY };
  * edl = that, times Eye-Dome Lighting over the frame's eye depth (render.c, edl.c), for every
  * pipeline: the depth cue that needs no normals at all. */
 enum { SP_SHADING_LAMBERT = 0, SP_SHADING_EDL };
-/* edl_pass: where shading=edl's pass runs (the same shade either way, edl.h): gpu = a GL
- * fragment pass over the frame's eye depth before the read-back (edl.c); cpu = on the host,
- * over the read-back frame and its eye depth (edl_host.c), where plain C with 8-wide vectors
- * costs a fraction of llvmpipe's fragment pass; auto = cpu on a software renderer, gpu on a GPU. */
-enum { SP_EDL_PASS_AUTO = 0, SP_EDL_PASS_GPU, SP_EDL_PASS_CPU };
 /* model: the Soft Transparency density model: express = view-facing discs with eq. 19 (the
  * default, pipe_soft.c); base = spheres with the exact density integral (eq. 4-12); concentric =
  * N concentric spheres of constant density (eq. 13-18); the last two through per-pixel fragment
@@ -101,22 +93,9 @@ enum {
 /* order: every value composites the soft discs back to front in the order of the axis-sorted
  * index arrays (pipe_soft.c); axis = as GL point sprites blended in primitive order, tile = a
  * compute compositor that bins them into 8x8 pixel tiles keeping that order and blends per
- * pixel, cpu = the discs as the GL projected them, read back and composited on the host in 64x64
- * tiles by every core (soft_cpu.h), the layer put over the frame by the GL; auto = cpu on a
- * software renderer (where the GL is the CPU: there it is the fastest on every cloud measured),
- * axis on a GPU. */
-enum { SP_ORDER_AXIS = 0, SP_ORDER_TILE, SP_ORDER_AUTO, SP_ORDER_CPU };
-/* kawata_raster: where kawata's passes 1 and 2 (the points into the image buffer), the list of
- * covered buffer pixels, pass 3's resolve and the plane fit run: gpu = the compute shaders
- * kawata_raster.comp and kawata_fit.comp; cpu = the host, every core (kawata_cpu.h,
- * kawata_fit_cpu.h), the same arrays and splats word for word, handed to the GL's gather
- * (color=field: passes 1 and 2 only); auto = cpu on a software renderer (where the GL is the
- * CPU), gpu on a GPU. */
-enum { SP_KAWATA_RASTER_AUTO = 0, SP_KAWATA_RASTER_GPU, SP_KAWATA_RASTER_CPU };
-/* soft_proj: with order=cpu, where the soft discs are projected: gpu = soft_bin.comp PASS 0,
- * read back; cpu = the host, every core (soft_proj.h; color=field's colour map stays in the GL);
- * auto = cpu on a software renderer, gpu on a GPU. */
-enum { SP_SOFT_PROJ_AUTO = 0, SP_SOFT_PROJ_GPU, SP_SOFT_PROJ_CPU };
+ * pixel; auto = the host compositor where the renderer has host paths (a software renderer,
+ * where the GL is the CPU: pipe.h rnd_host, soft_cpu.h), axis elsewhere. */
+enum { SP_ORDER_AXIS = 0, SP_ORDER_TILE, SP_ORDER_AUTO };
 
 typedef struct sp_params {
     int32_t pipeline;
@@ -151,9 +130,6 @@ typedef struct sp_params {
     int64_t provisional;    /* 1: an OPEN of a cloud being prepared answers INFO of a provisional
                                cloud (COPC: its top levels) first, then the full INFO
                                (PROTOCOL.md, OPEN); 0: INFO once the full cloud is ready */
-    int32_t edl_pass;       /* SP_EDL_PASS_*: where shading=edl's pass runs */
-    int32_t kawata_raster;  /* kawata: SP_KAWATA_RASTER_*, where passes 1 and 2 run */
-    int32_t soft_proj;      /* soft order=cpu: SP_SOFT_PROJ_*, where the discs are projected */
 } sp_params;
 
 typedef struct sp_param_info {

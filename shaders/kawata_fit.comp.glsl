@@ -24,10 +24,10 @@
 //           frame y, eye depth, 1), splats[2b + 1] = (colour, 1). The splats of the rectangle's
 //           rows were cleared to 0 ("none"), so a pixel with fewer than u_min_support supporters
 //           writes nothing. A neighbour is empty where near[] says so (its pts entries are an
-//           earlier frame's). Counts the splats in nsplats. Its float operations are `precise`
-//           and the determinants and the normal's length written out (not determinant() and
-//           normalize(), whose expansion is the compiler's): kawata_fit_cpu.c repeats them on
-//           the host word for word (kawata_raster=cpu).
+//           earlier frame's). Counts the splats in nsplats. The determinants are written out:
+//           the GLSL specification leaves determinant()'s precision undefined, where products
+//           and sums are correctly rounded (fused or not, which is the compiler's choice here:
+//           nothing else must repeat these values).
 
 layout(local_size_x = 64) in;
 
@@ -103,8 +103,8 @@ struct Fit {
 void add_point(vec4 t, vec3 pa, float z0, float tol, bool self, inout Fit f)
 {
     if (t.w == 0.0 || abs(t.z - z0) > tol) return;
-    precise vec3 e = t.xyz - pa;
-    precise float r = e.z - (f.g.x * e.x + f.g.y * e.y + f.g.z);
+    vec3 e = t.xyz - pa;
+    float r = e.z - (f.g.x * e.x + f.g.y * e.y + f.g.z);
     if (f.g.w > 0.0 && abs(r) > f.g.w) return;
     if (!self) f.support++;
     f.sxx += e.x * e.x, f.sxy += e.x * e.y, f.syy += e.y * e.y;
@@ -123,13 +123,11 @@ vec4 point_at(ivec2 q, int dx, int dy, int j, ivec2 blo, ivec2 bhi, int w)
     return texelFetch(u_pts, 4 * b + j);
 }
 
-// The determinant of the 3x3 matrix of columns a, b, c, expanded along the first row, each
-// operation rounded in this order (`precise`: kawata_fit_cpu.c repeats it word for word).
+// The determinant of the 3x3 matrix of columns a, b, c, expanded along the first row.
 float det3(vec3 a, vec3 b, vec3 c)
 {
-    precise float d = a.x * (b.y * c.z - c.y * b.z) - b.x * (a.y * c.z - c.y * a.z) +
-                      c.x * (a.y * b.z - b.y * a.z);
-    return d;
+    return a.x * (b.y * c.z - c.y * b.z) - b.x * (a.y * c.z - c.y * a.z) +
+           c.x * (a.y * b.z - b.y * a.z);
 }
 
 // Solves the round's normal equations by Cramer's rule on [sxx sxy sx; sxy syy sy; sx sy n]
@@ -141,10 +139,10 @@ bool solve(Fit f, out vec3 abc)
     vec3 cx = vec3(f.sxx, f.sxy, f.sx), cy = vec3(f.sxy, f.syy, f.sy), cn = vec3(f.sx, f.sy, f.n);
     vec3 cz = vec3(f.sxz, f.syz, f.sz);
     float det = det3(cx, cy, cn);
-    precise float lim = 1e-6 * f.sxx * f.syy * f.n;
+    float lim = 1e-6 * f.sxx * f.syy * f.n;
     if (!(abs(det) > lim)) return false;
-    precise float ax = det3(cz, cy, cn) / det, ay = det3(cx, cz, cn) / det;
-    precise float az = det3(cx, cy, cz) / det;
+    float ax = det3(cz, cy, cn) / det, ay = det3(cx, cz, cn) / det;
+    float az = det3(cx, cy, cz) / det;
     abc = vec3(ax, ay, az);
     return true;
 }
@@ -155,8 +153,8 @@ void pixel(ivec2 q, ivec2 blo, ivec2 bhi, int w)
     vec4 a1 = texelFetch(u_pts, 4 * b);
     if (a1.w == 0.0) return;
     vec4 a2 = texelFetch(u_pts, 4 * b + 1);
-    precise vec3 pa = a2.w > 0.0 ? 0.5 * (a1.xyz + a2.xyz) : a1.xyz; // pass 3
-    precise float tol = u_gamma + u_slope * (-a1.z);
+    vec3 pa = a2.w > 0.0 ? 0.5 * (a1.xyz + a2.xyz) : a1.xyz; // pass 3
+    float tol = u_gamma + u_slope * (-a1.z);
     // The up to 18 points of the 3x3 neighbourhood in both buffers, fetched once for both
     // rounds and named (llvmpipe keeps named values in registers; arrays and loops measured
     // ~10x slower in splat_resolve.frag.glsl).
@@ -201,7 +199,7 @@ void pixel(ivec2 q, ivec2 blo, ivec2 bhi, int w)
     add_point(v80, pa, a1.z, tol, false, f);
     add_point(v81, pa, a1.z, tol, false, f);
     if (f.support < u_min_support) return;
-    precise vec3 nrm = vec3(0.0, 0.0, 1.0);
+    vec3 nrm = vec3(0.0, 0.0, 1.0);
     vec3 abc;
     if (solve(f, abc)) {
         // A second round without the points farther from the first plane than 2.5 times the
@@ -211,13 +209,13 @@ void pixel(ivec2 q, ivec2 blo, ivec2 bhi, int w)
         // points enough to darken its pixel. When the nearest point itself is such a stray,
         // the pixel is dropped (pass 5 fills it from its neighbours), as the paper drops
         // outliers. The residual sum of squares from the sums: sum (z - Ax - By - C)^2.
-        precise float rss = f.szz - 2.0 * (abc.x * f.sxz + abc.y * f.syz + abc.z * f.sz) +
+        float rss = f.szz - 2.0 * (abc.x * f.sxz + abc.y * f.syz + abc.z * f.sz) +
                     abc.x * abc.x * f.sxx + 2.0 * abc.x * abc.y * f.sxy +
                     abc.y * abc.y * f.syy + 2.0 * abc.x * abc.z * f.sx +
                     2.0 * abc.y * abc.z * f.sy + abc.z * abc.z * f.n;
-        precise float bound = max(2.5 * sqrt(max(rss, 0.0) / f.n), 0.0625 * u_slope * (-a1.z));
-        precise vec3 e1 = a1.xyz - pa;
-        precise float r1 = e1.z - (abc.x * e1.x + abc.y * e1.y + abc.z);
+        float bound = max(2.5 * sqrt(max(rss, 0.0) / f.n), 0.0625 * u_slope * (-a1.z));
+        vec3 e1 = a1.xyz - pa;
+        float r1 = e1.z - (abc.x * e1.x + abc.y * e1.y + abc.z);
         if (abs(r1) > bound) return;
         f.g = vec4(abc, bound);
         f.sxx = f.sxy = f.syy = f.sx = f.sy = f.n = f.sxz = f.syz = f.sz = f.szz = 0.0;
@@ -242,29 +240,29 @@ void pixel(ivec2 q, ivec2 blo, ivec2 bhi, int w)
         add_point(v81, pa, a1.z, tol, false, f);
         if (f.support < u_min_support) return;
         if (solve(f, abc)) { // (A, B, -1) towards +z, divided by its length
-            precise float len = sqrt(abc.x * abc.x + abc.y * abc.y + 1.0);
+            float len = sqrt(abc.x * abc.x + abc.y * abc.y + 1.0);
             nrm = vec3(-abc.x, -abc.y, 1.0) / len;
         }
     }
     vec3 c1 = texelFetch(u_pts, 4 * b + 2).rgb;
-    precise vec3 col = a2.w > 0.0 ? 0.5 * (c1 + texelFetch(u_pts, 4 * b + 3).rgb) : c1;
+    vec3 col = a2.w > 0.0 ? 0.5 * (c1 + texelFetch(u_pts, 4 * b + 3).rgb) : c1;
     int color = u_color;
     mat4 v = u_view;
     vec3 l = u_light;
     if (color == 2) { // local normals (transpose(mat3(u_view)) * nrm), as `points`
-        precise vec3 ln = vec3(v[0].x * nrm.x + v[0].y * nrm.y + v[0].z * nrm.z,
+        vec3 ln = vec3(v[0].x * nrm.x + v[0].y * nrm.y + v[0].z * nrm.z,
                                v[1].x * nrm.x + v[1].y * nrm.y + v[1].z * nrm.z,
                                v[2].x * nrm.x + v[2].y * nrm.y + v[2].z * nrm.z);
         col = ln * 0.5 + 0.5;
     } else if (color == 3) {
-        precise float t = (-pa.z - u_znear) / (u_zfar - u_znear);
+        float t = (-pa.z - u_znear) / (u_zfar - u_znear);
         col = vec3(1.0 - clamp(t, 0.0, 1.0));
     } else {
-        precise float ndl = nrm.x * l.x + nrm.y * l.y + nrm.z * l.z;
+        float ndl = nrm.x * l.x + nrm.y * l.y + nrm.z * l.z;
         col *= 0.2 + 0.8 * max(ndl, 0.0); // ambient + Lambert
     }
-    precise vec4 clip = u_proj * vec4(pa, 1.0);
-    precise vec2 sxy = (clip.xy / clip.w * 0.5 + 0.5) * vec2(u_fsize);
+    vec4 clip = u_proj * vec4(pa, 1.0);
+    vec2 sxy = (clip.xy / clip.w * 0.5 + 0.5) * vec2(u_fsize);
     splats[2 * b] = vec4(sxy, -pa.z, 1.0);
     splats[2 * b + 1] = vec4(col, 1.0);
     // The 8x8 tiles of buffer pixels whose frame pixels this splat may reach (pass 5 reads

@@ -4,7 +4,9 @@
 // and "#define PASS 2": llvmpipe runs both sides of a branch (masked), so one program with a
 // uniform pass number paid for the other pass's instructions too (pass 1: 28 -> 24 ms of CPU
 // on the 1M scan). Both compute every point's depth and pixel with the same `precise`
-// instructions, as pass 2 compares the depth with pass 1's for equality.
+// instructions, as pass 2 compares the depth with pass 1's for equality: two compilations must
+// give the same bits, which `precise` guarantees (GLSL 4.50, 4.7.1: the stated order, no fused
+// operations) and nothing else does.
 //   PASS 1:   depth[b] = min over the points of buffer pixel b of their eye depth (float bits:
 //             positive floats order like uints).
 //   PASS 2:   the point whose depth equals depth[b] stores its cloud-wide index in near[b]
@@ -60,10 +62,19 @@ void main()
         if (k >= total) break;
         uint i = first + k;
         if (nranges > 1u) i = point_of(u_ranges, nranges, k);
-        precise vec4 c = viewproj * vec4(fetch3(u_pos, i), 1.0);
-        float d = c.w;
+        // c = u_viewproj (p, 1), written out: under `precise` the stated order holds and no
+        // product is fused into a sum (GLSL 4.50, 4.7.1), and + and * are correctly rounded
+        // (4.7.1's table), so c is the same on every conforming implementation (and the host
+        // path's, kawata_cpu.c); only the division may differ there (2.5 ulp).
+        vec3 p = fetch3(u_pos, i);
+        precise float cx = ((viewproj[0].x * p.x + viewproj[1].x * p.y) + viewproj[2].x * p.z) +
+                           viewproj[3].x;
+        precise float cy = ((viewproj[0].y * p.x + viewproj[1].y * p.y) + viewproj[2].y * p.z) +
+                           viewproj[3].y;
+        precise float d = ((viewproj[0].w * p.x + viewproj[1].w * p.y) + viewproj[2].w * p.z) +
+                          viewproj[3].w;
         if (!(d >= znear && d <= zfar)) continue;
-        precise vec2 b = (c.xy / d * 0.5 + 0.5) * fb;
+        precise vec2 b = (vec2(cx, cy) / d * 0.5 + 0.5) * fb;
         if (!(b.x >= 0.0 && b.y >= 0.0 && b.x < fb.x && b.y < fb.y)) continue;
         ivec2 q = min(ivec2(b), bsize - 1);
         int pi = q.y * bsize.x + q.x;

@@ -16,6 +16,7 @@
 #include <string.h>
 
 #include "commands.h"
+#include "gl_names.h"
 #include "render.h"
 #include "rndtest.h"
 #include "testutil.h"
@@ -655,6 +656,50 @@ static void test_auto_backend_and_shader_errors(void **state)
     tu_rm_rf(dir);
 }
 
+/* The software capability is the back end's (gl_backend.h): EGL's from its device's
+ * EGL_MESA_device_software, OSMesa always; by default the host paths follow it, and here, where
+ * the device is Mesa's software one, its renderer's name must say so too (the two ways of
+ * knowing agree). rnd_desc.software and .host_paths override it: host paths on or off whatever
+ * the back end, off with software off unless forced on; values outside RND_CAP_* are refused. */
+static void test_software_capability(void **state)
+{
+    (void)state;
+    static const struct {
+        int software, host, want;
+    } cases[] = {
+        {RND_CAP_AUTO, RND_CAP_ON, 1}, {RND_CAP_AUTO, RND_CAP_OFF, 0},
+        {RND_CAP_OFF, RND_CAP_AUTO, 0}, {RND_CAP_ON, RND_CAP_AUTO, 1},
+        {RND_CAP_OFF, RND_CAP_ON, 1},
+    };
+    sd_err err = {0};
+    rnd_desc d = {.backend = RND_BACKEND_EGL, .shader_dir = getenv("SPLATD_SHADERS")};
+    rnd_ctx *r = rnd_create(&d, &err);
+    if (!r) fail_msg("rnd_create: %s", err.msg);
+    int named = gl_renderer_is_software(rnd_renderer_string(r));
+    printf("egl: %s; host paths by default %d, the name says software %d\n",
+           rnd_renderer_string(r), rnd_host_paths(r), named);
+    assert_int_equal(rnd_host_paths(r), named);
+    rnd_destroy(r);
+    for (size_t k = 0; k < sizeof cases / sizeof *cases; k++) {
+        d.software = cases[k].software, d.host_paths = cases[k].host;
+        r = rnd_create(&d, &err);
+        if (!r) fail_msg("rnd_create: %s", err.msg);
+        assert_int_equal(rnd_host_paths(r), cases[k].want);
+        rnd_destroy(r);
+    }
+    const int bad[4][2] = {{RND_CAP_OFF + 1, 0}, {-1, 0}, {0, RND_CAP_OFF + 1}, {0, -1}};
+    for (int k = 0; k < 4; k++) {
+        d.software = bad[k][0], d.host_paths = bad[k][1];
+        assert_null(rnd_create(&d, &err));
+        assert_int_equal(err.code, SD_EINVAL);
+    }
+    rnd_desc o = {.backend = RND_BACKEND_OSMESA, .shader_dir = getenv("SPLATD_SHADERS")};
+    r = rnd_create(&o, &err);
+    if (!r) TU_SKIP("OSMesa back end unavailable: %s", err.msg);
+    assert_int_equal(rnd_host_paths(r), 1);
+    rnd_destroy(r);
+}
+
 /* Runs `splatd render` with the given arguments (NULL-terminated). */
 static int run_render(const char *first, ...)
 {
@@ -945,6 +990,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_backends_agree),
         cmocka_unit_test(test_stale_id),
         cmocka_unit_test(test_auto_backend_and_shader_errors),
+        cmocka_unit_test(test_software_capability),
         cmocka_unit_test(test_cmd_render_errors),
         cmocka_unit_test(test_cmd_render_file),
         cmocka_unit_test(test_buffer_sets),

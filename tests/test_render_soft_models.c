@@ -11,7 +11,10 @@
  *     differences under the thresholds stated at the test;
  *   - the memory cap: a cap that forces bands of rows gives the uncapped image and no flag; a
  *     row that alone exceeds it, and a pixel with more than 32 overlapping Base spheres, flag the
- *     frame (RND_FRAME_SOFT_TRUNCATED) and still render.
+ *     frame (RND_FRAME_SOFT_TRUNCATED) and still render;
+ *   - structure, where an average would hide it: one Concentric sphere's opacity at every pixel
+ *     against eq. 13-18 with its count of shells (and not with one more or one less), and stacks
+ *     of 1-4 coincident points in each model against what that many layers give.
  * Frames are float (RGBA16F, 11 significant bits) where 1 % is asked, so the check measures the
  * model rather than 8-bit rounding. Lengths are in world units here (the test clouds have no
  * median radius, so soft_lists.h's unit is 1 x splat_scale). */
@@ -334,6 +337,173 @@ static void test_memory_cap(void **state)
     rnd_release(tu_ctx, id20), rnd_release(tu_ctx, id60);
 }
 
+/* ---- structure: layers and shells that show in the pixels ---- */
+
+/* The distance from (cx, cy, cz) to pixel (x, y)'s centre ray. */
+static double ray_dist(int x, int y, double cx, double cy, double cz)
+{
+    double u[3], m[3] = {-cx, -cy, EZ - cz}; /* eye - centre */
+    pixel_ray(x, y, u);
+    double b = m[0] * u[0] + m[1] * u[1] + m[2] * u[2];
+    return sqrt(fmax(m[0] * m[0] + m[1] * m[1] + m[2] * m[2] - b * b, 0.0));
+}
+
+/* The Concentric-Model's optical depth (in units of the unit length) along a ray at distance d
+ * from the centre of a sphere of radius R with N shells of radii r_j = R (1 - j / N): inside
+ * shell j and outside shell j + 1 the density is mu'_j = R / (N r_j) (1 - d / r_j) (eq. 13,
+ * 15, 16-18), times kappa = R K[N]. */
+static double conc_tau(double d, double R, int N, double K)
+{
+    double tau = 0.0;
+    for (int j = 0; j < N; j++) {
+        double rj = R * (1.0 - (double)j / N), rn = R * (1.0 - (double)(j + 1) / N);
+        if (d >= rj) break;
+        double ch = 2.0 * sqrt(rj * rj - d * d);
+        double chn = j + 1 < N && d < rn ? 2.0 * sqrt(rn * rn - d * d) : 0.0;
+        tau += R / (N * rj) * (1.0 - d / rj) * (ch - chn);
+    }
+    return R * K * tau;
+}
+
+/* K[N] from its definition (soft_lists.h): the Base-Model's optical depth integrated over a unit
+ * sphere's disc (2 pi / 6 for r = 1, from eq. 7) over
+ * the Concentric-Model's with N shells and K = 1, integrated here by Simpson's rule on 20000
+ * intervals (independently of soft_lists_kappa's midpoint rule). */
+static double kappa_ref(int N)
+{
+    enum { M = 20000 };
+    double mass = 0.0;
+    for (int q = 0; q <= M; q++) {
+        double d = (double)q / M, w = q == 0 || q == M ? 1 : q % 2 ? 4 : 2;
+        mass += w * conc_tau(d, 1.0, N, 1.0) * d;
+    }
+    mass /= 3.0 * M;
+    return (1.0 / 6.0) / mass;
+}
+
+/* The shells the Concentric-Model gives one sphere: N = 1 + floor(R_px / 4), R_px its screen
+ * radius at its centre's depth (soft_frag.comp: one more shell every 4 pixels), so a white
+ * sphere r = 1 at the origin, 6 away, has 10. Its opacity at every pixel must be
+ * 1 - exp(-lambda conc_tau(d)) for N = 10 (float frame: 1 % of the value plus 0.002 for half
+ * precision, rays with d < 0.98 and an opacity over 0.02): the profile has a kink at every
+ * shell, so the count shows where an average would not. With N = 9 or 11 the same frame must
+ * miss that tolerance by far (its largest error at least 3 times the bound), so that the test
+ * tells the shell count apart. */
+static void test_concentric_shells(void **state)
+{
+    (void)state;
+    const sphere s[1] = {{0, 0, 0, 1.0f, {1, 1, 1}}};
+    uint32_t id = upload_spheres(s, 1, 0.0f);
+    rnd_camera cam = cam_z();
+    const double lambda = 0.6;
+    sp_params p = base_params(SP_MODEL_CONCENTRIC, (float)lambda);
+    rnd_frame f = {0};
+    tu_render(tu_ctx, id, &cam, &p, 1, &f);
+    assert_int_equal(f.flags, 0);
+    double rpx = 1.0 / tan(20.0 * M_PI / 180.0) * 0.5 * H / EZ;
+    int N = 1 + (int)floor(rpx / 4.0);
+    assert_int_equal(N, 10);
+    double worst[3] = {0, 0, 0};
+    int n = 0;
+    for (int k = 0; k < 3; k++) {
+        int nk = N - 1 + k;
+        double K = kappa_ref(nk);
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++) {
+                double d = ray_dist(x, y, 0, 0, 0);
+                if (d >= 0.98) continue;
+                double want = 1.0 - exp(-lambda * conc_tau(d, 1.0, nk, K));
+                if (want < 0.02) continue;
+                float c[4];
+                fpix(&f, x, y, c);
+                double e = fabs(c[0] - want) / (0.01 * want + 0.002);
+                worst[k] = fmax(worst[k], e);
+                n += k == 1;
+            }
+    }
+    printf("concentric, one sphere (R %.1f px, %d shells): %d rays; largest error over the "
+           "bound with %d / %d / %d shells: %.2f / %.2f / %.2f\n", rpx, N, n, N - 1, N, N + 1,
+           worst[0], worst[1], worst[2]);
+    assert_true(n > 3000);
+    assert_true(worst[1] <= 1.0);
+    assert_true(worst[0] >= 3.0 && worst[2] >= 3.0);
+    rnd_frame_free(&f);
+    rnd_release(tu_ctx, id);
+}
+
+/* Stacks of k = 1, 2, 3 and 4 coincident white soft points (r = 0.4, side by side at x = -1.35,
+ * -0.45, 0.45, 1.35, facing the camera), each model: the count of layers must show in every
+ * pixel near each stack's centre, against what k layers give:
+ *   Express: k discs of opacity lambda (cos(pi d / r) + 1) / 2 one over the other:
+ *     1 - (1 - Phi)^k (d the pixel centre's screen distance over the screen radius; d < 0.5);
+ *   Base: densities add: 1 - exp(-lambda k 2 P(sqrt(r^2 - d^2))) with eq. 7 (every ray within
+ *     0.9 r);
+ *   Concentric: 1 - exp(-lambda k conc_tau(d)) with N = 1 + floor(R_px / 4) = 4 shells.
+ * Float frames; tolerance 1 % of the value plus 0.002 (half precision); and the values of k
+ * and k + 1 layers lie far apart at each stack's centre (so one layer lost or added fails). */
+static void test_layer_count(void **state)
+{
+    (void)state;
+    enum { NS = 4 };
+    const float r = 0.4f, xs[NS] = {-1.35f, -0.45f, 0.45f, 1.35f};
+    sphere s[1 + 2 + 3 + 4];
+    int m = 0;
+    for (int k = 0; k < NS; k++)
+        for (int j = 0; j <= k; j++) s[m++] = (sphere){xs[k], 0, 0, r, {1, 1, 1}};
+    uint32_t id = upload_spheres(s, m, 0.0f);
+    rnd_camera cam = cam_z();
+    const double rpx = r / tan(20.0 * M_PI / 180.0) * 0.5 * H / EZ;
+    const int N = 1 + (int)floor(rpx / 4.0);
+    const double K = kappa_ref(N);
+    const int models[3] = {SP_MODEL_EXPRESS, SP_MODEL_BASE, SP_MODEL_CONCENTRIC};
+    const char *const mname[3] = {"express", "base", "concentric"};
+    const double lambdas[3] = {0.3, 1.5, 1.5};
+    for (int mi = 0; mi < 3; mi++) {
+        sp_params p = base_params(models[mi], (float)lambdas[mi]);
+        rnd_frame f = {0};
+        tu_render(tu_ctx, id, &cam, &p, 1, &f);
+        double worst = 0, centre[NS];
+        int n = 0;
+        for (int k = 0; k < NS; k++) {
+            /* the stack's centre pixel and screen position (camera on the axis: x scales) */
+            double sx = (xs[k] / (EZ * tan(20.0 * M_PI / 180.0)) * 0.5 + 0.5) * W;
+            for (int y = 0; y < H; y++)
+                for (int x = (int)(sx - rpx) - 1; x <= (int)(sx + rpx) + 1; x++) {
+                    if (x < 0 || x >= W) continue;
+                    double want;
+                    if (models[mi] == SP_MODEL_EXPRESS) {
+                        double dd = hypot(x + 0.5 - sx, y + 0.5 - 0.5 * H) / rpx;
+                        if (dd >= 0.5) continue;
+                        double phi = lambdas[mi] * (cos(M_PI * dd) + 1.0) / 2.0;
+                        want = 1.0 - pow(1.0 - phi, k + 1);
+                    } else {
+                        double d = ray_dist(x, y, xs[k], 0, 0);
+                        if (d >= 0.9 * r) continue;
+                        double tau = models[mi] == SP_MODEL_BASE
+                                         ? 2.0 * eq7(r, d, sqrt(r * r - d * d))
+                                         : conc_tau(d, r, N, K);
+                        want = 1.0 - exp(-lambdas[mi] * (k + 1) * tau);
+                    }
+                    float c[4];
+                    fpix(&f, x, y, c);
+                    worst = fmax(worst, fabs(c[0] - want) / (0.01 * want + 0.002));
+                    n++;
+                }
+            float c[4];
+            fpix(&f, (int)sx, H / 2, c);
+            centre[k] = c[0];
+        }
+        printf("layers 1-4, %s: centre opacities %.4f %.4f %.4f %.4f; %d pixels, largest error "
+               "over the bound %.2f\n", mname[mi], centre[0], centre[1], centre[2], centre[3], n,
+               worst);
+        assert_true(n > 100);
+        assert_true(worst <= 1.0);
+        for (int k = 0; k + 1 < NS; k++) assert_true(centre[k + 1] - centre[k] > 0.03);
+        rnd_frame_free(&f);
+    }
+    rnd_release(tu_ctx, id);
+}
+
 int main(int argc, char **argv)
 {
     tu_args(argc, argv);
@@ -342,6 +512,8 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_base_two_spheres),
         cmocka_unit_test(test_models_alike),
         cmocka_unit_test(test_memory_cap),
+        cmocka_unit_test(test_concentric_shells),
+        cmocka_unit_test(test_layer_count),
     };
     return cmocka_run_group_tests(tests, tu_egl_group_setup, tu_egl_group_teardown);
 }

@@ -240,6 +240,51 @@ static void test_over_frame(void **state)
     assert_true(off1 <= 3 * reached / 100);
 }
 
+/* Byte-exact rounding of the "over" onto the frame's 8-bit pixels (soft_cpu_blend with rgba8):
+ * out = 255 L + (1 - a) px on the 0..255 scale, rounded to nearest with halves up, clamped.
+ * Discs of radius 2 centred on pixel centres, so that the centre pixel's distance is 0 and its
+ * opacity exactly lambda (cos 0 = 1), one disc per case, hand values whose exact result lands
+ * on a quarter or a half, where truncation, rounding down at halves or a second rounding would
+ * each give another byte (every number here is exact in float but the last):
+ *   lambda 0.5, black over 101: 50.5 -> 51;   over 100: 50 -> 50
+ *   lambda 0.5, white over 2: 127.5 + 1 = 128.5 -> 129;   over 255: 255 -> 255
+ *   lambda 0.25, black over 5: 3.75 -> 4;   over 3: 2.25 -> 2;   over 2: 1.5 -> 2
+ *   lambda 0.25, grey 0.4 over 0: 25.5 in reals, but 0.4 is 0.40000000596 in float, so
+ *   25.5000004 -> 26 (the float value decides, not the tie rule: a double reference would too). */
+static void test_rounding_hand_values(void **state)
+{
+    (void)state;
+    static const struct {
+        float lambda, colour;
+        uint8_t px, want;
+    } cases[] = {
+        {0.5f, 0.0f, 101, 51}, {0.5f, 0.0f, 100, 50}, {0.5f, 1.0f, 2, 129}, {0.5f, 1.0f, 255, 255},
+        {0.25f, 0.0f, 5, 4},   {0.25f, 0.0f, 3, 2},   {0.25f, 0.0f, 2, 2},  {0.25f, 0.4f, 0, 26},
+    };
+    enum { FW = 64, FH = 8, NC = sizeof cases / sizeof *cases };
+    static uint8_t frame[FW * FH * 4];
+    for (size_t k = 0; k < NC; k++) {
+        memset(frame, 0, sizeof frame);
+        float proj[8] = {8.5f + 6.0f * (float)k, 4.5f, 2.0f, 1.0f,
+                         cases[k].colour, cases[k].colour, cases[k].colour, 1.0f};
+        uint32_t order[1] = {0};
+        soft_cpu_seg seg = {proj, order, 1, 0};
+        size_t o = 4 * (4 * FW + 8 + 6 * k);
+        frame[o] = frame[o + 1] = frame[o + 2] = cases[k].px, frame[o + 3] = 255;
+        soft_cpu_mem mem = {0};
+        soft_cpu_job job = {.segs = &seg, .nsegs = 1, .width = FW, .y0 = 0, .rows = FH,
+                            .mem = &mem, .threads = 1};
+        assert_int_equal(soft_cpu_bin(&job), 0);
+        job.lambda = cases[k].lambda, job.rgba8 = frame;
+        assert_int_equal(soft_cpu_blend(&job), 0);
+        soft_cpu_mem_free(&mem);
+        printf("lambda %.2f, colour %.1f over %3d: %3d (want %3d)\n", (double)cases[k].lambda,
+               (double)cases[k].colour, cases[k].px, frame[o], cases[k].want);
+        for (int c = 0; c < 3; c++) assert_int_equal(frame[o + c], cases[k].want);
+        assert_int_equal(frame[o + 3], 255);
+    }
+}
+
 int main(int argc, char **argv)
 {
     tu_args(argc, argv);
@@ -247,6 +292,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_matches_reference),
         cmocka_unit_test(test_nothing),
         cmocka_unit_test(test_over_frame),
+        cmocka_unit_test(test_rounding_hand_values),
     };
     return cmocka_run_group_tests_name("soft_cpu", tests, NULL, NULL);
 }

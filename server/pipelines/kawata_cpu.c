@@ -78,6 +78,9 @@ static void project(const kawata_cpu_job *job, const float *pos, uint32_t n, uin
         prep_v8f bx = (cx / d * 0.5f + 0.5f) * fbx, by = (cy / d * 0.5f + 0.5f) * fby;
         prep_v8i in = (d >= zn) & (d <= zf) & (bx >= 0.0f) & (by >= 0.0f) & (bx < fbx) &
                       (by < fby);
+        /* the lanes left out become 0 before the conversion and the arithmetic below: a
+         * point at the eye or off the frame has no integer pixel (its quotient may be inf) */
+        bx = (prep_v8f)((prep_v8i)bx & in), by = (prep_v8f)((prep_v8i)by & in);
         prep_v8i qx = __builtin_convertvector(bx, prep_v8i);
         prep_v8i qy = __builtin_convertvector(by, prep_v8i);
         prep_v8i cxm = qx < bw - 1, cym = qy < bh - 1;

@@ -1,14 +1,16 @@
-/* kawata_cpu.h — passes 1 and 2 of the `kawata` pipeline on the host (`kawata_raster=cpu`, the
- * default on a software renderer; pipe_kawata.c). On llvmpipe the GL is the CPU, and its compute
+/* kawata_cpu.h — passes 1 and 2 of the `kawata` pipeline on the host (the host paths, host.h:
+ * a software renderer; pipe_kawata.c). On llvmpipe the GL is the CPU, and its compute
  * path pays for every instruction of every SIMD lane of the raster shader (kawata_raster.comp)
  * plus its atomics lane by lane; the same work in C over every core costs a fraction of it.
  *
- * The same results as kawata_raster.comp, array for array: every point is projected with the
- * shader's float operations in the shader's order (no fused multiply-add: the shader's are
- * `precise`, and this file is compiled without contraction, -std=c11), so its buffer pixel and
- * its depth key are the shader's; pass 1 keeps each pixel's least key (float bits of the eye
+ * What kawata_raster.comp computes: every point is projected with the shader's operations in
+ * the shader's order, each product and sum rounded (this file is compiled without contraction,
+ * -std=c11), the division IEEE's; pass 1 keeps each pixel's least key (float bits of the eye
  * depth), pass 2 the least cloud-wide index among the points with exactly that key and the
  * greatest (1 + quantised step) << index_bits | index among those behind it by at most gamma.
+ * A GPU may order the matrix product's sums otherwise and divide within 2.5 units in the last
+ * place (GLSL 4.50, 4.7.1), so a point within that of a pixel's edge, or of another's depth,
+ * may be decided otherwise there; test_render_kawata's test_host_vs_gl bounds where.
  * Minima and maxima do not depend on the order the points are met in, so neither do the
  * results, whatever the thread count.
  *
@@ -94,7 +96,7 @@ void kawata_cpu_mem_free(kawata_cpu_mem *m);
  * for ~65k pixels, bound by its scattered reads; here it is a small part of that. The colour
  * sources: RGBA8 (unpackUnorm4x8: each byte / 255.0) or the intensity's float clamped to
  * [0, 1]; color=field (a polynomial colour map) stays with the GL (pipe_kawata.c). The rest of
- * pass 3 and pass 4 (STAGE 2, the fit) follow on the host too: kawata_fit_cpu.h. */
+ * pass 3 and pass 4 (STAGE 2, the fit) run in the GL. */
 
 /* A buffer set: its positions and colour source (NULL when none of its points is visible),
  * cloud-wide index of its first point, points. */

@@ -65,44 +65,27 @@
  * A cloud in several buffer sets (pipe.h) is drawn set by set: passes 1 and 2 key points by
  * their cloud-wide index, and STAGE 1 runs once per set, each resolving the points of its own.
  *
- * On a software renderer (kawata_raster=auto; =cpu anywhere) passes 1 and 2, the list and
- * STAGE 1 run on the host instead (kawata_cpu.h), and so does STAGE 2, the fit
- * (kawata_fit_cpu.h): every core, the shader's float operations in its order, so the arrays,
- * the splats and the tile marks handed to the gather are the compute path's word for word
- * (tests: test_render_kawata's test_host_equals_gpu, test_lod, test_kawata_cpu). For that the
- * fit's determinants and its normal's length are written out in the shader and `precise`
- * (the built-ins' expansion is the compiler's: with determinant() and normalize() 15k of
- * Guanyin's splat words differed; writing them out moved the GL path's bunny frame 89.6 dB from
- * its golden). The positions and colours are read where the GL keeps them, each buffer set's
- * buffers mapped for reading (on llvmpipe its own memory: no copy; a LOD pool's two sets share
- * their buffers, mapped once), and the arrays, splats and marks are written into the mapped
- * storage buffers, which are unmapped before the gather. color=field keeps STAGE 0-2 in the GL
- * (its colour map is a shader polynomial). Every cloud form the GL path draws (one set,
- * several, LOD pools, ranges after culling and budgets) goes through the host path; there is
- * no fallback to the GL for any of them.
+ * With the renderer's host paths (pipe.h rnd_host: a software renderer) passes 1 and 2, the
+ * list and STAGE 1 run on the host instead (kawata_cpu.h), over every core, writing the same
+ * arrays: the same decisions (buffer pixel, nearest point, farthest within gamma) as the
+ * shader's wherever the precision the GLSL specification allows a GPU leaves no doubt about
+ * them (test_render_kawata's test_host_vs_gl states where it may and checks the rest). The
+ * positions and colours are read where the GL keeps them, each buffer set's buffers mapped for
+ * reading (on llvmpipe its own memory: no copy; a LOD pool's two sets share their buffers,
+ * mapped once), and the arrays are written into the mapped storage buffers, which are unmapped
+ * before the fit. The fit (STAGE 2) and the gather stay in the GL on every back end.
+ * color=field keeps STAGE 0-1 in the GL (its colour map is a shader polynomial). Every cloud
+ * form the GL path draws (one set, several, LOD pools, ranges after culling and budgets) goes
+ * through the host path; there is no fallback to the GL for any of them.
  *
- * Cost (the 1M scan at 1280x720, CPU time of every thread, glFinish between passes, a loaded
- * 2-core machine). The GL path: clears ~2.5 ms, pass 1 ~23, pass 2 ~24, the list ~1, pass 3's
- * resolve ~10, the fit ~11, the gather ~11: ~83 ms against `splat`'s ~83 (before: one raster
- * program for both passes, 28 + 26, and fragment passes over the whole rectangle, the resolve
- * ~13, the fit ~22 and the gather ~18; the resolve's cost is its random reads of the two
- * points' positions and colours, not its pixel count). That cloud is denser than the frame, so
- * rho is 1 and the buffer is the frame; passes 1 and 2 over every point are each as costly as
- * the whole raster pass of `points`. The host path: the per-thread arrays cleared ~0.55,
- * pass 1 (the projection 2.6, memory-bound, and the minima) ~4.4, merged ~0.45, pass 2 ~3.7,
- * merged ~0.55, the list ~0.3, the resolve ~2.2 (~12 in all, against ~55 for the same work in
- * the GL), the fit ~8.2 (with its clears of the splats and tiles; the GL's STAGE 2 cost ~10.3
- * and its clears ~1.2: the host's is bound by its reads of the 9 neighbours' points, eight
- * pixels at a time), then the GL's gather ~11: ~33-34 ms against `splat`'s ~82, 2.4x (README
- * "kawata's passes 1-3 on the host"; there kawata's point passes run in C while splat's run in
- * llvmpipe). */
+ * Costs of each pass on llvmpipe, and of the host path against the GL's: docs/performance.md
+ * ("kawata", "Host paths"). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "camera.h"
-#include "kawata_cpu.h"
-#include "kawata_fit_cpu.h"
+#include "host.h"
 #include "pipe.h"
 #include "progress.h"
 #include "shaders.h"
@@ -144,8 +127,8 @@ typedef struct kawata_state {
     GLuint buf[NBUF];
     uint64_t bytes[NBUF];
     GLuint tex[NBUF];          /* buffer textures over buf[] (0 for the counter) */
-    /* kawata_raster=cpu (kawata_cpu.h): the view's runs of points, each set's mapped
-     * positions, the host's working memory and its thread count */
+    /* the host path (kawata_cpu.h): the view's runs of points, each set's mapped positions,
+     * the host's working memory and its thread count */
     kawata_cpu_seg *segs;
     kawata_cpu_set *sets;
     uint8_t *own;              /* per set: OWN_POS, OWN_SRC where this set's mapping is held */
@@ -327,17 +310,16 @@ static const void *map_shared(const gl_api *gl, kawata_state *s, const rnd_gpu_c
     return p;
 }
 
-/* Passes 1 and 2 on the host (kawata_raster=cpu, kawata_cpu.h) into rows [y0, y1) of the
- * depth, near and far buffers, and with rj (not NULL) the list and pass 3's first half too
- * (*nlist: the listed pixels, also written to the counter). The positions of every buffer set
- * with a visible chunk (and with rj its colour source) are mapped for reading, the buffers
- * written mapped for writing (on a software renderer both are the GL's own memory: no copy
- * either way), and all are unmapped for the GL passes that follow. job and rj hold the frame's
+/* Passes 1 and 2 through the host paths h (kawata_cpu.h) into rows [y0, y1) of the depth, near
+ * and far buffers, and with rj (not NULL) the list and pass 3's first half too (*nlist: the
+ * listed pixels, also written to the counter). The positions of every buffer set with a
+ * visible chunk (and with rj its colour source) are mapped for reading, the buffers written
+ * mapped for writing (on a software renderer both are the GL's own memory: no copy either
+ * way), and all are unmapped for the GL passes that follow. job and rj hold the frame's
  * constants. Returns 0 or SD_E*. */
-static int host_passes(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c,
-                       const rnd_view *v, kawata_cpu_job *job, kawata_cpu_resolve_job *rj,
-                       kawata_fit_job *fj, const int trect[4], int color, uint32_t *nlist,
-                       sd_err *err)
+static int host_passes(const gl_api *gl, const rnd_host *h, kawata_state *s,
+                       const rnd_gpu_cloud *c, const rnd_view *v, kawata_cpu_job *job,
+                       kawata_cpu_resolve_job *rj, int color, uint32_t *nlist, sd_err *err)
 {
     uint32_t ns = c->nsets ? c->nsets : 1;
     if (soft_cpu_grow((void **)&s->segs, &s->segs_cap, v->nchunks ? v->nchunks : 1,
@@ -372,60 +354,47 @@ static int host_passes(const gl_api *gl, kawata_state *s, const rnd_gpu_cloud *c
         }
         s->segs[nsegs++] = (kawata_cpu_seg){hs->pos, b->base, ch->first, ch->count};
     }
-    /* depth, near, far, with rj the list and pts, with fj the splats and the tiles (the fit
-     * reads what the resolve wrote: all read-write then) */
-    static const int bufs[7] = {B_DEPTH, B_NEAR, B_FAR, B_LIST, B_PTS, B_SPLATS, B_TILES};
-    void *arr[7] = {NULL, NULL, NULL, NULL, NULL, NULL, NULL};
+    /* depth, near, far, with rj the list and pts */
+    static const int bufs[5] = {B_DEPTH, B_NEAR, B_FAR, B_LIST, B_PTS};
+    void *arr[5] = {NULL, NULL, NULL, NULL, NULL};
     size_t rows = (size_t)(job->y1 - job->y0), bw = (size_t)job->bw;
-    size_t tw = (bw + 7) / 8;
-    const GLintptr at[7] = {(GLintptr)(job->y0 * bw * 4), (GLintptr)(job->y0 * bw * 4),
-                            (GLintptr)(job->y0 * bw * 4), 0, (GLintptr)(job->y0 * bw * 64),
-                            (GLintptr)(job->y0 * bw * 32), (GLintptr)((size_t)trect[1] * tw * 4)};
+    const GLintptr at[5] = {(GLintptr)(job->y0 * bw * 4), (GLintptr)(job->y0 * bw * 4),
+                            (GLintptr)(job->y0 * bw * 4), 0, (GLintptr)(job->y0 * bw * 64)};
     size_t area = rj ? (size_t)(rj->x1 - rj->x0) * rows : 0;
-    size_t trows = (size_t)(trect[3] - trect[1]);
-    const GLsizeiptr bytes[7] = {(GLsizeiptr)(rows * bw * 4), (GLsizeiptr)(rows * bw * 4),
+    const GLsizeiptr bytes[5] = {(GLsizeiptr)(rows * bw * 4), (GLsizeiptr)(rows * bw * 4),
                                  (GLsizeiptr)(rows * bw * 4), (GLsizeiptr)(area * 4),
-                                 (GLsizeiptr)(rows * bw * 64), (GLsizeiptr)(rows * bw * 32),
-                                 (GLsizeiptr)(trows * tw * 4)};
-    int nmap = rj ? (fj ? 7 : 5) : 3;
+                                 (GLsizeiptr)(rows * bw * 64)};
+    int nmap = rj ? 5 : 3;
     for (int a = 0; a < nmap && rc == 0 && rows > 0; a++) {
         arr[a] = map(gl, GL_SHADER_STORAGE_BUFFER, s->buf[bufs[a]], at[a], bytes[a],
-                     a < 3 || fj ? GL_MAP_READ_BIT | GL_MAP_WRITE_BIT : GL_MAP_WRITE_BIT,
+                     a < 3 ? GL_MAP_READ_BIT | GL_MAP_WRITE_BIT : GL_MAP_WRITE_BIT,
                      "mapping kawata's image buffer", err);
         if (!arr[a]) rc = err && err->code ? err->code : SD_EGL;
     }
-    uint32_t listed = 0, splats = 0;
+    uint32_t listed = 0;
     if (rc == 0 && rows > 0) {
         job->segs = s->segs, job->nsegs = nsegs;
         job->depth = arr[0], job->near = arr[1], job->far = arr[2];
         job->threads = s->threads;
         job->mem = &s->mem;
-        if (kawata_cpu_raster(job) != 0)
+        if (h->kawata_raster(job) != 0)
             rc = sd_errf(err, SD_ENOMEM, "out of memory for kawata's host passes");
         if (rc == 0 && rj) {
             rj->sets = s->sets, rj->nsets = c->nsets;
             rj->near = arr[1], rj->far = arr[2], rj->list = arr[3], rj->pts = arr[4];
             rj->threads = s->threads;
-            listed = kawata_cpu_resolve(rj);
-        }
-        if (rc == 0 && fj) { /* the tiles within reach of the rectangle cleared, then the fit */
-            memset(arr[6], 0, trows * tw * 4);
-            fj->near = arr[1], fj->pts = arr[4], fj->list = arr[3], fj->n = listed;
-            fj->splats = arr[5];
-            fj->tiles = (uint32_t *)arr[6] - (size_t)trect[1] * tw;
-            fj->threads = s->threads;
-            splats = kawata_fit_cpu(fj);
+            listed = h->kawata_resolve(rj);
         }
     }
-    for (int a = 0; a < 7; a++)
+    for (int a = 0; a < 5; a++)
         if (arr[a]) unmap(gl, GL_SHADER_STORAGE_BUFFER, s->buf[bufs[a]]);
     for (uint32_t i = 0; i < c->nsets; i++) {
         if (s->own[i] & OWN_POS) unmap(gl, GL_COPY_READ_BUFFER, c->sets[i].buf[RND_ATTR_POS]);
         if (s->own[i] & OWN_SRC) unmap(gl, GL_COPY_READ_BUFFER, c->sets[i].buf[src]);
     }
     gl->BindBuffer(GL_COPY_READ_BUFFER, 0);
-    if (rc == 0 && rj) { /* the counter: (splats, listed) */
-        const GLuint counter[2] = {splats, listed};
+    if (rc == 0 && rj) { /* the counter: (splats, listed); the GL's fit counts the splats */
+        const GLuint counter[2] = {0, listed};
         gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, s->buf[B_COUNTER]);
         gl->BufferSubData(GL_SHADER_STORAGE_BUFFER, 0, sizeof counter, counter);
         *nlist = listed;
@@ -542,31 +511,25 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
     buffer(gl, s, B_COUNTER, 8, RND_B_KAWATA_COUNT, 0, 0);
     GLintptr row0 = (GLintptr)brect[1] * bw * 4;
     GLsizeiptr rows = (GLsizeiptr)(brect[3] - brect[1]) * bw * 4;
-    /* passes 1-2 on the host (kawata_cpu.h) or in kawata_raster.comp: see params.h; on the
-     * host the list and pass 3's first half too, but for color=field (its colour map is the
-     * GL's; color=scan likewise) */
-    int host = p->kawata_raster == SP_KAWATA_RASTER_CPU ||
-               (p->kawata_raster == SP_KAWATA_RASTER_AUTO && k->software);
-    int host_resolve = host && p->color != SP_COLOR_FIELD && p->color != SP_COLOR_SCAN;
-    if (!host) {
+    /* passes 1-2 through the host paths (kawata_cpu.h) or in kawata_raster.comp; with the host
+     * paths the list and pass 3's first half too, but for color=field and color=scan (their
+     * colour map is the GL's) */
+    const rnd_host *h = k->host;
+    int host_resolve = h && p->color != SP_COLOR_FIELD && p->color != SP_COLOR_SCAN;
+    if (!h) {
         fill(gl, s->buf[B_DEPTH], row0, rows, 0xFFFFFFFFu);
         fill(gl, s->buf[B_NEAR], row0, rows, 0xFFFFFFFFu);
         fill(gl, s->buf[B_FAR], row0, rows, 0);
     }
-    /* on the host with the resolve also the fit (kawata_fit_cpu.h), which clears the splats
-     * and tiles itself */
-    int host_fit = host_resolve;
-    if (!host_fit)
-        fill(gl, s->buf[B_SPLATS], (GLintptr)brect[1] * bw * SPLAT_BYTES,
-             (GLsizeiptr)(brect[3] - brect[1]) * bw * SPLAT_BYTES, 0);
+    fill(gl, s->buf[B_SPLATS], (GLintptr)brect[1] * bw * SPLAT_BYTES,
+         (GLsizeiptr)(brect[3] - brect[1]) * bw * SPLAT_BYTES, 0);
     /* the tiles within reach of the rectangle's splats (3 buffer pixels around it) */
     int trect[4] = {(brect[0] - 3 > 0 ? brect[0] - 3 : 0) / 8,
                     (brect[1] - 3 > 0 ? brect[1] - 3 : 0) / 8,
                     (brect[2] + 3 < bw ? brect[2] + 3 : bw - 1) / 8 + 1,
                     (brect[3] + 3 < bh ? brect[3] + 3 : bh - 1) / 8 + 1};
-    if (!host_fit)
-        fill(gl, s->buf[B_TILES], (GLintptr)trect[1] * tw * 4,
-             (GLsizeiptr)(trect[3] - trect[1]) * tw * 4, 0);
+    fill(gl, s->buf[B_TILES], (GLintptr)trect[1] * tw * 4,
+         (GLsizeiptr)(trect[3] - trect[1]) * tw * 4, 0);
     fill(gl, s->buf[B_COUNTER], 0, 8, 0);
     gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
 
@@ -595,13 +558,13 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
         if (l[U_BHI] >= 0) gl->Uniform2i(l[U_BHI], brect[2], brect[3]);
     }
 
-    /* Passes 1 and 2, on the host, or each over every buffer set (one set: its range table is
-     * made once, and the set stays bound for pass 3). */
+    /* Passes 1 and 2, through the host paths, or each over every buffer set (one set: its range
+     * table is made once, and the set stays bound for pass 3). */
     int rebind = c->nsets > 1;
     uint32_t nranges = 0, first = 0;
     int64_t total = 0;
     uint32_t nlist = 0;
-    if (host) {
+    if (h) {
         kawata_cpu_job job = {.bw = bw, .bh = bh, .znear = v->znear, .zfar = v->zfar,
                               .gamma = gamma, .qscale = qscale, .ibits = ibits, .qmax = qmax,
                               .x0 = brect[0], .x1 = brect[2], .y0 = brect[1], .y1 = brect[3]};
@@ -610,16 +573,8 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
                                      .x0 = brect[0], .x1 = brect[2], .y0 = brect[1],
                                      .y1 = brect[3], .ibits = ibits};
         memcpy(rj.view, v->view, sizeof rj.view);
-        kawata_fit_job fj = {.bw = bw, .bh = bh, .fw = v->width, .fh = v->height,
-                             .x0 = brect[0], .x1 = brect[2], .y0 = brect[1], .y1 = brect[3],
-                             .gamma = gamma, .slope = slope, .znear = v->znear,
-                             .zfar = v->zfar, .min_support = KAWATA_MIN_SUPPORT,
-                             .color = p->color};
-        memcpy(fj.view, v->view, sizeof fj.view);
-        memcpy(fj.proj, v->proj, sizeof fj.proj);
-        memcpy(fj.light, light, sizeof fj.light);
-        int rc = host_passes(gl, s, c, v, &job, host_resolve ? &rj : NULL,
-                             host_fit ? &fj : NULL, trect, p->color, &nlist, err);
+        int rc = host_passes(gl, h, s, c, v, &job, host_resolve ? &rj : NULL, p->color, &nlist,
+                             err);
         if (rc < 0) return rc;
         if (!rebind && c->nsets) rnd_kit_bind_set(k, &c->sets[0], p->color);
     } else {
@@ -666,14 +621,12 @@ static int kawata_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err
             gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
         }
     }
-    /* Passes 3 (average) and 4 (plane fit, shading): the splats (unless the host fitted). */
-    if (!host_fit) {
-        gl->UseProgram(s->prog[P_FIT]);
-        gl->Uniform1ui(s->loc[P_FIT][U_THREADS], lg * GROUP);
-        gl->DispatchCompute(lg, 1, 1);
-        gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT |
-                          GL_BUFFER_UPDATE_BARRIER_BIT);
-    }
+    /* Passes 3 (average) and 4 (plane fit, shading): the splats. */
+    gl->UseProgram(s->prog[P_FIT]);
+    gl->Uniform1ui(s->loc[P_FIT][U_THREADS], lg * GROUP);
+    gl->DispatchCompute(lg, 1, 1);
+    gl->MemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT |
+                      GL_BUFFER_UPDATE_BARRIER_BIT);
     if (k->kawata_probe) d->out->probe = probe_arrays(gl, s, bw, bh, brect, trect);
 
     /* Pass 5 into the target over the cloud's screen rectangle, grown by the cut-off. */

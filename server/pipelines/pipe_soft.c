@@ -42,9 +42,9 @@
  * farthest. Three arrays read both ways are the paper's six (half its memory). The order is
  * exact for discs separated along the chosen axis and the paper's approximation otherwise; a
  * cloud in several buffer sets draws its sets by their centres along the axis, each sorted
- * within. Two ways to composite in that order (parameter `order`):
- *   axis  (default) one GL point sprite per soft disc (soft.vert/.frag): GL blends in primitive
- *         order, so the "over" runs back to front with no per-frame sort or list.
+ * within. Three ways to composite in that order (parameter `order`):
+ *   axis  one GL point sprite per soft disc (soft.vert/.frag): GL blends in primitive order, so
+ *         the "over" runs back to front with no per-frame sort or list.
  *   tile  a compute compositor (soft_bin.comp, soft_scan.comp, soft_blend.comp,
  *         soft_resolve.frag): the ordered soft points are cut into 64 consecutive blocks whose
  *         invocations walk them serially, count and then scatter each disc into the 8x8 pixel
@@ -52,32 +52,21 @@
  *         stays in back-to-front order without a sort); one work group per tile blends its list
  *         per pixel in float, and one blend puts the result over the target. Same order, one
  *         rounding to 8 bits instead of one per disc (test_tile_matches_axis).
- * Measured on llvmpipe (2 shared cores, Guanyin 1280x720, t = 0.5, 157k soft discs, process
- * CPU per frame): splat ~50 ms, axis ~220-230, tile ~210 (16x16 tiles: ~385, every pixel
- * testing every disc of its tile; 8x8: binning ~75 ms of which the projection ~30, the serial
- * per-block count and scatter ~40, the per-pixel blend the rest). The sprites cost about 1 us a
- * soft disc whatever its size (1-pixel sprites cost the same; two triangles a disc instead of a
- * point sprite: 275 against 193 ms).
- *   cpu   (soft_host.c) the host compositor (soft_cpu.h): soft_bin.comp PASS 0's projection read
- *         back, each stripe's visibility keys read back, the discs binned into 64x64 tiles in draw
- *         order and blended by every core over only the pixels they cover, the rows they reached
- *         uploaded as the layer soft_resolve puts over the target. ~95 ms of CPU on the same
- *         Guanyin frame (of which the blending ~30, the GL projection ~25), half of axis and tile,
- *         and the fastest in wall time on every cloud measured (bench_soft.sh), so order=auto (the
- *         default) takes it on a software renderer; on a GPU the sprites stay. Clouds of more than
- *         64 buffer sets take the sprites. The projection itself runs on the host too (soft_proj.h;
- *         soft_proj=auto on a software renderer, not color=field), from the sets' buffers mapped
- *         for reading: no dispatch, no read-back of the discs. With it and the compositor's later
- *         changes (discs copied per tile, no branch per lane, the binning on every core) the
- *         Guanyin frame above took ~72 ms of CPU against ~88 before (same run, 2 cores shared with
- *         other work). On an opaque 8-bit frame with nothing after the pipeline in the GL
- *         (rnd_draw.host_after: no GL Eye-Dome Lighting) there is no layer: the stripes' keys are
- *         kept and, after the read-back, soft__after blends each tile's discs into a float tile of
- *         its thread's and puts it over the frame's pixels (rnd_pipeline.after). Guanyin: the
- *         layer's upload (2-7 ms) and the GL pass putting it over the target (5-6.5 ms, one thread)
- *         go; the frame took 51.5 ms of CPU against 68.7 (both with the solid list). The binning
+ *   auto  (the default) axis, or where the renderer has host paths (pipe.h rnd_host: a software
+ *         renderer, whose GL is the CPU) the host compositor (soft_host.c, soft_cpu.h):
+ *         soft_bin.comp PASS 0's projection read back, each stripe's visibility keys read back,
+ *         the discs binned into 64x64 tiles in draw order and blended in float by every core
+ *         over only the pixels they cover, the rows they reached uploaded as the layer
+ *         soft_resolve puts over the target; clouds of more than 64 buffer sets take the
+ *         sprites. The host paths project the discs too (soft_proj.h: no dispatch, no
+ *         read-back), but for color=field. On an opaque 8-bit frame with nothing after the pipeline in the GL
+ *         (rnd_draw.host_after: no Eye-Dome Lighting) there is no layer: the stripes' keys are
+ *         kept and, after the read-back, soft__after blends each tile's discs into a float tile
+ *         of its thread's and puts it over the frame's pixels (rnd_pipeline.after); the binning
  *         (soft_cpu_bin) then runs on a thread of its own while the GL makes the keys, where
- *         llvmpipe leaves a core partly idle: Guanyin 34-38 -> 30-31 ms a frame (splat 29.6).
+ *         llvmpipe leaves a core partly idle.
+ * What each costs on llvmpipe, and why the host compositor is the default there:
+ * docs/performance.md ("soft", "Host paths").
  *
  * Transparency modulation (eq. 22). For t < F < l_m the opacity is interpolated between the
  * model's Phi and a near-solid disc, with W = (F - t) / (l_m - t): Phi_f = (1 - d/r)(1 - W) +
@@ -105,7 +94,6 @@
 
 #include "shaders.h"
 #include "soft_pipe.h"
-#include "soft_proj.h"
 #include "splat_passes.h"
 
 enum {
@@ -150,6 +138,7 @@ static int soft_create(rnd_kit *k, void **state, sd_err *err)
     if (!s) return sd_errf(err, SD_ENOMEM, "out of memory creating the soft pipeline");
     long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
     s->threads = ncpu < 1 ? 1 : ncpu > 16 ? 16 : (int)ncpu;
+    s->host = k->host;
     int rc = splat__create_filtered(k, &s->splat, err);
     if (rc < 0) {
         soft_destroy(k, s);
@@ -762,10 +751,9 @@ static int soft_render(rnd_kit *k, void *state, const rnd_draw *d, sd_err *err)
     int want_tile = p->order == SP_ORDER_TILE;
     int tile = !lists && draw && want_tile && sc->nsets == 1 && sc->sets[0].nsoft > 0;
     if (tile && (rc = tile_bin(k, s, d, sc, &o, err)) < 0) return rc;
-    /* order=cpu, or auto on a software renderer: the host compositor (soft_cpu.h), for clouds
-     * of up to 64 sets (more take the sprites) */
-    int cpu = !lists && draw && !tile && sc->nsets <= 64 &&
-              (p->order == SP_ORDER_CPU || (p->order == SP_ORDER_AUTO && k->software));
+    /* order=auto with the host paths: the host compositor (soft_cpu.h), for clouds of up to 64
+     * sets (more take the sprites) */
+    int cpu = !lists && draw && !tile && sc->nsets <= 64 && p->order == SP_ORDER_AUTO && k->host;
     if (cpu && (rc = soft__cpu_project(k, s, d, sc, &o, err)) < 0) return rc;
     /* on an 8-bit frame with no GL pass after ours, the discs go over the read-back pixels
      * (soft__after) */

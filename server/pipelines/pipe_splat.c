@@ -22,8 +22,8 @@
  *   exact   the textbook resampling filter: every splat's footprint is J V_r J^T + lowpass I,
  *           cut off at 2 standard deviations, every splat sampled over its full footprint; no
  *           resolve blur. The default on a hardware GPU (ewa=auto).
- *   split   the form below, for software rasterisers (ewa=auto on llvmpipe/softpipe/swrast,
- *           decided from GL_RENDERER at create time).
+ *   split   the form below, for software rasterisers (ewa=auto where the GL back end reports
+ *           one: rnd_kit.software, gl_backend.h).
  *
  * Why compute, and why the low-pass is split. On llvmpipe (2 cores, 1M points, 1280x720) a
  * three-pass point-sprite splatter takes 850-2000 ms, and even as compute passes every fragment
@@ -119,7 +119,7 @@ typedef struct splat_state {
     GLuint prog[P_COUNT];
     GLint loc[P_COUNT][U_COUNT];
     int float_atomics;         /* GL_NV_shader_atomic_float in use */
-    int software;              /* GL_RENDERER names a software rasteriser: ewa=auto is split */
+    int software;              /* rnd_kit.software (the back end's): ewa=auto is split */
     GLuint groups_cap;         /* most work groups per splat dispatch; invocations loop over
                                   the points (grid stride). llvmpipe pays ~3 us a work group, so
                                   there 1024 groups of 64 (1M points: 15 each) measured 20-25 %

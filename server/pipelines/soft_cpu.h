@@ -1,13 +1,13 @@
-/* soft_cpu.h — the Express-Model's soft discs composited on the CPU (`order=cpu`, pipe_soft.c).
+/* soft_cpu.h — the Express-Model's soft discs composited on the CPU (the host paths, host.h:
+ * order=auto on a software renderer, pipe_soft.c).
  *
  * On a software renderer the GL is the CPU, and what costs there is not the blending but the
  * GL's way to it: ~1 us of set-up per point sprite on llvmpipe's one front-end thread
  * (order=axis), or a compute compositor whose per-pixel loop over every disc of its tile does
  * three times the work the discs cover (order=tile). This compositor takes the discs as
- * soft_bin.comp PASS 0 projects them (in the GL and read back, or on the host, soft_proj.h:
- * centre and radius in window pixels, eye depth, shaded colour, W of eq. 22), in the same
- * back-to-front order (the axis-sorted arrays), and for each
- * disc visits only the pixels whose centres lie inside it: the fragments soft.frag would get,
+ * soft_bin.comp PASS 0 projects them (read back: centre and radius in window pixels, eye depth,
+ * shaded colour, W of eq. 22), in the same back-to-front order (the axis-sorted arrays), and for
+ * each disc visits only the pixels whose centres lie inside it: the fragments soft.frag would get,
  * with soft.frag's opacity (eq. 19, modulated by eq. 22) and its test against the solid
  * surface's visibility keys, blended with the premultiplied "over" in float.
  *

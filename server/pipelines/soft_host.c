@@ -1,26 +1,28 @@
-/* soft_host.c — the `soft` pipeline's order=cpu (see pipe_soft.c's file comment): the soft
- * discs projected on the host (soft_proj.h) or by the GL and read back, composited by the host
- * compositor (soft_cpu.h) either into a layer that soft_resolve puts over the target, or, on an
- * opaque 8-bit frame with no GL pass after the pipeline (rnd_draw.host_after), over the
- * read-back pixels in the pipeline's `after` hook, tested against the visibility keys the
+/* soft_host.c — the `soft` pipeline's host compositor (the host paths, host.h; see pipe_soft.c's
+ * file comment): the soft discs projected through the host paths (soft_proj.h) or by the GL and
+ * read back, composited by the host paths' compositor (soft_cpu.h) either into a layer that
+ * soft_resolve puts over the target,
+ * or, on an opaque 8-bit frame with no GL pass after the pipeline (rnd_draw.host_after), over
+ * the read-back pixels in the pipeline's `after` hook, tested against the visibility keys the
  * stripes kept; and the binning on a thread of its own while the GL makes those keys. */
 #include <pthread.h>
 #include <stdint.h>
 #include <string.h>
 
+#include "host.h"
 #include "soft_pipe.h"
 #include "soft_proj.h"
 #include "splat_passes.h"
 
-/* order=cpu composites at most this many bytes of float layer at a time (rows of a band): a
- * 1280x720 frame is one band; an 8192x8192 one, whose layer would be 1 GiB, sixteen. */
+/* The host compositor composites at most this many bytes of float layer at a time (rows of a
+ * band): a 1280x720 frame is one band; an 8192x8192 one, whose layer would be 1 GiB, sixteen. */
 #define SOFT_CPU_LAYER (64ull << 20)
 
 /* The binning of the host compositor (soft_cpu_bin) on a thread of its own, and its end. */
 static void *bin_main(void *arg)
 {
     soft_state *s = arg;
-    s->bin_rc = soft_cpu_bin(&s->bin_job);
+    s->bin_rc = s->host->soft_bin(&s->bin_job);
     return NULL;
 }
 
@@ -37,7 +39,7 @@ int soft__bin_join(soft_state *s)
     return s->bin_rc;
 }
 
-/* host_project_set: soft_bin.comp PASS 0 on the host (soft_proj.h) for set si into out (8 floats
+/* host_project_set: soft_bin.comp PASS 0 through the host paths (soft_proj.h) for set si into out (8 floats
  * a disc): the set's positions, normals, radii and colour source mapped for reading (on a
  * software renderer the GL's own memory), then unmapped. Returns 0 or SD_EGL. */
 static int host_project_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
@@ -70,7 +72,7 @@ static int host_project_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const 
         memcpy(job.view, v->view, sizeof job.view);
         memcpy(job.proj, v->proj, sizeof job.proj);
         soft_light(p, job.light);
-        soft_proj_run(&job);
+        k->host->soft_project(&job);
     }
     for (int a = 0; a < 4; a++)
         if (m[a]) {
@@ -81,18 +83,16 @@ static int host_project_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const 
     return rc;
 }
 
-/* soft__cpu_project: order=cpu, the soft discs of every set projected, one segment per set in the
- * sets' order: on the host (soft_proj=cpu, or auto on a software renderer; not color=field or
- * color=scan, whose colour map is the GL's) or
- * by the GL (soft_bin.comp PASS 0, as for the sprites) and read back. Returns 0 or SD_E*. */
+/* soft__cpu_project: the host compositor's discs, one segment per set in the sets' order, into
+ * s->h_proj: projected through the host paths (not for color=field or color=scan, whose
+ * colour map is a shader polynomial, nor under rnd_pipe_opts.soft_proj_gl), or by the GL (soft_bin.comp PASS 0,
+ * as for the sprites) and read back. Returns 0 or SD_E*. */
 int soft__cpu_project(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_cloud *sc,
-                       const soft_order *o, sd_err *err)
+                      const soft_order *o, sd_err *err)
 {
     const gl_api *gl = k->gl;
-    const sp_params *p = d->params;
-    int host = p->color != SP_COLOR_FIELD && p->color != SP_COLOR_SCAN &&
-               (p->soft_proj == SP_SOFT_PROJ_CPU ||
-                (p->soft_proj == SP_SOFT_PROJ_AUTO && k->software));
+    int host = k->host->soft_project && d->params->color != SP_COLOR_FIELD &&
+               d->params->color != SP_COLOR_SCAN && !k->opts.soft_proj_gl;
     uint32_t nsets = sc->nsets < 64 ? sc->nsets : 64;
     size_t total = 0;
     for (uint32_t si = 0; si < nsets; si++) total += sc->sets[si].nsoft;
@@ -117,10 +117,11 @@ int soft__cpu_project(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_c
                                              ss->nsoft, ss->nsoft, o->rev};
         at += 8 * (size_t)ss->nsoft;
     }
+    gl->BindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
     return 0;
 }
 
-/* soft__cpu_blend: order=cpu over rows [y0, y0 + n): the stripe's visibility keys read back (keys,
+/* soft__cpu_blend: the host compositor over rows [y0, y0 + n): the stripe's visibility keys read back (keys,
  * yb, nb as draw_soft), then in bands of at most SOFT_CPU_LAYER bytes of layer (and of a storage
  * block) the discs composited on the host (soft_cpu.h), the rows they reached uploaded as the
  * layer and put over the target by soft_resolve. Returns 0 or SD_E*. */
@@ -156,7 +157,7 @@ int soft__cpu_blend(rnd_kit *k, soft_state *s, const rnd_draw *d, int keys, int 
                             .width = v->width, .y0 = b0, .rows = bn,
                             .keys = keys ? s->h_keys : NULL, .kb = yb, .nk = nb,
                             .layer = s->h_layer, .mem = &s->mem, .threads = s->threads};
-        if (soft_cpu_composite(&job) != 0)
+        if (k->host->soft_composite(&job) != 0)
             return sd_errf(err, SD_ENOMEM, "soft: out of memory compositing the soft discs");
         if (job.touched[0] < 0) continue; /* no disc reached these rows */
         int r0 = job.touched[0], rn = job.touched[1] - job.touched[0] + 1;
@@ -170,7 +171,7 @@ int soft__cpu_blend(rnd_kit *k, soft_state *s, const rnd_draw *d, int keys, int 
     return 0;
 }
 
-/* soft__keep_keys: order=cpu with rnd_draw.host_after: the stripe's own rows [y0, y0 + n) of its
+/* soft__keep_keys: the host compositor with rnd_draw.host_after: the stripe's own rows [y0, y0 + n) of its
  * visibility keys (whose buffer starts at row yb) read back into the frame's keys, for
  * soft__after. Returns 0 or SD_E*. */
 int soft__keep_keys(rnd_kit *k, soft_state *s, const rnd_draw *d, int y0, int n, int yb,
@@ -194,12 +195,11 @@ int soft__keep_keys(rnd_kit *k, soft_state *s, const rnd_draw *d, int y0, int n,
     return 0;
 }
 
-/* soft__after: order=cpu with rnd_draw.host_after: the discs soft__cpu_project made composited over
+/* soft__after: the host compositor with rnd_draw.host_after: the discs soft__cpu_project made composited over
  * the read-back frame (soft_cpu.h), tile by tile, tested against the keys soft__keep_keys kept: no
  * layer to upload and no GL pass to put it over the target. Returns 0 or SD_ENOMEM. */
 int soft__after(rnd_kit *k, void *state, const rnd_draw *d, uint8_t *rgba8, sd_err *err)
 {
-    (void)k;
     soft_state *s = state;
     const rnd_view *v = d->view;
     if (soft__bin_join(s) != 0)
@@ -208,6 +208,7 @@ int soft__after(rnd_kit *k, void *state, const rnd_draw *d, uint8_t *rgba8, sd_e
     job->lambda = d->params->lambda;
     job->keys = s->after_keys ? s->h_fkeys : NULL, job->kb = 0, job->nk = v->height;
     job->rgba8 = rgba8;
-    soft_cpu_blend(job);
-    return 0;
+    return k->host->soft_blend(job) != 0
+               ? sd_errf(err, SD_ENOMEM, "soft: out of memory blending the soft discs")
+               : 0;
 }

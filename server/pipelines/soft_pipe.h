@@ -1,6 +1,6 @@
 /* soft_pipe.h — the `soft` pipeline's state and per-cloud data, shared by its two files:
- * pipe_soft.c (the split, the GL passes, the pipeline itself) and soft_host.c (order=cpu's glue
- * to the host compositor soft_cpu.h and the host projection soft_proj.h). Internal to the
+ * pipe_soft.c (the split, the GL passes, the pipeline itself) and soft_host.c (the glue to the
+ * host paths' compositor, soft_cpu.h). Internal to the
  * pipeline: nothing else includes it. */
 #pragma once
 #include <pthread.h>
@@ -43,8 +43,10 @@ typedef struct soft_state {
     uint64_t proj_bytes, cells_bytes, list_bytes, layer_bytes;
     GLuint proj_tex, cells_tex, list_tex, layer_tex;
     soft_lists lists;          /* model=base|concentric (soft_lists.h) */
-    /* order=cpu (soft_cpu.h): the projected discs of every set read back, their segments, the
-     * draw-order scratch, the stripe's keys and the layer, all on the host */
+    /* the host compositor (soft_cpu.h through k->host, kept here for the binning thread): the
+     * projected discs of every set read back, their segments, the draw-order scratch, the
+     * stripe's keys and the layer, all on the host */
+    const rnd_host *host;
     float *h_proj, *h_layer;
     uint32_t *h_keys;
     uint32_t *h_fkeys;         /* rnd_draw.host_after: the frame's keys, every stripe's rows */
@@ -68,7 +70,7 @@ typedef struct soft_set {
     uint32_t nruns;
     uint32_t nsoft;            /* soft points for the current split */
     GLuint idx_buf;            /* 4 * nsoft uint32: the soft points, then of sorted[0..2] */
-    uint32_t *idx;             /* the same on the host (order=cpu) */
+    uint32_t *idx;             /* the same on the host (the host compositor) */
     uint32_t *solid;           /* a cloud in one set: its n - nsoft solid points, in point order */
     GLuint solid_buf;          /* the same, on RND_T_SOFT_SOLID (SPLAT_SOLID_LIST) */
     float centre[3];           /* mean of the set's bounds: the order of sets */
@@ -99,7 +101,7 @@ int soft__project_set(rnd_kit *k, soft_state *s, const rnd_draw *d, const soft_c
 /* soft__resolve_layer: soft_resolve puts the layer (rows [y0, y0 + n)) over the target. */
 void soft__resolve_layer(rnd_kit *k, soft_state *s, const rnd_draw *d, int y0, int n);
 
-/* soft_host.c, for pipe_soft.c: order=cpu */
+/* soft_host.c, for pipe_soft.c: the host compositor */
 /* soft__bin_start: soft_cpu_bin(&s->bin_job) on a thread of its own (here, now, without one);
  * soft__bin_join waits for it and returns its result (0 when none ran). */
 void soft__bin_start(soft_state *s);

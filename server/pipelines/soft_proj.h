@@ -1,14 +1,15 @@
-/* soft_proj.h — soft_bin.comp's PASS 0 on the host, for the host compositor (soft_cpu.h) on a
- * software renderer: each soft disc projected (centre and radius in window pixels, eye depth,
- * shaded colour, W of eq. 22) from the buffer set's own buffers, mapped for reading (on
- * llvmpipe the GL's memory: no copy), into the 8 floats a disc soft_cpu_seg reads. Doing it in
- * the GL cost a dispatch plus the read-back of every disc (~14 ms a frame of Guanyin's ~90).
+/* soft_proj.h — soft_bin.comp's PASS 0 on the host (the host paths, host.h), for the host
+ * compositor (soft_cpu.h) on a software renderer: each soft disc projected (centre and radius
+ * in window pixels, eye depth, shaded colour, W of eq. 22) from the buffer set's own buffers,
+ * mapped for reading (on llvmpipe the GL's memory: no copy), into the 8 floats a disc
+ * soft_cpu_seg reads, where the GL path pays a dispatch plus the read-back of every disc
+ * (docs/performance.md, "Host paths").
  *
  * The shader's float operations in the shader's order (compiled without contraction, -std=c11),
  * for the colour modes rgb, intensity, depth and normal; color=field's colour map is a shader
- * polynomial and stays in the GL. llvmpipe may fuse a product into a sum, and its inversesqrt
- * and pow are its own approximations, so the results are the shader's within a few units in
- * the last place, not word for word (test_soft_proj states the tolerances). */
+ * polynomial and stays in the GL. A GL may fuse a product into a sum, divide within 2.5 ulp and
+ * has its own inversesqrt and pow, so the results are the shader's within what the GLSL
+ * specification allows it, not word for word (test_soft_proj states the tolerances). */
 #pragma once
 #include <stdint.h>
 

@@ -1,7 +1,6 @@
 /* edl.c — Eye-Dome Lighting as one fragment pass over the cloud's screen rectangle (edl.h,
- * shaders/edl.frag.glsl): edl_pass=gpu, the default on a GPU. On a software renderer edl_pass=auto
- * runs the same arithmetic on the host after the read-back instead (edl_host.c), at about half
- * the CPU time of this pass.
+ * shaders/edl.frag.glsl), on every back end (a host copy of the pass was measured to save too
+ * little of a frame to keep: docs/performance.md, "Host paths").
  *
  * The shade only darkens, so it is applied by blending (dst = dst * src, glBlendFunc(GL_ZERO,
  * GL_SRC_COLOR)) instead of a copy of the colour: the pass never reads the colour it writes, so
@@ -23,7 +22,6 @@
 #include "edl.h"
 
 #include <math.h>
-#include <stdlib.h>
 #include <string.h>
 
 #include "shaders.h"
@@ -54,7 +52,6 @@ void rnd__edl_free(rnd_edl *e, const gl_api *gl)
     if (e->vao) gl->DeleteVertexArrays(1, &e->vao);
     if (e->copy_buf) gl->DeleteBuffers(1, &e->copy_buf);
     if (e->copy_tex) gl->DeleteTextures(1, &e->copy_tex);
-    free(e->host);
     memset(e, 0, sizeof *e);
 }
 

@@ -13,8 +13,6 @@ typedef struct rnd_edl {
     GLint u_org, u_pw, u_r, u_k;
     GLuint copy_buf, copy_tex;   /* depth_eye copied into a buffer, read as a buffer texture */
     uint64_t copy_bytes;
-    float *host;                 /* edl_pass=cpu: the rectangle's eye depth framed by +inf */
-    size_t host_cap;             /* floats allocated at host */
 } rnd_edl;
 
 /* rnd__edl_init: compiles edl.vert/edl.frag. Returns 0 or SD_E* with err filled.
@@ -32,19 +30,3 @@ void rnd__edl_free(rnd_edl *e, const gl_api *gl);
  * draws nothing. */
 void rnd__edl_apply(rnd_edl *e, const gl_api *gl, const rnd_target *t, const int rect[4],
                     float strength, float radius);
-
-/* rnd__edl_host: the same pass on the host (edl_pass=cpu, edl_host.c), after the frame's
- * read-back: reads t->depth_eye over rect into e->host framed by +inf and multiplies the colour
- * of the read-back frame (rgba8, and rgba16f when not NULL: width x height pixels, rows
- * bottom-up as glReadPixels left them) by the shade, alpha untouched. strength 0 touches
- * nothing. Returns 0 or SD_ENOMEM with err filled (the frame is then left unshaded). */
-int rnd__edl_host(rnd_edl *e, const gl_api *gl, const rnd_target *t, const int rect[4],
-                  float strength, float radius, uint8_t *rgba8, uint16_t *rgba16f, int width,
-                  sd_err *err);
-
-/* rnd__edl_host_shade: the arithmetic of rnd__edl_host, for tests. z: the depth of a w x h
- * rectangle at z[(y + r) * pw + x + r], framed by r rows and columns of +inf, pw = w + 2r,
- * with 8 more readable floats after the last row (+inf); rgba8 / rgba16f: the rectangle's
- * bottom-left pixel in frames of `stride` pixels a row; k = RND_EDL_SCALE * strength / 4. */
-void rnd__edl_host_shade(const float *z, int pw, int r, int w, int h, float k, uint8_t *rgba8,
-                         uint16_t *rgba16f, int stride);

@@ -2,8 +2,9 @@
  *
  * Order of attempts: EGL_EXT_platform_device with every device eglQueryDevicesEXT lists,
  * hardware devices first and then Mesa's software device (the one whose extension string has
- * EGL_MESA_device_software); then EGL_MESA_platform_surfaceless. On each display: a 4.5 core
- * context (4.6 fails with EGL_BAD_MATCH on Mesa 22), else 4.3, without a config
+ * EGL_MESA_device_software, which is also how the back end reports a software renderer); then
+ * EGL_MESA_platform_surfaceless (software when its renderer's name says so). On each display:
+ * a 4.5 core context (4.6 fails with EGL_BAD_MATCH on Mesa 22), else 4.3, without a config
  * (EGL_KHR_no_config_context), current with EGL_NO_SURFACE (a 1x1 pbuffer on drivers without
  * those extensions); rendering goes into FBOs. */
 #include <EGL/egl.h>
@@ -21,6 +22,7 @@ struct gl_backend {
     EGLDisplay dpy;
     EGLContext ctx;
     EGLSurface surf; /* EGL_NO_SURFACE, or a 1x1 pbuffer where surfaceless contexts are missing */
+    int software;    /* the context rasterises on the CPU (gl_backend_ops.software) */
     char desc[256];
 };
 
@@ -147,7 +149,10 @@ static int try_devices(gl_backend *b, sd_err *err)
                      soft ? "software" : "hardware");
             EGLDisplay dpy = platform_display(EGL_PLATFORM_DEVICE_EXT, devs[i], NULL);
             rc = open_display(b, dpy, what, err);
-            if (rc == 0) return 0;
+            if (rc == 0) {
+                b->software = soft;
+                return 0;
+            }
         }
     }
     return rc;
@@ -161,7 +166,16 @@ static int surfaceless(gl_backend *b, sd_err *err)
     if (!platform_display)
         return sd_errf(err, SD_EUNSUP, "EGL: eglGetPlatformDisplayEXT is missing");
     EGLDisplay dpy = platform_display(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, NULL);
-    return open_display(b, dpy, "surfaceless platform", err);
+    int rc = open_display(b, dpy, "surfaceless platform", err);
+    if (rc < 0) return rc;
+    /* the platform names no device: the current context's renderer says what it is */
+    typedef const unsigned char *(*get_string_fn)(unsigned);
+    get_string_fn get_string = (get_string_fn)0;
+    p = egl_proc("glGetString");
+    memcpy(&get_string, &p, sizeof p);
+    b->software = get_string && gl_renderer_is_software(
+                                    (const char *)get_string(0x1F01 /* GL_RENDERER */));
+    return 0;
 }
 
 /* The display is left initialised: an EGL display is one per device and process, and
@@ -227,6 +241,11 @@ static const char *egl_describe(const gl_backend *b)
     return b->desc;
 }
 
+static int egl_software(const gl_backend *b)
+{
+    return b->software;
+}
+
 const gl_backend_ops gl_backend_egl = {
     .name = "egl",
     .create = egl_create,
@@ -234,4 +253,5 @@ const gl_backend_ops gl_backend_egl = {
     .destroy = egl_destroy,
     .getproc = egl_getproc,
     .describe = egl_describe,
+    .software = egl_software,
 };

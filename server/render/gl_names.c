@@ -1,7 +1,8 @@
-/* gl_names.c — EGL and GL error code names (see gl_names.h). */
+/* gl_names.c — EGL and GL error code names, software renderer names (see gl_names.h). */
 #include "gl_names.h"
 
 #include <stdio.h>
+#include <string.h>
 
 #define GL_ERROR_NAMES(X)                                                     \
     X(0x0000, "GL_NO_ERROR")                                                  \
@@ -59,4 +60,10 @@ const char *egl_error_name(unsigned code, char *buf, unsigned long len)
     }
     snprintf(buf, len, "EGL error 0x%04x", code);
     return buf;
+}
+
+int gl_renderer_is_software(const char *renderer)
+{
+    return renderer && (strstr(renderer, "llvmpipe") || strstr(renderer, "softpipe") ||
+                        strstr(renderer, "swrast"));
 }

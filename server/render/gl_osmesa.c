@@ -82,6 +82,13 @@ static const char *osm_describe(const gl_backend *b)
     return b->desc;
 }
 
+/* OSMesa is Mesa's off-screen software renderer (llvmpipe, softpipe or swrast beneath). */
+static int osm_software(const gl_backend *b)
+{
+    (void)b;
+    return 1;
+}
+
 const gl_backend_ops gl_backend_osmesa = {
     .name = "osmesa",
     .create = osm_create,
@@ -89,4 +96,5 @@ const gl_backend_ops gl_backend_osmesa = {
     .destroy = osm_destroy,
     .getproc = osm_getproc,
     .describe = osm_describe,
+    .software = osm_software,
 };

@@ -124,11 +124,22 @@ GLuint gl_program_from(const gl_api *gl, const rnd_shaders *sh, sd_err *err, ...
 
 /* ---- the kit: what every pipeline shares (pipe_kit.c) --------------------------------- */
 
+/* The host paths: the passes that a software rasteriser, whose GL is the CPU, runs faster as
+ * C on the host over every core than through its GL (each kept because it measured so:
+ * docs/performance.md, "Host paths"). They sit behind one table (server/pipelines/host.h),
+ * chosen once, by rnd_kit_init: rnd_host_cpu where the back end reports a software renderer
+ * (or rnd_desc.host_paths says so), NULL elsewhere. A pipeline asks the table whether a pass is
+ * on the host and calls it there; nothing asks what the renderer is called. */
+typedef struct rnd_host rnd_host;
+extern const rnd_host rnd_host_cpu;
+
 typedef struct rnd_kit {
     const gl_api *gl;
     const rnd_shaders *sh;
     rnd_pipe_opts opts;
-    int software;              /* GL_RENDERER names a software rasteriser (llvmpipe, ...) */
+    int software;              /* the back end rasterises on the CPU (gl_backend.h; or
+                                  rnd_desc.software): the GL paths' tunings for that */
+    const rnd_host *host;      /* the host paths, or NULL: every pass in the GL */
     int float_atomics;         /* GL_NV_shader_atomic_float is there */
     GLint64 max_ssbo;          /* GL_MAX_SHADER_STORAGE_BLOCK_SIZE */
     GLint64 max_texels;        /* GL_MAX_TEXTURE_BUFFER_SIZE */
@@ -142,10 +153,11 @@ typedef struct rnd_kit {
     uint32_t range_cap;
 } rnd_kit;
 
-/* rnd_kit_init: queries the driver (renderer string, extensions, limits) and makes the shared
- * textures. Returns 0 or SD_EGL. rnd_kit_free releases them; safe on a zeroed kit. */
+/* rnd_kit_init: takes the back end's capability (software: 1 for a software rasteriser;
+ * host: 1 to take the host paths), queries the driver (extensions, limits) and makes the
+ * shared textures. Returns 0 or SD_EGL. rnd_kit_free releases them; safe on a zeroed kit. */
 int rnd_kit_init(rnd_kit *k, const gl_api *gl, const rnd_shaders *sh, const rnd_pipe_opts *o,
-                 sd_err *err);
+                 int software, int host, sd_err *err);
 void rnd_kit_free(rnd_kit *k);
 
 /* rnd_kit_has_extension: whether the current context lists extension name. */

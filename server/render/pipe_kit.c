@@ -1,6 +1,7 @@
-/* pipe_kit.c — what every pipeline shares (pipe.h): driver facts, the program builder, storage
- * buffers that grow, the colour source, a buffer set bound on the fixed texture units of
- * bindings.h, and the per-set range table of lib_ranges.glsl. */
+/* pipe_kit.c — what every pipeline shares (pipe.h): the back end's capability and the host
+ * paths chosen from it, driver facts, the program builder, storage buffers that grow, the
+ * colour source, a buffer set bound on the fixed texture units of bindings.h, and the per-set
+ * range table of lib_ranges.glsl. */
 #include <stdlib.h>
 #include <string.h>
 
@@ -25,15 +26,14 @@ int rnd_kit_has_extension(const gl_api *gl, const char *name)
 }
 
 int rnd_kit_init(rnd_kit *k, const gl_api *gl, const rnd_shaders *sh, const rnd_pipe_opts *o,
-                 sd_err *err)
+                 int software, int host, sd_err *err)
 {
     memset(k, 0, sizeof *k);
     k->gl = gl;
     k->sh = sh;
     if (o) k->opts = *o;
-    const char *ren = (const char *)gl->GetString(GL_RENDERER);
-    k->software = ren && (strstr(ren, "llvmpipe") || strstr(ren, "softpipe") ||
-                          strstr(ren, "swrast"));
+    k->software = software != 0;
+    k->host = host ? &rnd_host_cpu : NULL;
     k->float_atomics = rnd_kit_has_extension(gl, "GL_NV_shader_atomic_float");
     GLint v = 0;
     gl->GetIntegerv(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &v);

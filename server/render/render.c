@@ -130,9 +130,11 @@ rnd_ctx *rnd_create(const rnd_desc *desc, sd_err *err)
     if (!d.max_width) d.max_width = 8192;
     if (!d.max_height) d.max_height = 8192;
     if (d.max_width < 1 || d.max_height < 1 || d.backend < RND_BACKEND_AUTO ||
-        d.backend > RND_BACKEND_OSMESA) {
-        sd_errf(err, SD_EINVAL, "bad renderer description (backend %d, max size %dx%d)",
-                (int)d.backend, d.max_width, d.max_height);
+        d.backend > RND_BACKEND_OSMESA || d.software < RND_CAP_AUTO || d.software > RND_CAP_OFF ||
+        d.host_paths < RND_CAP_AUTO || d.host_paths > RND_CAP_OFF) {
+        sd_errf(err, SD_EINVAL, "bad renderer description (backend %d, max size %dx%d, "
+                "software %d, host paths %d)", (int)d.backend, d.max_width, d.max_height,
+                d.software, d.host_paths);
         return NULL;
     }
     rnd_ctx *r = calloc(1, sizeof *r);
@@ -162,7 +164,11 @@ rnd_ctx *rnd_create(const rnd_desc *desc, sd_err *err)
              r->ops->describe(r->be));
     r->sh = rnd_shaders_create(d.shader_dir, err);
     if (!r->sh) goto fail;
-    if ((rc = rnd_kit_init(&r->kit, &r->gl, r->sh, &d.pipe, err)) < 0) goto fail;
+    /* the back end's capability, unless the description forces it (pipe.h: the host paths) */
+    int software = d.software == RND_CAP_AUTO ? r->ops->software(r->be)
+                                              : d.software == RND_CAP_ON;
+    int host = d.host_paths == RND_CAP_AUTO ? software : d.host_paths == RND_CAP_ON;
+    if ((rc = rnd_kit_init(&r->kit, &r->gl, r->sh, &d.pipe, software, host, err)) < 0) goto fail;
     /* EDL is optional: a driver that cannot build it refuses only frames that ask for it. */
     rnd__edl_init(&r->edl, &r->kit, &r->edl_err);
     r->budget = d.gpu_memory ? d.gpu_memory : device_budget(r);
@@ -281,6 +287,11 @@ const char *rnd_renderer_string(const rnd_ctx *r)
 const char *rnd_pipeline_name(int i)
 {
     return i >= 0 && i < NPIPES ? pipelines[i]->name : NULL;
+}
+
+int rnd_host_paths(const rnd_ctx *r)
+{
+    return r && r->kit.host != NULL;
 }
 
 const char *rnd_backend_name(const rnd_ctx *r)
@@ -871,10 +882,7 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     if (pi < 0 || pi >= NPIPES)
         return sd_errf(err, SD_EINVAL, "pipeline %d is not one of the %d pipelines", pi, NPIPES);
     int edl = params->shading == SP_SHADING_EDL;
-    /* edl_pass (params.h): on the host after the read-back, or a GL pass before it. */
-    int edl_host = edl && (params->edl_pass == SP_EDL_PASS_CPU ||
-                           (params->edl_pass == SP_EDL_PASS_AUTO && r->kit.software));
-    if (edl && !edl_host && !r->edl.prog)
+    if (edl && !r->edl.prog)
         return sd_errf(err, SD_EGL, "shading=edl is not available: %s", r->edl_err.msg);
     const rnd_gpu_cloud *c = &slot->c;
     rnd_view v;
@@ -956,11 +964,11 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
     rnd_draw_out out = {0};
     const rnd_draw draw = {.cloud = c, .cloud_data = slot->pdata[pi], .view = &v,
                            .params = params, .target = t, .out = &out,
-                           .host_after = opaque8 && (!edl || edl_host)};
+                           .host_after = opaque8 && !edl};
     rc = pipelines[pi]->render(&r->kit, r->pstate[pi], &draw, err);
     free(frame->kawata_arrays);
     frame->kawata_arrays = out.probe;
-    if (rc == 0 && edl && !edl_host)
+    if (rc == 0 && edl)
         rnd__edl_apply(&r->edl, gl, t, edl_rect, params->edl_strength, params->edl_radius);
     if (edl && !t->is_float) {
         const GLenum one[2] = {GL_COLOR_ATTACHMENT0, GL_NONE};
@@ -1001,15 +1009,12 @@ int rnd_render(rnd_ctx *r, uint32_t cloud_id, const rnd_camera *cam, const sp_pa
         gl->ReadPixels(0, 0, cam->width, cam->height, GL_RED, GL_FLOAT, frame->depth);
     }
     uint64_t t2 = now_us();
-    /* the pipeline's host part, then the host EDL pass: both rendering */
+    /* the pipeline's host part: rendering too */
     if (out.after && pipelines[pi]->after)
         rc = pipelines[pi]->after(&r->kit, r->pstate[pi], &draw, frame->rgba8, err);
-    if (rc == 0 && edl_host)
-        rc = rnd__edl_host(&r->edl, gl, t, edl_rect, params->edl_strength, params->edl_radius,
-                           frame->rgba8, want_float ? frame->rgba16f : NULL, cam->width, err);
     gl->BindFramebuffer(GL_FRAMEBUFFER, 0);
     if (rc < 0) return rc;
-    frame->render_us = t1 - t0 + (now_us() - t2); /* the host EDL pass is rendering too */
+    frame->render_us = t1 - t0 + (now_us() - t2);
     frame->readback_us = t2 - t1;
     frame->points_drawn = v.points_visible;
     frame->splats_drawn = out.splats;

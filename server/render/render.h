@@ -19,9 +19,14 @@ typedef struct rnd_pipe_opts {
     int points_raster;        /* RND_RASTER_*: the points pipeline's form (default auto) */
     int splat_fixed;          /* 1: fixed-point accumulation even with float atomics */
     int splat_stripe_rows;    /* rows per accumulation stripe, 0 = as many as fit */
+    int soft_proj_gl;         /* 1: with the host paths, soft's discs still projected by the GL
+                                 (test_soft_proj compares the two) */
 } rnd_pipe_opts;
 
 enum { RND_RASTER_AUTO = 0, RND_RASTER_PACKED, RND_RASTER_EXACT, RND_RASTER_GL };
+
+/* rnd_desc.software and .host_paths: as the GL back end reports (RND_CAP_AUTO), or forced. */
+enum { RND_CAP_AUTO = 0, RND_CAP_ON, RND_CAP_OFF };
 
 enum { RND_DEFAULT_WIDTH = SP_DEFAULT_WIDTH, RND_DEFAULT_HEIGHT = SP_DEFAULT_HEIGHT };
 
@@ -51,6 +56,14 @@ typedef struct rnd_desc {
     uint64_t lod_budget;      /* default 0: the point budget of LOD frames whose point_budget
                                  is 0, per back end: RND_LOD_BUDGET_SOFTWARE on a software
                                  renderer, RND_LOD_BUDGET_GPU on a GPU */
+    int software;             /* RND_CAP_*: default AUTO, as the back end reports
+                                 (gl_backend.h): whether the GL paths take their tunings for a
+                                 software rasteriser (compute invocations doing runs of points,
+                                 ewa=auto's split form, the LOD and memory budgets) */
+    int host_paths;           /* RND_CAP_*: default AUTO, on exactly where `software` is: the
+                                 pipelines' host paths (pipe.h rnd_host: kawata's passes 1-3,
+                                 soft's compositor); ON / OFF force them on any back end
+                                 (tests compare both; render_bench --host-ab) */
 } rnd_desc;
 
 /* A camera in the cloud file's coordinates (doubles, so georeferenced eyes keep precision).
@@ -108,6 +121,8 @@ void rnd_destroy(rnd_ctx *r);
 
 /* rnd_renderer_string: "egl: llvmpipe (LLVM 15.0.6, 256 bits)" and so on. */
 const char *rnd_renderer_string(const rnd_ctx *r);
+/* rnd_host_paths: 1 when frames take the pipelines' host paths (rnd_desc.host_paths). */
+int rnd_host_paths(const rnd_ctx *r);
 const char *rnd_backend_name(const rnd_ctx *r);
 /* rnd_pipeline_name: the name the implementation of pipeline i (SP_PIPE_*) gives itself, or
  * NULL when i is not one (tests check it against the parameter's value names). */

@@ -58,8 +58,7 @@ run_cloud bunnyData "$data/bunnyData.pts"
 run_cloud synthetic-1M "$tmp/synthetic-1M.ply"
 # Eye-Dome Lighting's cost: frames with and without shading=edl in interleaved pairs
 # (render_bench --edl-cost: the pass over the frame's depth, and the 8-bit target's writing and
-# clearing of that depth), per pipeline; at the default edl_pass (auto: cpu on a software
-# renderer), then with the GL pass for comparison.
+# clearing of that depth), per pipeline.
 for c in Guanyin synthetic-1M; do
     f="$data/Guanyin.ply"
     [ "$c" = synthetic-1M ] && f="$tmp/synthetic-1M.ply"
@@ -67,10 +66,18 @@ for c in Guanyin synthetic-1M; do
         --pipelines points,splat,kawata --edl-cost --label "$c" \
         > "$tmp/$c-edl.out" 2> "$tmp/$c-edl.err" ||
         echo "bench_render: --edl-cost run failed on $c: $(tail -1 "$tmp/$c-edl.err")" >&2
+done
+# The host paths (pipe.h rnd_host) against the GL paths they replace on a software renderer:
+# kawata and soft on two renderers, without and with them, frame by frame in turn
+# (render_bench --interleave --host-ab: ratio = GL wall time / host wall time, median of the
+# rounds), on the real scans and the synthetic 1M cloud.
+for c in Guanyin synthetic-1M; do
+    f="$data/Guanyin.ply"
+    [ "$c" = synthetic-1M ] && f="$tmp/synthetic-1M.ply"
     "$bench/render_bench" "$f" --frames "$frames" --size "$size" --backend "$backend" \
-        --pipelines points,splat,kawata --edl-cost --label "$c, edl_pass=gpu" --set edl_pass=gpu \
-        > "$tmp/$c-edlgl.out" 2> "$tmp/$c-edlgl.err" ||
-        echo "bench_render: --edl-cost edl_pass=gpu run failed on $c: $(tail -1 "$tmp/$c-edlgl.err")" >&2
+        --pipelines kawata,soft --interleave --host-ab --label "$c" \
+        > "$tmp/$c-host.out" 2> "$tmp/$c-host.err" ||
+        echo "bench_render: --host-ab run failed on $c: $(tail -1 "$tmp/$c-host.err")" >&2
 done
 # The textbook EWA filter (ewa=exact) on the same cloud, for comparison with the default.
 "$bench/render_bench" "$tmp/synthetic-1M.ply" --frames 3 --size "$size" --backend "$backend" \
@@ -207,7 +214,16 @@ echo
 echo "| cloud | pipeline | lambert ms | edl ms | EDL ms (median of pair differences) | EDL CPU ms |"
 echo "|---|---|---:|---:|---:|---:|"
 for c in Guanyin synthetic-1M; do
-    sed -n 's/^edl: //p' "$tmp/$c-edl.out" "$tmp/$c-edlgl.out" 2>/dev/null
+    sed -n 's/^edl: //p' "$tmp/$c-edl.out" 2>/dev/null
+done
+echo
+echo "Host paths (render_bench --interleave --host-ab: the same pipeline without [gl] and with"
+echo "[host] the host paths, frame by frame in turn; ratio = GL wall time / host wall time):"
+echo
+echo "| cloud | pipeline | ms/frame | CPU ms | ratio |"
+echo "|---|---|---:|---:|---:|"
+for c in Guanyin synthetic-1M; do
+    sed -n 's/^ab: //p' "$tmp/$c-host.out" 2>/dev/null
 done
 k1=$(ms synthetic-1M kawata)
 e1=$(awk -F'|' '$3 ~ "^ *points *$" { print $6 + 0 }' "$tmp/synthetic-1M-edl.out" 2>/dev/null)

@@ -22,7 +22,7 @@ data=${SPLATD_TESTDATA:-tests/data}
 frames=${SPLATD_BENCH_SOFT_FRAMES:-5}
 backend=${SPLATD_BENCH_BACKEND:-auto}
 size=1280x720
-pipes=points,splat,olt,soft,soft:order=axis,soft:order=tile,soft:order=cpu,soft:model=concentric,soft:model=base,soft:lambda=0
+pipes=points,splat,olt,soft,soft:order=axis,soft:order=tile,soft:model=concentric,soft:model=base,soft:lambda=0
 
 for f in "$bench/render_bench" "$tools/gen_cloud"; do
     if [ ! -x "$f" ]; then
@@ -39,8 +39,8 @@ echo "### Soft Transparency (${size}, t = 0.5, lambda = 0.5, field=uncertainty, 
 echo
 echo "load average at the start: $(cut -d' ' -f1-3 /proc/loadavg)"
 echo
-echo "| cloud | points | SP ms | OLT ms | ST ms (auto) | ST axis ms | ST tile ms | ST cpu ms | Concentric ms | Base ms | Solid ms | ST/SP | OLT/SP | Base/Express | Base/Express, soft layer | Base/solid (bound) | CPU: ST/SP, OLT/SP, Base/Express |"
-echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"
+echo "| cloud | points | SP ms | OLT ms | ST ms (auto) | ST axis ms | ST tile ms | Concentric ms | Base ms | Solid ms | ST/SP | OLT/SP | Base/Express | Base/Express, soft layer | Base/solid (bound) | CPU: ST/SP, OLT/SP, Base/Express |"
+echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"
 for c in autzen_trim Guanyin veg-1M; do
     case $c in
         autzen_trim) f="$data/autzen_trim.las" ;;
@@ -50,7 +50,7 @@ for c in autzen_trim Guanyin veg-1M; do
     o="$tmp/$c"
     if ! "$bench/render_bench" "$f" --frames "$frames" --size "$size" --backend "$backend" \
            --pipelines "$pipes" --label "$c" > "$o.out" 2> "$o.err"; then
-        echo "| $c | render_bench failed: $(tail -1 "$o.err") | | | | | | | | | | | | | | | |"
+        echo "| $c | render_bench failed: $(tail -1 "$o.err") | | | | | | | | | | | | | | |"
         continue
     fi
     awk -F'|' -v c="$c" '
@@ -62,9 +62,8 @@ for c in autzen_trim Guanyin veg-1M; do
             # the soft layer alone: "-" where ST is not above the solid passes by 0.5 ms
             # (frame-to-frame noise)
             layer = st - so > 0.5 ? sprintf("%.1f", (b - so) / (st - so)) : "-"
-            printf "| %s | %d | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.2f | %.2f | %.1f | %s | %.1f | %.2f, %.2f, %.1f |\n",
+            printf "| %s | %d | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.2f | %.2f | %.1f | %s | %.1f | %.2f, %.2f, %.1f |\n",
                 c, n, sp, ms["olt"], st, ms["soft:order=axis"], ms["soft:order=tile"],
-                ms["soft:order=cpu"],
                 ms["soft:model=concentric"], b, so,
                 sp / st, sp / ms["olt"], b / st, layer, b / so, cpu["splat"] / cpu["soft"],
                 cpu["splat"] / cpu["olt"], cpu["soft:model=base"] / cpu["soft"]

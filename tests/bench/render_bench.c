@@ -10,6 +10,10 @@
  *                [--zoom Z]              (eye Z times closer to the target: a close-up, culled)
  *                [--edl-cost]            (also: each pipeline's frames with and without
  *                                         shading=edl, interleaved; see below)
+ *                [--interleave]          (the pipelines' frames in turn, A B C A B C ..., at
+ *                                         one camera a round; see below)
+ *                [--host-ab]             (with --interleave: each pipeline on two renderers,
+ *                                         without and with the host paths; see below)
  *
  * Loads FILE (pc_load) and preprocesses it (prep_run, default k, T threads: 0 = every core),
  * timing both; uploads the prepared cloud and renders, per pipeline, 1 + N frames of the
@@ -36,7 +40,18 @@
  *   "edl: | cloud | pipeline | lambert ms | edl ms | EDL ms | EDL CPU ms |", medians of the
  *   wall-clock (as ms/frame) and of the per-pair differences, wall and process CPU. Pairs of
  *   adjacent frames cancel most of a shared machine's drifting load, which the difference of
- *   two separate runs does not (a few ms against a 3 ms target). */
+ *   two separate runs does not (a few ms against a 3 ms target).
+ * --interleave: for A/B comparisons of two forms of one pipeline (soft:order=tile against
+ *   soft:order=axis) on a shared machine: each round renders every pipeline once at the round's
+ *   camera, so that a drifting load falls on all of them alike; after the table, per pipeline,
+ *   "ab: | cloud | pipeline | ms/frame | CPU ms | ratio to the first |", the ratio being the
+ *   median over the rounds of the first pipeline's wall time over this one's (> 1: faster than
+ *   the first), and the load average at the end.
+ * --host-ab (with --interleave): two renderers, without and with the host paths
+ *   (rnd_desc.host_paths off and on, the same back end and tunings otherwise), each pipeline
+ *   rendered by both in every round: rows "P [gl]" and "P [host]", the ratio of a [host] row
+ *   being the median over the rounds of the [gl] frame's wall time over the [host] one's (> 1:
+ *   the host paths are faster). */
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
@@ -69,6 +84,8 @@ typedef struct bench_opts {
     const char *sets[MAX_PIPES]; /* --set key=value, applied to every pipeline's parameters */
     int nsets;
     int edl_cost;                /* --edl-cost */
+    int interleave;              /* --interleave */
+    int host_ab;                 /* --host-ab */
 } bench_opts;
 
 typedef struct pipe_result {
@@ -115,7 +132,8 @@ static void usage(void)
                     "(default 1280x720)]\n"
                     "       [--backend auto|egl|osmesa] [--pipelines points,splat] "
                     "[--label NAME] [--threads T] [--save DIR] [--set key=value ...]\n"
-                    "       [--shader-dir DIR] [--zoom Z]\n",
+                    "       [--shader-dir DIR] [--zoom Z] [--edl-cost] [--interleave] "
+                    "[--host-ab]\n",
             MAX_FRAMES);
 }
 
@@ -200,6 +218,14 @@ static int parse_args(int argc, char **argv, bench_opts *o)
             o->edl_cost = 1;
             continue;
         }
+        if (!strcmp(a, "--interleave")) {
+            o->interleave = 1;
+            continue;
+        }
+        if (!strcmp(a, "--host-ab")) {
+            o->host_ab = 1;
+            continue;
+        }
         int takes = a[0] == '-' && a[1] == '-';
         if (takes && !v) {
             fprintf(stderr, "render_bench: %s needs a value\n", a);
@@ -266,6 +292,10 @@ static int parse_args(int argc, char **argv, bench_opts *o)
         fprintf(stderr, "render_bench: no FILE given\n");
         return -1;
     }
+    if (o->host_ab && !o->interleave) {
+        fprintf(stderr, "render_bench: --host-ab needs --interleave\n");
+        return -1;
+    }
     if (!o->label) {
         const char *slash = strrchr(o->file, '/');
         o->label = slash ? slash + 1 : o->file;
@@ -291,18 +321,25 @@ static void orbit(const rnd_camera *cam0, double angle_rad, rnd_camera *cam)
         cam->eye[i] = cam0->target[i] + v[i] * c + kxv[i] * s + k[i] * kv * (1 - c);
 }
 
+/* params_of: the parameters of the k-th pipeline of o: the defaults, the --set ones, the
+ * pipeline and its own (all checked by parse_args). */
+static void params_of(const bench_opts *o, int k, sp_params *p)
+{
+    char emsg[200];
+    sp_params_defaults(p);
+    for (int i = 0; i < o->nsets; i++) sp_param_set_kv(p, o->sets[i], emsg, sizeof emsg);
+    p->pipeline = o->pipes[k];
+    const char *colon = strchr(o->pipe_names[k], ':');
+    if (colon) pipe_params(p, colon + 1, emsg, sizeof emsg);
+}
+
 /* bench_pipeline: renders 1 + o->frames frames of cloud id through pipeline pipe and fills res
  * with the medians. Returns 0, or a negative SD_E* code with err filled. */
 static int bench_pipeline(rnd_ctx *r, uint32_t id, const rnd_camera *cam0, int k,
                           const bench_opts *o, enc_ctx *enc, pipe_result *res, sd_err *err)
 {
     sp_params p, jp;
-    char emsg[200];
-    sp_params_defaults(&p);
-    for (int i = 0; i < o->nsets; i++) sp_param_set_kv(&p, o->sets[i], emsg, sizeof emsg);
-    p.pipeline = o->pipes[k];
-    const char *colon = strchr(o->pipe_names[k], ':');
-    if (colon) pipe_params(&p, colon + 1, emsg, sizeof emsg); /* checked by parse_pipelines */
+    params_of(o, k, &p);
     jp = p;
     jp.format = SP_FMT_JPEG;
     jp.quality = 85;
@@ -395,6 +432,61 @@ static int bench_edl(rnd_ctx *r, uint32_t id, const rnd_camera *cam0, int pipe,
     return rc;
 }
 
+/* bench_interleaved: 1 + o->frames rounds, each rendering every pipeline once at the round's
+ * camera (the first round is the warm-up) on each of the nr renderers r[] (cloud ids id[]),
+ * entry k being pipeline k / nr on renderer k % nr; fills res[k].frame_ms and cpu_ms with
+ * medians and prints the "ab:" rows (see the top). Returns 0 or SD_E*. */
+static int bench_interleaved(rnd_ctx *const *r, const uint32_t *id, int nr,
+                             const rnd_camera *cam0, const bench_opts *o, pipe_result *res,
+                             sd_err *err)
+{
+    int np = o->npipes * nr, nf = o->frames;
+    double *t = calloc((size_t)np * (size_t)nf * 3, sizeof(double));
+    if (!t) return sd_errf(err, SD_ENOMEM, "render_bench: out of memory");
+    double *tw = t, *tc = t + (size_t)np * nf, *ratio = tc + (size_t)np * nf;
+    sp_params p[2 * MAX_PIPES];
+    for (int k = 0; k < np; k++) params_of(o, k / nr, &p[k]);
+    rnd_frame f;
+    memset(&f, 0, sizeof f);
+    int rc = 0;
+    for (int i = -1; i < nf && rc == 0; i++) {
+        rnd_camera cam;
+        orbit(cam0, (i + 1) * 0.5 * M_PI / 180.0, &cam);
+        for (int k = 0; k < np && rc == 0; k++) {
+            double c0 = cpu_s(), t0 = now_s();
+            rc = rnd_render(r[k % nr], id[k % nr], &cam, &p[k], 0, &f, err);
+            double w = (now_s() - t0) * 1e3 - (double)f.readback_us * 1e-3;
+            if (rc < 0 || i < 0) continue;
+            tw[(size_t)k * nf + i] = w;
+            tc[(size_t)k * nf + i] = (cpu_s() - c0) * 1e3;
+            res[k].drawn = f.points_drawn;
+            res[k].flags |= f.flags;
+        }
+        /* the ratio to the first entry, or with two renderers to the pipeline's [gl] entry */
+        for (int k = 0; k < np && rc == 0 && i >= 0; k++) {
+            int ref = nr == 2 ? k - k % 2 : 0;
+            ratio[(size_t)k * nf + i] = tw[(size_t)ref * nf + i] / tw[(size_t)k * nf + i];
+        }
+    }
+    for (int k = 0; k < np && rc == 0; k++) {
+        res[k].frame_ms = median(tw + (size_t)k * nf, nf);
+        res[k].cpu_ms = median(tc + (size_t)k * nf, nf);
+        printf("ab: | %s | %s%s | %.1f | %.1f | %.2f |\n", o->label, o->pipe_names[k / nr],
+               nr == 2 ? (k % 2 ? " [host]" : " [gl]") : "", res[k].frame_ms, res[k].cpu_ms,
+               median(ratio + (size_t)k * nf, nf));
+    }
+    if (rc == 0) {
+        FILE *la = fopen("/proc/loadavg", "r");
+        char line[64] = "?";
+        if (la && fgets(line, sizeof line, la)) line[strcspn(line, "\n")] = 0;
+        if (la) fclose(la);
+        printf("ab-load: %s\n", line);
+    }
+    rnd_frame_free(&f);
+    free(t);
+    return rc;
+}
+
 /* load_and_prep: pc_load + prep_run of o->file into pc, printing the "prep:" row.
  * Returns 0 or a negative SD_E* code with err filled. */
 static int load_and_prep(const bench_opts *o, pc_prepared *pc, sd_err *err)
@@ -430,7 +522,7 @@ int main(int argc, char **argv)
     memset(&err, 0, sizeof err);
     pc_prepared pc;
     memset(&pc, 0, sizeof pc);
-    rnd_ctx *r = NULL;
+    rnd_ctx *r = NULL, *rgl = NULL; /* rgl: --host-ab's renderer without the host paths */
     enc_ctx *enc = NULL;
     int rc = 1;
 
@@ -439,7 +531,12 @@ int main(int argc, char **argv)
     memset(&rd, 0, sizeof rd);
     rd.backend = o.backend;
     rd.shader_dir = o.shader_dir;
+    if (o.host_ab) rd.host_paths = RND_CAP_ON;
     if (!(r = rnd_create(&rd, &err))) goto fail;
+    if (o.host_ab) {
+        rd.host_paths = RND_CAP_OFF;
+        if (!(rgl = rnd_create(&rd, &err))) goto fail;
+    }
     printf("renderer: %s\n", rnd_renderer_string(r));
     fflush(stdout);
     if (!(enc = enc_create(&err))) goto fail;
@@ -449,19 +546,25 @@ int main(int argc, char **argv)
     if (o.zoom > 1)
         for (int i = 0; i < 3; i++)
             cam0.eye[i] = cam0.target[i] + (cam0.eye[i] - cam0.target[i]) / o.zoom;
-    int64_t id = rnd_upload(r, &pc, &err);
+    int64_t id = rnd_upload(r, &pc, &err), idgl = 0;
     if (id < 0) goto fail;
+    if (rgl && (idgl = rnd_upload(rgl, &pc, &err)) < 0) goto fail;
     pc_prepared_free(&pc); /* the renderer keeps what it needs */
 
-    pipe_result res[MAX_PIPES];
+    pipe_result res[2 * MAX_PIPES];
     memset(res, 0, sizeof res);
     double points_ms = 0;
-    for (int k = 0; k < o.npipes; k++) {
+    rnd_ctx *const rs[2] = {rgl ? rgl : r, r};
+    const uint32_t ids[2] = {rgl ? (uint32_t)idgl : (uint32_t)id, (uint32_t)id};
+    if (o.interleave && bench_interleaved(rgl ? rs : rs + 1, rgl ? ids : ids + 1, rgl ? 2 : 1,
+                                          &cam0, &o, res, &err) < 0)
+        goto fail;
+    for (int k = 0; k < o.npipes && !o.interleave; k++) {
         if (bench_pipeline(r, (uint32_t)id, &cam0, k, &o, enc, &res[k], &err) < 0)
             goto fail;
         if (o.pipes[k] == SP_PIPE_POINTS) points_ms = res[k].frame_ms;
     }
-    for (int k = 0; k < o.npipes; k++) {
+    for (int k = 0; k < o.npipes && !o.host_ab; k++) {
         char ratio[32] = "-";
         const char *name = o.pipe_names[k];
         if (points_ms > 0) snprintf(ratio, sizeof ratio, "%.2f", res[k].frame_ms / points_ms);
@@ -489,6 +592,7 @@ fail:
     if (rc) fprintf(stderr, "render_bench: %s\n", err.msg[0] ? err.msg : "failed");
     enc_destroy(enc);
     if (r) rnd_destroy(r);
+    if (rgl) rnd_destroy(rgl);
     pc_prepared_free(&pc);
     return rc;
 }
