@@ -733,6 +733,7 @@ static void test_cmd_render_errors(void **state)
     assert_int_equal(run_render(ply, "-o", "x.png", "--set", "point_size=1000", NULL), 2);
     assert_int_equal(run_render(ply, "-o", "x.png", "--pipeline", "teapot", NULL), 2);
     assert_int_equal(run_render(ply, "-o", "x.png", "--backend", "vulkan", NULL), 2);
+    assert_int_equal(run_render(ply, "-o", "x.png", "--points-raster", "fast", NULL), 2);
     assert_int_equal(run_render(ply, "-o", "x.bmp", NULL), 2);                  /* format */
     assert_int_equal(run_render(ply, NULL), 2);                                 /* no -o */
     assert_int_equal(run_render("-o", "x.png", NULL), 2);                       /* no FILE */

@@ -28,12 +28,16 @@ static const char USAGE[] =
     "  --set key=value             any render parameter (repeatable; see PROTOCOL.md)\n"
     "  --backend auto|egl|osmesa   GL back end (default auto: EGL, then OSMesa)\n"
     "  --shader-dir DIR            load shaders from DIR before the built-in ones\n"
+    "  --points-raster FORM        the points pipeline's form: auto, packed (depth quanta, ties\n"
+    "                              by point index), exact (float depth: splatd --mpi's form, so\n"
+    "                              its frames match these exactly) or gl (default auto)\n"
     "  --cache DIR --k N           prepared-cloud cache directory and neighbour count\n"
     "  --quiet                     no progress or timing on stderr\n";
 
 typedef struct render_opts {
     const char *file, *out, *shader_dir;
     rnd_backend_kind backend;
+    int points_raster;       /* RND_RASTER_* */
     cache_desc cache;
     int have_eye, have_target, have_up;
     double eye[3], target[3], up[3];
@@ -120,7 +124,8 @@ static int parse_args(int argc, char **argv, render_opts *o, sp_params *p)
         }
         static const char *const with_value[] = {
             "-o", "--pipeline", "--eye", "--target", "--up", "--fov", "--size", "--near",
-            "--far", "--set", "--backend", "--shader-dir", "--cache", "--k", NULL};
+            "--far", "--set", "--backend", "--shader-dir", "--cache", "--k",
+            "--points-raster", NULL};
         int known = 0;
         for (int k = 0; with_value[k]; k++) known |= !strcmp(a, with_value[k]);
         if (!known) {
@@ -179,6 +184,18 @@ static int parse_args(int argc, char **argv, render_opts *o, sp_params *p)
             }
         } else if (!strcmp(a, "--shader-dir")) {
             o->shader_dir = v;
+        } else if (!strcmp(a, "--points-raster")) {
+            static const struct { const char *name; int form; } forms[] = {
+                {"auto", RND_RASTER_AUTO}, {"packed", RND_RASTER_PACKED},
+                {"exact", RND_RASTER_EXACT}, {"gl", RND_RASTER_GL}};
+            o->points_raster = -1;
+            for (int k = 0; k < 4; k++)
+                if (!strcmp(v, forms[k].name)) o->points_raster = forms[k].form;
+            if (o->points_raster < 0) {
+                fprintf(stderr, "splatd render: --points-raster '%s' is not auto, packed, exact "
+                        "or gl\n", v);
+                return 2;
+            }
         } else if (!strcmp(a, "--cache")) {
             o->cache.dir = v;
         } else if (!strcmp(a, "--k")) {
@@ -257,7 +274,8 @@ int cmd_render(int argc, char **argv)
         fprintf(stderr, "splatd render: %s\n", err.msg);
         return 1;
     }
-    rnd_desc d = {.backend = o.backend, .shader_dir = o.shader_dir};
+    rnd_desc d = {.backend = o.backend, .shader_dir = o.shader_dir,
+                  .pipe = {.points_raster = o.points_raster}};
     rnd_ctx *r = rnd_create(&d, &err);
     if (!r) {
         fprintf(stderr, "splatd render: %s\n", err.msg);

@@ -11,6 +11,7 @@ ones named after their cloud, damaged ones bad_*; and the splod target's, LOD ca
 lod_open_cloud with grid_bits 2 and leaf_max 64 (fuzz_one_splod's options; k 24, one thread) of
 200 points on a sphere and 400 on a plane (xyz) and 600 on a sphere with colours (PLY), several
 levels each; bad_magic, bad_truncated (200 bytes cut) and bad_table (node 1's parent made 5).
+build/tools/cache_seeds tests/fuzz/corpus remakes both kinds (after a cache format changes).
 tests/test_fuzz_regress.c checks both: valid seeds give 0, bad_* seeds a negative code.
 The layouts follow the readers' and protocol/proto.h's descriptions of the formats.
 """
