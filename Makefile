@@ -203,10 +203,13 @@ ifneq ($(MPICC),)
 $(eval $(call MPI_FLAVOUR,$(BUILD),))
 $(eval $(call MPI_FLAVOUR,$(BUILD)/asan,$(ASAN_FLAGS)))
 endif
-# test_mpi also tests the parts of server/mpi that need no MPI (the parts' order, "over")
-MPI_PLAIN_SRC := server/mpi/boxorder.c server/mpi/over.c
+# test_mpi also tests the parts of server/mpi that need no MPI (the parts' order, "over", the
+# ranks' records); test_fuzz_regress replays the records' fuzz target
+MPI_PLAIN_SRC := server/mpi/boxorder.c server/mpi/over.c server/mpi/mr_msg.c
 $(BUILD)/tests/test_mpi: $(call obj,$(BUILD),$(MPI_PLAIN_SRC))
 $(BUILD)/asan/tests/test_mpi: $(call obj,$(BUILD)/asan,$(MPI_PLAIN_SRC))
+$(BUILD)/tests/test_fuzz_regress: $(call obj,$(BUILD),server/mpi/mr_msg.c)
+$(BUILD)/asan/tests/test_fuzz_regress: $(call obj,$(BUILD)/asan,server/mpi/mr_msg.c)
 
 TESTS       := $(patsubst tests/%.c,$(BUILD)/tests/%,$(TEST_SRC))
 ASAN_TESTS  := $(patsubst tests/%.c,$(BUILD)/asan/tests/%,$(TEST_SRC))
