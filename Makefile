@@ -7,6 +7,7 @@
 #   make run        start the daemon on a bundled scan and render an orbit into ./out/
 #                   (RUN_ARGS=--force renders frames that exist again)
 #   make fuzz       libFuzzer targets for the protocol and every parser (FUZZ_SECONDS=60 each)
+#   make fuzz-smoke builds every fuzz target and runs each for FUZZ_SMOKE_SECONDS (4; CI)
 #   make install    PREFIX=/usr/local DESTDIR= (runs ldconfig when installing as root)
 #
 # Every dependency comes through pkg-config; when a check fails, deploy/deps.sh installs the
@@ -231,7 +232,7 @@ $(BUILD)/gen/page_gen.c $(BUILD)/gen/page_gen.h &: $(BUILD)/embed_shaders $(WEB)
 	@mkdir -p $(BUILD)/gen
 	$(BUILD)/embed_shaders --prefix page $(BUILD)/gen/page_gen $(WEB)
 
-.PHONY: all test asan bench fuzz run install clean
+.PHONY: all test asan bench fuzz fuzz-smoke run install clean
 all: $(BUILD)/bin/splatd $(BUILD)/bin/splat $(BUILD)/bin/splat-view $(BUILD)/libsplatclient.a $(BUILD)/libsplatclient.so $(TOOLS) \
      $(MPI_BIN)
 
@@ -267,6 +268,12 @@ bench: all $(BENCHES)
 
 fuzz:
 	@sh tests/fuzz/run.sh $(FUZZ_SECONDS)
+
+# CI: every fuzz target must compile, link and survive a few seconds on its corpus (so that
+# the fuzzers cannot rot unnoticed); two at a time.
+FUZZ_SMOKE_SECONDS ?= 4
+fuzz-smoke: $(BUILD)/gen/shaders_gen.c $(BUILD)/gen/page_gen.c
+	@FUZZ_JOBS=$${FUZZ_JOBS:-2} sh tests/fuzz/run.sh $(FUZZ_SMOKE_SECONDS)
 
 # make run RUN_ARGS=--force renders the demo's frames again (extra arguments go to `splat path`).
 run: all
