@@ -27,7 +27,9 @@
 #define MUTATIONS 1000 /* per valid seed: about 0.5 s in all without ASan, 4 s with it */
 
 static const char *const targets[] = {"proto", "ply", "pcd", "las", "xyz", "lzf", "params",
-                                      "ws", "laz", "copc", "cache", "frame", "dispatch"};
+                                      "ws", "laz", "copc", "cache", "frame", "dispatch",
+                                      "copclevels", "lodsrc", "campath", "shard", "token",
+                                      "mpimsg"};
 
 /* find: fuzz_target_find, and the dispatch target, which only binaries linking the whole
  * server have (this one does). */
@@ -171,6 +173,12 @@ static void test_corpus_copc(void **state) { (void)state; run_corpus("copc"); }
 static void test_corpus_cache(void **state) { (void)state; run_corpus("cache"); }
 static void test_corpus_frame(void **state) { (void)state; run_corpus("frame"); }
 static void test_corpus_dispatch(void **state) { (void)state; run_corpus("dispatch"); }
+static void test_corpus_copclevels(void **state) { (void)state; run_corpus("copclevels"); }
+static void test_corpus_lodsrc(void **state) { (void)state; run_corpus("lodsrc"); }
+static void test_corpus_campath(void **state) { (void)state; run_corpus("campath"); }
+static void test_corpus_shard(void **state) { (void)state; run_corpus("shard"); }
+static void test_corpus_token(void **state) { (void)state; run_corpus("token"); }
+static void test_corpus_mpimsg(void **state) { (void)state; run_corpus("mpimsg"); }
 
 /* Every saved crash input, through its target: must return (any code) without crashing. */
 static void test_crashes(void **state)
@@ -237,6 +245,9 @@ int main(void)
         cmocka_unit_test(test_corpus_copc),
         cmocka_unit_test(test_corpus_cache),  cmocka_unit_test(test_corpus_frame),
         cmocka_unit_test(test_corpus_dispatch),
+        cmocka_unit_test(test_corpus_copclevels), cmocka_unit_test(test_corpus_lodsrc),
+        cmocka_unit_test(test_corpus_campath), cmocka_unit_test(test_corpus_shard),
+        cmocka_unit_test(test_corpus_token),  cmocka_unit_test(test_corpus_mpimsg),
         cmocka_unit_test(test_crashes),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

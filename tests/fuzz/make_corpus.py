@@ -386,6 +386,192 @@ def copc():
     put("copc", "bad_page_size.bin", copc_info(160, 40) + page)
 
 
+def copc_from_laz(name, pages):
+    """A small COPC file made from a one-chunk pointwise LAZ file of tests/data: a "copc" info
+    VLR (record 1) put before its VLRs and hierarchy pages appended at its end. The readers
+    take a node's chunk from the hierarchy alone, so every node entry may point at the one
+    chunk (a pointwise chunk decodes its first k points as a chunk of k). pages(off, size,
+    count, root_off) gives the root page and the pages after it for that chunk (off, size
+    bytes, count points) with the root page at root_off."""
+    with open(os.path.join(DATA, name), "rb") as f:
+        b = bytearray(f.read())
+    hsize = struct.unpack_from("<H", b, 94)[0]
+    data_off, nvlr = struct.unpack_from("<II", b, 96)
+    count = struct.unpack_from("<I", b, 107)[0]
+    table = struct.unpack_from("<Q", b, data_off)[0]
+    shift = 54 + 160
+    root_off = len(b) + shift
+    root, rest = pages(data_off + 8 + shift, table - (data_off + 8), count, root_off)
+    vlr = struct.pack("<H16sHH32s", 0, b"copc", 1, 160, b"copc info") + copc_info(root_off, len(root))
+    out = b[:hsize] + vlr + b[hsize:]
+    struct.pack_into("<II", out, 96, data_off + shift, nvlr + 1)
+    struct.pack_into("<Q", out, data_off + shift, table + shift)
+    return bytes(out + root + rest)
+
+
+def copclevels():
+    """Seeds of the copclevels target: byte 0 is the deepest level asked for (0-7), then a
+    COPC file (copc_from_laz)."""
+    def put_l(name, level, data):
+        put("copclevels", name, bytes([level]) + data)
+
+    def one(level, count_of):
+        return lambda o, n, c, r: (copc_entry(level, 0, 0, 0, o, n, count_of(c)), b"")
+
+    put_l("root_only_p10", 2, copc_from_laz("point10.las.laz", one(0, lambda c: c)))
+    # levels 0, 1, 2 of 100, 300 and 1065 points (of the one chunk)
+    f = copc_from_laz("point10.las.laz", lambda o, n, c, r: (
+        copc_entry(0, 0, 0, 0, o, n, 100) + copc_entry(1, 1, 0, 1, o, n, 300)
+        + copc_entry(2, 3, 1, 2, o, n, c), b""))
+    put_l("three_levels_p10", 1, f)
+    put_l("three_levels_p10_all", 7, f)
+    # the root page (3 entries) links to a child page holding a level-2 node; an empty node
+    put_l("two_pages_rgb", 3, copc_from_laz("point-color.las.laz", lambda o, n, c, r: (
+        copc_entry(0, 0, 0, 0, o, n, 50) + copc_entry(1, 0, 1, 0, 0, 0, 0)
+        + copc_entry(1, 1, 1, 1, r + 96, 32, -1), copc_entry(2, 2, 3, 2, o, n, c))))
+    # bad: no copc VLR; a node of more points than its chunk holds; no node at level 0
+    with open(os.path.join(DATA, "point10.las.laz"), "rb") as fh:
+        put_l("bad_not_copc", 3, fh.read())
+    put_l("bad_count_over_chunk", 0, copc_from_laz("point10.las.laz", one(0, lambda c: c + 5)))
+    put_l("bad_nothing_at_level_0", 0, copc_from_laz("point10.las.laz", one(1, lambda c: c)))
+
+
+LODSRC_EXT = {".ply": 0, ".las": 1, ".laz": 2, ".pcd": 3, ".xyz": 4, ".pts": 5, ".txt": 6,
+              ".copc.laz": 7}
+
+
+def lodsrc():
+    """Seeds of the lodsrc target: byte 0 picks the extension (LODSRC_EXT) and, in its high 5
+    bits, the piece size of the reads; then the file. Most are other targets' seeds (written
+    before this runs)."""
+    def put_s(name, ext, piece, data):
+        put("lodsrc", name, bytes([LODSRC_EXT[ext] | piece << 3]) + data)
+
+    def seed(target, name, ext, piece):
+        with open(os.path.join(ROOT, target, name), "rb") as f:
+            put_s(("bad_" if name.startswith("bad_") else "") + target + "_" +
+                  name.replace("bad_", ""), ext, piece, f.read())
+
+    seed("ply", "binary_le_rgba_quality.ply", ".ply", 0)   # streamed, floats and bytes
+    seed("ply", "ascii_rgb_normal_faces.ply", ".ply", 3)   # read whole by pc_load
+    seed("ply", "binary_be_face_first_intensity_radius.ply", ".ply", 1)
+    seed("las", "las12_format3_rgb.las", ".las", 2)
+    seed("las", "las14_format7_rgb16.las", ".las", 0)
+    seed("laz", "point-color.las.laz", ".laz", 5)
+    seed("pcd", "ascii_xyz_rgb.pcd", ".pcd", 0)
+    seed("pcd", "binary_compressed_double_sep_rgb.pcd", ".pcd", 1)
+    seed("xyz", "rgb_commas_crlf.xyz", ".xyz", 2)
+    seed("xyz", "pts_count_irgb.pts", ".pts", 0)
+    seed("xyz", "float_colour_intensity.txt", ".txt", 4)
+    seed("xyz", "nan_row_no_newline.xyz", ".xyz", 1)
+    seed("xyz", "bad_token.xyz", ".xyz", 0)
+    seed("pcd", "bad_points_over_file.pcd", ".pcd", 0)
+    # streamed PLY, per-field path: doubles, 16-bit colours, a NaN point (dropped), an extra
+    # property; the vertex element first, a face element after it
+    h = ("ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty double x\n"
+         "property double y\nproperty double z\nproperty ushort red\nproperty ushort green\n"
+         "property ushort blue\nproperty int id\nelement face 0\n"
+         "property list uchar int vertex_indices\nend_header\n").encode()
+    pts = [(0, 0, 0), (1.5, -2, 3), (float("nan"), 1, 1), (-4, 8, 0.25), (2, 2, 2)]
+    for i, (x, y, z) in enumerate(pts):
+        h += struct.pack("<3d3Hi", x, y, z, 1000 * i, 65535, 257 * i, i)
+    put_s("ply_double_ushort_nan.ply", ".ply", 7, h)
+    # streamed PLY as pc_read_ply reads it: version "1", float colours named diffuse_* (scaled
+    # by 255), alpha; the stream's own header parser took neither name nor scale
+    h = ("ply\nformat binary_little_endian 1\ncomment c\nelement vertex 3\nproperty float x\n"
+         "property float y\nproperty float z\nproperty float diffuse_red\n"
+         "property float diffuse_green\nproperty float diffuse_blue\nproperty uchar alpha\n"
+         "end_header\n").encode()
+    for i in range(3):
+        h += struct.pack("<6fB", i, 2 * i, -i, 0.5, 0.25 * i, 1.0, 100 + i)
+    put_s("ply_v1_float_diffuse_colours.ply", ".ply", 2, h)
+    # refused by pc_read_ply, hence by the stream: a control byte in the header; a LAS file
+    # named .xyz (pc_load reads by extension; the stream took it as LAS)
+    put_s("bad_ply_control_byte.ply", ".ply", 0,
+          b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\x7f\n"
+          b"property float y\nproperty float z\nend_header\n" + bytes(12))
+    with open(os.path.join(ROOT, "las", "las12_format3_rgb.las"), "rb") as f:
+        put_s("bad_las_named_xyz.xyz", ".xyz", 0, f.read())
+    put_s("bad_ply_count_over_file.ply", ".ply", 0,
+          b"ply\nformat binary_little_endian 1.0\nelement vertex 9\nproperty float x\n"
+          b"property float y\nproperty float z\nend_header\n" + bytes(12 * 3))
+
+
+def campath():
+    """Seeds of the campath target: an output pattern line, then a camera-path file. Valid
+    seeds have a valid file (the pattern may be invalid: the target returns cp_load's code)."""
+    cams = "0 0 5, 0 0 0, 0 1 0, 45\n1 0 5 0 0 0 0 1 0 50 # a comment\n\n# only a comment\n"
+    put("campath", "zero_padded", "out/%05d.jpg\n" + cams)
+    put("campath", "plain_tabs_crlf", "frames/f%d.png\n2\t0\t5\t0\t0\t0\t0\t1\t0\t30\r\n"
+        "1e-3,2E2,-3.5,0,0,0,0,0,1,179.5\r\n")
+    put("campath", "percent_space_pad", "%%lit_%3d.exr\n0 0 1 0 0 0 0 1 0 0.5")
+    put("campath", "pattern_invalid_good_file", "out/%d_%d.raw\n" + cams)
+    put("campath", "zero_flags", "a/b.c/%0007d\n" + cams)
+    put("campath", "bad_nine_numbers", "x%d.jpg\n0 0 5 0 0 0 0 1 0\n")
+    put("campath", "bad_fov_180", "x%d.jpg\n0 0 5 0 0 0 0 1 0 180\n")
+    put("campath", "bad_no_cameras", "x%d.jpg\n# nothing\n\n")
+    put("campath", "bad_nan_second_line", "x%d.jpg\n" + cams + "nan 0 5 0 0 0 0 1 0 45\n")
+
+
+def shard():
+    """Seeds of the shard target: byte 0 says which of --shard, --shards, JOB_COMPLETION_INDEX,
+    SPLAT_SHARD_COUNT, SLURM_ARRAY_TASK_ID, SLURM_ARRAY_TASK_COUNT, SLURM_ARRAY_TASK_MIN are
+    set (bit 0 to 6); then their values, one a line."""
+    def put_s(name, mask, *fields):
+        put("shard", name, bytes([mask]) + "\n".join(fields).encode())
+
+    put_s("flag", 0x01, "3/8")
+    put_s("flag_over_env", 0x15, "0/2", "", "1", "", "7")
+    put_s("job_index_count", 0x0C, "", "", "5", "10")
+    put_s("shards_job_index", 0x06, "", "4", "2")
+    put_s("slurm_min", 0x70, "", "", "", "", "17", "4", "15")
+    put_s("none", 0x00)
+    put_s("bad_shards_alone", 0x02, "", "4")
+    put_s("bad_index_at_count", 0x01, "8/8")
+    put_s("bad_job_index_no_count", 0x04, "", "", "3")
+    put_s("bad_plus_sign", 0x01, "+1/2")
+    put_s("bad_tab_before_index", 0x0C, "", "", "\t5", "10")
+    put_s("bad_slurm_min_over_id", 0x70, "", "", "", "", "3", "4", "5")
+
+
+def token():
+    """Seeds of the token target: byte 0 bits 0-1 the mode (0600 0400 0640 0604), bit 2 a
+    symbolic link, bit 3 a directory, bit 4 a FIFO; then the file."""
+    put("token", "line", b"\x00secret\n")
+    put("token", "max_len", b"\x00" + b"t" * 4096)
+    put("token", "max_len_crlf", b"\x00" + b"t" * 4096 + b"\r\n")
+    put("token", "symlink_0400", b"\x05tok\r\n")
+    put("token", "binary", b"\x00\x00\x01\xff\n\x00")
+    put("token", "bad_group_readable", b"\x02secret")
+    put("token", "bad_other_readable", b"\x03secret")
+    put("token", "bad_only_newlines", b"\x00\n\r\n")
+    put("token", "bad_over_max", b"\x00" + b"t" * 4097)
+    put("token", "bad_directory", b"\x08x")
+    put("token", "bad_fifo", b"\x10x")
+    put("token", "bad_file_over_max_plus_2", b"\x00" + b"t" * 4096 + b"\n\n\n")
+
+
+def mpimsg():
+    """Seeds of the mpimsg target (server/mpi/mr_msg.h): byte 0 = 0, a command record (the
+    target pads it with zeros to MR_CMD_BYTES); byte 0 = 1, a failure record."""
+    def cmd(op, key, want_float=0, path=b"", cam=b"", par=b""):
+        return (b"\x00" + struct.pack("<3I", op, key, want_float)
+                + struct.pack("<H", len(path)) + path + struct.pack("<I", len(cam)) + cam
+                + struct.pack("<I", len(par)) + par)
+    put("mpimsg", "load", cmd(1, 1, path=b"/srv/clouds/bunny.ply"))
+    put("mpimsg", "render", cmd(2, 3, 1, cam=camera(64, 48), par=params_payload()))
+    put("mpimsg", "render_no_params", cmd(2, 3, 0, cam=camera(8, 8), par=struct.pack("<H", 0)))
+    put("mpimsg", "quit", cmd(3, 0))
+    put("mpimsg", "fail", b"\x01" + struct.pack("<i", -2) + b"rank 1 of 4: bad".ljust(512, b"\0"))
+    put("mpimsg", "fail_unknown_code", b"\x01" + struct.pack("<i", 77) + b"x" * 512)
+    put("mpimsg", "bad_unknown_op", cmd(7, 1))
+    put("mpimsg", "bad_key_0", cmd(1, 0, path=b"a.ply"))
+    put("mpimsg", "bad_nul_in_path", cmd(1, 1, path=b"a\0b.ply"))
+    put("mpimsg", "bad_want_float_2", cmd(2, 3, 2, cam=camera(64, 48), par=params_payload()))
+    put("mpimsg", "bad_camera_size", cmd(2, 3, 0, cam=camera(0, 48), par=params_payload()))
+    put("mpimsg", "bad_padding", cmd(3, 0) + b"\x01")
+
+
 def dispatch_seeds():
     """Seeds of the dispatch target (fuzz_one_dispatch): what one client sends to the daemon,
     whose data directory holds the 64-point cloud "sphere" and whose frames are at most
@@ -455,6 +641,12 @@ def main():
     params()
     laz()
     copc()
+    copclevels()
+    lodsrc()
+    campath()
+    shard()
+    token()
+    mpimsg()
     total = sum(os.path.getsize(os.path.join(dp, f))
                 for dp, _, fs in os.walk(ROOT) for f in fs)
     print("corpus: %d bytes under %s" % (total, ROOT))
