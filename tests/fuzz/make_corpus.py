@@ -344,14 +344,118 @@ def params():
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "data")
 
 
-def laz():
-    """Real LAZ files (tests/data) under 64 KiB, and broken copies of one."""
-    for name in ["point10.las.laz", "point-time.las.laz", "point-color.las.laz",
-                 "point-color-time.las.laz", "extrabytes.laz"]:
-        with open(os.path.join(DATA, name), "rb") as f:
-            put("laz", name, f.read())
-    with open(os.path.join(DATA, "point10.las.laz"), "rb") as f:
+class ArithEncoder:
+    """LASzip's arithmetic encoder, the exact inverse of laz_arith.h's decoder (a port of
+    tests/tools/laz_tile.c's), for values coded with fresh models only: each model here codes
+    one symbol, so no model is ever updated."""
+    MIN = 0x01000000
+
+    def __init__(self):
+        self.base, self.length, self.out = 0, 0xFFFFFFFF, bytearray()
+
+    def _carry(self):
+        i = len(self.out)
+        while i > 0 and self.out[i - 1] == 0xFF:
+            i -= 1
+            self.out[i] = 0
+        if i > 0:
+            self.out[i - 1] += 1
+
+    def _renorm(self):
+        while self.length < self.MIN:
+            self.out.append(self.base >> 24)
+            self.base = (self.base << 8) & 0xFFFFFFFF
+            self.length = (self.length << 8) & 0xFFFFFFFF
+
+    def _narrow(self, x, y):
+        b = self.base
+        self.base = (self.base + x) & 0xFFFFFFFF
+        self.length = y - x
+        if self.base < b:
+            self._carry()
+        self._renorm()
+
+    def symbol(self, n, sym):
+        """sym of a fresh model of n symbols: counts 1, distribution (2^31 / n) k >> 16."""
+        dist = [(((0x80000000 // n) * k) & 0xFFFFFFFF) >> 16 for k in range(n + 1)]
+        top, l = self.length, self.length >> 15
+        self._narrow(dist[sym] * l, top if sym == n - 1 else dist[sym + 1] * l)
+
+    def bit(self, b):
+        """b of a fresh bit model (probability of 0: 2^12 of 2^13)."""
+        x = (1 << 12) * (self.length >> 13)
+        if b == 0:
+            self.length = x
+            self._renorm()
+        else:
+            self._narrow(x, self.length)
+
+    def raw(self, v, bits):
+        if bits > 19:
+            self.raw(v & 0xFFFF, 16)
+            v, bits = v >> 16, bits - 16
+        l = self.length >> bits
+        self._narrow(v * l, v * l + l)
+
+    def integer(self, pred, real):
+        """real against pred through a fresh 32-bit integer compressor (bits_high 8)."""
+        corr = (real - pred) & 0xFFFFFFFF
+        corr = corr - (1 << 32) if corr >= 1 << 31 else corr
+        mag = corr - 1 if corr > 0 else -corr
+        k = mag.bit_length()
+        self.symbol(33, k)
+        if k == 0:
+            self.bit(corr)
+        elif k < 32:
+            c = (corr - 1 if corr > 0 else corr + (1 << k) - 1) & 0xFFFFFFFF
+            if k <= 8:
+                self.symbol(1 << k, c)
+            else:
+                self.symbol(256, c >> (k - 8))
+                self.raw(c & ((1 << (k - 8)) - 1), k - 8)
+
+    def done(self):
+        b = self.base
+        if self.length > 2 * self.MIN:
+            self.base, self.length = (self.base + self.MIN) & 0xFFFFFFFF, self.MIN >> 1
+        else:
+            self.base, self.length = (self.base + (self.MIN >> 1)) & 0xFFFFFFFF, self.MIN >> 9
+        if self.base < b:
+            self._carry()
+        self._renorm()
+        return bytes(self.out) + bytes(4)
+
+
+def laz_small(name, npts):
+    """A one-chunk pointwise LAS 1.2 LAZ file of tests/data cut to its first npts points: the
+    header's count, the chunk's first bytes (those points take fewer than three times their
+    share of the chunk, plus slack) and a new chunk table (fixed chunk size: only the chunk's
+    byte size is coded). A few hundred bytes of chunk instead of 10-30 KiB: the fuzzer
+    decodes far fewer points per input and mutates bytes that are read."""
+    with open(os.path.join(DATA, name), "rb") as f:
         b = bytearray(f.read())
+    data_off = struct.unpack_from("<I", b, 96)[0]
+    rec_len = struct.unpack_from("<H", b, 105)[0]
+    count = struct.unpack_from("<I", b, 107)[0]
+    table = struct.unpack_from("<Q", b, data_off)[0]
+    chunk = b[data_off + 8:table]
+    keep = min(len(chunk), rec_len + 3 * len(chunk) * npts // count + 64)
+    e = ArithEncoder()
+    e.integer(0, keep)
+    out = b[:data_off] + struct.pack("<Q", data_off + 8 + keep) + chunk[:keep]
+    out += struct.pack("<II", 0, 1) + e.done()
+    struct.pack_into("<I", out, 107, npts)
+    struct.pack_into("<5I", out, 111, npts, 0, 0, 0, 0)
+    return bytes(out)
+
+
+def laz():
+    """LAZ files of tests/data cut to a few dozen points (laz_small), and broken ones."""
+    for name, n in [("point10.las.laz", 40), ("point-time.las.laz", 30),
+                    ("point-color.las.laz", 30), ("point-color-time.las.laz", 25),
+                    ("extrabytes.laz", 20)]:
+        put("laz", name, laz_small(name, n))
+    b = bytearray(laz_small("point10.las.laz", 40))
     put("laz", "bad_cut_in_chunk.laz", bytes(b[:len(b) // 2]))
     w = bytearray(b)
     w[104] = 0x84  # waveform format 4
