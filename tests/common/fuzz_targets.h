@@ -83,9 +83,10 @@ int fuzz_parse_msg(const proto_msg *m);
 
 /* fuzz_one_copclevels: byte 0's low 3 bits are a level L, the rest a COPC file (a memfd)
  * read by pc_read_copc_levels(L) (io_copc.c), with the readers' checks (fuzz_one_las). When it
- * reads n points of levels 0..L' (its format string says L' <= L), pc_read_copc_budget(n)
- * must keep levels 0..L' and the same points in the same order, and pc_read_copc_budget(n - 1)
- * a shallower level and fewer points (or, where L' is the only level read, the same). Returns
+ * reads n points of levels 0..L' (its format string says L' <= L) and the whole hierarchy
+ * reads too (levels 0..24, what the budget reader walks), pc_read_copc_budget(n) must keep
+ * levels 0..L' and the same points in the same order, and pc_read_copc_budget(n - 1) a
+ * shallower level and fewer points (or, where L' is the only level read, the same). Returns
  * pc_read_copc_levels' or pc_finalize's code. */
 int fuzz_one_copclevels(const uint8_t *data, size_t len);
 

@@ -491,14 +491,13 @@ def copc():
 
 
 def copc_from_laz(name, pages):
-    """A small COPC file made from a one-chunk pointwise LAZ file of tests/data: a "copc" info
-    VLR (record 1) put before its VLRs and hierarchy pages appended at its end. The readers
-    take a node's chunk from the hierarchy alone, so every node entry may point at the one
-    chunk (a pointwise chunk decodes its first k points as a chunk of k). pages(off, size,
-    count, root_off) gives the root page and the pages after it for that chunk (off, size
-    bytes, count points) with the root page at root_off."""
-    with open(os.path.join(DATA, name), "rb") as f:
-        b = bytearray(f.read())
+    """A small COPC file made from a LAZ file of tests/data cut to 40 points (laz_small): a
+    "copc" info VLR (record 1) put before its VLRs and hierarchy pages appended at its end.
+    The readers take a node's chunk from the hierarchy alone, so every node entry may point at
+    the one chunk (a pointwise chunk decodes its first k points as a chunk of k). pages(off,
+    size, count, root_off) gives the root page and the pages after it for that chunk (off,
+    size bytes, count points) with the root page at root_off."""
+    b = bytearray(laz_small(name, 40))
     hsize = struct.unpack_from("<H", b, 94)[0]
     data_off, nvlr = struct.unpack_from("<II", b, 96)
     count = struct.unpack_from("<I", b, 107)[0]
@@ -523,20 +522,19 @@ def copclevels():
         return lambda o, n, c, r: (copc_entry(level, 0, 0, 0, o, n, count_of(c)), b"")
 
     put_l("root_only_p10", 2, copc_from_laz("point10.las.laz", one(0, lambda c: c)))
-    # levels 0, 1, 2 of 100, 300 and 1065 points (of the one chunk)
+    # levels 0, 1, 2 of 10, 25 and 40 points (of the one chunk)
     f = copc_from_laz("point10.las.laz", lambda o, n, c, r: (
-        copc_entry(0, 0, 0, 0, o, n, 100) + copc_entry(1, 1, 0, 1, o, n, 300)
+        copc_entry(0, 0, 0, 0, o, n, 10) + copc_entry(1, 1, 0, 1, o, n, 25)
         + copc_entry(2, 3, 1, 2, o, n, c), b""))
     put_l("three_levels_p10", 1, f)
     put_l("three_levels_p10_all", 7, f)
     # the root page (3 entries) links to a child page holding a level-2 node; an empty node
     put_l("two_pages_rgb", 3, copc_from_laz("point-color.las.laz", lambda o, n, c, r: (
-        copc_entry(0, 0, 0, 0, o, n, 50) + copc_entry(1, 0, 1, 0, 0, 0, 0)
+        copc_entry(0, 0, 0, 0, o, n, 15) + copc_entry(1, 0, 1, 0, 0, 0, 0)
         + copc_entry(1, 1, 1, 1, r + 96, 32, -1), copc_entry(2, 2, 3, 2, o, n, c))))
     # bad: no copc VLR; a node of more points than its chunk holds; no node at level 0
-    with open(os.path.join(DATA, "point10.las.laz"), "rb") as fh:
-        put_l("bad_not_copc", 3, fh.read())
-    put_l("bad_count_over_chunk", 0, copc_from_laz("point10.las.laz", one(0, lambda c: c + 5)))
+    put_l("bad_not_copc", 3, laz_small("point10.las.laz", 40))
+    put_l("bad_count_over_chunk", 0, copc_from_laz("point10.las.laz", one(0, lambda c: 50 * c)))
     put_l("bad_nothing_at_level_0", 0, copc_from_laz("point10.las.laz", one(1, lambda c: c)))
 
 
