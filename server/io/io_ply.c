@@ -804,7 +804,6 @@ static int ply_plan(void *arg)
     pc_raw raw = {0}; /* plan_vertex sets only its attrs and scalar name */
     rc = plan_vertex(&c, h, &h->elems[0], j->slot, &raw);
     if (rc < 0) return rc;
-    int have_alpha = rc;
     for (size_t k = 0; k < h->nelem; k++)
         if ((rc = bin_element(&c, h, &h->elems[k], NULL, NULL, 0)) < 0) return rc;
     pc_ply_stream *sp = j->sp;
@@ -815,7 +814,7 @@ static int ply_plan(void *arg)
     for (int i = 0; i < 7; i++) sp->off[i] = -1, sp->cscale[i] = 1.0;
     for (size_t k = 0, off = 0; k < h->elems[0].nprop; k++) {
         const ply_slot *sl = &j->slot[k];
-        if (sl->dst >= D_X && sl->dst <= D_A && (sl->dst != D_A || have_alpha)) {
+        if (sl->dst >= D_X && sl->dst <= D_A) { /* colours only where r, g and b all are */
             int i = sl->dst - D_X;
             sp->off[i] = (int)off;
             sp->type[i] = sl->type;
