@@ -594,6 +594,12 @@ def lodsrc():
           b"property float y\nproperty float z\nend_header\n" + bytes(12))
     with open(os.path.join(ROOT, "las", "las12_format3_rgb.las"), "rb") as f:
         put_s("bad_las_named_xyz.xyz", ".xyz", 0, f.read())
+    # the vertices whole, the faces after them cut short: pc_read_ply refuses the file
+    h = (b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
+         b"property float y\nproperty float z\nelement face 2\n"
+         b"property list uchar int vertex_indices\nend_header\n")
+    h += struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0) + struct.pack("<B3i", 3, 0, 1, 2) + b"\x03"
+    put_s("bad_ply_faces_cut.ply", ".ply", 0, h)
     put_s("bad_ply_count_over_file.ply", ".ply", 0,
           b"ply\nformat binary_little_endian 1.0\nelement vertex 9\nproperty float x\n"
           b"property float y\nproperty float z\nend_header\n" + bytes(12 * 3))
