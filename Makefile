@@ -8,6 +8,7 @@
 #   make run        start the daemon on a bundled scan and render an orbit into ./out/
 #                   (RUN_ARGS=--force renders frames that exist again)
 #   make fuzz       libFuzzer targets for the protocol and every parser (FUZZ_SECONDS=60 each)
+#   make fuzz-smoke builds every fuzz target and runs each for FUZZ_SMOKE_SECONDS (4; CI)
 #   make install    PREFIX=/usr/local DESTDIR= (runs ldconfig when installing as root)
 #
 # Every dependency comes through pkg-config; when a check fails, deploy/deps.sh installs the
@@ -205,10 +206,13 @@ ifneq ($(MPICC),)
 $(eval $(call MPI_FLAVOUR,$(BUILD),))
 $(eval $(call MPI_FLAVOUR,$(BUILD)/asan,$(ASAN_FLAGS)))
 endif
-# test_mpi also tests the parts of server/mpi that need no MPI (the parts' order, "over")
-MPI_PLAIN_SRC := server/mpi/boxorder.c server/mpi/over.c
+# test_mpi also tests the parts of server/mpi that need no MPI (the parts' order, "over", the
+# ranks' records); test_fuzz_regress replays the records' fuzz target
+MPI_PLAIN_SRC := server/mpi/boxorder.c server/mpi/over.c server/mpi/mr_msg.c
 $(BUILD)/tests/test_mpi: $(call obj,$(BUILD),$(MPI_PLAIN_SRC))
 $(BUILD)/asan/tests/test_mpi: $(call obj,$(BUILD)/asan,$(MPI_PLAIN_SRC))
+$(BUILD)/tests/test_fuzz_regress: $(call obj,$(BUILD),server/mpi/mr_msg.c)
+$(BUILD)/asan/tests/test_fuzz_regress: $(call obj,$(BUILD)/asan,server/mpi/mr_msg.c)
 
 TESTS       := $(patsubst tests/%.c,$(BUILD)/tests/%,$(TEST_SRC))
 ASAN_TESTS  := $(patsubst tests/%.c,$(BUILD)/asan/tests/%,$(TEST_SRC))
@@ -230,7 +234,7 @@ $(BUILD)/gen/page_gen.c $(BUILD)/gen/page_gen.h &: $(BUILD)/embed_shaders $(WEB)
 	@mkdir -p $(BUILD)/gen
 	$(BUILD)/embed_shaders --prefix page $(BUILD)/gen/page_gen $(WEB)
 
-.PHONY: all test asan bench fuzz run install clean
+.PHONY: all test asan bench fuzz fuzz-smoke run install clean
 all: $(BUILD)/bin/splatd $(BUILD)/bin/splat $(BUILD)/bin/splat-view $(BUILD)/libsplatclient.a $(BUILD)/libsplatclient.so $(TOOLS) \
      $(MPI_BIN)
 
@@ -268,6 +272,12 @@ bench: all $(BENCHES)
 
 fuzz:
 	@sh tests/fuzz/run.sh $(FUZZ_SECONDS)
+
+# CI: every fuzz target must compile, link and survive a few seconds on its corpus (so that
+# the fuzzers cannot rot unnoticed); two at a time.
+FUZZ_SMOKE_SECONDS ?= 4
+fuzz-smoke: $(BUILD)/gen/shaders_gen.c $(BUILD)/gen/page_gen.c
+	@FUZZ_JOBS=$${FUZZ_JOBS:-2} sh tests/fuzz/run.sh $(FUZZ_SMOKE_SECONDS)
 
 # make run RUN_ARGS=--force renders the demo's frames again (extra arguments go to `splat path`).
 run: all

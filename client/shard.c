@@ -1,6 +1,7 @@
 /* shard.c — the frames of a camera path one farm worker renders (see shard.h). */
 #include "shard.h"
 
+#include <ctype.h>
 #include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -8,10 +9,11 @@
 
 enum { SHARD_MAX = 1000000 };
 
-/* parse_num: a whole decimal number in [lo, hi], nothing else. 0 or -1. */
+/* parse_num: a whole decimal number in [lo, hi], nothing else (digits only: strtol alone would
+ * take leading white space and a sign). 0 or -1. */
 static int parse_num(const char *s, long lo, long hi, long *out)
 {
-    if (!s || !*s || *s == '+' || *s == '-' || *s == ' ') return -1;
+    if (!s || !isdigit((unsigned char)*s)) return -1;
     char *end;
     errno = 0;
     long v = strtol(s, &end, 10);

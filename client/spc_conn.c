@@ -207,7 +207,8 @@ int spc__wait(spc_client *c, uint32_t seq, unsigned type, proto_msg *m, spc_prog
 
 int spc__read_token(const char *path, uint8_t *buf, size_t cap, char *err, size_t errlen)
 {
-    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    /* O_NONBLOCK: a FIFO in the token's place must not block; it is refused below */
+    int fd = open(path, O_RDONLY | O_CLOEXEC | O_NONBLOCK);
     if (fd < 0) {
         snprintf(err, errlen, "cannot open token file %s: %s", path, strerror(errno));
         return SPC_E_TOKEN;
@@ -223,28 +224,38 @@ int spc__read_token(const char *path, uint8_t *buf, size_t cap, char *err, size_
                  "accessible to group or others (chmod 600 %s)", path,
                  (unsigned)(st.st_mode & 07777), path);
     } else {
+        /* the daemon's rule (auth.h): at most cap + 2 bytes (a token and its line end), less
+         * the trailing CR and LF; the bytes past cap go to tail */
+        uint8_t tail[3];
         size_t n = 0;
-        for (;;) {
-            if (n == cap) {
-                snprintf(err, errlen, "token file %s is longer than %zu bytes", path, cap);
-                n = 0;
-                break;
-            }
-            ssize_t k = read(fd, buf + n, cap - n);
+        int ok = 1;
+        while (n < cap + sizeof tail) {
+            ssize_t k = n < cap ? read(fd, buf + n, cap - n)
+                                : read(fd, tail + (n - cap), cap + sizeof tail - n);
             if (k < 0 && errno == EINTR) continue;
             if (k < 0) {
                 snprintf(err, errlen, "cannot read token file %s: %s", path, strerror(errno));
-                n = 0;
+                ok = 0;
                 break;
             }
-            if (k == 0) {
-                while (n > 0 && (buf[n - 1] == '\n' || buf[n - 1] == '\r')) n--;
-                if (n == 0) snprintf(err, errlen, "token file %s is empty", path);
-                break;
-            }
+            if (k == 0) break;
             n += (size_t)k;
         }
-        if (n > 0) rc = (int)n;
+        if (ok && n == cap + sizeof tail) {
+            snprintf(err, errlen, "token file %s holds more than %zu bytes (a token of at most "
+                     "%zu and its line end)", path, cap + 2, cap);
+            ok = 0;
+        }
+#define TOKEN_BYTE(i) ((i) < cap ? buf[i] : tail[(i) - cap])
+        while (ok && n > 0 && (TOKEN_BYTE(n - 1) == '\n' || TOKEN_BYTE(n - 1) == '\r')) n--;
+#undef TOKEN_BYTE
+        if (ok && n > cap)
+            snprintf(err, errlen, "token file %s: the token is longer than %zu bytes", path, cap);
+        else if (ok && n == 0)
+            snprintf(err, errlen, "token file %s is empty", path);
+        else if (ok)
+            rc = (int)n;
+        memset(tail, 0, sizeof tail);
     }
     close(fd);
     return rc;

@@ -95,6 +95,8 @@ int spc__tls_pending(const spc_client *c);
 /* spc__tls_end: frees the TLS state (graceful: sends close_notify first, best effort). */
 void spc__tls_end(spc_client *c, int graceful);
 
-/* spc__read_token: reads a token file (refusing group/other permissions). Returns the token
- * length (> 0) written to buf (cap bytes), or SPC_E_TOKEN with err filled. */
+/* spc__read_token: reads a token file by the daemon's rule (auth_token_load, auth.h): a
+ * regular file that group and others cannot use, its trailing CR and LF characters not part of
+ * the token, which must hold 1 to cap bytes; a file over cap + 2 bytes is refused. Returns the
+ * token length (> 0) written to buf (cap bytes), or SPC_E_TOKEN with err filled. */
 int spc__read_token(const char *path, uint8_t *buf, size_t cap, char *err, size_t errlen);

@@ -1,6 +1,6 @@
 #!/bin/sh
 # deps.sh — the Debian packages splatd needs to build, test and run (`make`, `make test`,
-# `make run`), and nothing else.
+# `make fuzz-smoke`, `make run`), and nothing else.
 #
 #   sh deploy/deps.sh           install what is missing (idempotent: apt-get is called only
 #                               when a package is absent)
@@ -42,6 +42,12 @@ file:/usr/lib/python3/dist-packages/yaml/__init__.py=python3-yaml
 tool:mpicc=libopenmpi-dev
 tool:mpirun=openmpi-bin
 file:/usr/bin/time=time
+"
+# CI's fuzz smoke run (make fuzz-smoke, tests/fuzz/run.sh): clang 14 and its libFuzzer and
+# sanitizer runtimes.
+NEEDS="$NEEDS
+tool:clang-14=clang-14
+file:/usr/lib/llvm-14/lib/clang/14.0.6/lib/linux/libclang_rt.fuzzer-${arch%%-*}.a=libclang-rt-14-dev
 "
 # Tests only: the browser viewer's end-to-end test (tests/test_browser.c) drives headless
 # Chromium through chromedriver; it skips, naming the package, where they are absent.

@@ -334,12 +334,32 @@ static void test_token_file(void **state)
     chmod(path, 0600);
     assert_int_equal(spc__read_token(path, buf, sizeof buf, err, sizeof err), SPC_E_TOKEN);
     assert_non_null(strstr(err, "empty"));
+    /* the daemon's limits (auth_token_load), at each boundary: a token of exactly the room,
+     * with its line end too; one byte more; a file over the room and two bytes */
     char big[100];
     memset(big, 'k', sizeof big);
-    tu_write_file(path, big, sizeof big);
+    tu_write_file(path, big, sizeof buf);
+    assert_int_equal(spc__read_token(path, buf, sizeof buf, err, sizeof err), 64);
+    memcpy(big + 64, "\r\n", 2);
+    tu_write_file(path, big, 66);
+    assert_int_equal(spc__read_token(path, buf, sizeof buf, err, sizeof err), 64);
+    assert_memory_equal(buf, big, 64);
+    big[64] = 'k';
+    tu_write_file(path, big, 65);
     assert_int_equal(spc__read_token(path, buf, sizeof buf, err, sizeof err), SPC_E_TOKEN);
     assert_non_null(strstr(err, "longer than 64"));
+    memcpy(big + 64, "\n\n\n", 3);
+    tu_write_file(path, big, 67);
+    assert_int_equal(spc__read_token(path, buf, sizeof buf, err, sizeof err), SPC_E_TOKEN);
+    assert_non_null(strstr(err, "more than 66 bytes"));
+    tu_write_file(path, big, sizeof big);
+    assert_int_equal(spc__read_token(path, buf, sizeof buf, err, sizeof err), SPC_E_TOKEN);
     assert_int_equal(spc__read_token(dir, buf, sizeof buf, err, sizeof err), SPC_E_TOKEN);
+    /* a FIFO without a writer is refused at once, not waited on */
+    snprintf(path, sizeof path, "%s/fifo", dir);
+    assert_int_equal(mkfifo(path, 0600), 0);
+    assert_int_equal(spc__read_token(path, buf, sizeof buf, err, sizeof err), SPC_E_TOKEN);
+    assert_non_null(strstr(err, "not a regular file"));
     snprintf(path, sizeof path, "%s/none", dir);
     assert_int_equal(spc__read_token(path, buf, sizeof buf, err, sizeof err), SPC_E_TOKEN);
     tu_rm_rf(dir);

@@ -106,7 +106,8 @@ static void test_shard_parse_and_env(void **state)
     assert_int_equal(i, 2);
     assert_int_equal(n, 5);
     static const char *const bad[] = {"5/5", "-1/3", "1/0", "1", "/3", "1/", "a/3", "1/3x",
-                                      "+1/3", "1/1000001", " 1/3"};
+                                      "+1/3", "1/1000001", " 1/3", "\t1/3", "1/\n3",
+                                      "1/ 3"};
     for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++)
         if (shard_parse(bad[k], &i, &n) == 0) fail_msg("'%s' was taken", bad[k]);
 
@@ -146,6 +147,13 @@ static void test_shard_parse_and_env(void **state)
     shard_env e5 = {.slurm_id = "x1", .slurm_count = "4"};
     assert_int_equal(shard_resolve(&e5, &s, err, sizeof err), -1);
     assert_non_null(strstr(err, "SLURM_ARRAY_TASK_ID"));
+    /* digits only, in the environment too: strtol alone takes leading white space */
+    shard_env e5b = {.job_index = "\n2", .shard_count = "4"};
+    assert_int_equal(shard_resolve(&e5b, &s, err, sizeof err), -1);
+    assert_non_null(strstr(err, "JOB_COMPLETION_INDEX"));
+    e5b.job_index = "2", e5b.shard_count = "\t4";
+    assert_int_equal(shard_resolve(&e5b, &s, err, sizeof err), -1);
+    assert_non_null(strstr(err, "SPLAT_SHARD_COUNT"));
     shard_env e6 = {.shards_flag = "3"};
     assert_int_equal(shard_resolve(&e6, &s, err, sizeof err), -1);
 

@@ -28,7 +28,9 @@
 
 static const char *const targets[] = {"proto", "ply", "pcd", "las", "xyz", "lzf", "params",
                                       "ws", "laz", "copc", "cache", "frame", "dispatch",
-                                      "e57", "e57xml", "e57bits", "splod"};
+                                      "e57", "e57xml", "e57bits", "splod",
+                                      "copclevels", "lodsrc", "campath", "shard", "token",
+                                      "mpimsg"};
 
 /* find: fuzz_target_find, and the dispatch target, which only binaries linking the whole
  * server have (this one does). */
@@ -176,6 +178,12 @@ static void test_corpus_dispatch(void **state) { (void)state; run_corpus("dispat
 static void test_corpus_e57(void **state) { (void)state; run_corpus("e57"); }
 static void test_corpus_e57xml(void **state) { (void)state; run_corpus("e57xml"); }
 static void test_corpus_e57bits(void **state) { (void)state; run_corpus("e57bits"); }
+static void test_corpus_copclevels(void **state) { (void)state; run_corpus("copclevels"); }
+static void test_corpus_lodsrc(void **state) { (void)state; run_corpus("lodsrc"); }
+static void test_corpus_campath(void **state) { (void)state; run_corpus("campath"); }
+static void test_corpus_shard(void **state) { (void)state; run_corpus("shard"); }
+static void test_corpus_token(void **state) { (void)state; run_corpus("token"); }
+static void test_corpus_mpimsg(void **state) { (void)state; run_corpus("mpimsg"); }
 
 /* Every saved crash input, through its target: must return (any code) without crashing. */
 static void test_crashes(void **state)
@@ -246,6 +254,9 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_corpus_e57),    cmocka_unit_test(test_corpus_e57xml),
         cmocka_unit_test(test_corpus_e57bits),
         cmocka_unit_test(test_corpus_splod),
+        cmocka_unit_test(test_corpus_copclevels), cmocka_unit_test(test_corpus_lodsrc),
+        cmocka_unit_test(test_corpus_campath), cmocka_unit_test(test_corpus_shard),
+        cmocka_unit_test(test_corpus_token),  cmocka_unit_test(test_corpus_mpimsg),
         cmocka_unit_test(test_crashes),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -39,6 +39,8 @@
 #include "partition.h"
 #include "cloud.h"
 #include "morton.h"
+#include "mr_msg.h"
+#include "proto.h"
 #include "prep.h"
 #include "testutil.h"
 
@@ -859,6 +861,106 @@ static void test_over(void **state)
     assert_int_equal(sd_float_to_half(ldexpf(3.0f, -25)), 2);                /* 1.5 -> 2 */
 }
 
+/* The records rank 0 sends the other ranks (mr_msg.h): what they carry arrives whole, every
+ * parameter and the camera bit for bit, and each field is checked at its exact limits. */
+static void test_records(void **state)
+{
+    (void)state;
+    enum { N = MR_CMD_BYTES };
+    static uint8_t rec[N];
+    sd_err e = {0};
+    mr_cmd c = {.op = MR_RENDER, .key = 7, .want_float = 1,
+                .cam = {{1.5, -2, 3e9}, {0, 0, 0}, {1, 0, 0}, 33.25f, 0.5f, 900.0f, 640, 1}};
+    sp_params_defaults(&c.params);
+    /* every parameter away from its default: what a rank renders with is rank 0's */
+    for (int id = 0; id < SP_PARAM_COUNT; id++) {
+        proto_param_rec r;
+        proto_param_rec_from(&c.params, id, &r);
+        const sp_param_info *in = &sp_param_table[id];
+        switch (r.type) {
+        case SP_T_ENUM: r.u.e = r.u.e ? 0 : 1; break;
+        case SP_T_INT: r.u.i = r.u.i != (int64_t)in->max ? (int64_t)in->max : (int64_t)in->min; break;
+        case SP_T_FLOAT: r.u.f = r.u.f != (float)in->max ? (float)in->max : (float)in->min; break;
+        case SP_T_VEC3: for (int k = 0; k < 3; k++) r.u.v[k] = 0.25f * (float)(k + 1); break;
+        }
+        proto_error pe = {0};
+        if (proto_param_apply(&r, &c.params, NULL, &pe) != 0) fail_msg("%s", pe.msg);
+    }
+    assert_int_equal(mr_cmd_encode(&c, rec, &e), 0);
+    mr_cmd d;
+    if (mr_cmd_decode(rec, N, &d, &e) != 0) fail_msg("%s", e.msg);
+    assert_int_equal(d.op, MR_RENDER);
+    assert_int_equal(d.key, 7);
+    assert_int_equal(d.want_float, 1);
+    assert_memory_equal(&d.cam, &c.cam, sizeof d.cam);
+    for (int id = 0; id < SP_PARAM_COUNT; id++) {
+        proto_param_rec a, b;
+        proto_param_rec_from(&c.params, id, &a);
+        proto_param_rec_from(&d.params, id, &b);
+        if (memcmp(&a, &b, sizeof a)) fail_msg("parameter %s differs", sp_param_table[id].name);
+    }
+    assert_memory_equal(&d.params, &c.params, sizeof d.params);
+    /* the record's size, exactly */
+    assert_int_equal(mr_cmd_decode(rec, N - 1, &d, &e), SD_EFORMAT);
+    /* want_float 0 or 1 only; a width the wire refuses (0); a padding byte set */
+    rec[8] = 2;
+    assert_int_equal(mr_cmd_decode(rec, N, &d, &e), SD_EFORMAT);
+    assert_non_null(strstr(e.msg, "want_float 2"));
+    rec[8] = 1;
+    rec[N - 1] = 1;
+    assert_int_equal(mr_cmd_decode(rec, N, &d, &e), SD_EFORMAT);
+    assert_non_null(strstr(e.msg, "byte 8191"));
+    c.cam.width = 0;
+    assert_int_not_equal(mr_cmd_encode(&c, rec, &e) == 0 && mr_cmd_decode(rec, N, &d, &e) == 0, 1);
+    /* LOAD: a path of PATH_MAX - 1 bytes travels, one of PATH_MAX does not */
+    mr_cmd l = {.op = MR_LOAD, .key = 1};
+    memset(l.path, 'p', PATH_MAX - 1);
+    assert_int_equal(mr_cmd_encode(&l, rec, &e), 0);
+    assert_int_equal(mr_cmd_decode(rec, N, &d, &e), 0);
+    assert_int_equal(strlen(d.path), PATH_MAX - 1);
+    rec[12] = (uint8_t)PATH_MAX, rec[13] = (uint8_t)(PATH_MAX >> 8);
+    memset(rec + 14 + PATH_MAX - 1, 'p', 1);
+    memset(rec + 14 + PATH_MAX, 0, 8);
+    assert_int_equal(mr_cmd_decode(rec, N, &d, &e), SD_EFORMAT);
+    assert_non_null(strstr(e.msg, "not shorter than PATH_MAX"));
+    /* a length whose field ends exactly at the record's end is read; one byte more is not */
+    memset(rec, 0, N);
+    rec[0] = MR_LOAD, rec[4] = 1;
+    size_t pl = N - 14 - 8;
+    rec[12] = (uint8_t)pl, rec[13] = (uint8_t)(pl >> 8);
+    assert_int_equal(mr_cmd_decode(rec, N, &d, &e), SD_EFORMAT);
+    assert_non_null(strstr(e.msg, "not shorter than PATH_MAX")); /* read to the end: fits */
+    pl++;
+    rec[12] = (uint8_t)pl, rec[13] = (uint8_t)(pl >> 8);
+    assert_int_equal(mr_cmd_decode(rec, N, &d, &e), SD_EFORMAT);
+    assert_non_null(strstr(e.msg, "runs past"));
+    /* op and key */
+    memset(rec, 0, N);
+    rec[0] = 4;
+    assert_int_equal(mr_cmd_decode(rec, N, &d, &e), SD_EFORMAT);
+    assert_non_null(strstr(e.msg, "unknown MPI command 4"));
+    rec[0] = MR_QUIT;
+    assert_int_equal(mr_cmd_decode(rec, N, &d, &e), 0);
+    rec[0] = MR_LOAD, rec[12] = 1, rec[14] = 'a';
+    assert_int_equal(mr_cmd_decode(rec, N, &d, &e), SD_EFORMAT);
+    assert_non_null(strstr(e.msg, "key 0"));
+    /* a failure record: its code when an SD_E* code, else SD_EIO; its message */
+    mr_fail f = {.code = SD_ENOTFOUND};
+    snprintf(f.msg, sizeof f.msg, "rank 2 of 3: gone");
+    assert_int_equal(mr_fail_decode(&f, sizeof f, &e), SD_ENOTFOUND);
+    assert_string_equal(e.msg, "rank 2 of 3: gone");
+    f.code = SD_ENOTFOUND - 1;
+    assert_int_equal(mr_fail_decode(&f, sizeof f, &e), SD_EIO);
+    f.code = 0;
+    assert_int_equal(mr_fail_decode(&f, sizeof f, &e), SD_EIO);
+    f.code = SD_EIO;
+    memset(f.msg, 'm', sizeof f.msg); /* no terminator */
+    assert_int_equal(mr_fail_decode(&f, sizeof f, &e), SD_EIO);
+    assert_int_equal(strlen(e.msg), sizeof e.msg - 1);
+    assert_int_equal(mr_fail_decode(&f, sizeof f - 1, &e), SD_EIO);
+    assert_non_null(strstr(e.msg, "cut short"));
+}
+
 int main(int argc, char **argv)
 {
     tu_args(argc, argv);
@@ -868,6 +970,7 @@ int main(int argc, char **argv)
         cmocka_unit_test(test_partition),
         cmocka_unit_test(test_box_order),
         cmocka_unit_test(test_over),
+        cmocka_unit_test(test_records),
         cmocka_unit_test_setup_teardown(test_points_identical_1_to_4, setup, teardown),
         cmocka_unit_test_setup_teardown(test_rank_dies, setup, teardown),
     };

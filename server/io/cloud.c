@@ -140,7 +140,7 @@ int pc_finalize(pc_raw *raw, pc_cloud *out, const char *path, sd_err *err)
     return 0;
 }
 
-static const char *ext_of(const char *name)
+const char *pc_ext(const char *name)
 {
     const char *slash = strrchr(name, '/');
     const char *dot = strrchr(slash ? slash : name, '.');
@@ -151,7 +151,7 @@ typedef int (*reader_fn)(const char *, pc_raw *, sd_err *);
 
 static reader_fn reader_for(const char *path)
 {
-    const char *e = ext_of(path);
+    const char *e = pc_ext(path);
     if (!strcasecmp(e, "ply")) return pc_read_ply;
     if (!strcasecmp(e, "pcd")) return pc_read_pcd;
     if (!strcasecmp(e, "las")) return pc_read_las;
@@ -182,7 +182,7 @@ int pc_load_threads(const char *path, int threads, pc_cloud *out, sd_err *err)
         return sd_errf(err, SD_EUNSUP,
                        "%s: unknown extension '.%s' (supported: ply, pcd, las, laz, copc.laz, "
                        "xyz, pts, txt, e57)",
-                       path, ext_of(path));
+                       path, pc_ext(path));
     pc_raw raw = {0};
     /* the LAZ reader decodes chunks on threads; every other reader is single-threaded */
     int rc = rd == pc_read_laz ? pc_read_laz_threads(path, &raw, threads, err)

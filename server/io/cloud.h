@@ -135,3 +135,6 @@ int pc_load_threads(const char *path, int threads, pc_cloud *out, sd_err *err);
 
 /* pc_supported_ext: 1 when the file name has an extension pc_load reads. */
 int pc_supported_ext(const char *name);
+/* pc_ext: the extension pc_load picks the reader by: what follows the last '.' of the file
+ * name ("laz" for x.copc.laz), "" when there is none. */
+const char *pc_ext(const char *name);

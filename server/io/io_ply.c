@@ -9,6 +9,7 @@
  * file cut short anywhere is reported. Nothing is reserved before the file is known to hold it. */
 #include "cloud.h"
 #include "io_text.h"
+#include "ply_stream.h"
 
 #include <float.h>
 #include <math.h>
@@ -742,13 +743,15 @@ static void normalise(pc_raw *raw)
     }
 }
 
-/* What the guarded part of pc_read_ply works on (pc__guarded: everything reachable here). */
+/* What the guarded part of pc_read_ply (raw) or pc_ply_stream_plan (sp) works on
+ * (pc__guarded: everything reachable here). */
 typedef struct ply_job {
     const char *path;
     const pc__file *f;
     ply_header *h;
     ply_slot *slot;
     pc_raw *raw;
+    pc_ply_stream *sp;
     sd_err *err;
 } ply_job;
 
@@ -785,19 +788,75 @@ static int ply_parse(void *arg)
     return 0;
 }
 
+/* ---------------------------------------------------------------- the streaming plan */
+
+/* ply_plan: pc_ply_stream_plan on the file mapped in j->f: the header, the vertex plan and
+ * every element's extent checked as ply_parse checks them, without decoding any value. */
+static int ply_plan(void *arg)
+{
+    ply_job *j = arg;
+    ply_header *h = j->h;
+    ply_ctx c = {.path = j->path, .data = j->f->data, .size = j->f->size, .err = j->err};
+    int rc = parse_header(&c, h);
+    if (rc < 0) return rc;
+    size_t minrec, rec = h->nelem ? record_size(h, &h->elems[0], &minrec) : 0;
+    if (h->fmt != FMT_LE || !rec || strcmp(h->elems[0].name, "vertex")) return 0;
+    pc_raw raw = {0}; /* plan_vertex sets only its attrs and scalar name */
+    rc = plan_vertex(&c, h, &h->elems[0], j->slot, &raw);
+    if (rc < 0) return rc;
+    for (size_t k = 0; k < h->nelem; k++)
+        if ((rc = bin_element(&c, h, &h->elems[k], NULL, NULL, 0)) < 0) return rc;
+    pc_ply_stream *sp = j->sp;
+    memset(sp, 0, sizeof *sp);
+    sp->data_off = h->data_off;
+    sp->count = h->elems[0].count;
+    sp->rec = rec;
+    for (int i = 0; i < 7; i++) sp->off[i] = -1, sp->cscale[i] = 1.0;
+    for (size_t k = 0, off = 0; k < h->elems[0].nprop; k++) {
+        const ply_slot *sl = &j->slot[k];
+        if (sl->dst >= D_X && sl->dst <= D_A) { /* colours only where r, g and b all are */
+            int i = sl->dst - D_X;
+            sp->off[i] = (int)off;
+            sp->type[i] = sl->type;
+            sp->cscale[i] = sl->cscale;
+        }
+        off += type_size[h->props[h->elems[0].first_prop + k].type];
+    }
+    snprintf(sp->format, sizeof sp->format, "PLY %s %s", fmt_name[h->fmt], h->version);
+    return 1;
+}
+
+/* ply_run: maps path and runs fn (ply_parse or ply_plan) on it under pc__guarded, with j's
+ * header and slot table allocated for it. Returns fn's result or the mapping's error. */
+static int ply_run(const char *path, ply_job *j, int (*fn)(void *))
+{
+    pc__file f;
+    int rc = pc__file_open(path, &f, j->err);
+    if (rc < 0) return rc;
+    j->path = path;
+    j->f = &f;
+    j->h = calloc(1, sizeof *j->h);
+    j->slot = calloc(PLY_MAX_PROPS, sizeof *j->slot);
+    if (!j->h || !j->slot)
+        rc = sd_errf(j->err, SD_ENOMEM, "%s: out of memory for the PLY header", path);
+    else
+        rc = pc__guarded(&f, path, fn, j, j->err);
+    free(j->h);
+    free(j->slot);
+    pc__file_close(&f);
+    return rc;
+}
+
+int pc_ply_stream_plan(const char *path, pc_ply_stream *sp, sd_err *err)
+{
+    ply_job j = {.sp = sp, .err = err};
+    return ply_run(path, &j, ply_plan);
+}
+
 int pc_read_ply(const char *path, pc_raw *raw, sd_err *err)
 {
     if (!path || !raw) return sd_errf(err, SD_EINVAL, "pc_read_ply: NULL argument");
-    pc__file f;
-    int rc = pc__file_open(path, &f, err);
-    if (rc < 0) return rc;
-    ply_job j = {.path = path, .f = &f, .raw = raw, .err = err};
-    j.h = calloc(1, sizeof *j.h);
-    j.slot = calloc(PLY_MAX_PROPS, sizeof *j.slot);
-    if (!j.h || !j.slot) rc = sd_errf(err, SD_ENOMEM, "%s: out of memory for the PLY header", path);
-    else rc = pc__guarded(&f, path, ply_parse, &j, err);
-    free(j.h);
-    free(j.slot);
-    pc__file_close(&f);
+    ply_job j = {.raw = raw, .err = err};
+    int rc = ply_run(path, &j, ply_parse);
     return rc < 0 ? rc : 0;
 }

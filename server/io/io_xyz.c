@@ -376,7 +376,7 @@ int64_t pc_xyz_stream_next(pc_xyz_stream *s, double *xyz, uint8_t *rgba, size_t 
     int rc = pc__guarded(&s->f, s->path, xyz_lines, &j, err);
     if (rc < 0) return rc;
     size_t n = s->win.n;
-    memcpy(xyz, s->win.xyz, 3 * n * sizeof *xyz);
+    if (n) memcpy(xyz, s->win.xyz, 3 * n * sizeof *xyz); /* none read: win.xyz may be NULL */
     if (rgba) {
         for (size_t i = 0; i < n; i++) {
             if (s->has_rgb) colour8(s->x.col + 3 * i, s->scale, rgba + 4 * i);

@@ -1,6 +1,7 @@
 /* laz_arith.c — the arithmetic decoder, its models and the integer decompressor (laz_arith.h). */
 #include "laz_arith.h"
 
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -112,8 +113,68 @@ void laz__model_update(laz_model *m)
     m->until = m->cycle;
 }
 
+/* Fresh models (every count 1, then the first update) of n <= 256 symbols with a decoder
+ * table, built once per n and copied: every chunk starts its models fresh, pointwise LAZ up to
+ * 768 lazily made 256-symbol ones, and the integer decompressors dozens of 2..256-symbol ones,
+ * and building each (counts, distribution, table) was most of the decoding time of a small or
+ * noisy chunk. Made at their first use, kept for the process (reachable from fresh[]). */
+typedef struct fresh_model {
+    uint32_t total, cycle, until;
+    size_t bytes;                   /* of block: counts, distribution and table */
+    _Alignas(64) uint8_t block[];
+} fresh_model;
+static fresh_model *fresh[257];
+static pthread_mutex_t fresh_lock = PTHREAD_MUTEX_INITIALIZER;
+static int model_build(laz_model *m, uint32_t n, int tab);
+
+/* block_bytes: the block of a model of n <= 256 symbols with a table (model_build's layout). */
+static size_t block_bytes(uint32_t n)
+{
+    return sizeof(uint32_t) * n + sizeof(uint16_t) * (n + 1) + TABLE_SIZE + 17;
+}
+
+/* fresh_get: the fresh model of n symbols (1 <= n <= 256, with a table), or NULL when out of
+ * memory. */
+static const fresh_model *fresh_get(uint32_t n)
+{
+    pthread_mutex_lock(&fresh_lock);
+    fresh_model *f = fresh[n];
+    laz_model m = {0};
+    if (!f && model_build(&m, n, 1) == 0 && (f = malloc(sizeof *f + block_bytes(n)))) {
+        f->bytes = block_bytes(n);
+        memcpy(f->block, m.count, f->bytes);
+        f->total = m.total, f->cycle = m.cycle, f->until = m.until;
+        fresh[n] = f;
+    }
+    laz_model_free(&m);
+    pthread_mutex_unlock(&fresh_lock);
+    return f;
+}
+
 /* model_init: laz_model_init, with a decoder table whatever n when tab is set. */
 static int model_init(laz_model *m, uint32_t n, int tab)
+{
+    const fresh_model *f = n >= 1 && n <= 256 && (n > TABLE_MIN || tab) &&
+                           (!m->count || m->n == n) ? fresh_get(n) : NULL;
+    if (!f) return model_build(m, n, tab);
+    if (!m->count) {
+        void *blk = NULL;
+        if (posix_memalign(&blk, 64, f->bytes)) return -1;
+        m->count = blk;
+        m->dist = (uint16_t *)(m->count + n);
+        m->table = (uint8_t *)(m->dist + n + 1);
+        m->table16 = NULL;
+        m->n = n;
+        m->last = n - 1;
+    }
+    memcpy(m->count, f->block, f->bytes);
+    m->total = f->total, m->cycle = f->cycle, m->until = f->until;
+    return 0;
+}
+
+/* model_build: a model of n symbols, counts 1 and distribution computed (a decoder table
+ * whatever n when tab is set); m's block is allocated at its first use. */
+static int model_build(laz_model *m, uint32_t n, int tab)
 {
     if (!m->count) {
         uint32_t tsize = 0;

@@ -12,21 +12,11 @@
 #include "boxorder.h"
 #include "cache.h"
 #include "compose.h"
+#include "mr_msg.h"
 #include "over.h"
 #include "partition.h"
 
-enum { MR_LOAD = 1, MR_RENDER, MR_QUIT };
 enum { MR_MAX_CLOUDS = 256, MR_MAX_TIMES = 4096 };
-
-/* What rank 0 broadcasts: one fixed-size record (every rank runs the same binary). */
-typedef struct mr_cmd {
-    int32_t op;
-    uint32_t key;              /* the cloud: LOAD gives it, RENDER names it */
-    int32_t want_float;
-    rnd_camera cam;
-    sp_params params;
-    char path[PATH_MAX];
-} mr_cmd;
 
 typedef struct mr_cloud {
     uint32_t key;              /* 0: free */
@@ -196,7 +186,7 @@ static int agree(mr_ctx *m, int rc, sd_err *err)
     int mrc = allreduce(m, &mine, &worst, 1, MPI_2INT, MPI_MAXLOC);
     if (mrc != MPI_SUCCESS) return mpi_err(m, mrc, "the ranks could not agree", err);
     if (!worst.v) return 0;
-    struct { int code; char msg[sizeof err->msg]; } e = {0};
+    mr_fail e = {0};
     if (m->rank == worst.r) {
         e.code = rc;
         int l = snprintf(e.msg, sizeof e.msg, "rank %d of %d: ", m->rank, m->size);
@@ -205,8 +195,7 @@ static int agree(mr_ctx *m, int rc, sd_err *err)
     }
     if ((mrc = bcast(m, &e, (int)sizeof e, worst.r)) != MPI_SUCCESS)
         return mpi_err(m, mrc, "the ranks could not agree", err);
-    sd_errf(err, e.code ? e.code : SD_EIO, "%s", e.msg);
-    return e.code ? e.code : SD_EIO;
+    return mr_fail_decode(&e, sizeof e, err);
 }
 
 /* load: every rank's part of the cloud at path (full: the prepared cloud when this rank has it,
@@ -288,13 +277,15 @@ static int64_t hook_adopt(void *user, rnd_ctx *rnd, const char *path, pc_prepare
         free(p);
         return sd_errf(err, SD_ELIMIT, "path too long for the ranks: %.80s...", path);
     }
-    int mrc = m->broken ? MPI_ERR_OTHER : bcast(m, &c, (int)sizeof c, 0);
+    uint8_t rec[MR_CMD_BYTES];
+    int rc = mr_cmd_encode(&c, rec, err);
+    int mrc = rc < 0 || m->broken ? MPI_ERR_OTHER : bcast(m, rec, (int)sizeof rec, 0);
     if (mrc != MPI_SUCCESS) {
         pc_prepared_free(p);
         free(p);
-        return mpi_err(m, mrc, "loading the cloud", err);
+        return rc < 0 ? rc : mpi_err(m, mrc, "loading the cloud", err);
     }
-    int rc = load(m, &c, p, err);
+    rc = load(m, &c, p, err);
     free(p);
     return rc < 0 ? rc : (int64_t)c.key;
 }
@@ -604,7 +595,9 @@ static int hook_render(void *user, rnd_ctx *rnd, uint32_t key, const rnd_camera 
     if (rc < 0) return rc;
     mr_cmd c = {.op = MR_RENDER, .key = key, .want_float = want_float, .cam = *cam,
                 .params = *params};
-    int mrc = m->broken ? MPI_ERR_OTHER : bcast(m, &c, (int)sizeof c, 0);
+    uint8_t rec[MR_CMD_BYTES];
+    if ((rc = mr_cmd_encode(&c, rec, err)) < 0) return rc;
+    int mrc = m->broken ? MPI_ERR_OTHER : bcast(m, rec, (int)sizeof rec, 0);
     if (mrc != MPI_SUCCESS) return mpi_err(m, mrc, "starting the frame", err);
     return frame(m, &c, f, err);
 }
@@ -676,18 +669,22 @@ int mr_worker(mr_ctx *m)
     if (!m->rnd)
         fprintf(stderr, "splatd-mpi: rank %d: cannot start the renderer: %s\n", m->rank, err.msg);
     for (;;) {
-        mr_cmd c;
-        if (bcast(m, &c, (int)sizeof c, 0) != MPI_SUCCESS) break;
-        if (c.op == MR_QUIT) break;
+        uint8_t rec[MR_CMD_BYTES];
+        if (bcast(m, rec, (int)sizeof rec, 0) != MPI_SUCCESS) break;
         sd_err e = {0};
-        int rc = m->rnd ? 0 : sd_errf(&e, SD_EGL, "no renderer: %s", err.msg);
-        if (c.op == MR_LOAD) {
-            if (rc < 0) agree(m, rc, &e);
-            else load(m, &c, NULL, &e);
-        } else if (c.op == MR_RENDER) {
-            if (rc < 0) agree(m, rc, &e);
-            else frame(m, &c, &m->frame, &e);
+        mr_cmd c;
+        int rc = mr_cmd_decode(rec, sizeof rec, &c, &e);
+        if (rc < 0 && c.op != MR_LOAD && c.op != MR_RENDER) {
+            /* no step this rank knows to take part in: the job cannot go on */
+            fprintf(stderr, "splatd-mpi: rank %d: %s; stopping\n", m->rank, e.msg);
+            break;
         }
+        if (rc == 0 && c.op == MR_QUIT) break;
+        if (rc == 0 && !m->rnd) rc = sd_errf(&e, SD_EGL, "no renderer: %s", err.msg);
+        /* a LOAD or RENDER this rank cannot take: its error goes to rank 0 */
+        if (rc < 0) agree(m, rc, &e);
+        else if (c.op == MR_LOAD) load(m, &c, NULL, &e);
+        else frame(m, &c, &m->frame, &e);
     }
     fprintf(stderr, "splatd-mpi: rank %d of %d: %llu frames, %.1f MiB sent compositing, "
             "resident %.0f MiB\n", m->rank, m->size, (unsigned long long)m->frames,
@@ -707,7 +704,8 @@ static int cmp_double(const void *a, const void *b)
 void mr_quit(mr_ctx *m)
 {
     mr_cmd c = {.op = MR_QUIT};
-    if (!m->broken) bcast(m, &c, (int)sizeof c, 0);
+    uint8_t rec[MR_CMD_BYTES];
+    if (!m->broken && mr_cmd_encode(&c, rec, NULL) == 0) bcast(m, rec, (int)sizeof rec, 0);
     double med = 0;
     if (m->ncomp) {
         qsort(m->comp_ms, (size_t)m->ncomp, sizeof m->comp_ms[0], cmp_double);

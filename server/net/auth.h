@@ -17,8 +17,9 @@ typedef struct auth_token {
 /* auth_token_load: reads the token file path into t. Refuses (SD_EINVAL) a file that is not a
  * regular file or whose mode grants any permission to group or others (like ssh's private
  * keys: a shared secret others can read is no secret), an empty token (SD_EEMPTY) and one over
- * AUTH_TOKEN_MAX bytes (SD_ELIMIT). Trailing newline and carriage-return characters are not part
- * of the token (so `echo secret > F` works). Returns 0 or the code with err naming the file. */
+ * AUTH_TOKEN_MAX bytes or a file over AUTH_TOKEN_MAX + 2 bytes (SD_ELIMIT). Trailing newline and
+ * carriage-return characters are not part of the token (so `echo secret > F` works). Returns 0
+ * or the code with err naming the file. (The client's spc__read_token applies the same rule.) */
 int auth_token_load(const char *path, auth_token *t, sd_err *err);
 
 /* auth_challenge: fills c with AUTH_CHALLENGE_LEN random bytes (getrandom). Returns 0 or SD_EIO. */

@@ -10,6 +10,10 @@
 
 enum { BLOCK = 1 << 14 };       /* points a task */
 
+/* The lanes of a:b (a's are 0-7, b's 8-15) at constant indices. __builtin_shufflevector is in
+ * both GCC (12 on) and clang; GCC's __builtin_shuffle is not in clang. */
+#define SHUF(a, b, ...) __builtin_shufflevector(a, b, __VA_ARGS__)
+
 typedef struct run {
     const kawata_cpu_job *job;
     uint64_t k0, k1;           /* this batch: visible points [k0, k1) */
@@ -61,17 +65,16 @@ static void project(const kawata_cpu_job *job, const float *pos, uint32_t n, uin
     const int bw = job->bw, bh = job->bh;
     const int x0 = job->x0, x1 = job->x1, y0 = job->y0, y1 = job->y1, rw = x1 - x0;
     uint32_t i = 0;
-    const prep_v8i lx = {0, 3, 6, 9, 12, 15, 0, 0}, hx = {0, 1, 2, 3, 4, 5, 10, 13};
-    const prep_v8i ly = {1, 4, 7, 10, 13, 0, 0, 0}, hy = {0, 1, 2, 3, 4, 8, 11, 14};
-    const prep_v8i lz = {2, 5, 8, 11, 14, 0, 0, 0}, hz = {0, 1, 2, 3, 4, 9, 12, 15};
     for (; i + 8 <= n; i += 8) {
         prep_v8f v0, v1, v2;
         memcpy(&v0, pos + 3 * (size_t)i, 32);
         memcpy(&v1, pos + 3 * (size_t)i + 8, 32);
         memcpy(&v2, pos + 3 * (size_t)i + 16, 32);
-        prep_v8f x = __builtin_shuffle(__builtin_shuffle(v0, v1, lx), v2, hx);
-        prep_v8f y = __builtin_shuffle(__builtin_shuffle(v0, v1, ly), v2, hy);
-        prep_v8f z = __builtin_shuffle(__builtin_shuffle(v0, v1, lz), v2, hz);
+        /* x y z of eight points out of 24 interleaved floats: lanes 0-5 (x) or 0-4 (y, z)
+         * from v0:v1, the rest from v2 (indices 8-15 of the second shuffle); 0: unused */
+        prep_v8f x = SHUF(SHUF(v0, v1, 0, 3, 6, 9, 12, 15, 0, 0), v2, 0, 1, 2, 3, 4, 5, 10, 13);
+        prep_v8f y = SHUF(SHUF(v0, v1, 1, 4, 7, 10, 13, 0, 0, 0), v2, 0, 1, 2, 3, 4, 8, 11, 14);
+        prep_v8f z = SHUF(SHUF(v0, v1, 2, 5, 8, 11, 14, 0, 0, 0), v2, 0, 1, 2, 3, 4, 9, 12, 15);
         prep_v8f cx = m[0] * x + m[4] * y + m[8] * z + m[12];
         prep_v8f cy = m[1] * x + m[5] * y + m[9] * z + m[13];
         prep_v8f d = m[3] * x + m[7] * y + m[11] * z + m[15];

@@ -8,6 +8,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -16,12 +17,12 @@
 #include "las_stream.h"
 #include "laz_stream.h"
 #include "pcd_stream.h"
+#include "ply_stream.h"
 #include "progress.h"
 #include "xyz_stream.h"
 
-enum { BLOCK = 1 << 16, MAX_PROPS = 64, MAX_HEADER = 64 * 1024 };
-enum { T_NONE, T_I8, T_U8, T_I16, T_U16, T_I32, T_U32, T_F32, T_F64 };
-static const uint8_t tsize[] = {0, 1, 1, 2, 2, 4, 4, 4, 8};
+enum { BLOCK = 1 << 16 };
+enum { T_NONE, T_I8, T_U8, T_I16, T_U16, T_I32, T_U32, T_F32, T_F64 }; /* ply_stream.h's types */
 
 struct lod_src {
     char path[4096];
@@ -30,6 +31,7 @@ struct lod_src {
     int fd;
     uint64_t data_off, nrec, rec, next;  /* next record */
     int off[7], type[7];                 /* x y z red green blue alpha: offset, type */
+    double cscale[7];                    /* colours: factor to 0..255 (ply_stream.h) */
     uint8_t *buf;
     /* streamed LAS: uncompressed (las) or LAZ and COPC (laz), as coordinates and 16-bit colours */
     pc_las_stream *las;
@@ -47,16 +49,6 @@ struct lod_src {
     pc_cloud cloud;
     int have_cloud;
 };
-
-static int type_of(const char *s)
-{
-    static const char *const names[][2] = {
-        {"char", "int8"}, {"uchar", "uint8"}, {"short", "int16"}, {"ushort", "uint16"},
-        {"int", "int32"}, {"uint", "uint32"}, {"float", "float32"}, {"double", "float64"}};
-    for (int i = 0; i < 8; i++)
-        if (!strcmp(s, names[i][0]) || !strcmp(s, names[i][1])) return i + 1;
-    return T_NONE;
-}
 
 static double load(const uint8_t *p, int t)
 {
@@ -80,66 +72,22 @@ static uint8_t colour8(double v)
     return (uint8_t)(v + 0.5);
 }
 
-/* try_ply_header: 1 when path is a binary little-endian PLY that starts with a vertex element
- * of scalar properties with x, y, z (then s is set up for streaming), 0 when it is something
- * else (the fallback reads it), negative on an I/O error. */
+/* try_ply_header: 1 when path is a binary little-endian PLY whose first element is the
+ * vertex element of fixed-size records and pc_read_ply reads it (ply_stream.h; then s is set
+ * up for streaming), 0 when it is something else (the fallback reads it), negative when
+ * pc_read_ply refuses it (with its message). */
 static int try_ply_header(lod_src *s, sd_err *err)
 {
-    char *h = malloc(MAX_HEADER + 1);
-    if (!h) return sd_errf(err, SD_ENOMEM, "out of memory");
-    ssize_t got = pread(s->fd, h, MAX_HEADER, 0);
-    if (got < 0) {
-        free(h);
-        return sd_errf(err, SD_EIO, "%s: %s", s->path, strerror(errno));
-    }
-    h[got] = 0;
-    char *end = strstr(h, "end_header\n");
-    if (strncmp(h, "ply\n", 4) != 0 || !end ||
-        !strstr(h, "\nformat binary_little_endian 1.0\n")) {
-        free(h);
-        return 0;
-    }
-    s->data_off = (uint64_t)(end + 11 - h);
-    *end = 0;
-    for (int i = 0; i < 7; i++) s->off[i] = -1;
-    int in_vertex = 0, seen_elem = 0, ok = 1;
-    uint64_t rec = 0;
-    char *save = NULL;
-    for (char *line = strtok_r(h, "\n", &save); line && ok; line = strtok_r(NULL, "\n", &save)) {
-        char a[64], b[64], c[64];
-        int nt = sscanf(line, "%63s %63s %63s", a, b, c);
-        if (nt >= 3 && !strcmp(a, "element")) {
-            if (seen_elem) break; /* only the first element matters */
-            seen_elem = 1;
-            char *e = NULL;
-            unsigned long long cnt = strtoull(c, &e, 10);
-            in_vertex = !strcmp(b, "vertex") && e && !*e;
-            ok = in_vertex;
-            s->nrec = cnt;
-        } else if (nt >= 1 && !strcmp(a, "property") && in_vertex) {
-            if (nt < 3 || !strcmp(b, "list")) { ok = 0; break; }
-            int t = type_of(b);
-            if (!t) { ok = 0; break; }
-            static const char *const want[7] = {"x", "y", "z", "red", "green", "blue", "alpha"};
-            for (int i = 0; i < 7; i++)
-                if (!strcmp(c, want[i]) && s->off[i] < 0) {
-                    s->off[i] = (int)rec;
-                    s->type[i] = t;
-                }
-            rec += tsize[t];
-        }
-    }
-    free(h);
-    if (!ok || !seen_elem || s->off[0] < 0 || s->off[1] < 0 || s->off[2] < 0 || rec == 0)
-        return 0;
-    s->rec = rec;
-    struct stat st;
-    if (fstat(s->fd, &st) < 0) return sd_errf(err, SD_EIO, "%s: %s", s->path, strerror(errno));
-    if (s->nrec > ((uint64_t)st.st_size - s->data_off) / rec)
-        return sd_errf(err, SD_ETRUNC, "%s: the header claims %llu vertices of %llu bytes, the "
-                       "file holds %llu bytes after its header", s->path,
-                       (unsigned long long)s->nrec, (unsigned long long)rec,
-                       (unsigned long long)((uint64_t)st.st_size - s->data_off));
+    pc_ply_stream sp;
+    int rc = pc_ply_stream_plan(s->path, &sp, err);
+    if (rc <= 0) return rc;
+    s->data_off = sp.data_off;
+    s->nrec = sp.count;
+    s->rec = sp.rec;
+    memcpy(s->off, sp.off, sizeof s->off);
+    memcpy(s->type, sp.type, sizeof s->type);
+    memcpy(s->cscale, sp.cscale, sizeof s->cscale);
+    snprintf(s->info.format, sizeof s->info.format, "%s", sp.format);
     return 1;
 }
 
@@ -220,11 +168,8 @@ static uint32_t record_rgba(const lod_src *s, const uint8_t *p)
     uint32_t v = 0;
     for (int c = 0; c < 4; c++) {
         uint8_t x = 255;
-        if (s->off[3 + c] >= 0) {
-            /* 16-bit colours are scaled to 8 bits, as io_ply does */
-            double scale = s->type[3 + c] == T_U16 ? 255.0 / 65535.0 : 1.0;
-            x = colour8(load(p + s->off[3 + c], s->type[3 + c]) * scale);
-        }
+        if (s->off[3 + c] >= 0)
+            x = colour8(load(p + s->off[3 + c], s->type[3 + c]) * s->cscale[3 + c]);
         v |= (uint32_t)x << (8 * c);
     }
     return v;
@@ -322,7 +267,6 @@ static int bounds_pass(lod_src *s, sd_err *err)
     s->info.n = kept;
     s->info.n_dropped = s->nrec - kept;
     s->info.attrs = s->off[3] >= 0 && s->off[4] >= 0 && s->off[5] >= 0 ? PC_ATTR_RGB : 0;
-    snprintf(s->info.format, sizeof s->info.format, "PLY binary_little_endian 1.0");
     s->info.streamed = 1;
     return 0;
 }
@@ -482,11 +426,16 @@ int lod_src_open(const char *path, lod_src **out, sd_err *err)
         return sd_errf(err, SD_EIO, "%s: %s", path, strerror(e));
     }
     struct stat st;
+    /* each stream takes only the files pc_load would give the same reader (by extension;
+     * pc_read_las hands LAZ on to pc_read_laz), so that both read a file alike */
+    const char *ext = pc_ext(path);
+    int is_las = !strcasecmp(ext, "las"), is_laz = !strcasecmp(ext, "laz");
     int rc = fstat(s->fd, &st) < 0 || !S_ISREG(st.st_mode)
-                 ? sd_errf(err, SD_EIO, "%s: not a regular file", path) : try_ply_header(s, err);
+                 ? sd_errf(err, SD_EIO, "%s: not a regular file", path)
+                 : !strcasecmp(ext, "ply") ? try_ply_header(s, err) : 0;
     int las = 0; /* 1: a streamed LAS or LAZ file */
-    if (rc == 0) las = rc = pc_las_stream_open(path, &s->las, err);
-    if (rc == 0) las = rc = pc_laz_stream_open(path, 0, &s->laz, err);
+    if (rc == 0 && is_las) las = rc = pc_las_stream_open(path, &s->las, err);
+    if (rc == 0 && (is_las || is_laz)) las = rc = pc_laz_stream_open(path, 0, &s->laz, err);
     int rows = 0; /* 1: a streamed text or PCD file */
     if (rc == 0) rows = rc = pc_xyz_stream_open(path, &s->xyz, err);
     if (rc == 0) rows = rc = pc_pcd_stream_open(path, &s->pcd, err);
@@ -496,6 +445,7 @@ int lod_src_open(const char *path, lod_src **out, sd_err *err)
         s->xyz_rgba = malloc((size_t)BLOCK * 4);
         rc = s->las_xyz && s->xyz_rgba ? rows_bounds_pass(s, err)
                                        : sd_errf(err, SD_ENOMEM, "out of memory");
+        if (rc == 0) rc = lod_src_rewind(s, err); /* the bounds pass read these to the end */
     } else if (rc == 1 && !las) {
         s->buf = malloc((size_t)BLOCK * s->rec);
         rc = s->buf ? bounds_pass(s, err) : sd_errf(err, SD_ENOMEM, "out of memory");

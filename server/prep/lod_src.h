@@ -23,7 +23,8 @@
 
 typedef struct lod_src lod_src;
 
-/* lod_src_open: opens path and runs the bounds pass (one read of the file). */
+/* lod_src_open: opens path and runs the bounds pass (one read of the file); the stream then
+ * starts at the first point. */
 int lod_src_open(const char *path, lod_src **out, sd_err *err);
 void lod_src_close(lod_src *s);
 

@@ -45,6 +45,16 @@ static void fz_fail(const char *where, const char *fmt, ...)
     abort();
 }
 
+void fuzz_fail(const char *where, const char *fmt, ...)
+{
+    char msg[1024];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    fz_fail(where, "%s", msg);
+}
+
 /* FNV-1a, to compare two runs of the decoder without storing their messages. */
 static uint64_t fnv(uint64_t h, const void *p, size_t n)
 {
@@ -96,6 +106,11 @@ static int params_equal(const sp_params *a, const sp_params *b)
         if (memcmp(&ra, &rb, sizeof ra) != 0) return 0;
     }
     return 1;
+}
+
+int fuzz_params_equal(const sp_params *a, const sp_params *b)
+{
+    return params_equal(a, b);
 }
 
 /* check_params_msg: PARAMS applies all records or none; what it applied travels through the
@@ -362,6 +377,11 @@ static void check_sd_err(int rc, const sd_err *err, const char *path, const char
         fz_fail(what, "the error message does not name the file %s: '%s'", path, err->msg);
 }
 
+void fuzz_check_sd_err(int rc, const sd_err *err, const char *path, const char *what)
+{
+    check_sd_err(rc, err, path, what);
+}
+
 /* touch: reads every byte of an n-element array so that ASan sees one that is too short. */
 static unsigned touch(const void *p, size_t n, size_t elem, uint32_t attrs, uint32_t bit,
                       const char *what, const char *name)
@@ -434,7 +454,7 @@ static void check_cloud(const pc_cloud *c, size_t n, const char *what)
 
 /* fuzz_reader: data as a file through a memfd; reader, then pc_finalize, then the checks.
  * Returns the first non-zero code. */
-static int fuzz_reader(reader_fn rd, const char *what, const uint8_t *data, size_t len)
+int fuzz_memfd(const uint8_t *data, size_t len, char *path, size_t plen)
 {
     int fd = memfd_create("splatd-fuzz", MFD_CLOEXEC);
     if (fd < 0) {
@@ -449,8 +469,14 @@ static int fuzz_reader(reader_fn rd, const char *what, const uint8_t *data, size
         }
         off += (size_t)w;
     }
+    snprintf(path, plen, "/proc/self/fd/%d", fd);
+    return fd;
+}
+
+static int fuzz_reader(reader_fn rd, const char *what, const uint8_t *data, size_t len)
+{
     char path[64];
-    snprintf(path, sizeof path, "/proc/self/fd/%d", fd);
+    int fd = fuzz_memfd(data, len, path, sizeof path);
     pc_raw raw;
     memset(&raw, 0, sizeof raw);
     sd_err err;
@@ -478,6 +504,79 @@ int fuzz_one_pcd(const uint8_t *data, size_t len) { return fuzz_reader(pc_read_p
 int fuzz_one_las(const uint8_t *data, size_t len) { return fuzz_reader(pc_read_las, "las", data, len); }
 int fuzz_one_xyz(const uint8_t *data, size_t len) { return fuzz_reader(pc_read_xyz, "xyz", data, len); }
 int fuzz_one_laz(const uint8_t *data, size_t len) { return fuzz_reader(pc_read_laz, "laz", data, len); }
+
+/* ---- COPC's top levels (io_copc.c) -------------------------------------------------------- */
+
+/* copc_read: path through pc_read_copc_levels(max_level) (budget 0) or pc_read_copc_budget
+ * into raw, with the reader's checks; *deepest gets the deepest level read (from the format
+ * string for the levels reader). Returns the reader's code. */
+static int copc_read(const char *path, size_t len, int max_level, uint64_t budget, pc_raw *raw,
+                     int *deepest)
+{
+    memset(raw, 0, sizeof *raw);
+    sd_err err;
+    memset(&err, 0, sizeof err);
+    int lv = -1;
+    int rc = budget ? pc_read_copc_budget(path, budget, raw, &lv, &err)
+                    : pc_read_copc_levels(path, max_level, raw, &err);
+    check_sd_err(rc, &err, path, "copclevels");
+    check_raw(raw, len, rc == 0, "copclevels");
+    if (rc == 0 && !budget) {
+        const char *l = strstr(raw->format, ", levels 0-");
+        if (!l || sscanf(l, ", levels 0-%d", &lv) != 1)
+            fuzz_fail("copclevels", "format '%s' does not say its levels", raw->format);
+    }
+    if (rc == 0 && (lv < 0 || lv > (budget ? 24 : max_level) || raw->n == 0))
+        fuzz_fail("copclevels", "deepest level %d (at most %d asked), %zu points", lv,
+                  budget ? 24 : max_level, raw->n);
+    *deepest = lv;
+    return rc;
+}
+
+int fuzz_one_copclevels(const uint8_t *data, size_t len)
+{
+    if (len < 1) return SD_EINVAL;
+    int max_level = data[0] & 7;
+    char path[64];
+    int fd = fuzz_memfd(data + 1, len - 1, path, sizeof path);
+    pc_raw a, b;
+    int la, lb;
+    int rc = copc_read(path, len, max_level, 0, &a, &la);
+    /* the budget reader walks the whole hierarchy (to level 24): its answers are compared
+     * where the whole hierarchy and its nodes read */
+    int whole = -1;
+    if (rc == 0 && copc_read(path, len, 24, 0, &b, &lb) == 0) whole = lb;
+    if (rc == 0) pc_raw_free(&b);
+    if (whole >= 0) {
+        /* a budget of exactly the points of levels 0..la keeps exactly those levels: the
+         * same points in the same order */
+        int brc = copc_read(path, len, 0, a.n, &b, &lb);
+        if (brc != 0 || lb != la || b.n != a.n || memcmp(a.xyz, b.xyz, 3 * a.n * sizeof *a.xyz))
+            fuzz_fail("copclevels", "levels 0-%d hold %zu points, but a budget of %zu keeps "
+                      "levels 0-%d, %zu points (code %d)", la, a.n, a.n, lb, b.n, brc);
+        pc_raw_free(&b);
+        /* one point less: a shallower level, unless the shallowest level read is la itself */
+        brc = copc_read(path, len, 0, a.n - 1 ? a.n - 1 : 1, &b, &lb);
+        if (brc != 0 || lb > la || (lb == la) != (b.n == a.n) || b.n > a.n)
+            fuzz_fail("copclevels", "levels 0-%d hold %zu points; a budget of %zu keeps levels "
+                      "0-%d, %zu points (code %d)", la, a.n, a.n - 1, lb, b.n, brc);
+        pc_raw_free(&b);
+    }
+    if (rc == 0) {
+        size_t n = a.n;
+        pc_cloud c;
+        sd_err err;
+        memset(&err, 0, sizeof err);
+        rc = pc_finalize(&a, &c, path, &err);
+        check_sd_err(rc, &err, path, "pc_finalize");
+        if (rc == 0) check_cloud(&c, n, "copclevels");
+        else if (rc != SD_EEMPTY && rc != SD_ELIMIT) fz_fail("copclevels", "pc_finalize: %d", rc);
+        pc_cloud_free(&c);
+    }
+    pc_raw_free(&a);
+    close(fd);
+    return rc;
+}
 
 /* ---- LZF --------------------------------------------------------------------------------- */
 
@@ -663,19 +762,29 @@ static void write_file(const char *path, const void *data, size_t len)
     }
 }
 
+void fuzz_write_file(const char *path, const void *data, size_t len)
+{
+    write_file(path, data, len);
+}
+
+void fuzz_mkdtemp(char *dir, size_t len, const char *tag)
+{
+    const char *tmp = getenv("TMPDIR");
+    if (access("/dev/shm", W_OK) == 0) tmp = "/dev/shm";
+    snprintf(dir, len, "%s/splatd-fuzz-%s.XXXXXX", tmp && *tmp ? tmp : "/tmp", tag);
+    if (!mkdtemp(dir)) {
+        perror("mkdtemp");
+        abort();
+    }
+}
+
 /* cache_files: a new directory (tmpfs when there is one: a file system round trip per input
  * is most of the cost) holding the source src (CACHE_SRC) and the cache file cpath named
  * c.EXT with data. */
 static void cache_files(const char *ext, const uint8_t *data, size_t len, char *dir,
                         char *src, char *cpath)
 {
-    const char *tmp = getenv("TMPDIR");
-    if (access("/dev/shm", W_OK) == 0) tmp = "/dev/shm";
-    snprintf(dir, 512, "%s/splatd-fuzz-cache.XXXXXX", tmp && *tmp ? tmp : "/tmp");
-    if (!mkdtemp(dir)) {
-        perror("mkdtemp");
-        abort();
-    }
+    fuzz_mkdtemp(dir, 512, "cache");
     snprintf(src, 600, "%s/s.xyz", dir);
     snprintf(cpath, 600, "%s/c.%s", dir, ext);
     write_file(src, CACHE_SRC, sizeof CACHE_SRC - 1);
@@ -853,6 +962,9 @@ fuzz_fn fuzz_target_find(const char *name)
         {"cache", fuzz_one_cache}, {"frame", fuzz_one_frame},
         {"e57", fuzz_one_e57},     {"e57xml", fuzz_one_e57xml}, {"e57bits", fuzz_one_e57bits},
         {"splod", fuzz_one_splod},
+        {"copclevels", fuzz_one_copclevels}, {"lodsrc", fuzz_one_lodsrc},
+        {"campath", fuzz_one_campath}, {"shard", fuzz_one_shard}, {"token", fuzz_one_token},
+        {"mpimsg", fuzz_one_mpimsg},
     };
     for (size_t i = 0; i < sizeof targets / sizeof targets[0]; i++)
         if (!strcmp(targets[i].name, name)) return targets[i].fn;

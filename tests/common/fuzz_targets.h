@@ -106,9 +106,61 @@ int fuzz_one_e57xml(const uint8_t *data, size_t len);
  * the maximum alike. Returns 0, or SD_EFORMAT when a value was over the maximum. */
 int fuzz_one_e57bits(const uint8_t *data, size_t len);
 
+/* fuzz_one_copclevels: byte 0's low 3 bits are a level L, the rest a COPC file (a memfd)
+ * read by pc_read_copc_levels(L) (io_copc.c), with the readers' checks (fuzz_one_las). When it
+ * reads n points of levels 0..L' (its format string says L' <= L) and the whole hierarchy
+ * reads too (levels 0..24, what the budget reader walks), pc_read_copc_budget(n) must keep
+ * levels 0..L' and the same points in the same order, and pc_read_copc_budget(n - 1) a
+ * shallower level and fewer points (or, where L' is the only level read, the same). Returns
+ * pc_read_copc_levels' or pc_finalize's code. */
+int fuzz_one_copclevels(const uint8_t *data, size_t len);
+
+/* fuzz_one_lodsrc (fuzz_lodsrc.c): byte 0's low 3 bits pick the file's extension (.ply .las
+ * .laz .pcd .xyz .pts .txt .copc.laz), its high 5 bits the piece size of the reads; the rest is
+ * the file, opened by lod_src_open (the LOD build's stream: its own PLY header parser, the
+ * LAS/LAZ/COPC, PCD and XYZ streams, else pc_load). What it opens must stream exactly info.n
+ * finite points inside its box, the same again after lod_src_rewind, and be what pc_load reads
+ * of the file: the same count, box, offset, float positions and colours (white without).
+ * Returns lod_src's code. */
+int fuzz_one_lodsrc(const uint8_t *data, size_t len);
+
+/* fuzz_one_campath (fuzz_cli.c): the first line (to '\n' or NUL) is an output pattern for
+ * cp_pattern_check and cp_expand, compared with an independent reading of campath.h's grammar
+ * for five frame numbers, in a buffer of exactly the room the name needs and one byte less;
+ * the rest is a camera-path file for cp_load (a memfd), which must give the cameras
+ * cp_parse_line gives line by line, or fail naming the file and the first bad line; each
+ * camera must print and parse back to itself. Returns cp_load's code. */
+int fuzz_one_campath(const uint8_t *data, size_t len);
+
+/* fuzz_one_shard (fuzz_cli.c): byte 0's bits 0-6 say which of --shard, --shards,
+ * JOB_COMPLETION_INDEX, SPLAT_SHARD_COUNT, SLURM_ARRAY_TASK_ID, SLURM_ARRAY_TASK_COUNT and
+ * SLURM_ARRAY_TASK_MIN are set; the rest holds their values, '\n'-separated. shard_resolve must
+ * agree with an independent reading of shard.h's rules (digits only, each range, the order of
+ * precedence), name the option or variable it refuses, and shard_filter keep exactly the frames
+ * of its shard. Returns shard_resolve's code. */
+int fuzz_one_shard(const uint8_t *data, size_t len);
+
+/* fuzz_one_token (fuzz_cli.c): byte 0 bits 0-1 give the file's mode (0600 0400 0640 0604),
+ * bit 2 reads it through a symbolic link, bit 3 puts a directory in its place, bit 4 a FIFO;
+ * the rest is the token file. The daemon's auth_token_load and the client's spc__read_token
+ * (room for AUTH_TOKEN_MAX bytes) must both accept exactly a regular file that group and others
+ * cannot use, of at most AUTH_TOKEN_MAX + 2 bytes, whose content less its trailing CR and LF
+ * is 1 to AUTH_TOKEN_MAX bytes, and give those bytes. Returns auth_token_load's code. */
+int fuzz_one_token(const uint8_t *data, size_t len);
+
+/* fuzz_one_mpimsg (fuzz_mpi.c): byte 0 bit 0 set: the rest is a failure record for
+ * mr_fail_decode (server/mpi/mr_msg.h), which must give an SD_E* code and a terminated
+ * message (the record's own when it has one); clear: the rest is a command record for
+ * mr_cmd_decode, as received (any length but MR_CMD_BYTES refused) and padded with zeros or
+ * cut to MR_CMD_BYTES. What decodes must hold what its op needs and re-encode (mr_cmd_encode)
+ * to a record that decodes to the same command. Returns mr_cmd_decode's code (0 for a failure
+ * record). */
+int fuzz_one_mpimsg(const uint8_t *data, size_t len);
+
 /* fuzz_target_find: the fuzz_one_* function of a target name ("proto", "ply", "pcd", "las",
  * "xyz", "lzf", "params", "laz", "copc", "ws", "cache", "splod", "frame", "e57", "e57xml",
- * "e57bits"; "dispatch" where the server is linked), or NULL. */
+ * "e57bits", "copclevels", "lodsrc", "campath", "shard", "token", "mpimsg"; "dispatch" where
+ * the server is linked), or NULL. */
 typedef int (*fuzz_fn)(const uint8_t *data, size_t len);
 fuzz_fn fuzz_target_find(const char *name);
 
@@ -120,3 +172,22 @@ fuzz_fn fuzz_target_find(const char *name);
  * 400/414/431/505 with a text. Returns 0 when the stream decoded without error, else minus
  * the close code. */
 int fuzz_one_ws(const uint8_t *data, size_t len);
+
+/* ---- helpers for the bodies in the other tests/common/fuzz_*.c files ---- */
+
+/* fuzz_fail: prints "fuzz oracle failed (where): ..." to stderr and aborts. */
+void fuzz_fail(const char *where, const char *fmt, ...) __attribute__((format(printf, 2, 3),
+                                                                      noreturn));
+/* fuzz_check_sd_err: a reader's failure rc (0: none) is a known SD_E* code whose message in
+ * err names path; else fuzz_fail for what. */
+typedef struct sd_err sd_err;
+void fuzz_check_sd_err(int rc, const sd_err *err, const char *path, const char *what);
+/* fuzz_params_equal: 1 when a and b hold the same value of every parameter (params.h). */
+typedef struct sp_params sp_params;
+int fuzz_params_equal(const sp_params *a, const sp_params *b);
+/* fuzz_memfd: data as a memfd; path (plen bytes) gets "/proc/self/fd/N". Returns the fd. */
+int fuzz_memfd(const uint8_t *data, size_t len, char *path, size_t plen);
+/* fuzz_mkdtemp: a new directory "splatd-fuzz-TAG.XXXXXX" in /dev/shm (else $TMPDIR, else
+ * /tmp) into dir. fuzz_write_file: path := data. Both abort on failure (the harness's). */
+void fuzz_mkdtemp(char *dir, size_t len, const char *tag);
+void fuzz_write_file(const char *path, const void *data, size_t len);

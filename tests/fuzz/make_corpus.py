@@ -351,14 +351,118 @@ def params():
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "data")
 
 
-def laz():
-    """Real LAZ files (tests/data) under 64 KiB, and broken copies of one."""
-    for name in ["point10.las.laz", "point-time.las.laz", "point-color.las.laz",
-                 "point-color-time.las.laz", "extrabytes.laz"]:
-        with open(os.path.join(DATA, name), "rb") as f:
-            put("laz", name, f.read())
-    with open(os.path.join(DATA, "point10.las.laz"), "rb") as f:
+class ArithEncoder:
+    """LASzip's arithmetic encoder, the exact inverse of laz_arith.h's decoder (a port of
+    tests/tools/laz_tile.c's), for values coded with fresh models only: each model here codes
+    one symbol, so no model is ever updated."""
+    MIN = 0x01000000
+
+    def __init__(self):
+        self.base, self.length, self.out = 0, 0xFFFFFFFF, bytearray()
+
+    def _carry(self):
+        i = len(self.out)
+        while i > 0 and self.out[i - 1] == 0xFF:
+            i -= 1
+            self.out[i] = 0
+        if i > 0:
+            self.out[i - 1] += 1
+
+    def _renorm(self):
+        while self.length < self.MIN:
+            self.out.append(self.base >> 24)
+            self.base = (self.base << 8) & 0xFFFFFFFF
+            self.length = (self.length << 8) & 0xFFFFFFFF
+
+    def _narrow(self, x, y):
+        b = self.base
+        self.base = (self.base + x) & 0xFFFFFFFF
+        self.length = y - x
+        if self.base < b:
+            self._carry()
+        self._renorm()
+
+    def symbol(self, n, sym):
+        """sym of a fresh model of n symbols: counts 1, distribution (2^31 / n) k >> 16."""
+        dist = [(((0x80000000 // n) * k) & 0xFFFFFFFF) >> 16 for k in range(n + 1)]
+        top, l = self.length, self.length >> 15
+        self._narrow(dist[sym] * l, top if sym == n - 1 else dist[sym + 1] * l)
+
+    def bit(self, b):
+        """b of a fresh bit model (probability of 0: 2^12 of 2^13)."""
+        x = (1 << 12) * (self.length >> 13)
+        if b == 0:
+            self.length = x
+            self._renorm()
+        else:
+            self._narrow(x, self.length)
+
+    def raw(self, v, bits):
+        if bits > 19:
+            self.raw(v & 0xFFFF, 16)
+            v, bits = v >> 16, bits - 16
+        l = self.length >> bits
+        self._narrow(v * l, v * l + l)
+
+    def integer(self, pred, real):
+        """real against pred through a fresh 32-bit integer compressor (bits_high 8)."""
+        corr = (real - pred) & 0xFFFFFFFF
+        corr = corr - (1 << 32) if corr >= 1 << 31 else corr
+        mag = corr - 1 if corr > 0 else -corr
+        k = mag.bit_length()
+        self.symbol(33, k)
+        if k == 0:
+            self.bit(corr)
+        elif k < 32:
+            c = (corr - 1 if corr > 0 else corr + (1 << k) - 1) & 0xFFFFFFFF
+            if k <= 8:
+                self.symbol(1 << k, c)
+            else:
+                self.symbol(256, c >> (k - 8))
+                self.raw(c & ((1 << (k - 8)) - 1), k - 8)
+
+    def done(self):
+        b = self.base
+        if self.length > 2 * self.MIN:
+            self.base, self.length = (self.base + self.MIN) & 0xFFFFFFFF, self.MIN >> 1
+        else:
+            self.base, self.length = (self.base + (self.MIN >> 1)) & 0xFFFFFFFF, self.MIN >> 9
+        if self.base < b:
+            self._carry()
+        self._renorm()
+        return bytes(self.out) + bytes(4)
+
+
+def laz_small(name, npts):
+    """A one-chunk pointwise LAS 1.2 LAZ file of tests/data cut to its first npts points: the
+    header's count, the chunk's first bytes (those points take fewer than three times their
+    share of the chunk, plus slack) and a new chunk table (fixed chunk size: only the chunk's
+    byte size is coded). A few hundred bytes of chunk instead of 10-30 KiB: the fuzzer
+    decodes far fewer points per input and mutates bytes that are read."""
+    with open(os.path.join(DATA, name), "rb") as f:
         b = bytearray(f.read())
+    data_off = struct.unpack_from("<I", b, 96)[0]
+    rec_len = struct.unpack_from("<H", b, 105)[0]
+    count = struct.unpack_from("<I", b, 107)[0]
+    table = struct.unpack_from("<Q", b, data_off)[0]
+    chunk = b[data_off + 8:table]
+    keep = min(len(chunk), rec_len + 3 * len(chunk) * npts // count + 64)
+    e = ArithEncoder()
+    e.integer(0, keep)
+    out = b[:data_off] + struct.pack("<Q", data_off + 8 + keep) + chunk[:keep]
+    out += struct.pack("<II", 0, 1) + e.done()
+    struct.pack_into("<I", out, 107, npts)
+    struct.pack_into("<5I", out, 111, npts, 0, 0, 0, 0)
+    return bytes(out)
+
+
+def laz():
+    """LAZ files of tests/data cut to a few dozen points (laz_small), and broken ones."""
+    for name, n in [("point10.las.laz", 40), ("point-time.las.laz", 30),
+                    ("point-color.las.laz", 30), ("point-color-time.las.laz", 25),
+                    ("extrabytes.laz", 20)]:
+        put("laz", name, laz_small(name, n))
+    b = bytearray(laz_small("point10.las.laz", 40))
     put("laz", "bad_cut_in_chunk.laz", bytes(b[:len(b) // 2]))
     w = bytearray(b)
     w[104] = 0x84  # waveform format 4
@@ -391,6 +495,199 @@ def copc():
     put("copc", "bad_self_link.bin", copc_info(160, 32) + loop)
     put("copc", "bad_key.bin", copc_info(160, 32) + copc_entry(1, 2, 0, 0, 0, 0, 0))
     put("copc", "bad_page_size.bin", copc_info(160, 40) + page)
+
+
+def copc_from_laz(name, pages):
+    """A small COPC file made from a LAZ file of tests/data cut to 40 points (laz_small): a
+    "copc" info VLR (record 1) put before its VLRs and hierarchy pages appended at its end.
+    The readers take a node's chunk from the hierarchy alone, so every node entry may point at
+    the one chunk (a pointwise chunk decodes its first k points as a chunk of k). pages(off,
+    size, count, root_off) gives the root page and the pages after it for that chunk (off,
+    size bytes, count points) with the root page at root_off."""
+    b = bytearray(laz_small(name, 40))
+    hsize = struct.unpack_from("<H", b, 94)[0]
+    data_off, nvlr = struct.unpack_from("<II", b, 96)
+    count = struct.unpack_from("<I", b, 107)[0]
+    table = struct.unpack_from("<Q", b, data_off)[0]
+    shift = 54 + 160
+    root_off = len(b) + shift
+    root, rest = pages(data_off + 8 + shift, table - (data_off + 8), count, root_off)
+    vlr = struct.pack("<H16sHH32s", 0, b"copc", 1, 160, b"copc info") + copc_info(root_off, len(root))
+    out = b[:hsize] + vlr + b[hsize:]
+    struct.pack_into("<II", out, 96, data_off + shift, nvlr + 1)
+    struct.pack_into("<Q", out, data_off + shift, table + shift)
+    return bytes(out + root + rest)
+
+
+def copclevels():
+    """Seeds of the copclevels target: byte 0 is the deepest level asked for (0-7), then a
+    COPC file (copc_from_laz)."""
+    def put_l(name, level, data):
+        put("copclevels", name, bytes([level]) + data)
+
+    def one(level, count_of):
+        return lambda o, n, c, r: (copc_entry(level, 0, 0, 0, o, n, count_of(c)), b"")
+
+    put_l("root_only_p10", 2, copc_from_laz("point10.las.laz", one(0, lambda c: c)))
+    # levels 0, 1, 2 of 10, 25 and 40 points (of the one chunk)
+    f = copc_from_laz("point10.las.laz", lambda o, n, c, r: (
+        copc_entry(0, 0, 0, 0, o, n, 10) + copc_entry(1, 1, 0, 1, o, n, 25)
+        + copc_entry(2, 3, 1, 2, o, n, c), b""))
+    put_l("three_levels_p10", 1, f)
+    put_l("three_levels_p10_all", 7, f)
+    # the root page (3 entries) links to a child page holding a level-2 node; an empty node
+    put_l("two_pages_rgb", 3, copc_from_laz("point-color.las.laz", lambda o, n, c, r: (
+        copc_entry(0, 0, 0, 0, o, n, 15) + copc_entry(1, 0, 1, 0, 0, 0, 0)
+        + copc_entry(1, 1, 1, 1, r + 96, 32, -1), copc_entry(2, 2, 3, 2, o, n, c))))
+    # bad: no copc VLR; a node of more points than its chunk holds; no node at level 0
+    put_l("bad_not_copc", 3, laz_small("point10.las.laz", 40))
+    put_l("bad_count_over_chunk", 0, copc_from_laz("point10.las.laz", one(0, lambda c: 50 * c)))
+    put_l("bad_nothing_at_level_0", 0, copc_from_laz("point10.las.laz", one(1, lambda c: c)))
+
+
+LODSRC_EXT = {".ply": 0, ".las": 1, ".laz": 2, ".pcd": 3, ".xyz": 4, ".pts": 5, ".txt": 6,
+              ".copc.laz": 7}
+
+
+def lodsrc():
+    """Seeds of the lodsrc target: byte 0 picks the extension (LODSRC_EXT) and, in its high 5
+    bits, the piece size of the reads; then the file. Most are other targets' seeds (written
+    before this runs)."""
+    def put_s(name, ext, piece, data):
+        put("lodsrc", name, bytes([LODSRC_EXT[ext] | piece << 3]) + data)
+
+    def seed(target, name, ext, piece):
+        with open(os.path.join(ROOT, target, name), "rb") as f:
+            put_s(("bad_" if name.startswith("bad_") else "") + target + "_" +
+                  name.replace("bad_", ""), ext, piece, f.read())
+
+    seed("ply", "binary_le_rgba_quality.ply", ".ply", 0)   # streamed, floats and bytes
+    seed("ply", "ascii_rgb_normal_faces.ply", ".ply", 3)   # read whole by pc_load
+    seed("ply", "binary_be_face_first_intensity_radius.ply", ".ply", 1)
+    seed("las", "las12_format3_rgb.las", ".las", 2)
+    seed("las", "las14_format7_rgb16.las", ".las", 0)
+    seed("laz", "point-color.las.laz", ".laz", 5)
+    seed("pcd", "ascii_xyz_rgb.pcd", ".pcd", 0)
+    seed("pcd", "binary_compressed_double_sep_rgb.pcd", ".pcd", 1)
+    seed("xyz", "rgb_commas_crlf.xyz", ".xyz", 2)
+    seed("xyz", "pts_count_irgb.pts", ".pts", 0)
+    seed("xyz", "float_colour_intensity.txt", ".txt", 4)
+    seed("xyz", "nan_row_no_newline.xyz", ".xyz", 1)
+    seed("xyz", "bad_token.xyz", ".xyz", 0)
+    seed("pcd", "bad_points_over_file.pcd", ".pcd", 0)
+    # streamed PLY, per-field path: doubles, 16-bit colours, a NaN point (dropped), an extra
+    # property; the vertex element first, a face element after it
+    h = ("ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty double x\n"
+         "property double y\nproperty double z\nproperty ushort red\nproperty ushort green\n"
+         "property ushort blue\nproperty int id\nelement face 0\n"
+         "property list uchar int vertex_indices\nend_header\n").encode()
+    pts = [(0, 0, 0), (1.5, -2, 3), (float("nan"), 1, 1), (-4, 8, 0.25), (2, 2, 2)]
+    for i, (x, y, z) in enumerate(pts):
+        h += struct.pack("<3d3Hi", x, y, z, 1000 * i, 65535, 257 * i, i)
+    put_s("ply_double_ushort_nan.ply", ".ply", 7, h)
+    # streamed PLY as pc_read_ply reads it: version "1", float colours named diffuse_* (scaled
+    # by 255), alpha; the stream's own header parser took neither name nor scale
+    h = ("ply\nformat binary_little_endian 1\ncomment c\nelement vertex 3\nproperty float x\n"
+         "property float y\nproperty float z\nproperty float diffuse_red\n"
+         "property float diffuse_green\nproperty float diffuse_blue\nproperty uchar alpha\n"
+         "end_header\n").encode()
+    for i in range(3):
+        h += struct.pack("<6fB", i, 2 * i, -i, 0.5, 0.25 * i, 1.0, 100 + i)
+    put_s("ply_v1_float_diffuse_colours.ply", ".ply", 2, h)
+    # refused by pc_read_ply, hence by the stream: a control byte in the header; a LAS file
+    # named .xyz (pc_load reads by extension; the stream took it as LAS)
+    put_s("bad_ply_control_byte.ply", ".ply", 0,
+          b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\x7f\n"
+          b"property float y\nproperty float z\nend_header\n" + bytes(12))
+    with open(os.path.join(ROOT, "las", "las12_format3_rgb.las"), "rb") as f:
+        put_s("bad_las_named_xyz.xyz", ".xyz", 0, f.read())
+    # the vertices whole, the faces after them cut short: pc_read_ply refuses the file
+    h = (b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
+         b"property float y\nproperty float z\nelement face 2\n"
+         b"property list uchar int vertex_indices\nend_header\n")
+    h += struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0) + struct.pack("<B3i", 3, 0, 1, 2) + b"\x03"
+    put_s("bad_ply_faces_cut.ply", ".ply", 0, h)
+    put_s("bad_ply_count_over_file.ply", ".ply", 0,
+          b"ply\nformat binary_little_endian 1.0\nelement vertex 9\nproperty float x\n"
+          b"property float y\nproperty float z\nend_header\n" + bytes(12 * 3))
+
+
+def campath():
+    """Seeds of the campath target: an output pattern line, then a camera-path file. Valid
+    seeds have a valid file (the pattern may be invalid: the target returns cp_load's code)."""
+    cams = "0 0 5, 0 0 0, 0 1 0, 45\n1 0 5 0 0 0 0 1 0 50 # a comment\n\n# only a comment\n"
+    put("campath", "zero_padded", "out/%05d.jpg\n" + cams)
+    put("campath", "plain_tabs_crlf", "frames/f%d.png\n2\t0\t5\t0\t0\t0\t0\t1\t0\t30\r\n"
+        "1e-3,2E2,-3.5,0,0,0,0,0,1,179.5\r\n")
+    put("campath", "percent_space_pad", "%%lit_%3d.exr\n0 0 1 0 0 0 0 1 0 0.5")
+    put("campath", "pattern_invalid_good_file", "out/%d_%d.raw\n" + cams)
+    put("campath", "zero_flags", "a/b.c/%0007d\n" + cams)
+    # the widths' limit exactly: 19 is a width, 20 is not (N < 20)
+    put("campath", "width_19", "f%019d.png\n" + cams)
+    put("campath", "width_20_refused", "f%20d.png\n" + cams)
+    put("campath", "bad_nine_numbers", "x%d.jpg\n0 0 5 0 0 0 0 1 0\n")
+    put("campath", "bad_fov_180", "x%d.jpg\n0 0 5 0 0 0 0 1 0 180\n")
+    put("campath", "bad_no_cameras", "x%d.jpg\n# nothing\n\n")
+    put("campath", "bad_nan_second_line", "x%d.jpg\n" + cams + "nan 0 5 0 0 0 0 1 0 45\n")
+
+
+def shard():
+    """Seeds of the shard target: byte 0 says which of --shard, --shards, JOB_COMPLETION_INDEX,
+    SPLAT_SHARD_COUNT, SLURM_ARRAY_TASK_ID, SLURM_ARRAY_TASK_COUNT, SLURM_ARRAY_TASK_MIN are
+    set (bit 0 to 6); then their values, one a line."""
+    def put_s(name, mask, *fields):
+        put("shard", name, bytes([mask]) + "\n".join(fields).encode())
+
+    put_s("flag", 0x01, "3/8")
+    put_s("flag_over_env", 0x15, "0/2", "", "1", "", "7")
+    put_s("job_index_count", 0x0C, "", "", "5", "10")
+    put_s("shards_job_index", 0x06, "", "4", "2")
+    put_s("slurm_min", 0x70, "", "", "", "", "17", "4", "15")
+    put_s("none", 0x00)
+    put_s("bad_shards_alone", 0x02, "", "4")
+    put_s("bad_index_at_count", 0x01, "8/8")
+    put_s("bad_job_index_no_count", 0x04, "", "", "3")
+    put_s("bad_plus_sign", 0x01, "+1/2")
+    put_s("bad_tab_before_index", 0x0C, "", "", "\t5", "10")
+    put_s("bad_slurm_min_over_id", 0x70, "", "", "", "", "3", "4", "5")
+
+
+def token():
+    """Seeds of the token target: byte 0 bits 0-1 the mode (0600 0400 0640 0604), bit 2 a
+    symbolic link, bit 3 a directory, bit 4 a FIFO; then the file."""
+    put("token", "line", b"\x00secret\n")
+    put("token", "max_len", b"\x00" + b"t" * 4096)
+    put("token", "max_len_crlf", b"\x00" + b"t" * 4096 + b"\r\n")
+    put("token", "symlink_0400", b"\x05tok\r\n")
+    put("token", "binary", b"\x00\x00\x01\xff\n\x00")
+    put("token", "bad_group_readable", b"\x02secret")
+    put("token", "bad_other_readable", b"\x03secret")
+    put("token", "bad_only_newlines", b"\x00\n\r\n")
+    put("token", "bad_over_max", b"\x00" + b"t" * 4097)
+    put("token", "bad_directory", b"\x08x")
+    put("token", "bad_fifo", b"\x10x")
+    put("token", "bad_file_over_max_plus_2", b"\x00" + b"t" * 4096 + b"\n\n\n")
+
+
+def mpimsg():
+    """Seeds of the mpimsg target (server/mpi/mr_msg.h): byte 0 = 0, a command record (the
+    target pads it with zeros to MR_CMD_BYTES); byte 0 = 1, a failure record."""
+    def cmd(op, key, want_float=0, path=b"", cam=b"", par=b""):
+        return (b"\x00" + struct.pack("<3I", op, key, want_float)
+                + struct.pack("<H", len(path)) + path + struct.pack("<I", len(cam)) + cam
+                + struct.pack("<I", len(par)) + par)
+    put("mpimsg", "load", cmd(1, 1, path=b"/srv/clouds/bunny.ply"))
+    put("mpimsg", "render", cmd(2, 3, 1, cam=camera(64, 48), par=params_payload()))
+    put("mpimsg", "render_no_params", cmd(2, 3, 0, cam=camera(8, 8), par=struct.pack("<H", 0)))
+    put("mpimsg", "quit", cmd(3, 0))
+    put("mpimsg", "fail", b"\x01" + struct.pack("<i", -2) + b"rank 1 of 4: bad".ljust(512, b"\0"))
+    put("mpimsg", "fail_unknown_code", b"\x01" + struct.pack("<i", 77) + b"x" * 512)
+    put("mpimsg", "bad_unknown_op", cmd(7, 1))
+    put("mpimsg", "bad_key_0", cmd(1, 0, path=b"a.ply"))
+    put("mpimsg", "bad_nul_in_path", cmd(1, 1, path=b"a\0b.ply"))
+    put("mpimsg", "bad_want_float_2", cmd(2, 3, 2, cam=camera(64, 48), par=params_payload()))
+    put("mpimsg", "bad_camera_size", cmd(2, 3, 0, cam=camera(0, 48), par=params_payload()))
+    put("mpimsg", "bad_padding", cmd(3, 0) + b"\x01")
 
 
 def dispatch_seeds():
@@ -501,6 +798,12 @@ def main():
     laz()
     copc()
     e57()
+    copclevels()
+    lodsrc()
+    campath()
+    shard()
+    token()
+    mpimsg()
     total = sum(os.path.getsize(os.path.join(dp, f))
                 for dp, _, fs in os.walk(ROOT) for f in fs)
     print("corpus: %d bytes under %s" % (total, ROOT))
